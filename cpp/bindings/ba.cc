@@ -1,0 +1,251 @@
+// Bindings of calibproj::ba: numpy arrays in, a dict of numpy arrays out.
+
+#include <pybind11/eigen.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <map>
+#include <stdexcept>
+#include <string>
+
+#include "calibproj/ba/bundle_adjuster.h"
+#include "calibproj/ba/manifolds.h"
+#include "calibproj/ba/reprojection_cost.h"
+#include "registry.h"
+
+namespace py = pybind11;
+
+namespace calibproj::bindings {
+
+namespace {
+
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+template <typename Enum>
+Enum ParseChoice(const std::string& what, const std::string& value, const std::map<std::string, Enum>& choices) {
+  const auto it = choices.find(value);
+  if (it != choices.end()) return it->second;
+  std::string names;
+  for (const auto& [name, unused] : choices) names += (names.empty() ? "" : ", ") + name;
+  throw std::invalid_argument(what + ": unknown value '" + value + "' (choose from " + names + ")");
+}
+
+// Intrinsics from an array (C, 3, 3) of upper-triangular camera matrices.
+std::vector<ba::Intrinsics> IntrinsicsFromArray(const py::array_t<double, py::array::c_style | py::array::forcecast>& K) {
+  if (K.ndim() != 3 || K.shape(1) != 3 || K.shape(2) != 3) {
+    throw std::invalid_argument("intrinsics: expected an array of shape (cameras, 3, 3)");
+  }
+  std::vector<ba::Intrinsics> out(K.shape(0));
+  const auto k = K.unchecked<3>();
+  for (py::ssize_t c = 0; c < K.shape(0); ++c) {
+    out[c] = {k(c, 0, 0), k(c, 1, 1), k(c, 0, 2), k(c, 1, 2), k(c, 0, 1)};
+  }
+  return out;
+}
+
+template <typename Matrix>
+Matrix RowsOf(const RowMatrix& array, int cols, const std::string& what) {
+  if (array.cols() != cols && array.size() > 0) {
+    throw std::invalid_argument(what + ": expected shape (N, " + std::to_string(cols) + "), got (" +
+                                std::to_string(array.rows()) + ", " + std::to_string(array.cols()) + ")");
+  }
+  Matrix out(array.rows(), cols);
+  if (array.size() > 0) out = array;
+  return out;
+}
+
+Eigen::Vector2d Vec2(const Eigen::VectorXd& v, const std::string& what) {
+  if (v.size() != 2) throw std::invalid_argument(what + ": expected 2 values");
+  return v;
+}
+
+ba::Intrinsics IntrinsicsOf(const Eigen::Matrix3d& K) { return {K(0, 0), K(1, 1), K(0, 2), K(1, 2), K(0, 1)}; }
+
+// Residual and the requested Jacobian blocks of one cost function at one point.
+py::tuple EvaluateCost(const ceres::CostFunction& cost, const std::vector<Eigen::VectorXd>& blocks,
+                       const std::vector<bool>& want) {
+  const auto& sizes = cost.parameter_block_sizes();
+  if (blocks.size() != sizes.size() || want.size() != sizes.size()) {
+    throw std::invalid_argument("expected " + std::to_string(sizes.size()) + " parameter blocks and flags");
+  }
+  std::vector<const double*> parameters;
+  std::vector<RowMatrix> jacobians;
+  std::vector<double*> jacobian_ptrs;
+  for (size_t b = 0; b < sizes.size(); ++b) {
+    if (blocks[b].size() != sizes[b]) throw std::invalid_argument("parameter block " + std::to_string(b) + " has the wrong size");
+    parameters.push_back(blocks[b].data());
+    jacobians.emplace_back(RowMatrix::Zero(2, sizes[b]));
+  }
+  for (size_t b = 0; b < sizes.size(); ++b) jacobian_ptrs.push_back(want[b] ? jacobians[b].data() : nullptr);
+  Eigen::Vector2d residual;
+  const bool ok = cost.Evaluate(parameters.data(), residual.data(), jacobian_ptrs.data());
+  py::list out_jacobians;
+  for (size_t b = 0; b < sizes.size(); ++b) {
+    if (want[b]) out_jacobians.append(jacobians[b]); else out_jacobians.append(py::none());
+  }
+  return py::make_tuple(ok, residual, out_jacobians);
+}
+
+py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::VectorXi& point_index,
+                        const RowMatrix& observed,
+                        const py::array_t<double, py::array::c_style | py::array::forcecast>& intrinsics,
+                        const RowMatrix& poses, const RowMatrix& points, const Eigen::VectorXd& plane,
+                        const std::string& model, const std::string& loss, double loss_scale,
+                        int max_iterations, double function_tolerance, double gradient_tolerance,
+                        double parameter_tolerance, int num_threads, const std::string& linear_solver,
+                        bool refine_poses, bool refine_points, int gauge_camera, int scale_camera,
+                        bool compute_covariance, bool full_report) {
+  ba::Options options;
+  options.model = ParseChoice<ba::Model>("model", model, {{"free", ba::Model::kFree}, {"coplanar", ba::Model::kCoplanar}});
+  options.loss = ParseChoice<ba::Loss>(
+      "loss", loss, {{"none", ba::Loss::kNone}, {"huber", ba::Loss::kHuber}, {"cauchy", ba::Loss::kCauchy}});
+  options.linear_solver = ParseChoice<ba::LinearSolver>(
+      "linear_solver", linear_solver,
+      {{"auto", ba::LinearSolver::kAuto},
+       {"dense_schur", ba::LinearSolver::kDenseSchur},
+       {"sparse_schur", ba::LinearSolver::kSparseSchur},
+       {"iterative_schur", ba::LinearSolver::kIterativeSchur},
+       {"dense_qr", ba::LinearSolver::kDenseQr},
+       {"sparse_normal_cholesky", ba::LinearSolver::kSparseNormalCholesky}});
+  options.loss_scale_px = loss_scale;
+  options.max_iterations = max_iterations;
+  options.function_tolerance = function_tolerance;
+  options.gradient_tolerance = gradient_tolerance;
+  options.parameter_tolerance = parameter_tolerance;
+  options.num_threads = num_threads;
+  options.refine_poses = refine_poses;
+  options.refine_points = refine_points;
+  options.gauge_camera = gauge_camera;
+  options.scale_camera = scale_camera;
+  options.compute_covariance = compute_covariance;
+  options.full_report = full_report;
+
+  ba::Data data;
+  data.camera_index = camera_index;
+  data.point_index = point_index;
+  data.observed = RowsOf<ba::PixelMatrix>(observed, 2, "observed");
+  data.intrinsics = IntrinsicsFromArray(intrinsics);
+  data.poses = RowsOf<ba::PoseMatrix>(poses, 6, "poses");
+  data.points = RowsOf<ba::PointMatrix>(points, 3, "points");
+  if (options.model == ba::Model::kCoplanar) {
+    if (plane.size() != 4) throw std::invalid_argument("plane: expected 4 values [nx, ny, nz, d]");
+    data.plane = plane;
+  }
+
+  ba::Result result;
+  {
+    py::gil_scoped_release release;
+    result = ba::BundleAdjust(data, options);
+  }
+  py::dict out;
+  out["initial_cost"] = result.initial_cost;
+  out["final_cost"] = result.final_cost;
+  out["iterations"] = result.iterations;
+  out["termination"] = result.termination;
+  out["usable"] = result.usable;
+  out["solve_time_s"] = result.solve_time_s;
+  out["gauge_camera"] = result.gauge_camera;
+  out["scale_camera"] = result.scale_camera;
+  out["poses"] = result.poses;
+  out["points"] = result.points;
+  out["plane"] = Eigen::VectorXd(result.plane);
+  out["residuals"] = result.residuals;
+  if (options.compute_covariance) {
+    py::array_t<double> covariances({static_cast<py::ssize_t>(result.pose_covariances.size()), py::ssize_t{6}, py::ssize_t{6}});
+    auto cov = covariances.mutable_unchecked<3>();
+    for (size_t c = 0; c < result.pose_covariances.size(); ++c) {
+      for (int i = 0; i < 6; ++i) for (int j = 0; j < 6; ++j) cov(c, i, j) = result.pose_covariances[c](i, j);
+    }
+    out["pose_covariances"] = covariances;
+  }
+  out["report"] = result.report;
+  return out;
+}
+
+// Plus, Minus and their Jacobians of a manifold, for tests of its invariants.
+py::dict ManifoldFunctions(const ceres::Manifold& manifold, const Eigen::VectorXd& x, const Eigen::VectorXd& y,
+                           const Eigen::VectorXd& delta) {
+  const int ambient = manifold.AmbientSize();
+  const int tangent = manifold.TangentSize();
+  if (x.size() != ambient || y.size() != ambient || delta.size() != tangent) {
+    throw std::invalid_argument("manifold: expected x, y of size " + std::to_string(ambient) + " and delta of size " +
+                                std::to_string(tangent));
+  }
+  Eigen::VectorXd x_plus_delta(ambient), y_minus_x(tangent);
+  RowMatrix plus_jacobian(ambient, tangent), minus_jacobian(tangent, ambient);
+  manifold.Plus(x.data(), delta.data(), x_plus_delta.data());
+  manifold.Minus(y.data(), x.data(), y_minus_x.data());
+  manifold.PlusJacobian(x.data(), plus_jacobian.data());
+  manifold.MinusJacobian(x.data(), minus_jacobian.data());
+  py::dict out;
+  out["plus"] = x_plus_delta;
+  out["minus"] = y_minus_x;
+  out["plus_jacobian"] = plus_jacobian;
+  out["minus_jacobian"] = minus_jacobian;
+  return out;
+}
+
+}  // namespace
+
+void register_ba(py::module_& m) {
+  m.def("bundle_adjust", &BundleAdjustPy, py::arg("camera_index"), py::arg("point_index"), py::arg("observed"),
+        py::arg("intrinsics"), py::arg("poses"), py::arg("points"), py::arg("plane") = Eigen::VectorXd(),
+        py::kw_only(), py::arg("model") = "free", py::arg("loss") = "none", py::arg("loss_scale") = 1.0,
+        py::arg("max_iterations") = 100, py::arg("function_tolerance") = 1e-12,
+        py::arg("gradient_tolerance") = 1e-14, py::arg("parameter_tolerance") = 1e-12,
+        py::arg("num_threads") = 1, py::arg("linear_solver") = "auto", py::arg("refine_poses") = true,
+        py::arg("refine_points") = true, py::arg("gauge_camera") = 0, py::arg("scale_camera") = -1,
+        py::arg("compute_covariance") = false, py::arg("full_report") = false,
+        R"doc(Bundle adjustment with analytic Jacobians (Ceres).
+
+Observations: camera_index (N,), point_index (N,), observed (N, 2) undistorted pixels.
+intrinsics (C, 3, 3); poses (C, 6) cam_from_world [angle-axis, t]; points (P, 3);
+plane [nx, ny, nz, d] with n . X = d (COPLANAR only). Returns a dict with the refined
+poses, points, plane, per-observation residuals (N, 2), costs, iterations, termination,
+solve time and, if compute_covariance, pose_covariances (C, 6, 6) of [dtheta, dt].
+Bad input raises ValueError naming the problem. Releases the GIL while solving.)doc");
+
+  m.def(
+      "evaluate_free_cost",
+      [](const Eigen::Matrix3d& K, const Eigen::VectorXd& observed, const Eigen::VectorXd& pose,
+         const Eigen::VectorXd& point, const std::vector<bool>& want) {
+        const ba::FreePointReprojectionCost cost(IntrinsicsOf(K), Vec2(observed, "observed"));
+        return EvaluateCost(cost, {pose, point}, want);
+      },
+      py::arg("K"), py::arg("observed"), py::arg("pose"), py::arg("point"), py::arg("want") = std::vector<bool>{true, true},
+      "Diagnostics: (ok, residual, [J_pose, J_point]) of the FREE reprojection cost.");
+  m.def(
+      "evaluate_plane_cost",
+      [](const Eigen::Matrix3d& K, const Eigen::VectorXd& observed, const Eigen::VectorXd& pose,
+         const Eigen::VectorXd& plane, const Eigen::VectorXd& ab, const std::vector<bool>& want) {
+        const ba::PlanePointReprojectionCost cost(IntrinsicsOf(K), Vec2(observed, "observed"));
+        return EvaluateCost(cost, {pose, plane, ab}, want);
+      },
+      py::arg("K"), py::arg("observed"), py::arg("pose"), py::arg("plane"), py::arg("ab"),
+      py::arg("want") = std::vector<bool>{true, true, true},
+      "Diagnostics: (ok, residual, [J_pose, J_plane, J_ab]) of the COPLANAR reprojection cost.");
+  m.def(
+      "point_on_plane",
+      [](const Eigen::Vector4d& plane, const Eigen::Vector2d& ab) { return ba::PointOnPlane(plane.data(), ab.data()); },
+      py::arg("plane"), py::arg("ab"), "World point of plane coordinates (a, b) on the plane [n, d].");
+  m.def(
+      "plane_manifold",
+      [](const Eigen::VectorXd& reference_normal, bool fix_offset, const Eigen::VectorXd& x, const Eigen::VectorXd& y,
+         const Eigen::VectorXd& delta) {
+        if (reference_normal.size() != 3) throw std::invalid_argument("reference_normal: expected 3 values");
+        return ManifoldFunctions(ba::PlaneManifold(reference_normal, fix_offset), x, y, delta);
+      },
+      py::arg("reference_normal"), py::arg("fix_offset"), py::arg("x"), py::arg("y"), py::arg("delta"),
+      "Diagnostics: Plus(x, delta), Minus(y, x) and their Jacobians at x of the plane manifold.");
+  m.def(
+      "fixed_distance_pose_manifold",
+      [](const Eigen::VectorXd& reference_translation, const Eigen::VectorXd& x, const Eigen::VectorXd& y,
+         const Eigen::VectorXd& delta) {
+        if (reference_translation.size() != 3) throw std::invalid_argument("reference_translation: expected 3 values");
+        return ManifoldFunctions(ba::FixedDistancePoseManifold(reference_translation), x, y, delta);
+      },
+      py::arg("reference_translation"), py::arg("x"), py::arg("y"), py::arg("delta"),
+      "Diagnostics: Plus, Minus and Jacobians of the scale-gauge pose manifold.");
+}
+
+}  // namespace calibproj::bindings

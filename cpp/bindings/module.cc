@@ -1,0 +1,22 @@
+// calibproj._core: thin pybind11 bindings of the C++ library.
+// Each stage registers its functions in a submodule of the same name.
+
+#include <pybind11/pybind11.h>
+
+#include <ceres/version.h>
+#include <opencv2/core/version.hpp>
+
+#include "registry.h"
+
+namespace py = pybind11;
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "calibproj C++ core: bundle adjustment, geometry, registration, detection, video";
+  m.attr("ceres_version") = CERES_VERSION_STRING;
+  m.attr("opencv_version") = CV_VERSION;
+
+  auto ba = m.def_submodule("ba", "Bundle adjustment with analytic Jacobians (Ceres)");
+  calibproj::bindings::register_ba(ba);
+  auto geometry = m.def_submodule("geometry", "Two-view and multi-view geometry");
+  calibproj::bindings::register_geometry(geometry);
+}

@@ -1,0 +1,426 @@
+#include "calibproj/ba/bundle_adjuster.h"
+
+#include <ceres/ceres.h>
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "calibproj/ba/manifolds.h"
+#include "calibproj/ba/reprojection_cost.h"
+#include "calibproj/ba/rotation.h"
+#include "calibproj/ba/sphere.h"
+
+namespace calibproj::ba {
+
+namespace {
+
+std::string Str(double v) { return std::to_string(v); }
+std::string Str(int v) { return std::to_string(v); }
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument(message);
+}
+
+// Rigid change of world frame X' = R X + t, applied to poses, points and the plane.
+struct FrameChange {
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+};
+
+Eigen::Matrix3d PoseRotation(const PoseMatrix& poses, int c) {
+  return RotationFromAngleAxis(poses.row(c).head<3>().transpose());
+}
+
+// Moves the data into the gauge camera's frame (gauge pose becomes the identity).
+Data ToGaugeFrame(const Data& data, const FrameChange& change) {
+  Data out = data;
+  for (int c = 0; c < data.poses.rows(); ++c) {
+    const Eigen::Matrix3d Rc = PoseRotation(data.poses, c) * change.R.transpose();
+    const Eigen::Vector3d tc = data.poses.row(c).tail<3>().transpose() - Rc * change.t;
+    out.poses.row(c).head<3>() = AngleAxisFromRotation(Rc).transpose();
+    out.poses.row(c).tail<3>() = tc.transpose();
+  }
+  for (int p = 0; p < data.points.rows(); ++p) {
+    out.points.row(p) = (change.R * data.points.row(p).transpose() + change.t).transpose();
+  }
+  const Eigen::Vector3d n = change.R * data.plane.head<3>();
+  out.plane << n, data.plane(3) + n.dot(change.t);
+  return out;
+}
+
+// Inverse of ToGaugeFrame for poses, points and plane.
+void FromGaugeFrame(const FrameChange& change, PoseMatrix* poses, PointMatrix* points, Eigen::Vector4d* plane) {
+  for (int c = 0; c < poses->rows(); ++c) {
+    const Eigen::Matrix3d Rc_gauge = PoseRotation(*poses, c);
+    const Eigen::Vector3d tc = poses->row(c).tail<3>().transpose() + Rc_gauge * change.t;
+    poses->row(c).head<3>() = AngleAxisFromRotation(Rc_gauge * change.R).transpose();
+    poses->row(c).tail<3>() = tc.transpose();
+  }
+  for (int p = 0; p < points->rows(); ++p) {
+    points->row(p) = (change.R.transpose() * (points->row(p).transpose() - change.t)).transpose();
+  }
+  const Eigen::Vector3d n_gauge = plane->head<3>();
+  const double d = (*plane)(3) - n_gauge.dot(change.t);
+  *plane << change.R.transpose() * n_gauge, d;
+}
+
+ceres::LinearSolverType CeresLinearSolver(LinearSolver solver, int num_cameras) {
+  switch (solver) {
+    case LinearSolver::kDenseSchur: return ceres::DENSE_SCHUR;
+    case LinearSolver::kSparseSchur: return ceres::SPARSE_SCHUR;
+    case LinearSolver::kIterativeSchur: return ceres::ITERATIVE_SCHUR;
+    case LinearSolver::kDenseQr: return ceres::DENSE_QR;
+    case LinearSolver::kSparseNormalCholesky: return ceres::SPARSE_NORMAL_CHOLESKY;
+    case LinearSolver::kAuto: break;
+  }
+  // Measured on the paper rig (tools/bench/ba_speed.py): the reduced camera system
+  // is small and dense, so dense Schur wins until it is a few hundred columns wide.
+  return num_cameras <= 60 ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
+}
+
+std::unique_ptr<ceres::LossFunction> MakeLoss(const Options& options) {
+  switch (options.loss) {
+    case Loss::kHuber: return std::make_unique<ceres::HuberLoss>(options.loss_scale_px);
+    case Loss::kCauchy: return std::make_unique<ceres::CauchyLoss>(options.loss_scale_px);
+    case Loss::kNone: break;
+  }
+  return nullptr;
+}
+
+int FarthestCamera(const PoseMatrix& poses_in_gauge_frame, int gauge_camera) {
+  int best = -1;
+  double best_distance = 0.0;
+  for (int c = 0; c < poses_in_gauge_frame.rows(); ++c) {
+    const double distance = poses_in_gauge_frame.row(c).tail<3>().norm();
+    if (c != gauge_camera && distance > best_distance) {
+      best = c;
+      best_distance = distance;
+    }
+  }
+  return best;
+}
+
+// The parameter blocks the solver works on, in the gauge frame.
+struct Parameters {
+  PoseMatrix poses;
+  PointMatrix points;                                                 // FREE
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> plane_points;  // COPLANAR
+  Eigen::Vector4d plane;
+};
+
+Parameters InitialParameters(const Data& gauge_data, const Options& options) {
+  Parameters params;
+  params.poses = gauge_data.poses;
+  params.plane = gauge_data.plane;
+  if (options.model == Model::kFree) {
+    params.points = gauge_data.points;
+    return params;
+  }
+  // The plane normal points away from the gauge camera (d > 0), so its tangent
+  // basis stays far from its singular direction -e_z.
+  params.plane.head<3>().normalize();
+  if (params.plane(3) < 0.0) params.plane = -params.plane;
+  const Eigen::Vector3d n = params.plane.head<3>();
+  Require(n.z() > kMinSphereZ, "plane: seen edge-on or from behind by the gauge camera");
+  const Eigen::Matrix<double, 3, 2> B = TangentBasis(n);
+  params.plane_points.resize(gauge_data.points.rows(), 2);
+  for (int p = 0; p < gauge_data.points.rows(); ++p) {
+    params.plane_points.row(p) = (B.transpose() * gauge_data.points.row(p).transpose()).transpose();
+  }
+  return params;
+}
+
+double* PointBlock(Parameters& params, const Options& options, int p) {
+  return options.model == Model::kFree ? params.points.row(p).data() : params.plane_points.row(p).data();
+}
+
+void CopyPointsOut(const Parameters& params, const Options& options, PointMatrix* points) {
+  if (options.model == Model::kFree) {
+    *points = params.points;
+    return;
+  }
+  points->resize(params.plane_points.rows(), 3);
+  for (int p = 0; p < params.plane_points.rows(); ++p) {
+    points->row(p) = PointOnPlane(params.plane.data(), params.plane_points.row(p).data()).transpose();
+  }
+}
+
+ceres::CostFunction* MakeCost(const Data& data, const Options& options, int i) {
+  const Intrinsics& K = data.intrinsics[data.camera_index(i)];
+  const Eigen::Vector2d observed = data.observed.row(i).transpose();
+  if (options.model == Model::kFree) return new FreePointReprojectionCost(K, observed);
+  return new PlanePointReprojectionCost(K, observed);
+}
+
+struct Gauge {
+  int camera = -1;
+  int scale_camera = -1;
+  bool fixed = false;  // poses and points both refined: the gauge must be removed
+};
+
+void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, Parameters& params,
+                  ceres::LossFunction* loss, ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
+  const bool coplanar = options.model == Model::kCoplanar;
+  const int point_size = coplanar ? 2 : 3;
+  for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
+    problem->AddParameterBlock(PointBlock(params, options, p), point_size);
+    ordering->AddElementToGroup(PointBlock(params, options, p), 0);
+  }
+  for (int c = 0; c < params.poses.rows(); ++c) {
+    double* pose = params.poses.row(c).data();
+    if (gauge.fixed && c == gauge.scale_camera) {
+      problem->AddParameterBlock(pose, 6, new FixedDistancePoseManifold(params.poses.row(c).tail<3>().transpose()));
+    } else {
+      problem->AddParameterBlock(pose, 6);
+    }
+    ordering->AddElementToGroup(pose, 1);
+  }
+  if (coplanar) {
+    problem->AddParameterBlock(params.plane.data(), 4,
+                               new PlaneManifold(params.plane.head<3>(), /*fix_offset=*/gauge.fixed));
+    ordering->AddElementToGroup(params.plane.data(), 1);
+  }
+  for (int i = 0; i < data.camera_index.size(); ++i) {
+    double* pose = params.poses.row(data.camera_index(i)).data();
+    double* point = PointBlock(params, options, data.point_index(i));
+    if (coplanar) {
+      problem->AddResidualBlock(MakeCost(data, options, i), loss, pose, params.plane.data(), point);
+    } else {
+      problem->AddResidualBlock(MakeCost(data, options, i), loss, pose, point);
+    }
+  }
+  if (!options.refine_poses) {
+    for (int c = 0; c < params.poses.rows(); ++c) problem->SetParameterBlockConstant(params.poses.row(c).data());
+  } else if (gauge.fixed) {
+    problem->SetParameterBlockConstant(params.poses.row(gauge.camera).data());
+  }
+  if (!options.refine_points) {
+    for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
+      problem->SetParameterBlockConstant(PointBlock(params, options, p));
+    }
+    if (coplanar) problem->SetParameterBlockConstant(params.plane.data());
+  }
+}
+
+ceres::Solver::Options SolverOptions(const Options& options, int num_cameras,
+                                     std::shared_ptr<ceres::ParameterBlockOrdering> ordering) {
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = CeresLinearSolver(options.linear_solver, num_cameras);
+  if (solver.linear_solver_type == ceres::ITERATIVE_SCHUR) solver.preconditioner_type = ceres::SCHUR_JACOBI;
+  const bool schur = solver.linear_solver_type == ceres::DENSE_SCHUR ||
+                     solver.linear_solver_type == ceres::SPARSE_SCHUR ||
+                     solver.linear_solver_type == ceres::ITERATIVE_SCHUR;
+  if (schur && options.refine_points && options.refine_poses) solver.linear_solver_ordering = ordering;
+  solver.max_num_iterations = options.max_iterations;
+  solver.function_tolerance = options.function_tolerance;
+  solver.gradient_tolerance = options.gradient_tolerance;
+  solver.parameter_tolerance = options.parameter_tolerance;
+  solver.num_threads = options.num_threads;
+  solver.logging_type = ceres::SILENT;
+  solver.minimizer_progress_to_stdout = false;
+  return solver;
+}
+
+// Ceres covariance of each free pose in the gauge frame, mapped to [dtheta, dt]
+// in the caller's frame (see Result::pose_covariances).
+std::vector<Matrix6d> PoseCovariances(ceres::Problem* problem, Parameters& params, const FrameChange& change,
+                                      const Options& options) {
+  const int num_cameras = static_cast<int>(params.poses.rows());
+  std::vector<std::pair<const double*, const double*>> blocks;
+  for (int c = 0; c < num_cameras; ++c) {
+    if (!problem->IsParameterBlockConstant(params.poses.row(c).data())) {
+      blocks.emplace_back(params.poses.row(c).data(), params.poses.row(c).data());
+    }
+  }
+  ceres::Covariance::Options covariance_options;
+  covariance_options.num_threads = options.num_threads;
+  ceres::Covariance covariance(covariance_options);
+  if (!covariance.Compute(blocks, problem)) {
+    throw std::runtime_error("covariance: the Jacobian is rank deficient; the poses are not determined");
+  }
+  std::vector<Matrix6d> out(num_cameras, Matrix6d::Zero());
+  for (int c = 0; c < num_cameras; ++c) {
+    const double* pose = params.poses.row(c).data();
+    if (problem->IsParameterBlockConstant(pose)) continue;
+    Matrix6d ambient;
+    covariance.GetCovarianceBlock(pose, pose, ambient.data());
+    const Eigen::Vector3d w = params.poses.row(c).head<3>().transpose();
+    Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+    const Eigen::Matrix3d J_left = LeftJacobian(w);
+    A.topLeftCorner<3, 3>() = J_left;
+    A.bottomLeftCorner<3, 3>() = -Skew(RotationFromAngleAxis(w) * change.t) * J_left;
+    A.bottomRightCorner<3, 3>().setIdentity();
+    out[c] = A * ambient * A.transpose();
+  }
+  return out;
+}
+
+const char* ModelName(Model model) { return model == Model::kFree ? "free" : "coplanar"; }
+
+}  // namespace
+
+void Options::Check() const {
+  Require(loss_scale_px > 0.0 && std::isfinite(loss_scale_px),
+          "options: loss scale must be a positive number of pixels, got " + Str(loss_scale_px));
+  Require(max_iterations >= 0, "options: max_iterations must be >= 0, got " + Str(max_iterations));
+  Require(function_tolerance >= 0.0 && gradient_tolerance >= 0.0 && parameter_tolerance >= 0.0,
+          "options: tolerances must be >= 0");
+  Require(num_threads >= 1, "options: num_threads must be >= 1, got " + Str(num_threads));
+  Require(refine_poses || refine_points, "options: nothing to refine (refine_poses and refine_points both off)");
+  Require(!compute_covariance || refine_poses, "options: covariance needs refine_poses");
+}
+
+void ValidateData(const Data& data, const Options& options) {
+  options.Check();
+  const int num_obs = static_cast<int>(data.camera_index.size());
+  const int num_cameras = static_cast<int>(data.poses.rows());
+  const int num_points = static_cast<int>(data.points.rows());
+  Require(num_obs > 0, "empty problem: no observations");
+  Require(num_cameras > 0, "empty problem: no cameras");
+  Require(num_points > 0, "empty problem: no points");
+  Require(data.point_index.size() == num_obs,
+          "observations: " + Str(num_obs) + " camera indices but " + Str(int(data.point_index.size())) +
+              " point indices");
+  Require(data.observed.rows() == num_obs,
+          "observations: " + Str(num_obs) + " camera indices but " + Str(int(data.observed.rows())) + " pixels");
+  Require(static_cast<int>(data.intrinsics.size()) == num_cameras,
+          "intrinsics: " + Str(int(data.intrinsics.size())) + " cameras but " + Str(num_cameras) + " poses");
+  Require(data.poses.allFinite(), "poses: non-finite value");
+  Require(data.points.allFinite(), "points: non-finite value");
+  Require(data.observed.allFinite(), "observations: non-finite pixel");
+  for (int c = 0; c < num_cameras; ++c) {
+    const Intrinsics& K = data.intrinsics[c];
+    Require(std::isfinite(K.fx) && std::isfinite(K.fy) && std::isfinite(K.cx) && std::isfinite(K.cy) &&
+                std::isfinite(K.skew),
+            "intrinsics of camera " + Str(c) + ": non-finite value");
+    Require(K.fx > 0.0 && K.fy > 0.0, "intrinsics of camera " + Str(c) + ": focal lengths must be positive");
+  }
+  std::vector<int> camera_count(num_cameras, 0), point_count(num_points, 0);
+  for (int i = 0; i < num_obs; ++i) {
+    const int c = data.camera_index(i);
+    const int p = data.point_index(i);
+    Require(c >= 0 && c < num_cameras,
+            "observation " + Str(i) + ": camera index " + Str(c) + " out of range [0, " + Str(num_cameras) + ")");
+    Require(p >= 0 && p < num_points,
+            "observation " + Str(i) + ": point index " + Str(p) + " out of range [0, " + Str(num_points) + ")");
+    ++camera_count[c];
+    ++point_count[p];
+  }
+  for (int c = 0; c < num_cameras; ++c) Require(camera_count[c] > 0, "camera " + Str(c) + " has no observation");
+  for (int p = 0; p < num_points; ++p) Require(point_count[p] > 0, "point " + Str(p) + " has no observation");
+  if (options.model == Model::kCoplanar) {
+    Require(data.plane.allFinite(), "plane: non-finite value");
+    Require(data.plane.head<3>().norm() > 1e-12, "plane: the normal is zero");
+  }
+  Require(options.gauge_camera >= 0 && options.gauge_camera < num_cameras,
+          "options: gauge camera " + Str(options.gauge_camera) + " out of range [0, " + Str(num_cameras) + ")");
+  Require(options.scale_camera >= -1 && options.scale_camera < num_cameras &&
+              options.scale_camera != options.gauge_camera,
+          "options: scale camera " + Str(options.scale_camera) + " must be another camera in range");
+  const PixelMatrix residuals = ComputeResiduals(data);
+  for (int i = 0; i < num_obs; ++i) {
+    Require(std::isfinite(residuals(i, 0)),
+            "observation " + Str(i) + ": point " + Str(data.point_index(i)) + " is behind camera " +
+                Str(data.camera_index(i)));
+  }
+}
+
+PixelMatrix ComputeResiduals(const Data& data) {
+  const int num_obs = static_cast<int>(data.camera_index.size());
+  PixelMatrix residuals(num_obs, 2);
+  for (int i = 0; i < num_obs; ++i) {
+    const FreePointReprojectionCost cost(data.intrinsics[data.camera_index(i)], data.observed.row(i).transpose());
+    const double* blocks[2] = {data.poses.row(data.camera_index(i)).data(), data.points.row(data.point_index(i)).data()};
+    double r[2];
+    if (cost.Evaluate(blocks, r, nullptr)) {
+      residuals.row(i) << r[0], r[1];
+    } else {
+      residuals.row(i).setConstant(std::numeric_limits<double>::quiet_NaN());
+    }
+  }
+  return residuals;
+}
+
+Result BundleAdjust(const Data& data, const Options& requested) {
+  ValidateData(data, requested);
+  // With points held fixed there is no plane to refine: both models are the same.
+  Options options = requested;
+  if (!options.refine_points) options.model = Model::kFree;
+  const int num_cameras = static_cast<int>(data.poses.rows());
+
+  Gauge gauge;
+  gauge.camera = options.gauge_camera;
+  gauge.fixed = options.refine_poses && options.refine_points;
+  FrameChange change;
+  change.R = PoseRotation(data.poses, gauge.camera);
+  change.t = data.poses.row(gauge.camera).tail<3>().transpose();
+  const Data gauge_data = ToGaugeFrame(data, change);
+  if (gauge.fixed && options.model == Model::kFree) {
+    if (num_cameras < 2) throw std::invalid_argument("FREE bundle adjustment needs at least 2 cameras");
+    gauge.scale_camera =
+        options.scale_camera >= 0 ? options.scale_camera : FarthestCamera(gauge_data.poses, gauge.camera);
+    Require(gauge.scale_camera >= 0 && gauge_data.poses.row(gauge.scale_camera).tail<3>().norm() > 1e-12,
+            "scale gauge: the scale camera's centre coincides with the gauge camera's");
+  }
+  if (options.model == Model::kCoplanar) {
+    Require(std::abs(gauge_data.plane(3)) > 1e-12 * gauge_data.plane.head<3>().norm(),
+            "plane: passes through the gauge camera's centre");
+  }
+
+  Parameters params = InitialParameters(gauge_data, options);
+  const std::unique_ptr<ceres::LossFunction> loss = MakeLoss(options);
+  ceres::Problem::Options problem_options;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.enable_fast_removal = false;
+  problem_options.disable_all_safety_checks = true;  // ValidateData has run
+  ceres::Problem problem(problem_options);
+  auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+  BuildProblem(gauge_data, options, gauge, params, loss.get(), &problem, ordering.get());
+
+  ceres::Solver::Summary summary;
+  const auto start = std::chrono::steady_clock::now();
+  ceres::Solve(SolverOptions(options, num_cameras, ordering), &problem, &summary);
+  const auto stop = std::chrono::steady_clock::now();
+
+  Result result;
+  result.initial_cost = summary.initial_cost;
+  result.final_cost = summary.final_cost;
+  result.iterations = static_cast<int>(summary.iterations.size()) - 1;
+  result.termination = ceres::TerminationTypeToString(summary.termination_type);
+  result.usable = summary.IsSolutionUsable();
+  result.solve_time_s = std::chrono::duration<double>(stop - start).count();
+  result.gauge_camera = gauge.fixed ? gauge.camera : -1;
+  result.scale_camera = gauge.scale_camera;
+  result.report = options.full_report ? summary.FullReport() : summary.BriefReport();
+  result.report += std::string("\nmodel: ") + ModelName(options.model);
+
+  if (options.compute_covariance && result.usable) {
+    result.pose_covariances = PoseCovariances(&problem, params, change, options);
+  }
+  result.poses = params.poses;
+  result.plane = params.plane;
+  CopyPointsOut(params, options, &result.points);
+  FromGaugeFrame(change, &result.poses, &result.points, &result.plane);
+  // The gauge camera did not move: return its pose bit for bit.
+  if (gauge.fixed || !options.refine_poses) {
+    result.poses.row(gauge.camera) = data.poses.row(gauge.camera);
+  }
+  if (!options.refine_poses) result.poses = data.poses;
+  if (!options.refine_points) result.points = data.points;
+  if (options.model == Model::kFree) result.plane = data.plane;
+  if (options.model == Model::kCoplanar && result.plane.head<3>().dot(data.plane.head<3>()) < 0.0) {
+    result.plane = -result.plane;  // keep the caller's orientation of the normal
+  }
+
+  Data final_data = data;
+  final_data.poses = result.poses;
+  final_data.points = result.points;
+  result.residuals = ComputeResiduals(final_data);
+  return result;
+}
+
+}  // namespace calibproj::ba

@@ -1,0 +1,95 @@
+#pragma once
+// Bundle adjustment of camera poses and points (FREE) or of poses, one plane and
+// points on it (COPLANAR), with fixed pinhole intrinsics and undistorted observations.
+//
+// Gauge. The world frame and scale are not observable; both are fixed so that the
+// problem is well posed:
+//  - the gauge camera's pose is held constant (6 dof);
+//  - COPLANAR: the distance from the gauge camera's centre to the plane is held
+//    constant (1 dof);
+//  - FREE: the distance between the gauge camera's centre and the scale camera's
+//    centre is held constant (1 dof; the scale camera is by default the one
+//    farthest from the gauge camera).
+// Internally the problem is solved in the gauge camera's frame, where these become
+// a constant block, the plane offset and the length of a translation; results are
+// returned in the caller's frame.
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "calibproj/ba/camera.h"
+
+namespace calibproj::ba {
+
+enum class Model { kFree, kCoplanar };
+enum class Loss { kNone, kHuber, kCauchy };
+enum class LinearSolver { kAuto, kDenseSchur, kSparseSchur, kIterativeSchur, kDenseQr, kSparseNormalCholesky };
+
+using PoseMatrix = Eigen::Matrix<double, Eigen::Dynamic, 6, Eigen::RowMajor>;
+using PointMatrix = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+using PixelMatrix = Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>;
+using Matrix6d = Eigen::Matrix<double, 6, 6, Eigen::RowMajor>;
+
+struct Options {
+  Model model = Model::kFree;
+  Loss loss = Loss::kNone;
+  double loss_scale_px = 1.0;  // Huber/Cauchy scale, in pixels
+  int max_iterations = 100;
+  double function_tolerance = 1e-12;
+  double gradient_tolerance = 1e-14;
+  double parameter_tolerance = 1e-12;
+  int num_threads = 1;
+  LinearSolver linear_solver = LinearSolver::kAuto;
+  bool refine_poses = true;
+  bool refine_points = true;  // points and, in COPLANAR, the plane
+  int gauge_camera = 0;
+  int scale_camera = -1;      // FREE only; -1 picks the camera farthest from the gauge camera
+  bool compute_covariance = false;
+  bool full_report = false;
+
+  // Throws std::invalid_argument naming the first inconsistent option.
+  void Check() const;
+};
+
+struct Data {
+  Eigen::VectorXi camera_index;   // per observation
+  Eigen::VectorXi point_index;    // per observation
+  PixelMatrix observed;           // per observation, undistorted pixels
+  std::vector<Intrinsics> intrinsics;  // per camera
+  PoseMatrix poses;               // per camera: cam_from_world [w, t]
+  PointMatrix points;             // per point, world coordinates
+  Eigen::Vector4d plane = Eigen::Vector4d(0, 0, 1, 0);  // COPLANAR: [n, d], n . X = d
+};
+
+struct Result {
+  double initial_cost = 0.0;  // 0.5 * sum of squared (robustified) residuals
+  double final_cost = 0.0;
+  int iterations = 0;
+  std::string termination;
+  bool usable = false;
+  double solve_time_s = 0.0;
+  int gauge_camera = -1;
+  int scale_camera = -1;      // FREE with poses and points refined; -1 otherwise
+  PoseMatrix poses;
+  PointMatrix points;         // COPLANAR: exactly on the plane
+  Eigen::Vector4d plane = Eigen::Vector4d::Zero();
+  PixelMatrix residuals;      // per observation, projected minus observed, pixels
+  // Per camera when requested: covariance of [dtheta, dt] with R = Exp(dtheta) R_hat,
+  // t = t_hat + dt, in the caller's frame. Zero for the gauge camera.
+  std::vector<Matrix6d> pose_covariances;
+  std::string report;         // Ceres FullReport when requested, else BriefReport
+};
+
+// Throws std::invalid_argument with a message naming the problem: sizes that do not
+// match, indices out of range, non-finite values, an empty problem, a camera or a
+// point without observations, a point behind a camera that observes it.
+void ValidateData(const Data& data, const Options& options);
+
+// Validates, then solves. Never lets a Ceres CHECK see bad input.
+Result BundleAdjust(const Data& data, const Options& options);
+
+// Residual of every observation (projected minus observed), NaN behind the camera.
+PixelMatrix ComputeResiduals(const Data& data);
+
+}  // namespace calibproj::ba

@@ -1,0 +1,5 @@
+import sys
+
+from calibproj.cli import main
+
+sys.exit(main())

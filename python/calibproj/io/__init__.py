@@ -1,0 +1,1 @@
+"""File formats: schema-versioned JSON, intrinsics, atomic writes."""
