@@ -94,7 +94,7 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
                         int max_iterations, double function_tolerance, double gradient_tolerance,
                         double parameter_tolerance, int num_threads, const std::string& linear_solver,
                         bool refine_poses, bool refine_points, int gauge_camera, int scale_camera,
-                        bool compute_covariance, bool full_report) {
+                        bool compute_covariance, bool full_report, const ba::CostFactory& make_cost) {
   ba::Options options;
   options.model = ParseChoice<ba::Model>("model", model, {{"free", ba::Model::kFree}, {"coplanar", ba::Model::kCoplanar}});
   options.loss = ParseChoice<ba::Loss>(
@@ -135,7 +135,7 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
   ba::Result result;
   {
     py::gil_scoped_release release;
-    result = ba::BundleAdjust(data, options);
+    result = ba::BundleAdjust(data, options, make_cost);
   }
   py::dict out;
   out["initial_cost"] = result.initial_cost;
@@ -187,23 +187,44 @@ py::dict ManifoldFunctions(const ceres::Manifold& manifold, const Eigen::VectorX
 
 }  // namespace
 
-void register_ba(py::module_& m) {
-  m.def("bundle_adjust", &BundleAdjustPy, py::arg("camera_index"), py::arg("point_index"), py::arg("observed"),
-        py::arg("intrinsics"), py::arg("poses"), py::arg("points"), py::arg("plane") = Eigen::VectorXd(),
-        py::kw_only(), py::arg("model") = "free", py::arg("loss") = "none", py::arg("loss_scale") = 1.0,
-        py::arg("max_iterations") = 100, py::arg("function_tolerance") = 1e-12,
-        py::arg("gradient_tolerance") = 1e-14, py::arg("parameter_tolerance") = 1e-12,
-        py::arg("num_threads") = 1, py::arg("linear_solver") = "auto", py::arg("refine_poses") = true,
-        py::arg("refine_points") = true, py::arg("gauge_camera") = 0, py::arg("scale_camera") = -1,
-        py::arg("compute_covariance") = false, py::arg("full_report") = false,
-        R"doc(Bundle adjustment with analytic Jacobians (Ceres).
+void def_bundle_adjust(py::module_& m, const char* name, const ba::CostFactory& make_cost) {
+  m.def(
+      name,
+      [make_cost](const Eigen::VectorXi& camera_index, const Eigen::VectorXi& point_index, const RowMatrix& observed,
+                  const py::array_t<double, py::array::c_style | py::array::forcecast>& intrinsics,
+                  const RowMatrix& poses, const RowMatrix& points, const Eigen::VectorXd& plane,
+                  const std::string& model, const std::string& loss, double loss_scale, int max_iterations,
+                  double function_tolerance, double gradient_tolerance, double parameter_tolerance,
+                  int num_threads, const std::string& linear_solver, bool refine_poses, bool refine_points,
+                  int gauge_camera, int scale_camera, bool compute_covariance, bool full_report) {
+        return BundleAdjustPy(camera_index, point_index, observed, intrinsics, poses, points, plane, model, loss,
+                              loss_scale, max_iterations, function_tolerance, gradient_tolerance,
+                              parameter_tolerance, num_threads, linear_solver, refine_poses, refine_points,
+                              gauge_camera, scale_camera, compute_covariance, full_report, make_cost);
+      },
+      py::arg("camera_index"), py::arg("point_index"), py::arg("observed"), py::arg("intrinsics"), py::arg("poses"),
+      py::arg("points"), py::arg("plane") = Eigen::VectorXd(), py::kw_only(), py::arg("model") = "free",
+      py::arg("loss") = "none", py::arg("loss_scale") = 1.0, py::arg("max_iterations") = 100,
+      py::arg("function_tolerance") = 1e-12, py::arg("gradient_tolerance") = 1e-14,
+      py::arg("parameter_tolerance") = 1e-12, py::arg("num_threads") = 1, py::arg("linear_solver") = "auto",
+      py::arg("refine_poses") = true, py::arg("refine_points") = true, py::arg("gauge_camera") = 0,
+      py::arg("scale_camera") = -1, py::arg("compute_covariance") = false, py::arg("full_report") = false,
+      R"doc(Bundle adjustment (Ceres).
 
 Observations: camera_index (N,), point_index (N,), observed (N, 2) undistorted pixels.
 intrinsics (C, 3, 3); poses (C, 6) cam_from_world [angle-axis, t]; points (P, 3);
-plane [nx, ny, nz, d] with n . X = d (COPLANAR only). Returns a dict with the refined
+plane [nx, ny, nz, d] with n . X = d (COPLANAR only). model: free | coplanar;
+loss: none | huber | cauchy (scale in pixels); linear_solver: auto | dense_schur |
+sparse_schur | iterative_schur | dense_qr | sparse_normal_cholesky. The gauge camera's
+pose is held fixed, and the scale through the plane offset (COPLANAR) or the distance
+to the scale camera (FREE; -1 picks the farthest). Returns a dict with the refined
 poses, points, plane, per-observation residuals (N, 2), costs, iterations, termination,
 solve time and, if compute_covariance, pose_covariances (C, 6, 6) of [dtheta, dt].
 Bad input raises ValueError naming the problem. Releases the GIL while solving.)doc");
+}
+
+void register_ba(py::module_& m) {
+  def_bundle_adjust(m, "bundle_adjust", ba::AnalyticCosts());
 
   m.def(
       "evaluate_free_cost",

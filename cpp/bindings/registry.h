@@ -3,9 +3,15 @@
 
 #include <pybind11/pybind11.h>
 
+#include "calibproj/ba/bundle_adjuster.h"
+
 namespace calibproj::bindings {
 
 void register_ba(pybind11::module_& m);
 void register_geometry(pybind11::module_& m);
+
+// Defines m.<name>(...) solving with the given costs; register_ba uses the analytic
+// ones, the benchmark-only module calibproj._bench the AutoDiff ones.
+void def_bundle_adjust(pybind11::module_& m, const char* name, const ba::CostFactory& make_cost);
 
 }  // namespace calibproj::bindings

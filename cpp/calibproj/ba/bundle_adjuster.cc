@@ -21,8 +21,10 @@ namespace {
 std::string Str(double v) { return std::to_string(v); }
 std::string Str(int v) { return std::to_string(v); }
 
+[[noreturn]] void Fail(const std::string& message) { throw std::invalid_argument(message); }
+
 void Require(bool condition, const std::string& message) {
-  if (!condition) throw std::invalid_argument(message);
+  if (!condition) Fail(message);
 }
 
 // Rigid change of world frame X' = R X + t, applied to poses, points and the plane.
@@ -149,12 +151,6 @@ void CopyPointsOut(const Parameters& params, const Options& options, PointMatrix
   }
 }
 
-ceres::CostFunction* MakeCost(const Data& data, const Options& options, int i) {
-  const Intrinsics& K = data.intrinsics[data.camera_index(i)];
-  const Eigen::Vector2d observed = data.observed.row(i).transpose();
-  if (options.model == Model::kFree) return new FreePointReprojectionCost(K, observed);
-  return new PlanePointReprojectionCost(K, observed);
-}
 
 struct Gauge {
   int camera = -1;
@@ -163,7 +159,7 @@ struct Gauge {
 };
 
 void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, Parameters& params,
-                  ceres::LossFunction* loss, ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
+                  const CostFactory& make_cost, ceres::LossFunction* loss, ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
   const bool coplanar = options.model == Model::kCoplanar;
   const int point_size = coplanar ? 2 : 3;
   for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
@@ -187,10 +183,12 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
   for (int i = 0; i < data.camera_index.size(); ++i) {
     double* pose = params.poses.row(data.camera_index(i)).data();
     double* point = PointBlock(params, options, data.point_index(i));
+    ceres::CostFunction* cost =
+        make_cost(options.model, data.intrinsics[data.camera_index(i)], data.observed.row(i).transpose());
     if (coplanar) {
-      problem->AddResidualBlock(MakeCost(data, options, i), loss, pose, params.plane.data(), point);
+      problem->AddResidualBlock(cost, loss, pose, params.plane.data(), point);
     } else {
-      problem->AddResidualBlock(MakeCost(data, options, i), loss, pose, point);
+      problem->AddResidualBlock(cost, loss, pose, point);
     }
   }
   if (!options.refine_poses) {
@@ -300,18 +298,25 @@ void ValidateData(const Data& data, const Options& options) {
     Require(K.fx > 0.0 && K.fy > 0.0, "intrinsics of camera " + Str(c) + ": focal lengths must be positive");
   }
   std::vector<int> camera_count(num_cameras, 0), point_count(num_points, 0);
+  // Messages are built only on failure: these loops run over every observation.
   for (int i = 0; i < num_obs; ++i) {
     const int c = data.camera_index(i);
     const int p = data.point_index(i);
-    Require(c >= 0 && c < num_cameras,
-            "observation " + Str(i) + ": camera index " + Str(c) + " out of range [0, " + Str(num_cameras) + ")");
-    Require(p >= 0 && p < num_points,
-            "observation " + Str(i) + ": point index " + Str(p) + " out of range [0, " + Str(num_points) + ")");
+    if (c < 0 || c >= num_cameras) {
+      Fail("observation " + Str(i) + ": camera index " + Str(c) + " out of range [0, " + Str(num_cameras) + ")");
+    }
+    if (p < 0 || p >= num_points) {
+      Fail("observation " + Str(i) + ": point index " + Str(p) + " out of range [0, " + Str(num_points) + ")");
+    }
     ++camera_count[c];
     ++point_count[p];
   }
-  for (int c = 0; c < num_cameras; ++c) Require(camera_count[c] > 0, "camera " + Str(c) + " has no observation");
-  for (int p = 0; p < num_points; ++p) Require(point_count[p] > 0, "point " + Str(p) + " has no observation");
+  for (int c = 0; c < num_cameras; ++c) {
+    if (camera_count[c] == 0) Fail("camera " + Str(c) + " has no observation");
+  }
+  for (int p = 0; p < num_points; ++p) {
+    if (point_count[p] == 0) Fail("point " + Str(p) + " has no observation");
+  }
   if (options.model == Model::kCoplanar) {
     Require(data.plane.allFinite(), "plane: non-finite value");
     Require(data.plane.head<3>().norm() > 1e-12, "plane: the normal is zero");
@@ -323,9 +328,10 @@ void ValidateData(const Data& data, const Options& options) {
           "options: scale camera " + Str(options.scale_camera) + " must be another camera in range");
   const PixelMatrix residuals = ComputeResiduals(data);
   for (int i = 0; i < num_obs; ++i) {
-    Require(std::isfinite(residuals(i, 0)),
-            "observation " + Str(i) + ": point " + Str(data.point_index(i)) + " is behind camera " +
-                Str(data.camera_index(i)));
+    if (!std::isfinite(residuals(i, 0))) {
+      Fail("observation " + Str(i) + ": point " + Str(data.point_index(i)) + " is behind camera " +
+           Str(data.camera_index(i)));
+    }
   }
 }
 
@@ -345,7 +351,16 @@ PixelMatrix ComputeResiduals(const Data& data) {
   return residuals;
 }
 
-Result BundleAdjust(const Data& data, const Options& requested) {
+CostFactory AnalyticCosts() {
+  return [](Model model, const Intrinsics& K, const Eigen::Vector2d& observed) -> ceres::CostFunction* {
+    if (model == Model::kFree) return new FreePointReprojectionCost(K, observed);
+    return new PlanePointReprojectionCost(K, observed);
+  };
+}
+
+Result BundleAdjust(const Data& data, const Options& options) { return BundleAdjust(data, options, AnalyticCosts()); }
+
+Result BundleAdjust(const Data& data, const Options& requested, const CostFactory& make_cost) {
   ValidateData(data, requested);
   // With points held fixed there is no plane to refine: both models are the same.
   Options options = requested;
@@ -379,7 +394,7 @@ Result BundleAdjust(const Data& data, const Options& requested) {
   problem_options.disable_all_safety_checks = true;  // ValidateData has run
   ceres::Problem problem(problem_options);
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-  BuildProblem(gauge_data, options, gauge, params, loss.get(), &problem, ordering.get());
+  BuildProblem(gauge_data, options, gauge, params, make_cost, loss.get(), &problem, ordering.get());
 
   ceres::Solver::Summary summary;
   const auto start = std::chrono::steady_clock::now();

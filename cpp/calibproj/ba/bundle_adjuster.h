@@ -15,10 +15,15 @@
 // returned in the caller's frame.
 
 #include <Eigen/Core>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "calibproj/ba/camera.h"
+
+namespace ceres {
+class CostFunction;
+}  // namespace ceres
 
 namespace calibproj::ba {
 
@@ -88,6 +93,14 @@ void ValidateData(const Data& data, const Options& options);
 
 // Validates, then solves. Never lets a Ceres CHECK see bad input.
 Result BundleAdjust(const Data& data, const Options& options);
+
+// The cost of one observation, owned by the caller's ceres::Problem. The product
+// path uses the analytic costs of reprojection_cost.h; tools/bench swaps in
+// automatic differentiation of the same residuals to measure the difference.
+using CostFactory =
+    std::function<ceres::CostFunction*(Model model, const Intrinsics& K, const Eigen::Vector2d& observed)>;
+Result BundleAdjust(const Data& data, const Options& options, const CostFactory& make_cost);
+CostFactory AnalyticCosts();
 
 // Residual of every observation (projected minus observed), NaN behind the camera.
 PixelMatrix ComputeResiduals(const Data& data);

@@ -35,7 +35,8 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
 Eigen::Matrix3d RotationFromAngleAxis(const Eigen::Vector3d& w) {
   const AngleCoefficients k = Coefficients(w.squaredNorm());
   const Eigen::Matrix3d W = Skew(w);
-  return Eigen::Matrix3d::Identity() + k.a * W + k.b * W * W;
+  const Eigen::Matrix3d W2 = W * W;  // same operation order as RotationAndLeftJacobian
+  return Eigen::Matrix3d::Identity() + k.a * W + k.b * W2;
 }
 
 void RotationAndLeftJacobian(const Eigen::Vector3d& w, Eigen::Matrix3d* R, Eigen::Matrix3d* J_left) {
