@@ -124,7 +124,7 @@ Parameters InitialParameters(const Data& gauge_data, const Options& options) {
   }
   // The plane normal points away from the gauge camera (d > 0), so its tangent
   // basis stays far from its singular direction -e_z.
-  params.plane.head<3>().normalize();
+  params.plane /= params.plane.head<3>().norm();  // unit normal, offset in world units
   if (params.plane(3) < 0.0) params.plane = -params.plane;
   const Eigen::Vector3d n = params.plane.head<3>();
   Require(n.z() > kMinSphereZ, "plane: seen edge-on or from behind by the gauge camera");
