@@ -1,0 +1,332 @@
+"""Camera intrinsics: the pinhole + OpenCV distortion model, and its file formats.
+
+Three formats are read (see docs/conventions.md):
+
+- ours, ``intrinsics/<camera>.json`` (``calibproj.intrinsics/1``);
+- OpenCV YAML/XML written by ``cv2.FileStorage`` (``camera_matrix`` or ``K``,
+  ``distortion_coefficients`` or ``D``, ``image_width``, ``image_height``);
+- the reference code's JSON (``sensors.RGB.intrinsics.data`` and
+  ``sensors.RGB.distortionCoefficients.data``), which carries no resolution.
+
+Only ours is written. OpenCV is imported inside the functions that need it so
+that importing this module stays cheap.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibproj.io.jsonio import FormatError, read_json, write_json
+
+SCHEMA_KIND = "intrinsics"
+SCHEMA_MAJOR = 1
+
+# OpenCV accepts distortion vectors of these lengths:
+# [k1 k2 p1 p2], + k3, + k4 k5 k6 (rational), + s1..s4 (thin prism), + tau_x tau_y (tilt).
+DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
+
+# Iterative undistortion stops when the point, distorted again, lands within this many
+# pixels of the input, or after this many iterations. OpenCV's default (5 iterations)
+# leaves errors of several pixels in the corners of a wide-angle image.
+UNDISTORT_EPS_PX = 1e-9
+UNDISTORT_MAX_ITERATIONS = 200
+
+YAML_SUFFIXES = (".yaml", ".yml", ".xml")
+INTRINSICS_SUFFIXES = (".json", *YAML_SUFFIXES)
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """One camera's pinhole matrix and OpenCV distortion.
+
+    Attributes:
+        name: camera name (the file stem when read from a directory).
+        resolution: image size ``(width, height)`` in pixels; ``None`` when the file
+            does not say (the reference code's format).
+        K: 3x3 camera matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (no skew, as OpenCV).
+        dist: distortion coefficients in OpenCV order, length 4, 5, 8, 12 or 14.
+    """
+
+    name: str
+    resolution: tuple[int, int] | None
+    K: np.ndarray
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+
+    def __post_init__(self) -> None:
+        K = np.array(self.K, dtype=float).reshape(3, 3)
+        dist = np.array(self.dist, dtype=float).ravel()
+        if dist.size == 0:
+            dist = np.zeros(5)
+        problem = _intrinsics_problem(K, dist, self.resolution)
+        if problem:
+            raise ValueError(f"intrinsics of {self.name!r}: {problem}")
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "dist", dist)
+        if self.resolution is not None:
+            object.__setattr__(self, "resolution", (int(self.resolution[0]), int(self.resolution[1])))
+
+    @property
+    def has_distortion(self) -> bool:
+        return bool(np.any(self.dist != 0.0))
+
+    def undistort_points(self, pixels: np.ndarray) -> np.ndarray:
+        """Undistorted pixel coordinates (same K) of distorted pixels, shape ``(N, 2)``.
+
+        Iterates until the result, distorted again, is within ``UNDISTORT_EPS_PX`` of
+        the input (a fixed-point iteration; it converges wherever the distortion is
+        one-to-one, see ``max_monotonic_radius``).
+        """
+        import cv2
+
+        pixels = _as_points(pixels)
+        if pixels.shape[0] == 0 or not self.has_distortion:
+            return pixels.copy()
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, UNDISTORT_MAX_ITERATIONS, UNDISTORT_EPS_PX)
+        out = cv2.undistortPointsIter(
+            pixels.reshape(-1, 1, 2), self.K, self.dist, np.eye(3), self.K, criteria
+        )
+        return out.reshape(-1, 2)
+
+    def distort_points(self, pixels: np.ndarray) -> np.ndarray:
+        """Distorted pixel coordinates of undistorted pixels (same K), shape ``(N, 2)``."""
+        pixels = _as_points(pixels)
+        if pixels.shape[0] == 0 or not self.has_distortion:
+            return pixels.copy()
+        return self.project_normalized(self.normalize(pixels))
+
+    def normalize(self, pixels: np.ndarray) -> np.ndarray:
+        """Pinhole normalised coordinates ``K^-1 [u, v, 1]`` of undistorted pixels."""
+        pixels = _as_points(pixels)
+        return (pixels - self.K[:2, 2]) / np.diag(self.K)[:2]
+
+    def project_normalized(self, xy: np.ndarray) -> np.ndarray:
+        """Distorted pixels of normalised coordinates ``(X/Z, Y/Z)``, shape ``(N, 2)``."""
+        xy = _as_points(xy)
+        if self.dist.size == 14 and np.any(self.dist[12:] != 0.0):
+            return self._project_normalized_tilted(xy)
+        distorted = _distort_normalized(xy, self.dist)
+        return distorted @ self.K[:2, :2].T + self.K[:2, 2]
+
+    def _project_normalized_tilted(self, xy: np.ndarray) -> np.ndarray:
+        """The tilted-sensor model (14 coefficients) through OpenCV."""
+        import cv2
+
+        if xy.shape[0] == 0:
+            return xy.copy()
+        rays = np.column_stack([xy, np.ones(len(xy))])
+        out, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), self.K, self.dist)
+        return out.reshape(-1, 2)
+
+    def max_monotonic_radius(self, limit: float = 4.0, step: float = 1e-3) -> float:
+        """Normalised radius up to which the radial distortion is one-to-one.
+
+        A polynomial distortion folds back beyond some radius, so points far outside
+        the field of view can land inside the image; callers reject points beyond
+        this radius. Returns ``limit`` when the model stays monotonic up to it.
+        """
+        radius = np.arange(step, limit + step, step)
+        distorted = radius * _radial_factor(self.dist, radius**2)
+        increasing = np.diff(distorted) > 0
+        if np.all(increasing) and np.all(np.isfinite(distorted)):
+            return float(limit)
+        return float(radius[int(np.argmin(increasing))])
+
+    def contains(self, pixels: np.ndarray, margin_px: float = 0.0) -> np.ndarray:
+        """Which pixels lie inside the image, ``margin_px`` away from its border."""
+        if self.resolution is None:
+            raise ValueError(f"intrinsics of {self.name!r}: resolution unknown")
+        pixels = _as_points(pixels)
+        width, height = self.resolution
+        return (
+            (pixels[:, 0] >= margin_px)
+            & (pixels[:, 0] <= width - 1 - margin_px)
+            & (pixels[:, 1] >= margin_px)
+            & (pixels[:, 1] <= height - 1 - margin_px)
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """Body of our intrinsics file (without the schema tag)."""
+        if self.resolution is None:
+            raise ValueError(f"intrinsics of {self.name!r}: resolution unknown, cannot write our format")
+        return {
+            "camera": self.name,
+            "resolution": list(self.resolution),
+            "K": self.K.tolist(),
+            "dist": self.dist.tolist(),
+        }
+
+
+def _as_points(points: np.ndarray) -> np.ndarray:
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 2:
+        points = points.reshape(-1, 2)
+    return points
+
+
+def _distort_normalized(xy: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """OpenCV's lens distortion (radial, tangential, thin prism) of normalised coordinates."""
+    coefficients = np.zeros(12)
+    coefficients[: min(len(dist), 12)] = dist[:12]
+    _, _, p1, p2, _, _, _, _, s1, s2, s3, s4 = coefficients
+    x, y = xy[:, 0], xy[:, 1]
+    r2 = x * x + y * y
+    radial = _radial_factor(dist, r2)
+    x_out = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2)
+    y_out = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y + r2 * (s3 + s4 * r2)
+    return np.column_stack([x_out, y_out])
+
+
+def _radial_factor(dist: np.ndarray, r2: np.ndarray) -> np.ndarray:
+    """OpenCV's radial factor (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)."""
+    coefficients = np.zeros(8)
+    coefficients[: min(len(dist), 8)] = dist[:8]
+    k1, k2, _, _, k3, k4, k5, k6 = coefficients
+    numerator = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    denominator = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return numerator / denominator
+
+
+def _intrinsics_problem(K: np.ndarray, dist: np.ndarray, resolution: Any) -> str | None:
+    """What is wrong with these values, or ``None``."""
+    if not np.all(np.isfinite(K)) or not np.all(np.isfinite(dist)):
+        return "K and dist must be finite numbers"
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
+        return f"focal lengths must be positive, got fx={K[0, 0]}, fy={K[1, 1]}"
+    if K[0, 1] != 0 or K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+        # OpenCV's distortion functions ignore a skew term, so none is accepted.
+        return f"K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got {K.tolist()}"
+    if dist.size not in DISTORTION_LENGTHS:
+        return f"dist must have {', '.join(map(str, DISTORTION_LENGTHS))} coefficients, got {dist.size}"
+    if resolution is not None:
+        if len(resolution) != 2 or any(int(v) != v or v <= 0 for v in resolution):
+            return f"resolution must be two positive integers [width, height], got {resolution}"
+    return None
+
+
+def read_intrinsics(path: str | os.PathLike, name: str | None = None) -> Intrinsics:
+    """Read one intrinsics file in any supported format; the name defaults to the file stem."""
+    path = Path(path)
+    name = name or path.stem
+    if not path.is_file():
+        raise FormatError(f"{path}: no such intrinsics file")
+    suffix = path.suffix.lower()
+    if suffix in YAML_SUFFIXES:
+        return _read_opencv_storage(path, name)
+    if suffix != ".json":
+        raise FormatError(f"{path}: unknown intrinsics format (expected .json, .yaml, .yml or .xml)")
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise FormatError(f"{path}: not valid JSON ({error})") from None
+    if isinstance(document, dict) and "sensors" in document:
+        return _from_reference_json(path, document, name)
+    return _from_our_json(path, name)
+
+
+def write_intrinsics(path: str | os.PathLike, intrinsics: Intrinsics) -> None:
+    """Write our intrinsics format atomically."""
+    write_json(path, SCHEMA_KIND, SCHEMA_MAJOR, intrinsics.to_json())
+
+
+def write_intrinsics_dir(directory: str | os.PathLike, cameras: dict[str, Intrinsics]) -> None:
+    """Write ``<directory>/<camera>.json`` for every camera."""
+    for camera_name, intrinsics in cameras.items():
+        write_intrinsics(Path(directory) / f"{camera_name}.json", intrinsics)
+
+
+def load_intrinsics_dir(directory: str | os.PathLike) -> dict[str, Intrinsics]:
+    """All intrinsics files of a directory, keyed by camera name (the file stem)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise FormatError(f"{directory}: no such intrinsics directory")
+    files = sorted(p for p in directory.iterdir() if p.is_file() and p.suffix.lower() in INTRINSICS_SUFFIXES)
+    out: dict[str, Intrinsics] = {}
+    for path in files:
+        if path.stem in out:
+            raise FormatError(f"{path}: a second intrinsics file for camera {path.stem!r}")
+        out[path.stem] = read_intrinsics(path)
+    if not out:
+        raise FormatError(f"{directory}: no intrinsics files (*.json, *.yaml, *.yml, *.xml)")
+    return out
+
+
+def _from_our_json(path: Path, name: str) -> Intrinsics:
+    document = read_json(path, SCHEMA_KIND, SCHEMA_MAJOR)
+    for key in ("resolution", "K"):
+        if key not in document:
+            raise FormatError(f"{path}: missing field {key!r}")
+    return _build(path, name, document["K"], document.get("dist", []), document["resolution"])
+
+
+def _from_reference_json(path: Path, document: dict[str, Any], name: str) -> Intrinsics:
+    try:
+        rgb = document["sensors"]["RGB"]
+        K = rgb["intrinsics"]["data"]
+        dist = rgb["distortionCoefficients"]["data"]
+    except (KeyError, TypeError):
+        raise FormatError(
+            f"{path}: expected sensors.RGB.intrinsics.data and sensors.RGB.distortionCoefficients.data"
+        ) from None
+    return _build(path, name, K, dist, None)
+
+
+def _read_opencv_storage(path: Path, name: str) -> Intrinsics:
+    import cv2
+
+    try:
+        storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except cv2.error as error:
+        raise FormatError(f"{path}: not an OpenCV YAML/XML file ({error.err})") from None
+    try:
+        K = _first_matrix(storage, ("camera_matrix", "K", "cameraMatrix"))
+        dist = _first_matrix(storage, ("distortion_coefficients", "D", "dist_coeffs", "distCoeffs"))
+        width, height = storage.getNode("image_width"), storage.getNode("image_height")
+        resolution = None if width.empty() or height.empty() else (width.real(), height.real())
+    finally:
+        storage.release()
+    if K is None:
+        raise FormatError(f"{path}: missing camera_matrix (or K)")
+    if dist is None:
+        raise FormatError(f"{path}: missing distortion_coefficients (or D)")
+    return _build(path, name, K, dist, resolution)
+
+
+def _first_matrix(storage: Any, keys: tuple[str, ...]) -> np.ndarray | None:
+    for key in keys:
+        node = storage.getNode(key)
+        if node.empty():
+            continue
+        matrix = node.mat()
+        if matrix is None:  # written as a plain sequence rather than an opencv-matrix
+            matrix = np.array([node.at(i).real() for i in range(node.size())])
+        return np.asarray(matrix, dtype=float)
+    return None
+
+
+def _build(path: Path, name: str, K: Any, dist: Any, resolution: Any) -> Intrinsics:
+    try:
+        K_array = np.array(K, dtype=float)
+        dist_array = np.array(dist, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise FormatError(f"{path}: K and dist must be numbers") from None
+    if K_array.size != 9:
+        raise FormatError(f"{path}: K must have 9 values (3x3), got {K_array.size}")
+    if resolution is not None:
+        try:
+            resolution = tuple(float(v) for v in resolution)
+        except (TypeError, ValueError):
+            raise FormatError(f"{path}: resolution must be [width, height], got {resolution!r}") from None
+        if any(not math.isfinite(v) for v in resolution):
+            raise FormatError(f"{path}: resolution must be finite, got {resolution!r}")
+    try:
+        return Intrinsics(name, resolution, K_array.reshape(3, 3), dist_array)
+    except ValueError as error:
+        raise FormatError(f"{path}: {error}") from None

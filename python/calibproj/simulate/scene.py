@@ -1,0 +1,381 @@
+"""Simulated rooms: a floor, a ceiling projector and cameras, read from and written to ``scene.json``.
+
+A scene is in metres, in the floor frame (z up, floor z = 0). Every device is placed
+by its ``position`` and the point it looks at (``look_at``); its orientation follows
+from those with the rule of ``look_at_rotation``: no roll, the image "up" is the
+world +z direction, and a device looking straight down (or up) has the top of its
+image towards world +y.
+
+File format (``calibproj.scene/1``, see DESIGN.md)::
+
+    {"schema": "calibproj.scene/1",
+     "floor": {"size_m": [4.0, 3.0]},
+     "projector": {"position": [0, 0, 3], "look_at": [0, 0, 0], "resolution": [1920, 1080], "fx": 1400},
+     "cameras": [{"name": "far1", "position": [...], "look_at": [...], "resolution": [1920, 1080],
+                  "fx": 915, "fy": 915, "cx": 960, "cy": 540, "dist": [k1, k2, p1, p2, k3],
+                  "fps": 30, "start_offset_s": 0.37, "exposure_s": 0.01}, ...],
+     "photometric": {"ambient": 0.05, "contrast": 0.8, "noise_std": 2.0,
+                     "blur_px": 0.7, "vignetting": 0.3, "gamma": 2.2}}
+
+``fy`` defaults to ``fx``; ``cx``, ``cy`` to the image centre ``((w - 1) / 2, (h - 1) / 2)``;
+``dist`` to no distortion; ``fps`` to 30, ``start_offset_s`` to 0, ``exposure_s`` to
+0.01 s (at most one frame); ``photometric`` to the defaults of ``Photometric``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibproj.io.intrinsics import DISTORTION_LENGTHS, Intrinsics
+from calibproj.io.jsonio import FormatError, read_json, write_json
+from calibproj.simulate.presets import PRESETS, preset_document
+
+SCHEMA_KIND = "scene"
+SCHEMA_MAJOR = 1
+
+# Below this |sin| between the optical axis and the vertical a device counts as
+# looking straight down (or up), and the image top is put towards world +y.
+VERTICAL_AXIS_TOLERANCE = 1e-9
+
+CAMERA_NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+
+
+def look_at_rotation(position: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """World-to-camera rotation of a device at ``position`` looking at ``target``.
+
+    Rows are the camera axes in world coordinates (OpenCV: x right, y down, z forward).
+    No roll: the image x axis is horizontal and the image "up" (-y) points towards
+    world +z. Looking straight down or up, the horizon is undefined; the image top
+    then points towards world +y (so a projector looking down maps image x to world x).
+    """
+    forward = np.asarray(target, dtype=float) - np.asarray(position, dtype=float)
+    norm = np.linalg.norm(forward)
+    if norm == 0.0:
+        raise ValueError("position and look_at coincide")
+    forward /= norm
+    up = np.array([0.0, 0.0, 1.0])
+    right = np.cross(forward, up)
+    if np.linalg.norm(right) < VERTICAL_AXIS_TOLERANCE:
+        right = np.cross(forward, np.array([0.0, 1.0, 0.0]))
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    return np.stack([right, down, forward])
+
+
+@dataclass(frozen=True)
+class Floor:
+    """The floor z = 0, a rectangle centred on the origin."""
+
+    size_m: tuple[float, float] = (4.0, 3.0)
+
+
+@dataclass(frozen=True)
+class Projector:
+    """A pinhole projector (no distortion, principal point at the image centre)."""
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    resolution: tuple[int, int]
+    fx: float
+
+    @property
+    def K(self) -> np.ndarray:
+        width, height = self.resolution
+        return np.array([[self.fx, 0.0, (width - 1) / 2.0], [0.0, self.fx, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+    @property
+    def R(self) -> np.ndarray:
+        return look_at_rotation(np.array(self.position), np.array(self.look_at))
+
+    @property
+    def t(self) -> np.ndarray:
+        return -self.R @ np.array(self.position, dtype=float)
+
+    @property
+    def center(self) -> np.ndarray:
+        return np.array(self.position, dtype=float)
+
+    def pixels_to_floor(self, pixels: np.ndarray) -> np.ndarray:
+        """Floor points (z = 0), shape ``(N, 3)``, hit by the rays of projector pixels.
+
+        Rays that do not go down towards the floor give NaN rows.
+        """
+        pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
+        rays_cam = np.linalg.solve(self.K, np.column_stack([pixels, np.ones(len(pixels))]).T)
+        rays_world = (self.R.T @ rays_cam).T
+        origin = self.center
+        with np.errstate(divide="ignore", invalid="ignore"):
+            depth = -origin[2] / rays_world[:, 2]
+        depth[~(depth > 0)] = np.nan
+        return origin + depth[:, None] * rays_world
+
+
+@dataclass(frozen=True)
+class Camera:
+    """One simulated camera: pose by position/look-at, intrinsics, timing."""
+
+    name: str
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    resolution: tuple[int, int]
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    fps: float = 30.0
+    start_offset_s: float = 0.0
+    exposure_s: float = 0.01
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def R(self) -> np.ndarray:
+        return look_at_rotation(np.array(self.position), np.array(self.look_at))
+
+    @property
+    def t(self) -> np.ndarray:
+        return -self.R @ np.array(self.position, dtype=float)
+
+    @property
+    def center(self) -> np.ndarray:
+        return np.array(self.position, dtype=float)
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return Intrinsics(self.name, self.resolution, self.K, np.array(self.dist))
+
+
+@dataclass(frozen=True)
+class Photometric:
+    """How rendered frames look (used by the video renderer, ignored by the geometric simulator).
+
+    Attributes:
+        ambient: light on the floor with the projector black, fraction of full scale.
+        contrast: projected white minus black on the floor, fraction of full scale.
+        noise_std: sensor noise, grey levels (0-255).
+        blur_px: Gaussian blur sigma (optics, focus), pixels.
+        vignetting: brightness lost in the image corners, fraction.
+        gamma: display gamma of the recorded video.
+    """
+
+    ambient: float = 0.05
+    contrast: float = 0.8
+    noise_std: float = 2.0
+    blur_px: float = 0.7
+    vignetting: float = 0.3
+    gamma: float = 2.2
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A simulated room: floor, projector, cameras (unique names) and photometric settings."""
+
+    floor: Floor
+    projector: Projector
+    cameras: tuple[Camera, ...]
+    photometric: Photometric = field(default_factory=Photometric)
+
+    @property
+    def camera_names(self) -> list[str]:
+        return [camera.name for camera in self.cameras]
+
+    def camera(self, name: str) -> Camera:
+        for camera in self.cameras:
+            if camera.name == name:
+                return camera
+        raise KeyError(f"no camera {name!r} in the scene (cameras: {', '.join(self.camera_names)})")
+
+    def subset(self, names: list[str]) -> Scene:
+        """The same room with only the named cameras, in the given order."""
+        return Scene(self.floor, self.projector, tuple(self.camera(name) for name in names), self.photometric)
+
+    def to_json(self) -> dict[str, Any]:
+        """Body of ``scene.json`` (without the schema tag)."""
+        return {
+            "floor": {"size_m": list(self.floor.size_m)},
+            "projector": _plain(asdict(self.projector)),
+            "cameras": [_plain(asdict(camera)) for camera in self.cameras],
+            "photometric": asdict(self.photometric),
+        }
+
+
+def _plain(record: dict[str, Any]) -> dict[str, Any]:
+    return {key: list(value) if isinstance(value, tuple) else value for key, value in record.items()}
+
+
+def save_scene(path: str | os.PathLike, scene: Scene) -> None:
+    """Write ``scene.json`` atomically."""
+    write_json(path, SCHEMA_KIND, SCHEMA_MAJOR, scene.to_json())
+
+
+def read_scene(path: str | os.PathLike) -> Scene:
+    """Read and validate a scene file; errors name the file and the field."""
+    document = read_json(path, SCHEMA_KIND, SCHEMA_MAJOR)
+    return scene_from_json(document, source=str(path))
+
+
+def load_scene(name_or_path: str | os.PathLike, seed: int | None = 0) -> Scene:
+    """A built-in scene by name (see ``calibproj.simulate.presets``) or a scene file by path.
+
+    ``seed`` drives the random parts of a preset (the camera angles of ``paper``); a
+    scene file is read as it is.
+    """
+    if isinstance(name_or_path, str) and name_or_path in PRESETS:
+        return scene_from_json(preset_document(name_or_path, seed), source=f"preset {name_or_path!r}")
+    path = Path(name_or_path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such scene file, and not a preset ({', '.join(PRESETS)})")
+    return read_scene(path)
+
+
+def scene_from_json(document: dict[str, Any], source: str = "scene") -> Scene:
+    """Validate a scene document; ``source`` names it in error messages."""
+    reader = _FieldReader(source)
+    known = {"schema", "floor", "projector", "cameras", "photometric"}
+    reader.no_unknown_keys(document, known, "")
+    floor = Floor(tuple(reader.numbers(reader.required(document, "floor", ""), "size_m", "floor", 2, positive=True)))
+    projector = _read_projector(reader, reader.required(document, "projector", ""))
+    cameras_json = reader.required(document, "cameras", "")
+    if not isinstance(cameras_json, list) or not cameras_json:
+        raise FormatError(f"{source}: cameras: expected a non-empty list")
+    cameras = tuple(_read_camera(reader, entry, f"cameras[{i}]") for i, entry in enumerate(cameras_json))
+    names = [camera.name for camera in cameras]
+    duplicates = sorted({name for name in names if names.count(name) > 1})
+    if duplicates:
+        raise FormatError(f"{source}: cameras: duplicate names {duplicates}")
+    photometric = _read_photometric(reader, document.get("photometric", {}))
+    scene = Scene(floor, projector, cameras, photometric)
+    _check_projector_hits_floor(source, scene.projector)
+    return scene
+
+
+def _read_projector(reader: _FieldReader, entry: Any) -> Projector:
+    where = "projector"
+    reader.no_unknown_keys(entry, {"position", "look_at", "resolution", "fx"}, where)
+    position, look_at = _read_placement(reader, entry, where)
+    resolution = _read_resolution(reader, entry, where)
+    fx = reader.number(entry, "fx", where, positive=True)
+    return Projector(position, look_at, resolution, fx)
+
+
+def _read_camera(reader: _FieldReader, entry: Any, where: str) -> Camera:
+    known = {"name", "position", "look_at", "resolution", "fx", "fy", "cx", "cy", "dist", "fps",
+             "start_offset_s", "exposure_s"}
+    reader.no_unknown_keys(entry, known, where)
+    name = reader.required(entry, "name", where)
+    if not isinstance(name, str) or not CAMERA_NAME_PATTERN.match(name):
+        reader.fail(f"{where}.name", f"expected letters, digits, '_', '-' or '.' (a file name), got {name!r}")
+    where = f"{where} ({name})"
+    position, look_at = _read_placement(reader, entry, where)
+    resolution = _read_resolution(reader, entry, where)
+    fx = reader.number(entry, "fx", where, positive=True)
+    fy = reader.number(entry, "fy", where, positive=True, default=fx)
+    cx = reader.number(entry, "cx", where, default=(resolution[0] - 1) / 2.0)
+    cy = reader.number(entry, "cy", where, default=(resolution[1] - 1) / 2.0)
+    dist = tuple(reader.numbers(entry, "dist", where, None, default=[0.0] * 5))
+    if len(dist) not in DISTORTION_LENGTHS:
+        reader.fail(f"{where}.dist", f"expected {', '.join(map(str, DISTORTION_LENGTHS))} coefficients, got {len(dist)}")
+    fps = reader.number(entry, "fps", where, positive=True, default=30.0)
+    start_offset_s = reader.number(entry, "start_offset_s", where, default=0.0)
+    exposure_s = reader.number(entry, "exposure_s", where, positive=True, default=min(0.01, 1.0 / fps))
+    if exposure_s > 1.0 / fps:
+        reader.fail(f"{where}.exposure_s", f"{exposure_s} s is longer than one frame at {fps} fps")
+    return Camera(name, position, look_at, resolution, fx, fy, cx, cy, dist, fps, start_offset_s, exposure_s)
+
+
+def _read_placement(reader: _FieldReader, entry: Any, where: str) -> tuple[tuple, tuple]:
+    position = tuple(reader.numbers(entry, "position", where, 3))
+    look_at = tuple(reader.numbers(entry, "look_at", where, 3))
+    if position == look_at:
+        reader.fail(f"{where}.look_at", "equals position; a device must look somewhere")
+    return position, look_at
+
+
+def _read_resolution(reader: _FieldReader, entry: Any, where: str) -> tuple[int, int]:
+    values = reader.numbers(entry, "resolution", where, 2, positive=True)
+    if any(v != int(v) for v in values):
+        reader.fail(f"{where}.resolution", f"expected two integers [width, height], got {values}")
+    return int(values[0]), int(values[1])
+
+
+def _read_photometric(reader: _FieldReader, entry: Any) -> Photometric:
+    where = "photometric"
+    defaults = Photometric()
+    reader.no_unknown_keys(entry, set(asdict(defaults)), where)
+    values = {}
+    for key, default in asdict(defaults).items():
+        value = reader.number(entry, key, where, default=default)
+        bounded = key in ("ambient", "contrast", "vignetting")
+        if (bounded and not 0.0 <= value <= 1.0) or value < 0.0 or (key == "gamma" and value == 0.0):
+            expected = "a number in [0, 1]" if bounded else "a positive number" if key == "gamma" else ">= 0"
+            reader.fail(f"{where}.{key}", f"expected {expected}, got {value}")
+        values[key] = value
+    return Photometric(**values)
+
+
+def _check_projector_hits_floor(source: str, projector: Projector) -> None:
+    width, height = projector.resolution
+    corners = np.array([[0, 0], [width - 1, 0], [width - 1, height - 1], [0, height - 1]], dtype=float)
+    if projector.position[2] <= 0 or np.isnan(projector.pixels_to_floor(corners)).any():
+        raise FormatError(
+            f"{source}: projector: its whole image must fall on the floor (z = 0); "
+            "place it above the floor looking down"
+        )
+
+
+class _FieldReader:
+    """Typed access to JSON fields with errors of the form ``<file>: <field>: <problem>``."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, where: str, problem: str) -> None:
+        raise FormatError(f"{self.source}: {where}: {problem}")
+
+    def no_unknown_keys(self, entry: Any, known: set[str], where: str) -> None:
+        if not isinstance(entry, dict):
+            self.fail(where or "scene", "expected a JSON object")
+        unknown = sorted(set(entry) - known)
+        if unknown:
+            self.fail(where or "scene", f"unknown field(s) {unknown} (known: {sorted(known)})")
+
+    def required(self, entry: dict[str, Any], key: str, where: str) -> Any:
+        if key not in entry:
+            self.fail(_join(where, key), "missing")
+        return entry[key]
+
+    def number(self, entry: dict[str, Any], key: str, where: str, positive: bool = False,
+               default: float | None = None) -> float:
+        value = entry.get(key, default) if default is not None else self.required(entry, key, where)
+        return self.check_number(value, _join(where, key), positive)
+
+    def numbers(self, entry: Any, key: str, where: str, count: int | None, positive: bool = False,
+                default: list[float] | None = None) -> list[float]:
+        if not isinstance(entry, dict):
+            self.fail(where, "expected a JSON object")
+        value = entry.get(key, default) if default is not None else self.required(entry, key, where)
+        if not isinstance(value, list) or (count is not None and len(value) != count):
+            size = f"{count} numbers" if count is not None else "a list of numbers"
+            self.fail(_join(where, key), f"expected {size}, got {value!r}")
+        return [self.check_number(v, f"{_join(where, key)}[{i}]", positive) for i, v in enumerate(value)]
+
+    def check_number(self, value: Any, where: str, positive: bool) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            self.fail(where, f"expected a number, got {value!r}")
+        if positive and value <= 0:
+            self.fail(where, f"expected a positive number, got {value}")
+        return float(value)
+
+
+def _join(where: str, key: str) -> str:
+    return f"{where}.{key}" if where else key

@@ -1,0 +1,137 @@
+"""Scenes: presets, look-at poses, scene.json round trip and validation messages."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from calibproj.simulate.presets import PRESETS
+from calibproj.simulate.scene import load_scene, look_at_rotation, read_scene, save_scene, scene_from_json
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_every_preset_loads_and_round_trips(tmp_path, name):
+    scene = load_scene(name, seed=3)
+    path = tmp_path / "scene.json"
+    save_scene(path, scene)
+    assert read_scene(path) == scene
+    assert load_scene(path) == scene
+    for camera in scene.cameras:
+        R = camera.R
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_paper_rig_cameras_sit_on_their_circles_at_seeded_angles():
+    scene = load_scene("paper", seed=7)
+    assert len(scene.cameras) == 10
+    for camera in scene.cameras:
+        radius, height = (2.8, 2.8) if camera.name.startswith("far") else (1.2, 1.4)
+        assert math.hypot(*camera.position[:2]) == pytest.approx(radius)
+        assert camera.position[2] == pytest.approx(height)
+        assert camera.look_at == (0.0, 0.0, 0.0)
+        assert camera.fx == 917.0 and camera.resolution == (1920, 1080)
+    assert load_scene("paper", seed=7) == scene
+    assert load_scene("paper", seed=8) != scene
+
+
+def test_or_full_is_the_mock_operating_room():
+    scene = load_scene("or-full")
+    focal = sorted(camera.fx for camera in scene.cameras)
+    assert len(scene.cameras) == 9
+    assert focal[-1] == 11100.0 and all(abs(f - 915.0) < 5.0 for f in focal[:-1])
+    assert all(camera.resolution == (1920, 1080) for camera in scene.cameras)
+    # Later video tests rely on varied frame rates and start offsets.
+    assert {25.0, 29.97, 30.0, 50.0, 60.0} <= {camera.fps for camera in scene.cameras}
+    assert len({camera.start_offset_s for camera in scene.cameras}) == 9
+    assert all(camera.exposure_s <= 1.0 / camera.fps for camera in scene.cameras)
+    # The projector hangs at ~3 m and covers about 4 x 2.3 m of floor.
+    corners = scene.projector.pixels_to_floor([[-0.5, -0.5], [1919.5, 1079.5]])
+    extent = np.abs(corners[1] - corners[0])[:2]
+    np.testing.assert_allclose(extent, [4.1, 2.3], atol=0.1)
+
+
+def test_small_preset_is_three_small_cameras():
+    scene = load_scene("small")
+    assert len(scene.cameras) == 3
+    assert all(camera.resolution == (640, 360) for camera in scene.cameras)
+
+
+def test_look_at_pose_looks_at_the_target_from_the_position():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        position, target = rng.uniform(-3, 3, 3), rng.uniform(-3, 3, 3)
+        R = look_at_rotation(position, target)
+        t = -R @ position
+        np.testing.assert_allclose(-R.T @ t, position, atol=1e-12)
+        in_camera = R @ target + t
+        np.testing.assert_allclose(in_camera[:2], 0.0, atol=1e-12)
+        assert in_camera[2] > 0
+        # No roll: the image x axis is horizontal and world "up" is image "up" (-y).
+        assert R[0, 2] == pytest.approx(0.0, abs=1e-12)
+        assert R[1, 2] <= 0.0
+
+
+def test_straight_down_camera_has_image_top_towards_world_y():
+    R = look_at_rotation(np.array([0.5, 0.2, 3.0]), np.array([0.5, 0.2, 0.0]))
+    np.testing.assert_allclose(R, [[1, 0, 0], [0, -1, 0], [0, 0, -1]], atol=1e-12)
+
+
+def test_unknown_preset_names_the_choices():
+    with pytest.raises(ValueError, match="no such scene file, and not a preset.*or-full"):
+        load_scene("no-such-room")
+
+
+def _write(tmp_path, document):
+    path = tmp_path / "room.json"
+    path.write_text(json.dumps(document))
+    return path
+
+
+def _document():
+    return {
+        "schema": "calibproj.scene/1",
+        "floor": {"size_m": [4.0, 3.0]},
+        "projector": {"position": [0, 0, 3.0], "look_at": [0, 0, 0], "resolution": [1920, 1080], "fx": 1400},
+        "cameras": [{"name": "far1", "position": [2.8, 0, 2.8], "look_at": [0, 0, 0],
+                     "resolution": [1920, 1080], "fx": 915}],
+    }
+
+
+def test_scene_file_defaults():
+    camera = scene_from_json(_document()).cameras[0]
+    assert (camera.fy, camera.cx, camera.cy) == (915.0, 959.5, 539.5)
+    assert camera.dist == (0.0,) * 5 and camera.fps == 30.0 and camera.exposure_s == 0.01
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda d: d["cameras"][0].pop("fx"), r"cameras\[0\] \(far1\)\.fx: missing"),
+        (lambda d: d["cameras"][0].update(fx=-3), r"cameras\[0\] \(far1\)\.fx: expected a positive number"),
+        (lambda d: d["cameras"][0].update(position=[1, 2]), r"position: expected 3 numbers"),
+        (lambda d: d["cameras"][0].update(dist=[0.1, 0.2, 0.3]), r"dist: expected 4, 5, 8, 12, 14"),
+        (lambda d: d["cameras"][0].update(resolution=[1920.5, 1080]), r"resolution: expected two integers"),
+        (lambda d: d["cameras"][0].update(focal=3), r"unknown field\(s\) \['focal'\]"),
+        (lambda d: d["cameras"][0].update(name="a/b"), r"cameras\[0\]\.name"),
+        (lambda d: d["cameras"][0].update(fps=60, exposure_s=0.02), r"exposure_s: 0.02 s is longer than one frame"),
+        (lambda d: d["cameras"][0].update(look_at=[2.8, 0, 2.8]), r"look_at: equals position"),
+        (lambda d: d["cameras"].append(dict(d["cameras"][0])), r"cameras: duplicate names \['far1'\]"),
+        (lambda d: d.update(cameras=[]), r"cameras: expected a non-empty list"),
+        (lambda d: d["projector"].update(look_at=[0, 0, 5]), r"projector: its whole image must fall on the floor"),
+        (lambda d: d.pop("floor"), r"floor: missing"),
+        (lambda d: d.update(photometric={"gamma": 0}), r"photometric\.gamma: expected a positive number"),
+        (lambda d: d.update(photometric={"contrast": 2}), r"photometric\.contrast: expected a number in \[0, 1\]"),
+        (lambda d: d.update(schema="calibproj.tracks/1"), r"is a calibproj tracks file, expected scene"),
+    ],
+)
+def test_scene_validation_names_the_file_and_the_field(tmp_path, edit, message):
+    document = _document()
+    edit(document)
+    path = _write(tmp_path, document)
+    with pytest.raises(ValueError, match=message) as error:
+        read_scene(path)
+    assert str(path) in str(error.value)
