@@ -152,6 +152,10 @@ void CopyPointsOut(const Parameters& params, const Options& options, PointMatrix
 }
 
 
+std::unique_ptr<ceres::Manifold> ScaleGaugeManifold(const Parameters& params, int camera) {
+  return std::make_unique<FixedDistancePoseManifold>(params.poses.row(camera).tail<3>().transpose());
+}
+
 struct Gauge {
   int camera = -1;
   int scale_camera = -1;
@@ -169,7 +173,7 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
   for (int c = 0; c < params.poses.rows(); ++c) {
     double* pose = params.poses.row(c).data();
     if (gauge.fixed && c == gauge.scale_camera) {
-      problem->AddParameterBlock(pose, 6, new FixedDistancePoseManifold(params.poses.row(c).tail<3>().transpose()));
+      problem->AddParameterBlock(pose, 6, new PaddedManifold(ScaleGaugeManifold(params, c), 1));
     } else {
       problem->AddParameterBlock(pose, 6);
     }
@@ -225,9 +229,14 @@ ceres::Solver::Options SolverOptions(const Options& options, int num_cameras,
 
 // Ceres covariance of each free pose in the gauge frame, mapped to [dtheta, dt]
 // in the caller's frame (see Result::pose_covariances).
-std::vector<Matrix6d> PoseCovariances(ceres::Problem* problem, Parameters& params, const FrameChange& change,
-                                      const Options& options) {
+std::vector<Matrix6d> PoseCovariances(ceres::Problem* problem, Parameters& params, const Gauge& gauge,
+                                      const FrameChange& change, const Options& options) {
   const int num_cameras = static_cast<int>(params.poses.rows());
+  if (gauge.scale_camera >= 0) {
+    // The padded manifold used for speed has an inert direction; covariance needs the exact one.
+    problem->SetManifold(params.poses.row(gauge.scale_camera).data(),
+                         ScaleGaugeManifold(params, gauge.scale_camera).release());
+  }
   std::vector<std::pair<const double*, const double*>> blocks;
   for (int c = 0; c < num_cameras; ++c) {
     if (!problem->IsParameterBlockConstant(params.poses.row(c).data())) {
@@ -414,7 +423,7 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   result.report += std::string("\nmodel: ") + ModelName(options.model);
 
   if (options.compute_covariance && result.usable) {
-    result.pose_covariances = PoseCovariances(&problem, params, change, options);
+    result.pose_covariances = PoseCovariances(&problem, params, gauge, change, options);
   }
   result.poses = params.poses;
   result.plane = params.plane;

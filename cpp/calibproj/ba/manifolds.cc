@@ -1,6 +1,8 @@
 #include "calibproj/ba/manifolds.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <vector>
 
 #include "calibproj/ba/sphere.h"
 
@@ -96,6 +98,30 @@ bool FixedDistancePoseManifold::MinusJacobian(const double* x, double* jacobian)
   const double length = t.norm();
   J.bottomRightCorner<2, 3>() = chart_.Basis(t / length).transpose() / length;
   return true;
+}
+
+bool PaddedManifold::PlusJacobian(const double* x, double* jacobian) const {
+  const int ambient = AmbientSize();
+  const int inner_tangent = inner_->TangentSize();
+  std::vector<double> inner(ambient * inner_tangent);
+  if (!inner_->PlusJacobian(x, inner.data())) return false;
+  for (int row = 0; row < ambient; ++row) {
+    for (int col = 0; col < TangentSize(); ++col) {
+      jacobian[row * TangentSize() + col] = col < inner_tangent ? inner[row * inner_tangent + col] : 0.0;
+    }
+  }
+  return true;
+}
+
+bool PaddedManifold::Minus(const double* y, const double* x, double* y_minus_x) const {
+  std::fill(y_minus_x + inner_->TangentSize(), y_minus_x + TangentSize(), 0.0);
+  return inner_->Minus(y, x, y_minus_x);
+}
+
+bool PaddedManifold::MinusJacobian(const double* x, double* jacobian) const {
+  const int ambient = AmbientSize();
+  std::fill(jacobian, jacobian + TangentSize() * ambient, 0.0);
+  return inner_->MinusJacobian(x, jacobian);  // the first rows, row-major
 }
 
 }  // namespace calibproj::ba

@@ -17,6 +17,8 @@
 #include <ceres/manifold.h>
 
 #include <Eigen/Core>
+#include <memory>
+#include <utility>
 
 namespace calibproj::ba {
 
@@ -60,6 +62,31 @@ class FixedDistancePoseManifold final : public ceres::Manifold {
 
  private:
   const SphereChart chart_;
+};
+
+// The manifold `inner` with `padding` extra tangent directions that Plus ignores.
+// Used for speed only: it lets the scale-gauge camera keep a 6-dimensional tangent
+// block like every other camera, so Ceres can use its fixed-size <2,3,6> Schur
+// eliminator. The extra direction has a zero column in the Jacobian; the trust
+// region's diagonal regularisation makes the step along it zero, so the solution is
+// that of `inner`. Not a manifold in Ceres's sense (MinusJacobian * PlusJacobian is
+// not the identity): covariance is computed with `inner` itself.
+class PaddedManifold final : public ceres::Manifold {
+ public:
+  PaddedManifold(std::unique_ptr<ceres::Manifold> inner, int padding)
+      : inner_(std::move(inner)), padding_(padding) {}
+  int AmbientSize() const override { return inner_->AmbientSize(); }
+  int TangentSize() const override { return inner_->TangentSize() + padding_; }
+  bool Plus(const double* x, const double* delta, double* x_plus_delta) const override {
+    return inner_->Plus(x, delta, x_plus_delta);
+  }
+  bool PlusJacobian(const double* x, double* jacobian) const override;
+  bool Minus(const double* y, const double* x, double* y_minus_x) const override;
+  bool MinusJacobian(const double* x, double* jacobian) const override;
+
+ private:
+  const std::unique_ptr<ceres::Manifold> inner_;
+  const int padding_;
 };
 
 }  // namespace calibproj::ba
