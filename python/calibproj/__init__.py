@@ -8,4 +8,11 @@ __version__ = "0.1.0"
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 
+# The tracks-only simulation and the pose comparison; these names shadow the
+# subpackage calibproj.simulate and the module calibproj.compare as attributes, so
+# import their contents with "from calibproj.simulate.scene import ...".
+from calibproj.compare import compare  # noqa: E402
+from calibproj.simulate import simulate_tracks as simulate  # noqa: E402
+
 __all__ = ["__version__"]
+__all__ += ["compare", "simulate"]

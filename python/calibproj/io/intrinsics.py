@@ -283,8 +283,10 @@ def _read_opencv_storage(path: Path, name: str) -> Intrinsics:
 
     try:
         storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as error:
-        raise FormatError(f"{path}: not an OpenCV YAML/XML file ({error.err})") from None
+    except (cv2.error, SystemError):  # the binding reports some parse errors as SystemError
+        storage = None
+    if storage is None or not storage.isOpened():
+        raise FormatError(f"{path}: not a readable OpenCV YAML/XML file")
     try:
         K = _first_matrix(storage, ("camera_matrix", "K", "cameraMatrix"))
         dist = _first_matrix(storage, ("distortion_coefficients", "D", "dist_coeffs", "distCoeffs"))

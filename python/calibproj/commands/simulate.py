@@ -1,0 +1,123 @@
+"""Simulate a camera network watching the projected markers, with ground truth.
+
+--scene is a preset (paper, or-full, easy, medium, hard, small) or a scene.json.
+--seed drives every random draw, the camera angles of the paper preset included.
+
+With --tracks-only nothing is rendered: the MSM centres of the layout (--grid,
+--arrays, --scales, --marker-px) are cast on the floor and observed by every camera
+that could decode the marker at one of its scales at least (shortest side at least
+--min-marker-px pixels, square wholly inside the image), as undistorted pixels with
+Gaussian noise (--noise) and optional gross outliers (--outliers). OUT receives
+tracks.json, eval_tracks.json (an independent evaluation set in the working volume),
+intrinsics/<camera>.json, truth.json and scene.json (the realised scene).
+
+Without --tracks-only the camera videos are rendered from --sequence.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+DEFAULT_GRID = "4x8"
+DEFAULT_ARRAYS = 100
+DEFAULT_SCALES = "1,1.4,2,3,4,6,8"
+DEFAULT_MARKER_PX = 24.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from calibproj.simulate import geometric as defaults
+
+    parser.add_argument("--scene", required=True, metavar="NAME|FILE", help="preset name or scene.json")
+    parser.add_argument("--sequence", metavar="FILE", help="sequence.json to render the videos from")
+    parser.add_argument("--tracks-only", action="store_true", help="write tracks instead of rendering videos")
+    parser.add_argument("--noise", type=float, default=defaults.DEFAULT_NOISE_PX, metavar="PX",
+                        help="Gaussian noise on observations, pixels (default %(default)s)")
+    parser.add_argument("--outliers", type=float, default=0.0, metavar="FRACTION",
+                        help="share of MSM observations replaced by gross outliers (default %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default %(default)s)")
+    parser.add_argument("--min-marker-px", type=float, default=defaults.DEFAULT_MIN_MARKER_PX, metavar="PX",
+                        help="shortest marker side a camera decodes, pixels (default %(default)s)")
+    parser.add_argument("--eval-points", type=int, default=defaults.DEFAULT_EVAL_POINTS, metavar="N",
+                        help="evaluation points drawn uniformly in the working volume (default %(default)s)")
+    parser.add_argument("--eval-points-per-camera", type=int, default=defaults.DEFAULT_EVAL_POINTS_PER_CAMERA,
+                        metavar="N", help="extra evaluation points inside each camera's view (default %(default)s)")
+    parser.add_argument("--eval-height", type=float, default=defaults.DEFAULT_EVAL_HEIGHT_M, metavar="M",
+                        help="height of the working volume above the floor, metres (default %(default)s)")
+    parser.add_argument("--grid", default=DEFAULT_GRID, metavar="ROWSxCOLS",
+                        help="markers per array, tracks only (default %(default)s)")
+    parser.add_argument("--arrays", type=int, default=DEFAULT_ARRAYS, help="number of arrays (default %(default)s)")
+    parser.add_argument("--scales", default=DEFAULT_SCALES, help="marker scales (default %(default)s)")
+    parser.add_argument("--marker-px", type=float, default=DEFAULT_MARKER_PX,
+                        help="marker side at scale 1, projector pixels (default %(default)s)")
+    parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
+
+
+def run(args: argparse.Namespace) -> int:
+    from calibproj.simulate.scene import load_scene
+
+    scene = load_scene(args.scene, seed=args.seed)
+    if not args.tracks_only:
+        return _render_videos(scene, args)
+    return _simulate_tracks(scene, args)
+
+
+def _render_videos(scene, args: argparse.Namespace) -> int:
+    import importlib
+    from pathlib import Path
+
+    from calibproj.cli import CommandError
+
+    try:
+        render = importlib.import_module("calibproj.simulate.render")
+    except ModuleNotFoundError as error:
+        if error.name != "calibproj.simulate.render":
+            raise
+        raise CommandError(
+            "rendering videos needs calibproj.simulate.render, which this installation does not have; "
+            "use --tracks-only for geometric tracks"
+        ) from None
+    sequence = Path(args.sequence) if args.sequence else None
+    render.simulate_videos(scene, sequence, Path(args.out), seed=args.seed)
+    return 0
+
+
+def _simulate_tracks(scene, args: argparse.Namespace) -> int:
+    from calibproj.cli import CommandError
+    from calibproj.simulate.geometric import simulate_tracks
+
+    if args.sequence:
+        raise CommandError(
+            "--tracks-only takes the marker layout from --grid, --arrays, --scales and --marker-px, "
+            "not from --sequence"
+        )
+    simulation = simulate_tracks(
+        scene, args.out,
+        noise_px=args.noise, seed=args.seed, outlier_fraction=args.outliers, min_marker_px=args.min_marker_px,
+        layout=_layout(scene, args), eval_points=args.eval_points,
+        eval_points_per_camera=args.eval_points_per_camera, eval_height_m=args.eval_height,
+    )
+    print(_summary(simulation, args.out))
+    return 0
+
+
+def _layout(scene, args: argparse.Namespace):
+    from calibproj.generate.layout import MsmLayout
+
+    try:
+        rows, cols = (int(v) for v in args.grid.lower().split("x"))
+        scales = tuple(float(v) for v in args.scales.split(","))
+    except ValueError:
+        raise ValueError(f"--grid must look like 4x8 and --scales like 1,2,4; got {args.grid!r}, {args.scales!r}") from None
+    return MsmLayout(projector=scene.projector.resolution, grid=(rows, cols), arrays=args.arrays,
+                     scales=scales, marker_px=args.marker_px)
+
+
+def _summary(simulation, out: str) -> str:
+    tracks, eval_tracks = simulation.tracks, simulation.eval_tracks
+    msm_counts, eval_counts = tracks.counts_per_camera(), eval_tracks.counts_per_camera()
+    lines = [f"{'camera':<16}{'MSM centres':>12}{'eval points':>12}"]
+    for name in tracks.camera_names:
+        lines.append(f"{name:<16}{msm_counts[name]:>12}{eval_counts[name]:>12}")
+    lines.append(f"{len(tracks)} observations of {tracks.num_points} MSM centres, "
+                 f"{len(eval_tracks)} of {eval_tracks.num_points} evaluation points; written to {out}")
+    return "\n".join(lines)

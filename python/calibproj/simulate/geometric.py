@@ -1,0 +1,325 @@
+"""Geometric simulation: where the cameras of a scene see the projected MSM centres.
+
+No images are rendered. The MSM centres of a layout (projector pixels) are cast
+through the projector onto the floor z = 0; a camera observes a centre when the
+marker, at one of its scales at least, would be decodable: its square, cast
+projector -> floor -> camera (with lens distortion), lies wholly inside the image
+and its shortest side is at least ``min_marker_px`` long. An observation is the
+undistorted pinhole projection of the centre plus Gaussian noise; a chosen share
+of them can be replaced by gross outliers drawn uniformly over the image.
+
+An independent evaluation set, like the paper's ChArUco recordings, is drawn in the
+working volume above the floor (partly uniform, partly inside each camera's view so
+that every camera, the zoomed one included, gets some), observed by every camera
+that has the point in front of it and inside its image, and kept when at least two
+cameras see it.
+
+Random draws come from independent streams of one seed, so changing, say, the
+outlier share leaves the noise of the other observations unchanged.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from calibproj.generate.layout import MsmLayout
+from calibproj.io.intrinsics import Intrinsics, write_intrinsics_dir
+from calibproj.simulate.scene import Camera, Scene, load_scene, save_scene
+from calibproj.simulate.truth import truth_document, write_truth
+from calibproj.tracks import Tracks
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_NOISE_PX = 0.5
+DEFAULT_MIN_MARKER_PX = 15.0
+DEFAULT_EVAL_POINTS = 1000
+DEFAULT_EVAL_POINTS_PER_CAMERA = 100
+DEFAULT_EVAL_HEIGHT_M = 2.0
+DEFAULT_MIN_DEPTH_M = 0.1
+MIN_EVAL_VIEWS = 2
+
+# Corners of a marker square in the order they go round it (for its side lengths).
+SQUARE_CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class Projection:
+    """World points seen by one camera.
+
+    Attributes:
+        distorted: image pixels (with lens distortion), NaN where not ``visible``.
+        undistorted: pinhole pixels (same K), NaN where not ``visible``.
+        visible: in front of the camera, where the lens model is one-to-one, and
+            inside the image.
+    """
+
+    distorted: np.ndarray
+    undistorted: np.ndarray
+    visible: np.ndarray
+
+
+def project_points(camera: Camera, points: np.ndarray, min_depth_m: float = DEFAULT_MIN_DEPTH_M) -> Projection:
+    """Project world points ``(N, 3)`` into a camera of a scene."""
+    intrinsics = camera.intrinsics
+    in_camera = np.asarray(points, dtype=float).reshape(-1, 3) @ camera.R.T + camera.t
+    depth = in_camera[:, 2]
+    in_front = depth > min_depth_m
+    normalized = in_camera[:, :2] / np.where(in_front, depth, 1.0)[:, None]
+    modelled = in_front & (np.linalg.norm(normalized, axis=1) <= intrinsics.max_monotonic_radius())
+    normalized[~modelled] = 0.0  # keeps the lens model finite; those rows are masked below
+    distorted = intrinsics.project_normalized(normalized)
+    undistorted = normalized @ camera.K[:2, :2].T + camera.K[:2, 2]
+    visible = modelled & intrinsics.contains(distorted)
+    distorted[~modelled] = np.nan
+    undistorted[~modelled] = np.nan
+    return Projection(distorted, undistorted, visible)
+
+
+def msm_floor_points(scene: Scene, layout: MsmLayout) -> np.ndarray:
+    """Floor positions of all MSM centres, shape ``(arrays * markers_per_array, 3)``; row = point id."""
+    return scene.projector.pixels_to_floor(layout.centres().reshape(-1, 2))
+
+
+def marker_corners_on_floor(scene: Scene, layout: MsmLayout) -> np.ndarray:
+    """Floor positions of the square corners of every MSM at every scale, ``(P, scales, 4, 3)``."""
+    centres = layout.centres().reshape(-1, 2)
+    half_sides = 0.5 * layout.marker_px * np.asarray(layout.scales)
+    corners = centres[:, None, None, :] + half_sides[None, :, None, None] * SQUARE_CORNERS[None, None]
+    return scene.projector.pixels_to_floor(corners.reshape(-1, 2)).reshape(*corners.shape[:3], 3)
+
+
+def decodable_msms(
+    camera: Camera,
+    centres: np.ndarray,
+    corners: np.ndarray,
+    min_marker_px: float = DEFAULT_MIN_MARKER_PX,
+    min_depth_m: float = DEFAULT_MIN_DEPTH_M,
+) -> np.ndarray:
+    """Per MSM, whether the camera could decode it at one of its scales at least.
+
+    Args:
+        camera: the observing camera.
+        centres: floor positions of the MSM centres, ``(P, 3)`` (``msm_floor_points``).
+        corners: floor positions of their square corners, ``(P, scales, 4, 3)``
+            (``marker_corners_on_floor``).
+        min_marker_px: shortest side, in image pixels, of a decodable marker.
+        min_depth_m: nearest distance in front of the camera at which it sees a point.
+    """
+    seen = project_points(camera, corners.reshape(-1, 3), min_depth_m)
+    image = seen.distorted.reshape(*corners.shape[:3], 2)
+    sides = np.linalg.norm(image - np.roll(image, -1, axis=2), axis=-1).min(axis=2)
+    inside = seen.visible.reshape(corners.shape[:3]).all(axis=2)
+    large_enough = inside & (np.nan_to_num(sides, nan=0.0) >= min_marker_px)
+    return large_enough.any(axis=1) & project_points(camera, centres, min_depth_m).visible
+
+
+def sample_eval_points(
+    scene: Scene,
+    rng: np.random.Generator,
+    count: int = DEFAULT_EVAL_POINTS,
+    per_camera: int = DEFAULT_EVAL_POINTS_PER_CAMERA,
+    height_m: float = DEFAULT_EVAL_HEIGHT_M,
+    min_depth_m: float = DEFAULT_MIN_DEPTH_M,
+) -> np.ndarray:
+    """Points in the working volume (floor rectangle x [0, height_m]): ``count`` uniform, plus
+    up to ``per_camera`` inside each camera's view (drawn along rays of random pixels)."""
+    width, depth = scene.floor.size_m
+    lower = np.array([-width / 2.0, -depth / 2.0, 0.0])
+    upper = np.array([width / 2.0, depth / 2.0, height_m])
+    parts = [rng.uniform(lower, upper, size=(count, 3))]
+    for camera in scene.cameras:
+        parts.append(_sample_in_view(camera, rng, per_camera, lower, upper, min_depth_m))
+    return np.concatenate(parts)
+
+
+def _sample_in_view(camera: Camera, rng: np.random.Generator, count: int, lower: np.ndarray,
+                    upper: np.ndarray, min_depth_m: float) -> np.ndarray:
+    width, height = camera.resolution
+    pixels = rng.uniform([-0.5, -0.5], [width - 0.5, height - 0.5], size=(count, 2))
+    intrinsics = camera.intrinsics
+    normalized = intrinsics.normalize(intrinsics.undistort_points(pixels))
+    rays = np.column_stack([normalized, np.ones(count)]) @ camera.R  # world directions, unit depth
+    with np.errstate(divide="ignore", invalid="ignore"):
+        to_lower = (lower - camera.center) / rays
+        to_upper = (upper - camera.center) / rays
+    near = np.fmax(np.nanmax(np.fmin(to_lower, to_upper), axis=1), min_depth_m)
+    far = np.nanmin(np.fmax(to_lower, to_upper), axis=1)
+    crosses = far > near
+    depth = rng.uniform(np.where(crosses, near, 0.0), np.where(crosses, far, 0.0))
+    return (camera.center + depth[:, None] * rays)[crosses]
+
+
+@dataclass(frozen=True)
+class GeometricSimulation:
+    """Everything a tracks-only simulation produces.
+
+    Attributes:
+        scene: the realised scene (random parts drawn).
+        layout: the MSM layout projected.
+        tracks: noisy undistorted observations of the MSM centres (point id = MSM id).
+        eval_tracks: noisy undistorted observations of the evaluation points.
+        msm_points: floor position of every MSM centre, row = point id, shape ``(P, 3)``.
+        eval_points: evaluation points, row = point id of ``eval_tracks``, shape ``(E, 3)``.
+        outliers: camera -> point ids whose observation is a gross outlier.
+        settings: the knobs used (noise, seed, ...), written into ``truth.json``.
+    """
+
+    scene: Scene
+    layout: MsmLayout
+    tracks: Tracks
+    eval_tracks: Tracks
+    msm_points: np.ndarray
+    eval_points: np.ndarray
+    outliers: dict[str, np.ndarray]
+    settings: dict
+
+    @property
+    def intrinsics(self) -> dict[str, Intrinsics]:
+        return {camera.name: camera.intrinsics for camera in self.scene.cameras}
+
+    def truth(self) -> dict:
+        """Body of ``truth.json``."""
+        extra = {
+            "simulation": {"kind": "geometric", **self.settings, "layout": asdict(self.layout)},
+            "outliers": {name: ids.tolist() for name, ids in self.outliers.items()},
+        }
+        msm_ids = np.arange(len(self.msm_points))
+        eval_ids = np.arange(len(self.eval_points))
+        return truth_document(
+            self.scene, (msm_ids, self.msm_points), self.layout.markers_per_array,
+            (eval_ids, self.eval_points), extra,
+        )
+
+    def write(self, out: str | os.PathLike) -> None:
+        """Write tracks.json, eval_tracks.json, intrinsics/<camera>.json, truth.json and scene.json."""
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        self.tracks.write(out / "tracks.json")
+        self.eval_tracks.write(out / "eval_tracks.json")
+        write_intrinsics_dir(out / "intrinsics", self.intrinsics)
+        save_scene(out / "scene.json", self.scene)
+        write_truth(out / "truth.json", self.truth())
+
+
+def simulate_tracks(
+    scene: Scene | str | os.PathLike,
+    out: str | os.PathLike | None = None,
+    *,
+    noise_px: float = DEFAULT_NOISE_PX,
+    seed: int = 0,
+    outlier_fraction: float = 0.0,
+    min_marker_px: float = DEFAULT_MIN_MARKER_PX,
+    layout: MsmLayout | None = None,
+    eval_points: int = DEFAULT_EVAL_POINTS,
+    eval_points_per_camera: int = DEFAULT_EVAL_POINTS_PER_CAMERA,
+    eval_height_m: float = DEFAULT_EVAL_HEIGHT_M,
+    min_depth_m: float = DEFAULT_MIN_DEPTH_M,
+) -> GeometricSimulation:
+    """Simulate MSM tracks and an evaluation set for a scene, with ground truth.
+
+    Args:
+        scene: a ``Scene``, a preset name or a scene file (presets draw their random
+            parts from ``seed``).
+        out: when given, the directory to write the files into (see ``GeometricSimulation.write``).
+        noise_px: standard deviation of the Gaussian noise on every coordinate, pixels.
+        seed: seed of every random draw.
+        outlier_fraction: share of MSM observations replaced by a uniform draw over the image.
+        min_marker_px: shortest marker side, in image pixels, that a camera still decodes.
+        layout: MSM layout; default ``MsmLayout`` at the projector's resolution.
+        eval_points: evaluation points drawn uniformly in the working volume.
+        eval_points_per_camera: extra evaluation points drawn inside each camera's view.
+        eval_height_m: height of the working volume above the floor.
+        min_depth_m: nearest distance in front of a camera at which it sees a point.
+    """
+    _check_settings(noise_px, outlier_fraction, min_marker_px, eval_points, eval_points_per_camera, eval_height_m)
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, seed=seed)
+    layout = layout or MsmLayout(projector=scene.projector.resolution)
+    noise_rng, outlier_rng, eval_rng, eval_noise_rng = (
+        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
+    )
+    msm_points = msm_floor_points(scene, layout)
+    tracks, outliers = _msm_tracks(scene, layout, msm_points, noise_rng, outlier_rng, noise_px,
+                                   outlier_fraction, min_marker_px, min_depth_m)
+    candidates = sample_eval_points(scene, eval_rng, eval_points, eval_points_per_camera, eval_height_m, min_depth_m)
+    eval_xyz, eval_tracks = _eval_tracks(scene, candidates, eval_noise_rng, noise_px, min_depth_m)
+    settings = {"noise_px": noise_px, "seed": seed, "outlier_fraction": outlier_fraction,
+                "min_marker_px": min_marker_px, "eval_height_m": eval_height_m, "min_depth_m": min_depth_m}
+    simulation = GeometricSimulation(scene, layout, tracks, eval_tracks, msm_points, eval_xyz, outliers, settings)
+    logger.info("simulated %d MSM observations of %d points, %d evaluation observations of %d points",
+                len(tracks), tracks.num_points, len(eval_tracks), eval_tracks.num_points)
+    if out is not None:
+        simulation.write(out)
+    return simulation
+
+
+def _check_settings(noise_px: float, outlier_fraction: float, min_marker_px: float, eval_points: int,
+                    eval_points_per_camera: int, eval_height_m: float) -> None:
+    if not noise_px >= 0:
+        raise ValueError(f"noise must be >= 0 px, got {noise_px}")
+    if not 0.0 <= outlier_fraction <= 1.0:
+        raise ValueError(f"outlier fraction must be in [0, 1], got {outlier_fraction}")
+    if not min_marker_px > 0:
+        raise ValueError(f"minimum marker size must be positive, got {min_marker_px} px")
+    if eval_points < 0 or eval_points_per_camera < 0:
+        raise ValueError("numbers of evaluation points must be >= 0")
+    if not eval_height_m > 0:
+        raise ValueError(f"working volume height must be positive, got {eval_height_m} m")
+
+
+def _msm_tracks(scene: Scene, layout: MsmLayout, msm_points: np.ndarray, noise_rng: np.random.Generator,
+                outlier_rng: np.random.Generator, noise_px: float, outlier_fraction: float,
+                min_marker_px: float, min_depth_m: float) -> tuple[Tracks, dict[str, np.ndarray]]:
+    corners = marker_corners_on_floor(scene, layout)
+    cameras, ids, xy = [], [], []
+    for index, camera in enumerate(scene.cameras):
+        seen = decodable_msms(camera, msm_points, corners, min_marker_px, min_depth_m)
+        point_ids = np.flatnonzero(seen)
+        pixels = project_points(camera, msm_points[point_ids], min_depth_m).undistorted
+        cameras.append(np.full(len(point_ids), index))
+        ids.append(point_ids)
+        xy.append(pixels + noise_rng.normal(0.0, noise_px, size=pixels.shape))
+        logger.debug("camera %s decodes %d MSMs", camera.name, len(point_ids))
+    camera_index, point_ids, pixels = np.concatenate(cameras), np.concatenate(ids), np.concatenate(xy)
+    outlier_rows = _replace_by_outliers(scene, outlier_rng, camera_index, pixels, outlier_fraction)
+    outliers = {
+        camera.name: np.sort(point_ids[outlier_rows[camera_index[outlier_rows] == index]])
+        for index, camera in enumerate(scene.cameras)
+    }
+    tracks = Tracks.from_observations(scene.camera_names, camera_index, point_ids, pixels, layout.markers_per_array)
+    return tracks, outliers
+
+
+def _replace_by_outliers(scene: Scene, rng: np.random.Generator, camera_index: np.ndarray, pixels: np.ndarray,
+                         fraction: float) -> np.ndarray:
+    """Overwrite a share of the observations (in place) with undistorted uniform image draws."""
+    rows = rng.choice(len(pixels), size=int(round(fraction * len(pixels))), replace=False)
+    for index, camera in enumerate(scene.cameras):
+        chosen = rows[camera_index[rows] == index]
+        width, height = camera.resolution
+        drawn = rng.uniform([-0.5, -0.5], [width - 0.5, height - 0.5], size=(len(chosen), 2))
+        pixels[chosen] = camera.intrinsics.undistort_points(drawn)
+    return rows
+
+
+def _eval_tracks(scene: Scene, candidates: np.ndarray, noise_rng: np.random.Generator, noise_px: float,
+                 min_depth_m: float) -> tuple[np.ndarray, Tracks]:
+    projections = [project_points(camera, candidates, min_depth_m) for camera in scene.cameras]
+    views = np.sum([p.visible for p in projections], axis=0)
+    kept = views >= MIN_EVAL_VIEWS
+    points = candidates[kept]
+    cameras, ids, xy = [], [], []
+    for index, projection in enumerate(projections):
+        point_ids = np.flatnonzero(projection.visible[kept])
+        pixels = projection.undistorted[kept][point_ids]
+        cameras.append(np.full(len(point_ids), index))
+        ids.append(point_ids)
+        xy.append(pixels + noise_rng.normal(0.0, noise_px, size=pixels.shape))
+    tracks = Tracks.from_observations(scene.camera_names, np.concatenate(cameras), np.concatenate(ids),
+                                      np.concatenate(xy), None)
+    return points, tracks
