@@ -11,6 +11,7 @@
 #include "calibproj/ba/bundle_adjuster.h"
 #include "calibproj/ba/manifolds.h"
 #include "calibproj/ba/reprojection_cost.h"
+#include "convert.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -20,15 +21,6 @@ namespace calibproj::bindings {
 namespace {
 
 using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-template <typename Enum>
-Enum ParseChoice(const std::string& what, const std::string& value, const std::map<std::string, Enum>& choices) {
-  const auto it = choices.find(value);
-  if (it != choices.end()) return it->second;
-  std::string names;
-  for (const auto& [name, unused] : choices) names += (names.empty() ? "" : ", ") + name;
-  throw std::invalid_argument(what + ": unknown value '" + value + "' (choose from " + names + ")");
-}
 
 // Intrinsics from an array (C, 3, 3) of upper-triangular camera matrices.
 std::vector<ba::Intrinsics> IntrinsicsFromArray(const py::array_t<double, py::array::c_style | py::array::forcecast>& K) {
@@ -96,9 +88,8 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
                         bool refine_poses, bool refine_points, int gauge_camera, int scale_camera,
                         bool compute_covariance, bool full_report, const ba::CostFactory& make_cost) {
   ba::Options options;
-  options.model = ParseChoice<ba::Model>("model", model, {{"free", ba::Model::kFree}, {"coplanar", ba::Model::kCoplanar}});
-  options.loss = ParseChoice<ba::Loss>(
-      "loss", loss, {{"none", ba::Loss::kNone}, {"huber", ba::Loss::kHuber}, {"cauchy", ba::Loss::kCauchy}});
+  options.model = ParseModel(model);
+  options.loss = ParseLoss(loss);
   options.linear_solver = ParseChoice<ba::LinearSolver>(
       "linear_solver", linear_solver,
       {{"auto", ba::LinearSolver::kAuto},

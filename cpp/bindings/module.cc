@@ -19,4 +19,8 @@ PYBIND11_MODULE(_core, m) {
   calibproj::bindings::register_ba(ba);
   auto geometry = m.def_submodule("geometry", "Two-view and multi-view geometry");
   calibproj::bindings::register_geometry(geometry);
+  auto registration = m.def_submodule("registration", "Incremental registration of cameras from tracks");
+  calibproj::bindings::register_registration(registration);
+  auto detect = m.def_submodule("detect", "ArUco and AprilTag marker families and detection");
+  calibproj::bindings::register_detect(detect);
 }

@@ -9,6 +9,8 @@ namespace calibproj::bindings {
 
 void register_ba(pybind11::module_& m);
 void register_geometry(pybind11::module_& m);
+void register_registration(pybind11::module_& m);
+void register_detect(pybind11::module_& m);
 
 // Defines m.<name>(...) solving with the given costs; register_ba uses the analytic
 // ones, the benchmark-only module calibproj._bench the AutoDiff ones.

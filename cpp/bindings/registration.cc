@@ -1,0 +1,224 @@
+// Bindings of calibproj::registration: the Reconstruction and its steps.
+
+#include <pybind11/eigen.h>
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <string>
+
+#include "calibproj/registration/incremental.h"
+#include "calibproj/registration/reconstruction.h"
+#include "calibproj/registration/view_score.h"
+#include "convert.h"
+#include "registry.h"
+
+namespace py = pybind11;
+
+namespace calibproj::bindings {
+
+namespace {
+
+using registration::Reconstruction;
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
+  registration::Options o;
+  for (const auto& item : kwargs) {
+    const std::string key = py::str(item.first);
+    const py::handle value = item.second;
+    if (key == "model") o.model = ParseModel(value.cast<std::string>());
+    else if (key == "loss") o.loss = ParseLoss(value.cast<std::string>());
+    else if (key == "loss_scale_px") o.loss_scale_px = value.cast<double>();
+    else if (key == "homography_threshold_px") o.homography_threshold_px = value.cast<double>();
+    else if (key == "pnp_threshold_px") o.pnp_threshold_px = value.cast<double>();
+    else if (key == "ransac_max_iterations") o.ransac_max_iterations = value.cast<int>();
+    else if (key == "ransac_confidence") o.ransac_confidence = value.cast<double>();
+    else if (key == "seed") o.seed = value.cast<std::uint64_t>();
+    else if (key == "min_pair_points") o.min_pair_points = value.cast<int>();
+    else if (key == "min_pnp_points") o.min_pnp_points = value.cast<int>();
+    else if (key == "min_triangulation_angle_deg") o.min_triangulation_angle_deg = value.cast<double>();
+    else if (key == "outlier_threshold_px") o.outlier_threshold_px = value.cast<double>();
+    else if (key == "outlier_sigma_factor") o.outlier_sigma_factor = value.cast<double>();
+    else if (key == "max_refine_rounds") o.max_refine_rounds = value.cast<int>();
+    else if (key == "view_score_levels") o.view_score_levels = value.cast<int>();
+    else if (key == "num_threads") o.num_threads = value.cast<int>();
+    else if (key == "intermediate_ba_iterations") o.intermediate_ba_iterations = value.cast<int>();
+    else if (key == "final_ba_iterations") o.final_ba_iterations = value.cast<int>();
+    else throw std::invalid_argument("registration: unknown option '" + key + "'");
+  }
+  o.Check();
+  return o;
+}
+
+std::vector<registration::Camera> CamerasFromArrays(const py::array_t<double, py::array::c_style | py::array::forcecast>& K,
+                                                    const RowMatrix& image_sizes) {
+  if (K.ndim() != 3 || K.shape(1) != 3 || K.shape(2) != 3) {
+    throw std::invalid_argument("registration: intrinsics must have shape (cameras, 3, 3)");
+  }
+  if (image_sizes.rows() != K.shape(0) || image_sizes.cols() != 2) {
+    throw std::invalid_argument("registration: image_sizes must have shape (cameras, 2)");
+  }
+  const auto k = K.unchecked<3>();
+  std::vector<registration::Camera> cameras(K.shape(0));
+  for (py::ssize_t c = 0; c < K.shape(0); ++c) {
+    cameras[c].K = {k(c, 0, 0), k(c, 1, 1), k(c, 0, 2), k(c, 1, 2), k(c, 0, 1)};
+    cameras[c].width = image_sizes(c, 0);
+    cameras[c].height = image_sizes(c, 1);
+  }
+  return cameras;
+}
+
+py::dict ToDict(const registration::PairCandidate& p) {
+  py::dict d;
+  d["camera1"] = p.camera1; d["camera2"] = p.camera2; d["score1"] = p.score1; d["score2"] = p.score2;
+  d["common_points"] = p.common_points;
+  return d;
+}
+
+py::dict ToDict(const registration::InitialPairResult& r) {
+  py::dict d;
+  d["success"] = r.success; d["reason"] = r.reason; d["homography_inliers"] = r.homography_inliers;
+  d["solutions"] = r.solutions; d["third_camera"] = r.third_camera; d["normal_agreement"] = r.normal_agreement;
+  d["points"] = r.points;
+  return d;
+}
+
+py::dict ToDict(const registration::NextCameraCandidate& n) {
+  py::dict d;
+  d["camera"] = n.camera; d["score"] = n.score; d["points"] = n.points;
+  return d;
+}
+
+py::dict ToDict(const registration::RegisterResult& r) {
+  py::dict d;
+  d["success"] = r.success; d["reason"] = r.reason; d["correspondences"] = r.correspondences;
+  d["inliers"] = r.inliers; d["mean_error_px"] = r.mean_error_px;
+  return d;
+}
+
+py::dict ToDict(const registration::AdjustResult& r) {
+  py::dict d;
+  d["initial_cost"] = r.initial_cost; d["final_cost"] = r.final_cost; d["iterations"] = r.iterations;
+  d["termination"] = r.termination; d["cameras"] = r.cameras; d["points"] = r.points;
+  d["observations"] = r.observations; d["solve_time_s"] = r.solve_time_s;
+  return d;
+}
+
+py::dict ToDict(const registration::RefineResult& r) {
+  py::dict d;
+  d["rounds"] = r.rounds; d["removed"] = r.removed; d["last"] = ToDict(r.last);
+  return d;
+}
+
+py::array_t<bool> BoolArray(const std::vector<bool>& values) {
+  py::array_t<bool> out(static_cast<py::ssize_t>(values.size()));
+  auto view = out.mutable_unchecked<1>();
+  for (size_t i = 0; i < values.size(); ++i) view(i) = values[i];
+  return out;
+}
+
+}  // namespace
+
+void register_registration(py::module_& m) {
+  using GIL = py::call_guard<py::gil_scoped_release>;
+  py::class_<Reconstruction>(m, "Reconstruction", R"doc(Incremental registration state and its steps.
+
+Reconstruction(intrinsics (C, 3, 3), image_sizes (C, 2), num_points, camera_index (N,),
+point_index (N,), observed (N, 2) undistorted pixels, **options). Options are the fields
+of calibproj.registration.RegistrationOptions.)doc")
+      .def(py::init([](const py::array_t<double, py::array::c_style | py::array::forcecast>& K,
+                       const RowMatrix& image_sizes, int num_points, const Eigen::VectorXi& camera_index,
+                       const Eigen::VectorXi& point_index, const RowMatrix& observed, const py::kwargs& kwargs) {
+             if (observed.cols() != 2 && observed.size() > 0) {
+               throw std::invalid_argument("registration: observed must have shape (N, 2)");
+             }
+             ba::PixelMatrix pixels(observed.rows(), 2);
+             if (observed.size() > 0) pixels = observed;
+             return Reconstruction(CamerasFromArrays(K, image_sizes), num_points, camera_index, point_index, pixels,
+                                   OptionsFromKwargs(kwargs));
+           }),
+           py::arg("intrinsics"), py::arg("image_sizes"), py::arg("num_points"), py::arg("camera_index"),
+           py::arg("point_index"), py::arg("observed"))
+      .def("rank_initial_pairs", [](const Reconstruction& r) {
+             py::list out;
+             for (const auto& p : r.RankInitialPairs()) out.append(ToDict(p));
+             return out;
+           }, "Camera pairs with enough common points, best first (maximising both view scores).")
+      .def("initialize", [](Reconstruction& r, int c1, int c2) {
+             registration::InitialPairResult result;
+             { py::gil_scoped_release release; result = r.Initialize(c1, c2); }
+             return ToDict(result);
+           }, py::arg("camera1"), py::arg("camera2"),
+           "Homography, decomposition, disambiguation, initial plane and points of a pair.")
+      .def("choose_next_camera", [](const Reconstruction& r) { return ToDict(r.ChooseNextCamera()); },
+           "Unregistered camera with the best view score on reconstructed points (camera -1: none).")
+      .def("register_camera", [](Reconstruction& r, int c) {
+             registration::RegisterResult result;
+             { py::gil_scoped_release release; result = r.RegisterCamera(c); }
+             return ToDict(result);
+           }, py::arg("camera"), "PnP RANSAC and refinement; a failure marks the camera failed.")
+      .def("add_points", &Reconstruction::AddPoints, py::arg("camera"), GIL(),
+           "Triangulate (FREE) or back-project (COPLANAR) the new points a registered camera sees.")
+      .def("adjust", [](Reconstruction& r, bool final) {
+             registration::AdjustResult result;
+             { py::gil_scoped_release release; result = r.Adjust(final); }
+             return ToDict(result);
+           }, py::arg("final") = false, "Bundle adjustment of all registered cameras and reconstructed points.")
+      .def("filter_outliers", &Reconstruction::FilterOutliers, GIL(),
+           "Deactivate observations above the (noise-adaptive) reprojection threshold.")
+      .def("refine", [](Reconstruction& r) {
+             registration::RefineResult result;
+             { py::gil_scoped_release release; result = r.Refine(); }
+             return ToDict(result);
+           }, "Final bundle adjustment and outlier removal, repeated until nothing is removed.")
+      .def("fail_unregistered", &Reconstruction::FailUnregistered, "Give every unregistered camera its reason.")
+      .def("run", [](Reconstruction& r, const std::function<void(const std::string&)>& log) {
+             registration::RunSummary summary;
+             {
+               py::gil_scoped_release release;
+               summary = registration::Run(r, [&log](const std::string& message) {
+                 if (!log) return;
+                 py::gil_scoped_acquire acquire;
+                 log(message);
+               });
+             }
+             py::dict d;
+             d["initialized"] = summary.initialized;
+             d["initial_pair"] = ToDict(summary.initial_pair);
+             d["initial"] = ToDict(summary.initial);
+             d["refined"] = ToDict(summary.refined);
+             return d;
+           }, py::arg("log") = std::function<void(const std::string&)>(),
+           "All steps in order, in C++ (the standalone executable's path).")
+      .def_property_readonly("num_cameras", &Reconstruction::num_cameras)
+      .def_property_readonly("num_points", &Reconstruction::num_points)
+      .def_property_readonly("registered", [](const Reconstruction& r) {
+             std::vector<bool> v(r.num_cameras());
+             for (int c = 0; c < r.num_cameras(); ++c) v[c] = r.registered(c);
+             return BoolArray(v);
+           })
+      .def_property_readonly("failure_reasons", &Reconstruction::failure_reasons)
+      .def_property_readonly("poses", &Reconstruction::poses)
+      .def_property_readonly("points", &Reconstruction::points)
+      .def_property_readonly("reconstructed", [](const Reconstruction& r) { return BoolArray(r.reconstructed()); })
+      .def_property_readonly("active", [](const Reconstruction& r) { return BoolArray(r.active()); })
+      .def_property_readonly("plane", [](const Reconstruction& r) { return Eigen::VectorXd(r.plane()); })
+      .def_property_readonly("gauge_camera", &Reconstruction::gauge_camera)
+      .def_property_readonly("registration_order", &Reconstruction::registration_order)
+      .def("residuals", &Reconstruction::Residuals, "Residuals (N, 2) of the active observations, NaN elsewhere.")
+      .def("view_score", &Reconstruction::ViewScore, py::arg("camera"));
+
+  m.def(
+      "view_score",
+      [](const RowMatrix& pixels, double width, double height, int levels) {
+        registration::VisibilityPyramid pyramid(levels, width, height);
+        for (int i = 0; i < pixels.rows(); ++i) pyramid.Add(pixels(i, 0), pixels(i, 1));
+        return py::make_tuple(pyramid.Score(), pyramid.MaxScore());
+      },
+      py::arg("pixels"), py::arg("width"), py::arg("height"), py::arg("levels") = 3,
+      "(score, max score) of the COLMAP visibility pyramid of the pixels (N, 2).");
+}
+
+}  // namespace calibproj::bindings

@@ -1,0 +1,31 @@
+#pragma once
+// Absolute pose of a calibrated camera from 2D-3D correspondences (OpenCV).
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <vector>
+
+#include "calibproj/geometry/homography.h"
+
+namespace calibproj::geometry {
+
+struct PnpOptions {
+  double threshold_px = 3.0;  // RANSAC reprojection threshold in this camera's pixels
+  int max_iterations = 1000;
+  double confidence = 0.9999;
+  int min_inliers = 6;
+};
+
+struct PnpEstimate {
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // cam_from_world
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  std::vector<int> inliers;
+  bool success = false;
+};
+
+// RANSAC over minimal samples (AP3P), then Levenberg-Marquardt on all inliers.
+// pixels are undistorted pixels of the camera with matrix K.
+PnpEstimate EstimatePoseRansac(const Points3& X, const Points2& pixels, const Eigen::Matrix3d& K,
+                               const PnpOptions& options);
+
+}  // namespace calibproj::geometry

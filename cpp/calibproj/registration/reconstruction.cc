@@ -1,0 +1,590 @@
+#include "calibproj/registration/reconstruction.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <stdexcept>
+
+#include "calibproj/ba/rotation.h"
+#include "calibproj/geometry/homography.h"
+#include "calibproj/geometry/pnp.h"
+#include "calibproj/geometry/triangulation.h"
+#include "calibproj/registration/view_score.h"
+
+namespace calibproj::registration {
+
+namespace {
+
+std::string Str(int v) { return std::to_string(v); }
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument(message);
+}
+
+Eigen::Matrix3d CameraMatrix(const ba::Intrinsics& K) {
+  Eigen::Matrix3d M;
+  M << K.fx, K.skew, K.cx, 0, K.fy, K.cy, 0, 0, 1;
+  return M;
+}
+
+Eigen::Matrix3d PoseRotation(const ba::PoseMatrix& poses, int c) {
+  return ba::RotationFromAngleAxis(poses.row(c).head<3>().transpose());
+}
+
+Eigen::Vector3d PoseTranslation(const ba::PoseMatrix& poses, int c) { return poses.row(c).tail<3>().transpose(); }
+
+void SetPose(ba::PoseMatrix* poses, int c, const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  poses->row(c).head<3>() = ba::AngleAxisFromRotation(R).transpose();
+  poses->row(c).tail<3>() = t.transpose();
+}
+
+// Robust standard deviation of 2D residuals from the median of their norms
+// (for isotropic Gaussian noise, median |r| = sigma * sqrt(2 ln 2)).
+double RobustSigma(std::vector<double> norms) {
+  if (norms.empty()) return 0.0;
+  const auto middle = norms.begin() + static_cast<long>(norms.size() / 2);
+  std::nth_element(norms.begin(), middle, norms.end());
+  return *middle / std::sqrt(2.0 * std::log(2.0));
+}
+
+}  // namespace
+
+void Options::Check() const {
+  Require(homography_threshold_px > 0 && pnp_threshold_px > 0, "registration: RANSAC thresholds must be positive");
+  Require(ransac_max_iterations > 0, "registration: ransac_max_iterations must be positive");
+  Require(ransac_confidence > 0 && ransac_confidence < 1, "registration: ransac_confidence must be in (0, 1)");
+  Require(min_pair_points >= 4, "registration: min_pair_points must be >= 4");
+  Require(min_pnp_points >= 4, "registration: min_pnp_points must be >= 4");
+  Require(min_triangulation_angle_deg >= 0, "registration: min_triangulation_angle_deg must be >= 0");
+  Require(outlier_threshold_px > 0 && outlier_sigma_factor >= 0, "registration: bad outlier threshold");
+  Require(max_refine_rounds >= 1, "registration: max_refine_rounds must be >= 1");
+  Require(view_score_levels >= 1 && view_score_levels <= 12, "registration: view_score_levels must be in [1, 12]");
+  Require(num_threads >= 1, "registration: num_threads must be >= 1");
+  Require(intermediate_ba_iterations >= 0 && final_ba_iterations >= 0, "registration: BA iterations must be >= 0");
+}
+
+Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eigen::VectorXi camera_index,
+                               Eigen::VectorXi point_index, PixelMatrix observed, Options options)
+    : cameras_(std::move(cameras)),
+      num_points_(num_points),
+      camera_index_(std::move(camera_index)),
+      point_index_(std::move(point_index)),
+      observed_(std::move(observed)),
+      options_(options) {
+  options_.Check();
+  const int num_obs = static_cast<int>(camera_index_.size());
+  Require(!cameras_.empty(), "registration: no cameras");
+  Require(num_points_ >= 0, "registration: negative point count");
+  Require(point_index_.size() == num_obs && observed_.rows() == num_obs,
+          "registration: camera_index, point_index and observed have different lengths");
+  Require(observed_.allFinite(), "registration: non-finite observation");
+  for (size_t c = 0; c < cameras_.size(); ++c) {
+    const Camera& cam = cameras_[c];
+    Require(cam.K.fx > 0 && cam.K.fy > 0 && std::isfinite(cam.K.cx) && std::isfinite(cam.K.cy),
+            "registration: camera " + Str(int(c)) + " has invalid intrinsics");
+    Require(cam.width > 0 && cam.height > 0, "registration: camera " + Str(int(c)) + " has no image size");
+  }
+  camera_observations_.assign(cameras_.size(), {});
+  point_observations_.assign(num_points_, {});
+  for (int i = 0; i < num_obs; ++i) {
+    const int c = camera_index_(i), p = point_index_(i);
+    if (c < 0 || c >= num_cameras()) throw std::invalid_argument("registration: observation " + Str(i) + " has camera index " + Str(c) + " out of range");
+    if (p < 0 || p >= num_points_) throw std::invalid_argument("registration: observation " + Str(i) + " has point index " + Str(p) + " out of range");
+    camera_observations_[c].push_back(i);
+    point_observations_[p].push_back(i);
+  }
+  registered_.assign(cameras_.size(), false);
+  failure_.assign(cameras_.size(), "");
+  poses_ = ba::PoseMatrix::Zero(num_cameras(), 6);
+  points_ = ba::PointMatrix::Zero(num_points_, 3);
+  reconstructed_.assign(num_points_, false);
+  active_.assign(num_obs, true);
+}
+
+double Reconstruction::Focal(int camera) const { return 0.5 * (cameras_[camera].K.fx + cameras_[camera].K.fy); }
+
+Eigen::Vector2d Reconstruction::Ray(int observation) const {
+  const ba::Intrinsics& K = cameras_[camera_index_(observation)].K;
+  const double y = (observed_(observation, 1) - K.cy) / K.fy;
+  const double x = (observed_(observation, 0) - K.cx - K.skew * y) / K.fx;
+  return {x, y};
+}
+
+int Reconstruction::ViewScore(int camera) const {
+  VisibilityPyramid pyramid(options_.view_score_levels, cameras_[camera].width, cameras_[camera].height);
+  for (int i : camera_observations_[camera]) {
+    if (active_[i]) pyramid.Add(observed_(i, 0), observed_(i, 1));
+  }
+  return pyramid.Score();
+}
+
+std::vector<int> Reconstruction::CommonObservations(int camera1, int camera2, std::vector<int>* second) const {
+  std::map<int, int> in_second;  // point -> observation of camera2
+  for (int i : camera_observations_[camera2]) {
+    if (active_[i]) in_second[point_index_(i)] = i;
+  }
+  std::vector<int> first;
+  second->clear();
+  for (int i : camera_observations_[camera1]) {
+    if (!active_[i]) continue;
+    const auto it = in_second.find(point_index_(i));
+    if (it == in_second.end()) continue;
+    first.push_back(i);
+    second->push_back(it->second);
+  }
+  return first;
+}
+
+std::vector<PairCandidate> Reconstruction::RankInitialPairs() const {
+  std::vector<PairCandidate> pairs;
+  for (int c1 = 0; c1 < num_cameras(); ++c1) {
+    for (int c2 = c1 + 1; c2 < num_cameras(); ++c2) {
+      std::vector<int> second;
+      const std::vector<int> first = CommonObservations(c1, c2, &second);
+      if (static_cast<int>(first.size()) < options_.min_pair_points) continue;
+      VisibilityPyramid p1(options_.view_score_levels, cameras_[c1].width, cameras_[c1].height);
+      VisibilityPyramid p2(options_.view_score_levels, cameras_[c2].width, cameras_[c2].height);
+      for (size_t k = 0; k < first.size(); ++k) {
+        p1.Add(observed_(first[k], 0), observed_(first[k], 1));
+        p2.Add(observed_(second[k], 0), observed_(second[k], 1));
+      }
+      pairs.push_back({c1, c2, p1.Score(), p2.Score(), static_cast<int>(first.size())});
+    }
+  }
+  // Maximise both scores: the smaller one first, then the larger, then the point count.
+  std::sort(pairs.begin(), pairs.end(), [](const PairCandidate& a, const PairCandidate& b) {
+    const auto key = [](const PairCandidate& p) {
+      return std::make_tuple(std::min(p.score1, p.score2), std::max(p.score1, p.score2), p.common_points,
+                             -p.camera1, -p.camera2);
+    };
+    return key(a) > key(b);
+  });
+  return pairs;
+}
+
+void Reconstruction::ResetStructure() {
+  std::fill(registered_.begin(), registered_.end(), false);
+  std::fill(reconstructed_.begin(), reconstructed_.end(), false);
+  order_.clear();
+  gauge_camera_ = -1;
+}
+
+void Reconstruction::SetInitialStructure(int camera1, int camera2, const Eigen::Matrix3d& R,
+                                         const Eigen::Vector3d& t, const Eigen::Vector3d& n) {
+  ResetStructure();
+  SetPose(&poses_, camera1, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero());
+  SetPose(&poses_, camera2, R, t);
+  registered_[camera1] = registered_[camera2] = true;
+  order_ = {camera1, camera2};
+  gauge_camera_ = camera1;
+  plane_ << n.normalized(), 1.0;  // the first camera is at distance 1 from the plane
+  AddPoints(camera1);
+  AddPoints(camera2);
+}
+
+int Reconstruction::ThirdCamera(int camera1, int camera2) const {
+  int best = -1;
+  size_t best_count = 0;
+  for (int c = 0; c < num_cameras(); ++c) {
+    if (c == camera1 || c == camera2 || !failure_[c].empty()) continue;
+    std::vector<int> second;
+    const size_t count = CommonObservations(camera1, c, &second).size();
+    if (count >= static_cast<size_t>(options_.min_pair_points) && count > best_count) {
+      best = c;
+      best_count = count;
+    }
+  }
+  return best;
+}
+
+InitialPairResult Reconstruction::Initialize(int camera1, int camera2) {
+  Require(camera1 >= 0 && camera1 < num_cameras() && camera2 >= 0 && camera2 < num_cameras() && camera1 != camera2,
+          "initialize: two different cameras in range are needed");
+  InitialPairResult result;
+  std::vector<int> second;
+  const std::vector<int> first = CommonObservations(camera1, camera2, &second);
+  geometry::Points2 x1(first.size(), 2), x2(first.size(), 2);
+  for (size_t k = 0; k < first.size(); ++k) {
+    x1.row(k) = Ray(first[k]).transpose();
+    x2.row(k) = Ray(second[k]).transpose();
+  }
+  geometry::HomographyRansacOptions ransac;
+  ransac.threshold_px = options_.homography_threshold_px;
+  ransac.focal1 = Focal(camera1);
+  ransac.focal2 = Focal(camera2);
+  ransac.max_iterations = options_.ransac_max_iterations;
+  ransac.confidence = options_.ransac_confidence;
+  ransac.seed = options_.seed;
+  const geometry::HomographyEstimate homography = geometry::EstimateHomographyRansac(x1, x2, ransac);
+  result.homography_inliers = static_cast<int>(homography.inliers.size());
+  if (!homography.success || result.homography_inliers < options_.min_pair_points) {
+    result.reason = "homography: " + Str(result.homography_inliers) + " inliers of " + Str(int(first.size())) +
+                    " common points (need " + Str(options_.min_pair_points) + ")";
+    return result;
+  }
+  geometry::Points2 in1(homography.inliers.size(), 2), in2(homography.inliers.size(), 2);
+  for (size_t k = 0; k < homography.inliers.size(); ++k) {
+    in1.row(k) = x1.row(homography.inliers[k]);
+    in2.row(k) = x2.row(homography.inliers[k]);
+  }
+  std::vector<geometry::PlanarMotion> motions = geometry::DecomposeHomography(homography.H, in1, in2);
+  result.solutions = static_cast<int>(motions.size());
+  if (motions.empty()) {
+    result.reason = "homography decomposition: no solution puts the points in front of both cameras";
+    return result;
+  }
+
+  // Two-fold ambiguity: the third camera's homography with camera1 gives the plane
+  // normal again; the true solution agrees with it.
+  const int third = motions.size() > 1 ? ThirdCamera(camera1, camera2) : -1;
+  if (third >= 0) {
+    std::vector<int> third_obs;
+    const std::vector<int> shared = CommonObservations(camera1, third, &third_obs);
+    geometry::Points2 y1(shared.size(), 2), y3(shared.size(), 2);
+    for (size_t k = 0; k < shared.size(); ++k) {
+      y1.row(k) = Ray(shared[k]).transpose();
+      y3.row(k) = Ray(third_obs[k]).transpose();
+    }
+    ransac.focal2 = Focal(third);
+    const geometry::HomographyEstimate h13 = geometry::EstimateHomographyRansac(y1, y3, ransac);
+    std::vector<geometry::PlanarMotion> third_motions;
+    if (h13.success) {
+      geometry::Points2 z1(h13.inliers.size(), 2), z3(h13.inliers.size(), 2);
+      for (size_t k = 0; k < h13.inliers.size(); ++k) {
+        z1.row(k) = y1.row(h13.inliers[k]);
+        z3.row(k) = y3.row(h13.inliers[k]);
+      }
+      third_motions = geometry::DecomposeHomography(h13.H, z1, z3);
+    }
+    if (!third_motions.empty()) {
+      double best_agreement = -2.0;
+      size_t best = 0;
+      for (size_t k = 0; k < motions.size(); ++k) {
+        for (const auto& other : third_motions) {
+          const double agreement = motions[k].n.dot(other.n);
+          if (agreement > best_agreement) {
+            best_agreement = agreement;
+            best = k;
+          }
+        }
+      }
+      motions = {motions[best]};
+      result.third_camera = third;
+      result.normal_agreement = best_agreement;
+    }
+  }
+
+  // Without a third camera: refine each solution and keep the lower cost.
+  double best_cost = std::numeric_limits<double>::infinity();
+  ba::PoseMatrix best_poses;
+  ba::PointMatrix best_points;
+  Eigen::Vector4d best_plane;
+  std::vector<bool> best_reconstructed;
+  for (const auto& motion : motions) {
+    SetInitialStructure(camera1, camera2, motion.R, motion.t, motion.n);
+    if (motions.size() == 1) break;
+    const AdjustResult adjusted = Adjust(false);
+    if (adjusted.final_cost < best_cost) {
+      best_cost = adjusted.final_cost;
+      best_poses = poses_;
+      best_points = points_;
+      best_plane = plane_;
+      best_reconstructed = reconstructed_;
+    }
+  }
+  if (motions.size() > 1) {
+    poses_ = best_poses;
+    points_ = best_points;
+    plane_ = best_plane;
+    reconstructed_ = best_reconstructed;
+  }
+  result.points = static_cast<int>(std::count(reconstructed_.begin(), reconstructed_.end(), true));
+  result.success = result.points >= options_.min_pair_points / 2;
+  if (!result.success) result.reason = "only " + Str(result.points) + " points could be reconstructed";
+  return result;
+}
+
+NextCameraCandidate Reconstruction::ChooseNextCamera() const {
+  NextCameraCandidate best;
+  for (int c = 0; c < num_cameras(); ++c) {
+    if (registered_[c] || !failure_[c].empty()) continue;
+    VisibilityPyramid pyramid(options_.view_score_levels, cameras_[c].width, cameras_[c].height);
+    int count = 0;
+    for (int i : camera_observations_[c]) {
+      if (active_[i] && reconstructed_[point_index_(i)]) {
+        pyramid.Add(observed_(i, 0), observed_(i, 1));
+        ++count;
+      }
+    }
+    if (count < options_.min_pnp_points) continue;
+    if (pyramid.Score() > best.score || (pyramid.Score() == best.score && count > best.points)) {
+      best = {c, pyramid.Score(), count};
+    }
+  }
+  return best;
+}
+
+RegisterResult Reconstruction::RegisterCamera(int camera) {
+  Require(camera >= 0 && camera < num_cameras(), "register: camera index out of range");
+  RegisterResult result;
+  std::vector<int> observations;
+  for (int i : camera_observations_[camera]) {
+    if (active_[i] && reconstructed_[point_index_(i)]) observations.push_back(i);
+  }
+  result.correspondences = static_cast<int>(observations.size());
+  geometry::Points3 X(observations.size(), 3);
+  geometry::Points2 pixels(observations.size(), 2);
+  for (size_t k = 0; k < observations.size(); ++k) {
+    X.row(k) = points_.row(point_index_(observations[k]));
+    pixels.row(k) = observed_.row(observations[k]);
+  }
+  geometry::PnpOptions pnp;
+  pnp.threshold_px = options_.pnp_threshold_px;
+  pnp.max_iterations = options_.ransac_max_iterations;
+  pnp.confidence = options_.ransac_confidence;
+  pnp.min_inliers = options_.min_pnp_points;
+  const geometry::PnpEstimate estimate =
+      geometry::EstimatePoseRansac(X, pixels, CameraMatrix(cameras_[camera].K), pnp);
+  result.inliers = static_cast<int>(estimate.inliers.size());
+  if (!estimate.success) {
+    result.reason = "PnP failed: " + Str(result.inliers) + " inliers of " + Str(result.correspondences) +
+                    " correspondences (need " + Str(options_.min_pnp_points) + ")";
+    failure_[camera] = result.reason;
+    return result;
+  }
+  // Refine the pose on the inliers with the points held fixed.
+  ba::Data data;
+  data.intrinsics = {cameras_[camera].K};
+  data.poses.resize(1, 6);
+  data.poses.row(0) << ba::AngleAxisFromRotation(estimate.R).transpose(), estimate.t.transpose();
+  data.points.resize(result.inliers, 3);
+  data.camera_index = Eigen::VectorXi::Zero(result.inliers);
+  data.point_index.resize(result.inliers);
+  data.observed.resize(result.inliers, 2);
+  for (int k = 0; k < result.inliers; ++k) {
+    data.points.row(k) = X.row(estimate.inliers[k]);
+    data.point_index(k) = k;
+    data.observed.row(k) = pixels.row(estimate.inliers[k]);
+  }
+  ba::Options refine;
+  refine.refine_points = false;
+  refine.max_iterations = options_.final_ba_iterations;
+  try {
+    const ba::Result refined = ba::BundleAdjust(data, refine);
+    poses_.row(camera) = refined.poses.row(0);
+    result.mean_error_px = refined.residuals.rowwise().norm().mean();
+  } catch (const std::invalid_argument& error) {
+    result.reason = std::string("pose refinement failed: ") + error.what();
+    failure_[camera] = result.reason;
+    return result;
+  }
+  registered_[camera] = true;
+  order_.push_back(camera);
+  result.success = true;
+  return result;
+}
+
+bool Reconstruction::InFront(int observation) const {
+  const int c = camera_index_(observation);
+  const Eigen::Vector3d X = points_.row(point_index_(observation)).transpose();
+  return (PoseRotation(poses_, c) * X + PoseTranslation(poses_, c)).z() > 0.0;
+}
+
+bool Reconstruction::ReconstructPoint(int point) {
+  std::vector<geometry::View> views;
+  for (int i : point_observations_[point]) {
+    const int c = camera_index_(i);
+    if (!active_[i] || !registered_[c]) continue;
+    views.push_back({PoseRotation(poses_, c), PoseTranslation(poses_, c), Ray(i)});
+  }
+  if (views.empty()) return false;
+  Eigen::Vector3d X;
+  if (options_.model == ba::Model::kCoplanar) {
+    // Back-project every view onto the plane and average: a point seen once counts too.
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    int count = 0;
+    for (const auto& view : views) {
+      if (geometry::IntersectRayWithPlane(view, plane_, &X)) {
+        sum += X;
+        ++count;
+      }
+    }
+    if (count == 0) return false;
+    X = sum / count;
+  } else {
+    if (views.size() < 2) return false;
+    X = geometry::TriangulateLinear(views);
+    if (!X.allFinite()) return false;
+    const double angle = geometry::MaxTriangulationAngle(views, X);
+    if (angle < options_.min_triangulation_angle_deg * M_PI / 180.0) return false;
+    for (const auto& view : views) {
+      const Eigen::Vector3d x_cam = view.R * X + view.t;
+      if (x_cam.z() <= 0.0) return false;
+    }
+  }
+  points_.row(point) = X.transpose();
+  reconstructed_[point] = true;
+  return true;
+}
+
+int Reconstruction::AddPoints(int camera) {
+  Require(camera >= 0 && camera < num_cameras() && registered_[camera], "add points: camera is not registered");
+  int added = 0;
+  for (int i : camera_observations_[camera]) {
+    const int p = point_index_(i);
+    if (active_[i] && !reconstructed_[p] && ReconstructPoint(p)) ++added;
+  }
+  return added;
+}
+
+AdjustResult Reconstruction::Adjust(bool final) {
+  AdjustResult result;
+  const bool coplanar = options_.model == ba::Model::kCoplanar;
+  // Observations that take part: active, registered camera, reconstructed point in front.
+  std::vector<int> used;
+  std::vector<int> point_uses(num_points_, 0);
+  for (int i = 0; i < static_cast<int>(active_.size()); ++i) {
+    if (!active_[i] || !registered_[camera_index_(i)] || !reconstructed_[point_index_(i)]) continue;
+    if (!InFront(i)) {
+      active_[i] = false;
+      continue;
+    }
+    used.push_back(i);
+    ++point_uses[point_index_(i)];
+  }
+  const int min_uses = coplanar ? 1 : 2;
+  std::vector<int> camera_map(num_cameras(), -1), point_map(num_points_, -1), cameras, points;
+  std::vector<int> kept;
+  for (int i : used) {
+    const int p = point_index_(i);
+    if (point_uses[p] < min_uses) continue;
+    const int c = camera_index_(i);
+    if (camera_map[c] < 0) {
+      camera_map[c] = static_cast<int>(cameras.size());
+      cameras.push_back(c);
+    }
+    if (point_map[p] < 0) {
+      point_map[p] = static_cast<int>(points.size());
+      points.push_back(p);
+    }
+    kept.push_back(i);
+  }
+  for (int p = 0; p < num_points_; ++p) {
+    if (reconstructed_[p] && point_map[p] < 0) reconstructed_[p] = false;
+  }
+  for (int c = 0; c < num_cameras(); ++c) {
+    if (registered_[c] && camera_map[c] < 0) {
+      registered_[c] = false;
+      failure_[c] = "lost all its observations during refinement";
+    }
+  }
+  if (cameras.empty() || kept.empty() || camera_map[gauge_camera_] < 0) return result;
+
+  ba::Data data;
+  for (int c : cameras) data.intrinsics.push_back(cameras_[c].K);
+  data.poses.resize(cameras.size(), 6);
+  for (size_t k = 0; k < cameras.size(); ++k) data.poses.row(k) = poses_.row(cameras[k]);
+  data.points.resize(points.size(), 3);
+  for (size_t k = 0; k < points.size(); ++k) data.points.row(k) = points_.row(points[k]);
+  data.camera_index.resize(kept.size());
+  data.point_index.resize(kept.size());
+  data.observed.resize(kept.size(), 2);
+  for (size_t k = 0; k < kept.size(); ++k) {
+    data.camera_index(k) = camera_map[camera_index_(kept[k])];
+    data.point_index(k) = point_map[point_index_(kept[k])];
+    data.observed.row(k) = observed_.row(kept[k]);
+  }
+  data.plane = plane_;
+  ba::Options ba_options;
+  ba_options.model = options_.model;
+  ba_options.loss = options_.loss;
+  ba_options.loss_scale_px = options_.loss_scale_px;
+  ba_options.num_threads = options_.num_threads;
+  ba_options.gauge_camera = camera_map[gauge_camera_];
+  ba_options.max_iterations = final ? options_.final_ba_iterations : options_.intermediate_ba_iterations;
+  if (!final) ba_options.function_tolerance = 1e-6;
+  if (cameras.size() < 2 && options_.model == ba::Model::kFree) return result;
+  const ba::Result solved = ba::BundleAdjust(data, ba_options);
+  for (size_t k = 0; k < cameras.size(); ++k) poses_.row(cameras[k]) = solved.poses.row(k);
+  for (size_t k = 0; k < points.size(); ++k) points_.row(points[k]) = solved.points.row(k);
+  if (coplanar) plane_ = solved.plane;
+  result.initial_cost = solved.initial_cost;
+  result.final_cost = solved.final_cost;
+  result.iterations = solved.iterations;
+  result.termination = solved.termination;
+  result.cameras = static_cast<int>(cameras.size());
+  result.points = static_cast<int>(points.size());
+  result.observations = static_cast<int>(kept.size());
+  result.solve_time_s = solved.solve_time_s;
+  return result;
+}
+
+Reconstruction::PixelMatrix Reconstruction::Residuals() const {
+  PixelMatrix residuals(observed_.rows(), 2);
+  residuals.setConstant(std::numeric_limits<double>::quiet_NaN());
+  for (int i = 0; i < observed_.rows(); ++i) {
+    const int c = camera_index_(i), p = point_index_(i);
+    if (!active_[i] || !registered_[c] || !reconstructed_[p]) continue;
+    const Eigen::Vector3d x = PoseRotation(poses_, c) * points_.row(p).transpose() + PoseTranslation(poses_, c);
+    if (x.z() <= 0.0) continue;
+    const ba::Intrinsics& K = cameras_[c].K;
+    const double xn = x.x() / x.z(), yn = x.y() / x.z();
+    residuals.row(i) << K.fx * xn + K.skew * yn + K.cx - observed_(i, 0), K.fy * yn + K.cy - observed_(i, 1);
+  }
+  return residuals;
+}
+
+int Reconstruction::FilterOutliers() {
+  const PixelMatrix residuals = Residuals();
+  std::vector<std::vector<double>> norms(cameras_.size());
+  for (int i = 0; i < residuals.rows(); ++i) {
+    if (std::isfinite(residuals(i, 0))) norms[camera_index_(i)].push_back(residuals.row(i).norm());
+  }
+  std::vector<double> threshold(cameras_.size());
+  for (size_t c = 0; c < cameras_.size(); ++c) {
+    threshold[c] = std::max(options_.outlier_threshold_px, options_.outlier_sigma_factor * RobustSigma(norms[c]));
+  }
+  int removed = 0;
+  for (int i = 0; i < residuals.rows(); ++i) {
+    if (std::isfinite(residuals(i, 0)) && residuals.row(i).norm() > threshold[camera_index_(i)]) {
+      active_[i] = false;
+      ++removed;
+    }
+  }
+  return removed;
+}
+
+RefineResult Reconstruction::Refine() {
+  RefineResult result;
+  for (int round = 0; round < options_.max_refine_rounds; ++round) {
+    result.last = Adjust(true);
+    ++result.rounds;
+    const int removed = FilterOutliers();
+    result.removed += removed;
+    if (removed == 0) break;
+  }
+  return result;
+}
+
+void Reconstruction::FailUnregistered() {
+  for (int c = 0; c < num_cameras(); ++c) {
+    if (registered_[c] || !failure_[c].empty()) continue;
+    int shared = 0;
+    for (int i : camera_observations_[c]) {
+      if (active_[i] && reconstructed_[point_index_(i)]) ++shared;
+    }
+    if (camera_observations_[c].empty()) {
+      failure_[c] = "no observations";
+    } else if (shared == 0) {
+      failure_[c] = "no point in common with the registered cameras (disconnected)";
+    } else {
+      failure_[c] = "only " + Str(shared) + " points in common with the registered cameras (need " +
+                    Str(options_.min_pnp_points) + ")";
+    }
+  }
+}
+
+}  // namespace calibproj::registration

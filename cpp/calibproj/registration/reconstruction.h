@@ -1,0 +1,159 @@
+#pragma once
+// Incremental registration of a camera network from point tracks (paper section 2.2).
+//
+// The Reconstruction holds the state (which cameras are registered, their poses,
+// which points are reconstructed, the plane, which observations are inliers) and
+// offers each step of the algorithm as a method. The order of the steps lives in
+// Run() (incremental.h) and, step by step, in the Python driver: both call the same
+// methods, so every algorithmic step exists once.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "calibproj/ba/bundle_adjuster.h"
+
+namespace calibproj::registration {
+
+struct Options {
+  ba::Model model = ba::Model::kCoplanar;
+  double homography_threshold_px = 3.0;  // initial pair RANSAC, in each camera's own pixels
+  double pnp_threshold_px = 3.0;         // PnP RANSAC, in the new camera's pixels
+  int ransac_max_iterations = 2000;
+  double ransac_confidence = 0.9999;
+  std::uint64_t seed = 0;
+  int min_pair_points = 15;         // common points for the initial pair and the third camera
+  int min_pnp_points = 6;           // 2D-3D correspondences to register a camera
+  double min_triangulation_angle_deg = 1.0;  // FREE: new points need this much parallax
+  double outlier_threshold_px = 1.0;    // observations above max(this, factor * sigma) are removed
+  double outlier_sigma_factor = 3.0;    // 0 keeps the fixed threshold of the paper
+  int max_refine_rounds = 10;
+  int view_score_levels = 3;
+  ba::Loss loss = ba::Loss::kNone;
+  double loss_scale_px = 1.0;
+  int num_threads = 1;
+  int intermediate_ba_iterations = 25;  // after each new camera
+  int final_ba_iterations = 100;
+
+  void Check() const;
+};
+
+struct Camera {
+  ba::Intrinsics K;
+  double width = 0.0, height = 0.0;
+};
+
+struct PairCandidate {
+  int camera1 = -1, camera2 = -1;
+  int score1 = 0, score2 = 0;  // view scores of the common points in each camera
+  int common_points = 0;
+};
+
+struct InitialPairResult {
+  bool success = false;
+  std::string reason;
+  int homography_inliers = 0;
+  int solutions = 0;          // decompositions with the points in front of both cameras
+  int third_camera = -1;      // camera used to pick between two solutions; -1 if refined both
+  double normal_agreement = 0.0;  // cosine between the chosen normal and the third camera's
+  int points = 0;
+};
+
+struct NextCameraCandidate {
+  int camera = -1;
+  int score = 0;
+  int points = 0;  // observations of reconstructed points
+};
+
+struct RegisterResult {
+  bool success = false;
+  std::string reason;
+  int correspondences = 0;
+  int inliers = 0;
+  double mean_error_px = 0.0;  // after refinement, over the inliers
+};
+
+struct AdjustResult {
+  double initial_cost = 0.0, final_cost = 0.0;
+  int iterations = 0;
+  std::string termination;
+  int cameras = 0, points = 0, observations = 0;
+  double solve_time_s = 0.0;
+};
+
+struct RefineResult {
+  int rounds = 0;
+  int removed = 0;
+  AdjustResult last;
+};
+
+class Reconstruction {
+ public:
+  using PixelMatrix = ba::PixelMatrix;
+
+  // Validates the inputs (std::invalid_argument naming the problem).
+  Reconstruction(std::vector<Camera> cameras, int num_points, Eigen::VectorXi camera_index,
+                 Eigen::VectorXi point_index, PixelMatrix observed, Options options);
+
+  // Steps, in the order Run() calls them.
+  std::vector<PairCandidate> RankInitialPairs() const;
+  InitialPairResult Initialize(int camera1, int camera2);
+  NextCameraCandidate ChooseNextCamera() const;
+  RegisterResult RegisterCamera(int camera);
+  int AddPoints(int camera);
+  AdjustResult Adjust(bool final);
+  int FilterOutliers();
+  RefineResult Refine();
+  void FailUnregistered();
+
+  // State.
+  int num_cameras() const { return static_cast<int>(cameras_.size()); }
+  int num_points() const { return num_points_; }
+  const Options& options() const { return options_; }
+  bool registered(int camera) const { return registered_[camera]; }
+  const std::vector<std::string>& failure_reasons() const { return failure_; }
+  const ba::PoseMatrix& poses() const { return poses_; }
+  const ba::PointMatrix& points() const { return points_; }
+  const std::vector<bool>& reconstructed() const { return reconstructed_; }
+  const std::vector<bool>& active() const { return active_; }
+  const Eigen::Vector4d& plane() const { return plane_; }
+  int gauge_camera() const { return gauge_camera_; }
+  std::vector<int> registration_order() const { return order_; }
+  // Residuals of the active observations of registered cameras and reconstructed
+  // points; NaN elsewhere.
+  PixelMatrix Residuals() const;
+  // View score of a camera over all its observations.
+  int ViewScore(int camera) const;
+
+ private:
+  Eigen::Vector2d Ray(int observation) const;
+  double Focal(int camera) const;
+  std::vector<int> CommonObservations(int camera1, int camera2, std::vector<int>* second) const;
+  void SetInitialStructure(int camera1, int camera2, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                           const Eigen::Vector3d& n);
+  void ResetStructure();
+  bool ReconstructPoint(int point);
+  bool InFront(int observation) const;
+  int ThirdCamera(int camera1, int camera2) const;
+
+  std::vector<Camera> cameras_;
+  int num_points_;
+  Eigen::VectorXi camera_index_, point_index_;
+  PixelMatrix observed_;
+  Options options_;
+  std::vector<std::vector<int>> camera_observations_, point_observations_;
+
+  std::vector<bool> registered_;
+  std::vector<std::string> failure_;
+  ba::PoseMatrix poses_;
+  ba::PointMatrix points_;
+  std::vector<bool> reconstructed_;
+  std::vector<bool> active_;
+  Eigen::Vector4d plane_ = Eigen::Vector4d(0, 0, 1, 1);
+  int gauge_camera_ = -1;
+  std::vector<int> order_;
+};
+
+}  // namespace calibproj::registration
