@@ -1,0 +1,204 @@
+// Bindings of calibproj::detect: numpy images in, (ids, corners) numpy arrays out.
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <stdexcept>
+#include <string>
+
+#include "calibproj/detect/marker_centre.h"
+#include "calibproj/detect/marker_detector.h"
+#include "calibproj/detect/marker_family.h"
+#include "registry.h"
+
+namespace py = pybind11;
+
+namespace calibproj::bindings {
+
+namespace {
+
+using detect::Quad;
+
+// A cv::Mat header over a 2-D uint8 numpy array (no copy; the array must outlive it).
+cv::Mat GrayView(const py::array& image) {
+  if (image.dtype().kind() != 'u' || image.itemsize() != 1) {
+    throw std::invalid_argument("expected an 8-bit (uint8) image, got dtype " +
+                                std::string(py::str(image.dtype())));
+  }
+  if (image.ndim() != 2) {
+    throw std::invalid_argument("expected a 2-D grayscale image, got " + std::to_string(image.ndim()) +
+                                " dimensions");
+  }
+  if (image.strides(1) != 1 || image.strides(0) < image.shape(1)) {
+    throw std::invalid_argument("image rows must be contiguous (use numpy.ascontiguousarray)");
+  }
+  return cv::Mat(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
+                 const_cast<void*>(image.data()), static_cast<std::size_t>(image.strides(0)));
+}
+
+py::array_t<double> CornersArray(const std::vector<Quad>& corners) {
+  py::array_t<double> out({static_cast<py::ssize_t>(corners.size()), py::ssize_t{4}, py::ssize_t{2}});
+  auto view = out.mutable_unchecked<3>();
+  for (std::size_t i = 0; i < corners.size(); ++i) {
+    for (int k = 0; k < 4; ++k) {
+      view(i, k, 0) = corners[i][k].x;
+      view(i, k, 1) = corners[i][k].y;
+    }
+  }
+  return out;
+}
+
+std::vector<Quad> QuadsFromArray(const py::array_t<double, py::array::c_style | py::array::forcecast>& corners) {
+  if (corners.ndim() != 3 || corners.shape(1) != 4 || corners.shape(2) != 2) {
+    throw std::invalid_argument("corners: expected an array of shape (N, 4, 2)");
+  }
+  const auto view = corners.unchecked<3>();
+  std::vector<Quad> quads(corners.shape(0));
+  for (py::ssize_t i = 0; i < corners.shape(0); ++i) {
+    for (int k = 0; k < 4; ++k) quads[i][k] = cv::Point2d(view(i, k, 0), view(i, k, 1));
+  }
+  return quads;
+}
+
+py::tuple DetectionsTuple(const detect::Detections& found) {
+  py::array_t<int32_t> ids(static_cast<py::ssize_t>(found.size()));
+  std::copy(found.ids.begin(), found.ids.end(), ids.mutable_data());
+  return py::make_tuple(ids, CornersArray(found.corners));
+}
+
+void RegisterRefinement(py::module_& m) {
+  py::enum_<detect::CornerRefinement>(m, "CornerRefinement", "How corners are refined (see corner_refinement.h)")
+      .value("none", detect::CornerRefinement::kNone)
+      .value("subpix", detect::CornerRefinement::kSubpix)
+      .value("edges", detect::CornerRefinement::kEdges);
+
+  using Options = detect::CornerRefinementOptions;
+  py::class_<Options>(m, "CornerRefinementOptions", "Corner refinement options (see corner_refinement.h)")
+      .def(py::init<>())
+      .def_readwrite("method", &Options::method)
+      .def_readwrite("window_fraction", &Options::window_fraction)
+      .def_readwrite("window_min_px", &Options::window_min_px)
+      .def_readwrite("window_max_px", &Options::window_max_px)
+      .def_readwrite("max_iterations", &Options::max_iterations)
+      .def_readwrite("epsilon_px", &Options::epsilon_px)
+      .def_readwrite("edge_search_fraction", &Options::edge_search_fraction)
+      .def_readwrite("edge_spacing_px", &Options::edge_spacing_px)
+      .def_readwrite("edge_min_samples", &Options::edge_min_samples)
+      .def_readwrite("edge_end_margin", &Options::edge_end_margin)
+      .def_readwrite("edge_min_contrast", &Options::edge_min_contrast)
+      .def_readwrite("edge_passes", &Options::edge_passes)
+      .def("check", &Options::Check, "Raise ValueError naming the first bad field.");
+}
+
+void RegisterOptions(py::module_& m) {
+  RegisterRefinement(m);
+  py::class_<detect::ArucoOptions>(m, "ArucoOptions", "ArUco detection options (see aruco_detector.h)")
+      .def(py::init<>())
+      .def_readwrite("inverted", &detect::ArucoOptions::inverted)
+      .def_readwrite("min_marker_perimeter_rate", &detect::ArucoOptions::min_marker_perimeter_rate)
+      .def_readwrite("max_marker_perimeter_rate", &detect::ArucoOptions::max_marker_perimeter_rate)
+      .def_readwrite("adaptive_thresh_win_size_min", &detect::ArucoOptions::adaptive_thresh_win_size_min)
+      .def_readwrite("adaptive_thresh_win_size_max", &detect::ArucoOptions::adaptive_thresh_win_size_max)
+      .def_readwrite("adaptive_thresh_win_size_step", &detect::ArucoOptions::adaptive_thresh_win_size_step)
+      .def_readwrite("adaptive_thresh_constant", &detect::ArucoOptions::adaptive_thresh_constant)
+      .def_readwrite("error_correction_rate", &detect::ArucoOptions::error_correction_rate)
+      .def_readwrite("refinement", &detect::ArucoOptions::refinement)
+      .def("check", &detect::ArucoOptions::Check, "Raise ValueError naming the first bad field.");
+
+  py::class_<detect::AprilTagOptions>(m, "AprilTagOptions", "AprilTag detection options (see apriltag_detector.h)")
+      .def(py::init<>())
+      .def_readwrite("inverted", &detect::AprilTagOptions::inverted)
+      .def_readwrite("quad_decimate", &detect::AprilTagOptions::quad_decimate)
+      .def_readwrite("quad_sigma", &detect::AprilTagOptions::quad_sigma)
+      .def_readwrite("nthreads", &detect::AprilTagOptions::nthreads)
+      .def_readwrite("refine_edges", &detect::AprilTagOptions::refine_edges)
+      .def_readwrite("decode_sharpening", &detect::AprilTagOptions::decode_sharpening)
+      .def_readwrite("max_hamming", &detect::AprilTagOptions::max_hamming)
+      .def_readwrite("min_white_black_diff", &detect::AprilTagOptions::min_white_black_diff)
+      .def_readwrite("refinement", &detect::AprilTagOptions::refinement)
+      .def("check", &detect::AprilTagOptions::Check, "Raise ValueError naming the first bad field.");
+}
+
+void RegisterFamilies(py::module_& m) {
+  m.def("family_specs", &detect::MarkerFamilySpecs, "Every marker family spec this build accepts.");
+  m.def(
+      "family_info",
+      [](const std::string& spec) {
+        const auto family = detect::ParseMarkerFamily(spec);
+        const auto geometry = detect::GetMarkerGeometry(family);
+        py::dict info;
+        info["spec"] = family.Spec();
+        info["system"] = family.SystemName();
+        info["name"] = family.name;
+        info["id_count"] = detect::MarkerIdCount(family);
+        info["grid_cells"] = geometry.grid_cells;
+        info["quad_cells"] = geometry.quad_cells;
+        return info;
+      },
+      py::arg("spec"),
+      "Canonical spec, system, name, number of ids, side of the drawn grid and of the "
+      "detected square (cells) of a marker family. ValueError for an unknown family.");
+  m.def(
+      "marker_bits",
+      [](const std::string& spec, int id) {
+        const cv::Mat bits = detect::MarkerBits(detect::ParseMarkerFamily(spec), id);
+        py::array_t<uint8_t> out({bits.rows, bits.cols});
+        for (int row = 0; row < bits.rows; ++row) {
+          std::copy(bits.ptr<uint8_t>(row), bits.ptr<uint8_t>(row) + bits.cols, out.mutable_data(row, 0));
+        }
+        return out;
+      },
+      py::arg("spec"), py::arg("id"),
+      "Cells of marker `id` as a square uint8 array of 0 (black) and 1 (white), as printed "
+      "black on white.");
+  m.def(
+      "marker_centres",
+      [](const py::array_t<double, py::array::c_style | py::array::forcecast>& corners) {
+        const auto centres = detect::MarkerCentres(QuadsFromArray(corners));
+        py::array_t<double> out({static_cast<py::ssize_t>(centres.size()), py::ssize_t{2}});
+        auto view = out.mutable_unchecked<2>();
+        for (std::size_t i = 0; i < centres.size(); ++i) {
+          view(i, 0) = centres[i].x;
+          view(i, 1) = centres[i].y;
+        }
+        return out;
+      },
+      py::arg("corners"),
+      "Marker centres (N, 2): intersections of the diagonals of corners (N, 4, 2). "
+      "NaN for a degenerate quad.");
+}
+
+}  // namespace
+
+void register_detect(py::module_& m) {
+  RegisterOptions(m);
+  RegisterFamilies(m);
+
+  py::class_<detect::MarkerDetector>(m, "MarkerDetector",
+                                     "Detector for one marker family; build once, call detect() per image.")
+      .def(py::init([](const std::string& spec, const detect::ArucoOptions& aruco,
+                       const detect::AprilTagOptions& apriltag) {
+             return std::make_unique<detect::MarkerDetector>(detect::ParseMarkerFamily(spec),
+                                                             detect::DetectorOptions{aruco, apriltag});
+           }),
+           py::arg("spec"), py::arg("aruco") = detect::ArucoOptions(),
+           py::arg("apriltag") = detect::AprilTagOptions())
+      .def_property_readonly("spec", [](const detect::MarkerDetector& d) { return d.family().Spec(); })
+      .def(
+          "detect",
+          [](const detect::MarkerDetector& detector, const py::array& image) {
+            const cv::Mat gray = GrayView(image);
+            detect::Detections found;
+            {
+              py::gil_scoped_release release;
+              found = detector.Detect(gray);
+            }
+            return DetectionsTuple(found);
+          },
+          py::arg("image"),
+          "(ids (N,) int32, corners (N, 4, 2) float64) of the markers in a 2-D uint8 image; "
+          "corners in OpenCV's convention and order, sorted by id.");
+}
+
+}  // namespace calibproj::bindings

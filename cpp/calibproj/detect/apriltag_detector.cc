@@ -1,0 +1,95 @@
+#include "calibproj/detect/apriltag_detector.h"
+
+#include <apriltag/apriltag.h>
+
+#include <opencv2/core.hpp>
+
+#include <stdexcept>
+#include <string>
+
+namespace calibproj::detect {
+
+namespace {
+
+// libapriltag puts the centre of the top-left pixel at (0.5, 0.5); OpenCV at (0, 0).
+constexpr double kAprilTagPixelOffset = 0.5;
+
+// libapriltag's corners p[0..3] are OpenCV's corners 1, 0, 3, 2 (measured on the
+// same tag36h11 image through both detectors): OpenCV corner k is p[kOpenCvToAprilTag[k]].
+constexpr int kOpenCvToAprilTag[4] = {1, 0, 3, 2};
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument("AprilTag options: " + message);
+}
+
+const std::string& AprilTagName(const MarkerFamily& family) {
+  if (family.system != MarkerSystem::kAprilTag) {
+    throw std::invalid_argument(family.Spec() + " is not an AprilTag family");
+  }
+  return family.name;
+}
+
+// Frees the detections and the array holding them.
+struct DetectionsDeleter {
+  void operator()(zarray_t* detections) const { apriltag_detections_destroy(detections); }
+};
+
+}  // namespace
+
+void AprilTagOptions::Check() const {
+  Require(quad_decimate >= 1.0f, "quad_decimate must be at least 1");
+  Require(quad_sigma >= 0.0f, "quad_sigma must be non-negative");
+  Require(nthreads >= 1, "nthreads must be at least 1");
+  Require(decode_sharpening >= 0.0, "decode_sharpening must be non-negative");
+  Require(max_hamming >= 0 && max_hamming <= 3, "max_hamming must be in [0, 3]");
+  Require(min_white_black_diff >= 0 && min_white_black_diff <= 255, "min_white_black_diff must be in [0, 255]");
+  refinement.Check();
+}
+
+AprilTagDetector::AprilTagDetector(const MarkerFamily& family, const AprilTagOptions& options)
+    : options_(options),
+      quad_cells_(GetMarkerGeometry(family).quad_cells),
+      family_(CreateAprilTagFamily(AprilTagName(family))),
+      detector_(nullptr, apriltag_detector_destroy) {
+  options_.Check();
+  detector_.reset(apriltag_detector_create());
+  if (!detector_) throw std::runtime_error("libapriltag could not create a detector");
+  detector_->quad_decimate = options_.quad_decimate;
+  detector_->quad_sigma = options_.quad_sigma;
+  detector_->nthreads = options_.nthreads;
+  detector_->refine_edges = options_.refine_edges;
+  detector_->decode_sharpening = options_.decode_sharpening;
+  detector_->qtp.min_white_black_diff = options_.min_white_black_diff;
+  apriltag_detector_add_family_bits(detector_.get(), family_.get(), options_.max_hamming);
+}
+
+AprilTagDetector::~AprilTagDetector() = default;
+
+Detections AprilTagDetector::Detect(const cv::Mat& gray) const {
+  CheckGrayImage(gray);
+  cv::Mat image = options_.inverted ? cv::Mat(255 - gray) : gray;
+  image_u8_t view = {image.cols, image.rows, static_cast<int32_t>(image.step[0]), image.data};
+  std::unique_ptr<zarray_t, DetectionsDeleter> found;
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    found.reset(apriltag_detector_detect(detector_.get(), &view));
+  }
+  if (!found) throw std::runtime_error("libapriltag detection failed");
+  Detections out;
+  for (int i = 0; i < zarray_size(found.get()); ++i) {
+    apriltag_detection_t* detection = nullptr;
+    zarray_get(found.get(), i, &detection);
+    Quad quad;
+    for (int k = 0; k < 4; ++k) {
+      const double* p = detection->p[kOpenCvToAprilTag[k]];
+      quad[k] = cv::Point2d(p[0] - kAprilTagPixelOffset, p[1] - kAprilTagPixelOffset);
+    }
+    RefineCorners(image, quad_cells_, options_.refinement, &quad);
+    out.ids.push_back(detection->id);
+    out.corners.push_back(quad);
+  }
+  SortById(&out);
+  return out;
+}
+
+}  // namespace calibproj::detect

@@ -1,0 +1,61 @@
+#include "calibproj/detect/aruco_detector.h"
+
+#include <stdexcept>
+#include <string>
+
+namespace calibproj::detect {
+
+namespace {
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument("ArUco options: " + message);
+}
+
+}  // namespace
+
+void ArucoOptions::Check() const {
+  Require(min_marker_perimeter_rate > 0.0, "min_marker_perimeter_rate must be positive");
+  Require(max_marker_perimeter_rate > min_marker_perimeter_rate,
+          "max_marker_perimeter_rate must exceed min_marker_perimeter_rate");
+  Require(adaptive_thresh_win_size_min >= 3, "adaptive_thresh_win_size_min must be at least 3");
+  Require(adaptive_thresh_win_size_max >= adaptive_thresh_win_size_min,
+          "adaptive_thresh_win_size_max must be at least adaptive_thresh_win_size_min");
+  Require(adaptive_thresh_win_size_step > 0, "adaptive_thresh_win_size_step must be positive");
+  Require(error_correction_rate >= 0.0 && error_correction_rate <= 1.0, "error_correction_rate must be in [0, 1]");
+  refinement.Check();
+}
+
+ArucoDetector::ArucoDetector(const MarkerFamily& family, const ArucoOptions& options)
+    : options_(options), dictionary_(ArucoDictionary(family)) {
+  options_.Check();
+  parameters_ = cv::aruco::DetectorParameters::create();
+  parameters_->detectInvertedMarker = options_.inverted;
+  parameters_->minMarkerPerimeterRate = options_.min_marker_perimeter_rate;
+  parameters_->maxMarkerPerimeterRate = options_.max_marker_perimeter_rate;
+  parameters_->adaptiveThreshWinSizeMin = options_.adaptive_thresh_win_size_min;
+  parameters_->adaptiveThreshWinSizeMax = options_.adaptive_thresh_win_size_max;
+  parameters_->adaptiveThreshWinSizeStep = options_.adaptive_thresh_win_size_step;
+  parameters_->adaptiveThreshConstant = options_.adaptive_thresh_constant;
+  parameters_->errorCorrectionRate = options_.error_correction_rate;
+  // Corners are refined by RefineCorners() in Detect().
+  parameters_->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;
+}
+
+Detections ArucoDetector::Detect(const cv::Mat& gray) const {
+  CheckGrayImage(gray);
+  std::vector<std::vector<cv::Point2f>> corners;
+  std::vector<int> ids;
+  cv::aruco::detectMarkers(gray, dictionary_, corners, ids, parameters_);
+  Detections out;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    Quad quad;
+    for (int k = 0; k < 4; ++k) quad[k] = cv::Point2d(corners[i][k].x, corners[i][k].y);
+    RefineCorners(gray, dictionary_->markerSize + 2, options_.refinement, &quad);
+    out.ids.push_back(ids[i]);
+    out.corners.push_back(quad);
+  }
+  SortById(&out);
+  return out;
+}
+
+}  // namespace calibproj::detect

@@ -1,0 +1,17 @@
+#include "calibproj/detect/marker_detector.h"
+
+namespace calibproj::detect {
+
+MarkerDetector::MarkerDetector(const MarkerFamily& family, const DetectorOptions& options) : family_(family) {
+  if (family.system == MarkerSystem::kAruco) {
+    aruco_ = std::make_unique<ArucoDetector>(family, options.aruco);
+  } else {
+    apriltag_ = std::make_unique<AprilTagDetector>(family, options.apriltag);
+  }
+}
+
+Detections MarkerDetector::Detect(const cv::Mat& gray) const {
+  return aruco_ ? aruco_->Detect(gray) : apriltag_->Detect(gray);
+}
+
+}  // namespace calibproj::detect
