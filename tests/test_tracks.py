@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from calibproj.tracks import Tracks
+from calibproj.tracks import Tracks, msm_point_ids
 
 CAMERAS = ("a", "b", "c", "d")
 
@@ -28,6 +28,9 @@ def test_observations_are_sorted_by_camera_then_point():
     ids, xy = tracks.observations("a")
     assert ids.tolist() == [0, 31, 65] and xy.tolist() == [[2, 3], [10, 11], [4, 5]]
     assert tracks.keys.tolist() == [[0, 0], [0, 31], [2, 1], [3, 4]]
+    assert msm_point_ids(tracks.keys[:, 0], tracks.keys[:, 1], 32).tolist() == tracks.point_ids.tolist()
+    with pytest.raises(ValueError, match="MSM keys out of range"):
+        msm_point_ids([0], [32], 32)
     camera_index, point_index, xy = tracks.bundle_arrays()
     assert camera_index.dtype == np.int32 and point_index.dtype == np.int32 and xy.shape == (7, 2)
 

@@ -34,7 +34,7 @@ SCHEMA_KIND = "tracks"
 SCHEMA_MAJOR = 1
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # numpy fields: compare the arrays explicitly
 class Tracks:
     """Observations of points by cameras, numpy-backed.
 
@@ -265,6 +265,14 @@ class Tracks:
             names, _concatenate(cameras, np.int32), _concatenate(ids, np.int64),
             np.concatenate(xy) if xy else np.zeros((0, 2)), document.get("markers_per_array"),
         )
+
+
+def msm_point_ids(arrays: np.ndarray, markers: np.ndarray, markers_per_array: int) -> np.ndarray:
+    """Point ids of MSMs ``(array, marker)``: ``array * markers_per_array + marker``."""
+    arrays, markers = np.asarray(arrays, dtype=np.int64), np.asarray(markers, dtype=np.int64)
+    if np.any((markers < 0) | (markers >= markers_per_array)) or np.any(arrays < 0):
+        raise ValueError(f"MSM keys out of range: arrays >= 0 and markers in [0, {markers_per_array})")
+    return arrays * markers_per_array + markers
 
 
 def _concatenate(parts: list[np.ndarray], dtype: type) -> np.ndarray:

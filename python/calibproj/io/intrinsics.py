@@ -42,7 +42,7 @@ YAML_SUFFIXES = (".yaml", ".yml", ".xml")
 INTRINSICS_SUFFIXES = (".json", *YAML_SUFFIXES)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # numpy fields: compare K and dist explicitly
 class Intrinsics:
     """One camera's pinhole matrix and OpenCV distortion.
 

@@ -34,7 +34,7 @@ UNITS = ("arbitrary", "m")
 ROTATION_TOLERANCE = 1e-6
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # numpy fields: compare the poses explicitly
 class CameraPoses:
     """World-to-camera poses by camera name, the unit of their frame, and failed cameras.
 

@@ -47,7 +47,7 @@ MIN_EVAL_VIEWS = 2
 SQUARE_CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Projection:
     """World points seen by one camera.
 
@@ -154,7 +154,7 @@ def _sample_in_view(camera: Camera, rng: np.random.Generator, count: int, lower:
     return (camera.center + depth[:, None] * rays)[crosses]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class GeometricSimulation:
     """Everything a tracks-only simulation produces.
 
