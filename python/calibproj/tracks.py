@@ -23,7 +23,6 @@ import json
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -298,6 +297,7 @@ def _camera_indices(camera_names: tuple[str, ...], cameras: Any) -> np.ndarray:
 def _check_markers_per_array(markers_per_array: Any) -> int | None:
     if markers_per_array is None:
         return None
-    if isinstance(markers_per_array, bool) or not isinstance(markers_per_array, (int, np.integer)) or markers_per_array <= 0:
+    integer = isinstance(markers_per_array, (int, np.integer)) and not isinstance(markers_per_array, bool)
+    if not integer or markers_per_array <= 0:
         raise ValueError(f"markers_per_array must be a positive integer or null, got {markers_per_array!r}")
     return int(markers_per_array)

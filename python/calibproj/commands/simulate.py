@@ -107,7 +107,9 @@ def _layout(scene, args: argparse.Namespace):
         rows, cols = (int(v) for v in args.grid.lower().split("x"))
         scales = tuple(float(v) for v in args.scales.split(","))
     except ValueError:
-        raise ValueError(f"--grid must look like 4x8 and --scales like 1,2,4; got {args.grid!r}, {args.scales!r}") from None
+        raise ValueError(
+            f"--grid must look like 4x8 and --scales like 1,2,4; got {args.grid!r} and {args.scales!r}"
+        ) from None
     return MsmLayout(projector=scene.projector.resolution, grid=(rows, cols), arrays=args.arrays,
                      scales=scales, marker_px=args.marker_px)
 

@@ -284,7 +284,8 @@ def _read_camera(reader: _FieldReader, entry: Any, where: str) -> Camera:
     cy = reader.number(entry, "cy", where, default=(resolution[1] - 1) / 2.0)
     dist = tuple(reader.numbers(entry, "dist", where, None, default=[0.0] * 5))
     if len(dist) not in DISTORTION_LENGTHS:
-        reader.fail(f"{where}.dist", f"expected {', '.join(map(str, DISTORTION_LENGTHS))} coefficients, got {len(dist)}")
+        lengths = ", ".join(map(str, DISTORTION_LENGTHS))
+        reader.fail(f"{where}.dist", f"expected {lengths} coefficients, got {len(dist)}")
     fps = reader.number(entry, "fps", where, positive=True, default=30.0)
     start_offset_s = reader.number(entry, "start_offset_s", where, default=0.0)
     exposure_s = reader.number(entry, "exposure_s", where, positive=True, default=min(0.01, 1.0 / fps))
