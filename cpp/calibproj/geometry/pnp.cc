@@ -23,7 +23,7 @@ PnpEstimate EstimatePoseRansac(const Points3& X, const Points2& pixels, const Ei
   std::vector<int> inliers;
   const bool found = cv::solvePnPRansac(object, image, K_cv, cv::noArray(), rvec, tvec, false, options.max_iterations,
                                         static_cast<float>(options.threshold_px), options.confidence, inliers,
-                                        cv::SOLVEPNP_AP3P);
+                                        cv::SOLVEPNP_SQPNP);
   if (!found || static_cast<int>(inliers.size()) < options.min_inliers) {
     estimate.inliers = inliers;
     return estimate;

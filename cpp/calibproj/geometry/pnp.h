@@ -23,7 +23,7 @@ struct PnpEstimate {
   bool success = false;
 };
 
-// RANSAC over minimal samples (AP3P), then Levenberg-Marquardt on all inliers.
+// RANSAC over minimal samples (SQPnP, globally optimal, robust to the planar flip ambiguity), then Levenberg-Marquardt on all inliers.
 // pixels are undistorted pixels of the camera with matrix K.
 PnpEstimate EstimatePoseRansac(const Points3& X, const Points2& pixels, const Eigen::Matrix3d& K,
                                const PnpOptions& options);

@@ -381,8 +381,18 @@ RegisterResult Reconstruction::RegisterCamera(int camera) {
     failure_[camera] = result.reason;
     return result;
   }
+  if (result.mean_error_px > options_.pnp_threshold_px) {
+    result.reason = "PnP pose inconsistent: mean error " + std::to_string(result.mean_error_px) +
+                    " px over its inliers after refinement";
+    failure_[camera] = result.reason;
+    return result;
+  }
   registered_[camera] = true;
   order_.push_back(camera);
+  // Cameras that failed earlier may succeed now that more points are reconstructed.
+  for (int c = 0; c < num_cameras(); ++c) {
+    if (!registered_[c]) failure_[c].clear();
+  }
   result.success = true;
   return result;
 }

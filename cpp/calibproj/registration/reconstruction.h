@@ -30,7 +30,7 @@ struct Options {
   double outlier_threshold_px = 1.0;    // observations above max(this, factor * sigma) are removed
   double outlier_sigma_factor = 3.0;    // 0 keeps the fixed threshold of the paper
   int max_refine_rounds = 10;
-  int view_score_levels = 3;
+  int view_score_levels = 6;   // COLMAP default: rewards many points as well as their spread
   ba::Loss loss = ba::Loss::kNone;
   double loss_scale_px = 1.0;
   int num_threads = 1;

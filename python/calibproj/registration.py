@@ -1,0 +1,218 @@
+"""The Python driver of the incremental registration (paper section 2.2).
+
+Every algorithmic step is one C++ method of ``calibproj._core.registration.Reconstruction``;
+this driver owns the tracks, calls those steps in the order of the C++ ``run()``, logs
+each camera as it is added, and yields after every step so that a caller can watch,
+hook in, or stop::
+
+    driver = RegistrationDriver(tracks, intrinsics)
+    for step in driver.steps():
+        print(step.name, step.info)
+    calibration = driver.result()
+
+``calibrate(tracks, intrinsics)`` does all of it and returns a ``Calibration``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from calibproj import _core
+from calibproj.calibration import Calibration
+from calibproj.io.intrinsics import Intrinsics
+from calibproj.tracks import Tracks
+
+logger = logging.getLogger(__name__)
+
+MODELS = ("free", "coplanar")
+LOSSES = ("none", "huber", "cauchy")
+
+
+@dataclass
+class RegistrationOptions:
+    """Knobs of the registration; the defaults are those of the paper where it gives one.
+
+    Attributes:
+        model: ``"coplanar"`` (points on one refined plane, as in the paper's results) or
+            ``"free"`` (3D points).
+        homography_threshold_px: RANSAC threshold of the initial pair's homography, in
+            each camera's own pixels (3 px in the paper).
+        pnp_threshold_px: RANSAC threshold of PnP for each new camera, in its pixels.
+        ransac_max_iterations: upper bound of RANSAC iterations.
+        ransac_confidence: RANSAC stops once a better model is this unlikely.
+        seed: RANSAC random seed (results are reproducible for a given seed).
+        min_pair_points: common points needed for the initial pair and the third camera.
+        min_pnp_points: correspondences needed to register a camera.
+        min_triangulation_angle_deg: FREE model: parallax needed to triangulate a point.
+        outlier_threshold_px: smallest reprojection error at which an observation is
+            removed (1 px in the paper).
+        outlier_sigma_factor: the threshold is ``max(outlier_threshold_px, factor * sigma)``
+            with sigma a robust estimate of each camera's noise; 0 keeps the fixed threshold.
+        max_refine_rounds: bundle adjustment and outlier removal rounds at the end.
+        view_score_levels: levels of the visibility pyramid of the view score.
+        loss: robust loss of the bundle adjustment (``none``, ``huber``, ``cauchy``).
+        loss_scale_px: scale of the robust loss in pixels.
+        num_threads: threads of the bundle adjustment.
+        intermediate_ba_iterations: iterations of the bundle adjustment after each camera.
+        final_ba_iterations: iterations of the final bundle adjustments.
+    """
+
+    model: str = "coplanar"
+    homography_threshold_px: float = 3.0
+    pnp_threshold_px: float = 3.0
+    ransac_max_iterations: int = 2000
+    ransac_confidence: float = 0.9999
+    seed: int = 0
+    min_pair_points: int = 15
+    min_pnp_points: int = 6
+    min_triangulation_angle_deg: float = 1.0
+    outlier_threshold_px: float = 1.0
+    outlier_sigma_factor: float = 3.0
+    max_refine_rounds: int = 10
+    view_score_levels: int = 6
+    loss: str = "none"
+    loss_scale_px: float = 1.0
+    num_threads: int = 1
+    intermediate_ba_iterations: int = 25
+    final_ba_iterations: int = 100
+
+    def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
+        if self.loss not in LOSSES:
+            raise ValueError(f"loss must be one of {LOSSES}, got {self.loss!r}")
+
+    def to_kwargs(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class Step:
+    """One step of the registration, as the driver yields it."""
+
+    name: str  # initialize, register, adjust, refine, done
+    camera: str | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def image_size(intrinsics: Intrinsics) -> tuple[float, float]:
+    """The camera's image size, or twice its principal point when the file gives none."""
+    if intrinsics.resolution is not None:
+        return float(intrinsics.resolution[0]), float(intrinsics.resolution[1])
+    return 2.0 * float(intrinsics.K[0, 2]) + 1.0, 2.0 * float(intrinsics.K[1, 2]) + 1.0
+
+
+class RegistrationDriver:
+    """Registers the cameras of ``tracks`` step by step (see the module docstring).
+
+    Cameras without intrinsics are reported as failed and left out.
+    """
+
+    def __init__(
+        self,
+        tracks: Tracks,
+        intrinsics: Mapping[str, Intrinsics],
+        options: RegistrationOptions | None = None,
+    ) -> None:
+        self.options = options or RegistrationOptions()
+        self.failed: dict[str, str] = {}
+        missing = [name for name in tracks.camera_names if name not in intrinsics]
+        for name in missing:
+            self.failed[name] = "no intrinsics for this camera"
+            logger.warning("camera %s: no intrinsics, left out", name)
+        self.all_cameras = tuple(tracks.camera_names)
+        self.tracks = tracks.drop_cameras(missing) if missing else tracks
+        self.intrinsics = {name: intrinsics[name] for name in self.tracks.camera_names}
+        K = np.array([self.intrinsics[name].K for name in self.tracks.camera_names]).reshape(-1, 3, 3)
+        sizes = np.array([image_size(self.intrinsics[name]) for name in self.tracks.camera_names]).reshape(-1, 2)
+        camera_index, point_index, xy = self.tracks.bundle_arrays()
+        self.reconstruction = _core.registration.Reconstruction(
+            K, sizes, self.tracks.num_points, camera_index, point_index, xy, **self.options.to_kwargs()
+        )
+        self.initial_pair: tuple[str, str] | None = None
+
+    def name(self, camera: int) -> str:
+        return self.tracks.camera_names[camera]
+
+    def steps(self) -> Iterator[Step]:
+        """The steps of the C++ ``run()``, in its order, yielding after each one."""
+        rec = self.reconstruction
+        for pair in rec.rank_initial_pairs():
+            info = rec.initialize(pair["camera1"], pair["camera2"])
+            names = (self.name(pair["camera1"]), self.name(pair["camera2"]))
+            if info["success"]:
+                self.initial_pair = names
+                logger.info("initial pair %s-%s: %d homography inliers, %d points", *names,
+                            info["homography_inliers"], info["points"])
+                yield Step("initialize", f"{names[0]}-{names[1]}", {**pair, **info})
+                break
+            logger.info("initial pair %s-%s rejected: %s", *names, info["reason"])
+        if self.initial_pair is None:
+            rec.fail_unregistered()
+            yield Step("done", None, {"reason": "no camera pair could be initialised"})
+            return
+        yield Step("adjust", None, rec.adjust(False))
+        while (next_camera := rec.choose_next_camera())["camera"] >= 0:
+            camera = next_camera["camera"]
+            info = rec.register_camera(camera)
+            if not info["success"]:
+                logger.warning("camera %s failed: %s", self.name(camera), info["reason"])
+                yield Step("register", self.name(camera), {**next_camera, **info})
+                continue
+            info["new_points"] = rec.add_points(camera)
+            adjusted = rec.adjust(False)
+            logger.info("camera %s registered: %d of %d correspondences, %.3f px, %d new points",
+                        self.name(camera), info["inliers"], info["correspondences"], info["mean_error_px"],
+                        info["new_points"])
+            yield Step("register", self.name(camera), {**next_camera, **info, "adjust": adjusted})
+        rec.fail_unregistered()
+        refined = rec.refine()
+        logger.info("refined: %d rounds, %d observations removed, cost %.6g",
+                    refined["rounds"], refined["removed"], refined["last"]["final_cost"])
+        yield Step("refine", None, refined)
+        yield Step("done", None, {})
+
+    def run(self, callback: Callable[[Step], bool | None] | None = None) -> Calibration:
+        """All steps; ``callback(step)`` returning False stops after that step."""
+        for step in self.steps():
+            if callback is not None and callback(step) is False:
+                break
+        return self.result()
+
+    def result(self) -> Calibration:
+        """The calibration in the floor frame, from the current state."""
+        rec = self.reconstruction
+        failed = dict(self.failed)
+        for camera, reason in enumerate(rec.failure_reasons):
+            if reason:
+                failed[self.name(camera)] = reason
+        return Calibration.from_reconstruction(
+            tracks=self.tracks,
+            all_cameras=self.all_cameras,
+            poses=rec.poses,
+            registered=rec.registered,
+            registration_order=[self.name(c) for c in rec.registration_order],
+            points=rec.points,
+            reconstructed=rec.reconstructed,
+            plane=rec.plane if self.options.model == "coplanar" else None,
+            residuals=rec.residuals(),
+            active=rec.active,
+            view_scores=[rec.view_score(c) for c in range(rec.num_cameras)],
+            failed=failed,
+            model=self.options.model,
+        )
+
+
+def calibrate(
+    tracks: Tracks,
+    intrinsics: Mapping[str, Intrinsics],
+    options: RegistrationOptions | None = None,
+    callback: Callable[[Step], bool | None] | None = None,
+) -> Calibration:
+    """Register every camera of ``tracks`` and return the ``Calibration`` (floor frame)."""
+    return RegistrationDriver(tracks, intrinsics, options).run(callback)
