@@ -73,7 +73,7 @@ std::vector<registration::Camera> CamerasFromArrays(const py::array_t<double, py
 py::dict ToDict(const registration::PairCandidate& p) {
   py::dict d;
   d["camera1"] = p.camera1; d["camera2"] = p.camera2; d["score1"] = p.score1; d["score2"] = p.score2;
-  d["common_points"] = p.common_points;
+  d["common_points"] = p.common_points; d["connected_cameras"] = p.connected_cameras;
   return d;
 }
 
@@ -108,7 +108,7 @@ py::dict ToDict(const registration::AdjustResult& r) {
 
 py::dict ToDict(const registration::RefineResult& r) {
   py::dict d;
-  d["rounds"] = r.rounds; d["removed"] = r.removed; d["last"] = ToDict(r.last);
+  d["rounds"] = r.rounds; d["changed"] = r.changed; d["removed"] = r.removed; d["last"] = ToDict(r.last); d["thresholds"] = r.thresholds;
   return d;
 }
 
@@ -166,8 +166,12 @@ of calibproj.registration.RegistrationOptions.)doc")
              { py::gil_scoped_release release; result = r.Adjust(final); }
              return ToDict(result);
            }, py::arg("final") = false, "Bundle adjustment of all registered cameras and reconstructed points.")
-      .def("filter_outliers", &Reconstruction::FilterOutliers, GIL(),
+      .def("outlier_thresholds", &Reconstruction::OutlierThresholds,
+           "Per-camera reprojection thresholds max(outlier_threshold_px, factor * robust sigma).")
+      .def("filter_outliers", py::overload_cast<>(&Reconstruction::FilterOutliers), GIL(),
            "Deactivate observations above the (noise-adaptive) reprojection threshold.")
+      .def("filter_outliers", py::overload_cast<const std::vector<double>&>(&Reconstruction::FilterOutliers),
+           py::arg("thresholds"), GIL(), "Deactivate observations above the given per-camera thresholds.")
       .def("refine", [](Reconstruction& r) {
              registration::RefineResult result;
              { py::gil_scoped_release release; result = r.Refine(); }

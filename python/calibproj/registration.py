@@ -166,13 +166,14 @@ class RegistrationDriver:
                 continue
             info["new_points"] = rec.add_points(camera)
             adjusted = rec.adjust(False)
+            info["outliers_changed"] = rec.filter_outliers()
             logger.info("camera %s registered: %d of %d correspondences, %.3f px, %d new points",
                         self.name(camera), info["inliers"], info["correspondences"], info["mean_error_px"],
                         info["new_points"])
             yield Step("register", self.name(camera), {**next_camera, **info, "adjust": adjusted})
         rec.fail_unregistered()
         refined = rec.refine()
-        logger.info("refined: %d rounds, %d observations removed, cost %.6g",
+        logger.info("refined: %d rounds, %d observations left out as outliers, cost %.6g",
                     refined["rounds"], refined["removed"], refined["last"]["final_cost"])
         yield Step("refine", None, refined)
         yield Step("done", None, {})

@@ -41,6 +41,7 @@ RunSummary Run(Reconstruction& reconstruction, const std::function<void(const st
     }
     const int added = reconstruction.AddPoints(next.camera);
     reconstruction.Adjust(false);
+    reconstruction.FilterOutliers();
     Log(log, "camera " + std::to_string(next.camera) + " registered: " + std::to_string(registered.inliers) +
                  " inliers, " + std::to_string(added) + " new points");
   }

@@ -7,6 +7,7 @@
 #include <map>
 #include <numeric>
 #include <stdexcept>
+#include <tuple>
 
 #include "calibproj/ba/rotation.h"
 #include "calibproj/geometry/homography.h"
@@ -138,7 +139,31 @@ std::vector<int> Reconstruction::CommonObservations(int camera1, int camera2, st
   return first;
 }
 
+std::vector<int> Reconstruction::ComponentSizes() const {
+  // Cameras are connected when they share enough points for PnP.
+  std::vector<int> component(num_cameras());
+  std::iota(component.begin(), component.end(), 0);
+  const auto find = [&component](int c) {
+    while (component[c] != c) c = component[c] = component[component[c]];
+    return c;
+  };
+  for (int c1 = 0; c1 < num_cameras(); ++c1) {
+    for (int c2 = c1 + 1; c2 < num_cameras(); ++c2) {
+      std::vector<int> second;
+      if (static_cast<int>(CommonObservations(c1, c2, &second).size()) >= options_.min_pnp_points) {
+        component[find(c1)] = find(c2);
+      }
+    }
+  }
+  std::vector<int> size(num_cameras(), 0);
+  for (int c = 0; c < num_cameras(); ++c) ++size[find(c)];
+  std::vector<int> out(num_cameras());
+  for (int c = 0; c < num_cameras(); ++c) out[c] = size[find(c)];
+  return out;
+}
+
 std::vector<PairCandidate> Reconstruction::RankInitialPairs() const {
+  const std::vector<int> component_size = ComponentSizes();
   std::vector<PairCandidate> pairs;
   for (int c1 = 0; c1 < num_cameras(); ++c1) {
     for (int c2 = c1 + 1; c2 < num_cameras(); ++c2) {
@@ -151,14 +176,15 @@ std::vector<PairCandidate> Reconstruction::RankInitialPairs() const {
         p1.Add(observed_(first[k], 0), observed_(first[k], 1));
         p2.Add(observed_(second[k], 0), observed_(second[k], 1));
       }
-      pairs.push_back({c1, c2, p1.Score(), p2.Score(), static_cast<int>(first.size())});
+      pairs.push_back({c1, c2, p1.Score(), p2.Score(), static_cast<int>(first.size()), component_size[c1]});
     }
   }
-  // Maximise both scores: the smaller one first, then the larger, then the point count.
+  // Start in the largest group of connected cameras; there maximise both scores: the
+  // smaller one first, then the larger, then the point count.
   std::sort(pairs.begin(), pairs.end(), [](const PairCandidate& a, const PairCandidate& b) {
     const auto key = [](const PairCandidate& p) {
-      return std::make_tuple(std::min(p.score1, p.score2), std::max(p.score1, p.score2), p.common_points,
-                             -p.camera1, -p.camera2);
+      return std::make_tuple(p.connected_cameras, std::min(p.score1, p.score2), std::max(p.score1, p.score2),
+                             p.common_points, -p.camera1, -p.camera2);
     };
     return key(a) > key(b);
   });
@@ -389,6 +415,11 @@ RegisterResult Reconstruction::RegisterCamera(int camera) {
   }
   registered_[camera] = true;
   order_.push_back(camera);
+  // Its observations that disagree with the pose are outliers until shown otherwise.
+  const PixelMatrix residuals = AllResiduals();
+  for (int i : camera_observations_[camera]) {
+    if (std::isfinite(residuals(i, 0)) && residuals.row(i).norm() > options_.pnp_threshold_px) active_[i] = false;
+  }
   // Cameras that failed earlier may succeed now that more points are reconstructed.
   for (int c = 0; c < num_cameras(); ++c) {
     if (!registered_[c]) failure_[c].clear();
@@ -532,12 +563,12 @@ AdjustResult Reconstruction::Adjust(bool final) {
   return result;
 }
 
-Reconstruction::PixelMatrix Reconstruction::Residuals() const {
+Reconstruction::PixelMatrix Reconstruction::AllResiduals() const {
   PixelMatrix residuals(observed_.rows(), 2);
   residuals.setConstant(std::numeric_limits<double>::quiet_NaN());
   for (int i = 0; i < observed_.rows(); ++i) {
     const int c = camera_index_(i), p = point_index_(i);
-    if (!active_[i] || !registered_[c] || !reconstructed_[p]) continue;
+    if (!registered_[c] || !reconstructed_[p]) continue;
     const Eigen::Vector3d x = PoseRotation(poses_, c) * points_.row(p).transpose() + PoseTranslation(poses_, c);
     if (x.z() <= 0.0) continue;
     const ba::Intrinsics& K = cameras_[c].K;
@@ -547,8 +578,18 @@ Reconstruction::PixelMatrix Reconstruction::Residuals() const {
   return residuals;
 }
 
-int Reconstruction::FilterOutliers() {
-  const PixelMatrix residuals = Residuals();
+Reconstruction::PixelMatrix Reconstruction::Residuals() const {
+  PixelMatrix residuals = AllResiduals();
+  for (int i = 0; i < residuals.rows(); ++i) {
+    if (!active_[i]) residuals.row(i).setConstant(std::numeric_limits<double>::quiet_NaN());
+  }
+  return residuals;
+}
+
+std::vector<double> Reconstruction::OutlierThresholds() const {
+  // Sigma from the median of all residuals, outliers included: the median is robust to
+  // them, and measuring on clipped residuals would shrink the threshold every round.
+  const PixelMatrix residuals = AllResiduals();
   std::vector<std::vector<double>> norms(cameras_.size());
   for (int i = 0; i < residuals.rows(); ++i) {
     if (std::isfinite(residuals(i, 0))) norms[camera_index_(i)].push_back(residuals.row(i).norm());
@@ -557,14 +598,26 @@ int Reconstruction::FilterOutliers() {
   for (size_t c = 0; c < cameras_.size(); ++c) {
     threshold[c] = std::max(options_.outlier_threshold_px, options_.outlier_sigma_factor * RobustSigma(norms[c]));
   }
-  int removed = 0;
+  return threshold;
+}
+
+int Reconstruction::FilterOutliers() { return FilterOutliers(OutlierThresholds()); }
+
+int Reconstruction::FilterOutliers(const std::vector<double>& threshold) {
+  Require(threshold.size() == cameras_.size(), "filter outliers: one threshold per camera is needed");
+  // Every observation that can be evaluated is classified again, so one rejected while
+  // the solution was still poor comes back once it fits.
+  const PixelMatrix residuals = AllResiduals();
+  int changed = 0;
   for (int i = 0; i < residuals.rows(); ++i) {
-    if (std::isfinite(residuals(i, 0)) && residuals.row(i).norm() > threshold[camera_index_(i)]) {
-      active_[i] = false;
-      ++removed;
+    if (!std::isfinite(residuals(i, 0))) continue;
+    const bool inlier = residuals.row(i).norm() <= threshold[camera_index_(i)];
+    if (inlier != active_[i]) {
+      active_[i] = inlier;
+      ++changed;
     }
   }
-  return removed;
+  return changed;
 }
 
 RefineResult Reconstruction::Refine() {
@@ -572,10 +625,12 @@ RefineResult Reconstruction::Refine() {
   for (int round = 0; round < options_.max_refine_rounds; ++round) {
     result.last = Adjust(true);
     ++result.rounds;
-    const int removed = FilterOutliers();
-    result.removed += removed;
-    if (removed == 0) break;
+    result.thresholds = OutlierThresholds();
+    const int changed = FilterOutliers(result.thresholds);
+    result.changed += changed;
+    if (changed == 0) break;
   }
+  result.removed = static_cast<int>(std::count(active_.begin(), active_.end(), false));
   return result;
 }
 

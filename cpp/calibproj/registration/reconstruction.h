@@ -49,6 +49,7 @@ struct PairCandidate {
   int camera1 = -1, camera2 = -1;
   int score1 = 0, score2 = 0;  // view scores of the common points in each camera
   int common_points = 0;
+  int connected_cameras = 0;  // size of the group of cameras connected to this pair
 };
 
 struct InitialPairResult {
@@ -85,8 +86,10 @@ struct AdjustResult {
 
 struct RefineResult {
   int rounds = 0;
-  int removed = 0;
+  int changed = 0;  // observations whose inlier status changed, over all rounds
+  int removed = 0;  // inactive observations at the end
   AdjustResult last;
+  std::vector<double> thresholds;  // per camera, pixels
 };
 
 class Reconstruction {
@@ -104,7 +107,12 @@ class Reconstruction {
   RegisterResult RegisterCamera(int camera);
   int AddPoints(int camera);
   AdjustResult Adjust(bool final);
+  // Per-camera reprojection thresholds: max(outlier_threshold_px, factor * robust sigma).
+  std::vector<double> OutlierThresholds() const;
+  // Marks every evaluable observation inlier or outlier by the thresholds; returns how
+  // many changed status.
   int FilterOutliers();
+  int FilterOutliers(const std::vector<double>& thresholds);
   RefineResult Refine();
   void FailUnregistered();
 
@@ -124,12 +132,15 @@ class Reconstruction {
   // Residuals of the active observations of registered cameras and reconstructed
   // points; NaN elsewhere.
   PixelMatrix Residuals() const;
+  // Residuals of every observation of a registered camera and a reconstructed point.
+  PixelMatrix AllResiduals() const;
   // View score of a camera over all its observations.
   int ViewScore(int camera) const;
 
  private:
   Eigen::Vector2d Ray(int observation) const;
   double Focal(int camera) const;
+  std::vector<int> ComponentSizes() const;
   std::vector<int> CommonObservations(int camera1, int camera2, std::vector<int>* second) const;
   void SetInitialStructure(int camera1, int camera2, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                            const Eigen::Vector3d& n);

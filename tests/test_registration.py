@@ -1,0 +1,211 @@
+"""Incremental registration against simulated rigs with known truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibproj import _core
+from calibproj.compare import compare
+from calibproj.io.poses import CameraPoses
+from calibproj.registration import RegistrationDriver, RegistrationOptions, calibrate
+from calibproj.simulate import simulate_tracks
+from calibproj.synthetic import matrix_from_rotvec, rotvec_from_matrix
+from calibproj.tracks import Tracks
+
+# Bounds of the registration issue (paper section 3.1 rig, 0.5 px noise).
+MAX_ROTATION_RMSE_DEG = 0.02
+MAX_TRANSLATION_RMSE_PCT = 0.05
+
+
+def truth_poses(sim) -> CameraPoses:
+    return CameraPoses({camera.name: (camera.R, camera.t) for camera in sim.scene.cameras}, "m")
+
+
+def errors(calibration, sim):
+    result = compare(CameraPoses(calibration.poses, calibration.unit, calibration.failed), truth_poses(sim))
+    return result.rotation_rmse_deg, result.translation_rmse_pct, result
+
+
+def cost_from_truth(driver: RegistrationDriver, sim, model: str) -> float:
+    """Final cost of a bundle adjustment started from the true poses and points, with the
+    observations the registration kept."""
+    rec = driver.reconstruction
+    camera_index, point_index, xy = driver.tracks.bundle_arrays()
+    keep = rec.active & rec.registered[camera_index] & rec.reconstructed[point_index]
+    cameras = np.flatnonzero(rec.registered)
+    points = np.unique(point_index[keep])
+    camera_map = np.full(rec.num_cameras, -1)
+    camera_map[cameras] = np.arange(len(cameras))
+    point_map = np.full(rec.num_points, -1)
+    point_map[points] = np.arange(len(points))
+    by_name = {c.name: c for c in sim.scene.cameras}
+    names = [driver.tracks.camera_names[c] for c in cameras]
+    poses = np.array([np.concatenate([rotvec_from_matrix(by_name[n].R), by_name[n].t]) for n in names])
+    K = np.array([by_name[n].K for n in names])
+    X = sim.msm_points[np.asarray(driver.tracks.point_ids)[points]]
+    result = _core.ba.bundle_adjust(
+        camera_map[camera_index[keep]], point_map[point_index[keep]], xy[keep], K, poses, X,
+        np.array([0.0, 0.0, 1.0, 0.0]), model=model,
+    )
+    return result["final_cost"]
+
+
+@pytest.mark.parametrize("model", ["coplanar", "free"])
+@pytest.mark.parametrize("seed", range(20))
+def test_paper_rig_reaches_the_global_optimum_within_bounds(model: str, seed: int) -> None:
+    sim = simulate_tracks("paper", None, noise_px=0.5, seed=seed)
+    driver = RegistrationDriver(sim.tracks, sim.intrinsics, RegistrationOptions(model=model))
+    calibration = driver.run()
+    assert calibration.failed == {}
+    assert sorted(calibration.registered) == sorted(sim.tracks.camera_names)
+    rotation, translation, _ = errors(calibration, sim)
+    assert rotation < MAX_ROTATION_RMSE_DEG
+    assert translation < MAX_TRANSLATION_RMSE_PCT
+    final = driver.reconstruction.adjust(True)["final_cost"]
+    assert abs(final - cost_from_truth(driver, sim, model)) / final < 1e-6
+    # The floor frame: points on z = 0, cameras above it, first registered camera at height 1.
+    if model == "coplanar":
+        assert calibration.floor_rms < 1e-9
+    else:  # triangulated points scatter about the fitted floor by their noise
+        assert np.median(np.abs(calibration.points[:, 2])) < 2e-3
+    first = calibration.registration_order[0]
+    assert abs(calibration.center(first)[2] - 1.0) < 1e-9
+
+
+@pytest.mark.parametrize("model", ["coplanar", "free"])
+def test_gross_outliers_leave_the_result_within_bounds(model: str) -> None:
+    sim = simulate_tracks("paper", None, noise_px=0.5, seed=3, outlier_fraction=0.05)
+    calibration = calibrate(sim.tracks, sim.intrinsics, RegistrationOptions(model=model))
+    assert calibration.failed == {}
+    rotation, translation, _ = errors(calibration, sim)
+    assert rotation < MAX_ROTATION_RMSE_DEG
+    assert translation < MAX_TRANSLATION_RMSE_PCT
+    # Most planted outliers were removed: they are far outside the noise.
+    kept = sum(m.inliers for m in calibration.metrics.values())
+    total = sum(m.observations for m in calibration.metrics.values())
+    assert 0.9 < kept / total < 0.96
+
+
+@pytest.mark.parametrize("model", ["coplanar", "free"])
+def test_or_full_registers_the_close_up_camera(model: str) -> None:
+    sim = simulate_tracks("or-full", None, noise_px=0.5, seed=0)
+    calibration = calibrate(sim.tracks, sim.intrinsics, RegistrationOptions(model=model))
+    assert calibration.failed == {}
+    _, _, result = errors(calibration, sim)
+    close_up = "ceiling"
+    assert close_up in calibration.registered
+    assert calibration.metrics[close_up].mean_px < 1.0
+    far = [name for name in result.cameras if name != close_up]
+    assert np.sqrt(np.mean([result.cameras[n].rotation_deg ** 2 for n in far])) < 2 * MAX_ROTATION_RMSE_DEG
+
+
+def relabel_points(tracks: Tracks, cameras: list[str], offset: int) -> Tracks:
+    """The same observations, but the given cameras see points nobody else sees."""
+    ids = np.asarray(tracks.point_ids)[tracks.point_index].copy()
+    moved = np.isin(np.asarray(tracks.camera_names)[tracks.camera_index], cameras)
+    ids[moved] += offset
+    return Tracks.from_observations(
+        tracks.camera_names, tracks.camera_index, ids, tracks.xy, tracks.markers_per_array
+    )
+
+
+def test_disconnected_group_and_camera_with_too_few_points_are_reported() -> None:
+    sim = simulate_tracks("paper", None, noise_px=0.5, seed=5)
+    tracks = relabel_points(sim.tracks, ["far5", "far6"], offset=1_000_000)
+    # near4 keeps only 4 of its observations.
+    names = np.asarray(tracks.camera_names)[tracks.camera_index]
+    keep = np.ones(len(tracks), bool)
+    keep[np.flatnonzero(names == "near4")[4:]] = False
+    tracks = tracks.select(keep)
+    calibration = calibrate(tracks, sim.intrinsics)
+    assert set(calibration.failed) == {"far5", "far6", "near4"}
+    assert "disconnected" in calibration.failed["far5"]
+    assert "only 4 points" in calibration.failed["near4"]
+    assert calibration.metrics["far5"].failure == calibration.failed["far5"]
+    rotation, translation, _ = errors(calibration, sim)
+    assert rotation < MAX_ROTATION_RMSE_DEG and translation < MAX_TRANSLATION_RMSE_PCT
+
+
+def test_missing_intrinsics_fail_one_camera_only() -> None:
+    sim = simulate_tracks("paper", None, noise_px=0.5, seed=6)
+    intrinsics = dict(sim.intrinsics)
+    del intrinsics["far2"]
+    calibration = calibrate(sim.tracks, intrinsics)
+    assert calibration.failed == {"far2": "no intrinsics for this camera"}
+    assert len(calibration.registered) == len(sim.tracks.camera_names) - 1
+
+
+def test_homography_decomposition_recovers_the_true_motion() -> None:
+    sim = simulate_tracks("paper", None, noise_px=0.0, seed=2)
+    cam1, cam2 = sim.scene.cameras[0], sim.scene.cameras[6]
+    ci, pi, xy = sim.tracks.bundle_arrays()
+    c1, c2 = sim.tracks.camera_names.index(cam1.name), sim.tracks.camera_names.index(cam2.name)
+    seen1 = dict(zip(pi[ci == c1], xy[ci == c1]))
+    seen2 = dict(zip(pi[ci == c2], xy[ci == c2]))
+    common = sorted(set(seen1) & set(seen2))
+    assert len(common) > 100
+
+    def normalised(camera, pixels):
+        return (np.linalg.inv(camera.K) @ np.column_stack([pixels, np.ones(len(pixels))]).T).T[:, :2]
+
+    x1 = normalised(cam1, np.array([seen1[p] for p in common]))
+    x2 = normalised(cam2, np.array([seen2[p] for p in common]))
+    ok, H, inliers = _core.geometry.estimate_homography(x1, x2, 1.0, cam1.K[0, 0], cam2.K[0, 0])
+    assert ok and len(inliers) == len(common)
+    motions = _core.geometry.decompose_homography(H, x1, x2)
+    R_true = cam2.R @ cam1.R.T
+    t_true = cam2.t - R_true @ cam1.t
+    distance = cam1.center[2]  # camera 1 height above the floor z = 0
+    n_true = cam1.R @ np.array([0.0, 0.0, -1.0])  # floor normal pointing away from camera 1
+    best = min(
+        motions,
+        key=lambda m: np.linalg.norm(m[0] - R_true) + np.linalg.norm(m[1] * distance - t_true),
+    )
+    np.testing.assert_allclose(best[0], R_true, atol=1e-9)
+    np.testing.assert_allclose(best[1] * distance, t_true, atol=1e-8)
+    np.testing.assert_allclose(best[2], n_true, atol=1e-9)
+
+
+def test_python_steps_and_cpp_run_agree() -> None:
+    sim = simulate_tracks("paper", None, noise_px=0.5, seed=7)
+    driver = RegistrationDriver(sim.tracks, sim.intrinsics)
+    driver.run()
+    other = RegistrationDriver(sim.tracks, sim.intrinsics)
+    summary = other.reconstruction.run()
+    assert summary["initialized"]
+    np.testing.assert_array_equal(driver.reconstruction.registered, other.reconstruction.registered)
+    np.testing.assert_array_equal(driver.reconstruction.active, other.reconstruction.active)
+    np.testing.assert_allclose(driver.reconstruction.poses, other.reconstruction.poses, rtol=0, atol=1e-12)
+
+
+def test_a_caller_can_stop_after_any_step() -> None:
+    sim = simulate_tracks("paper", None, noise_px=0.5, seed=8)
+    driver = RegistrationDriver(sim.tracks, sim.intrinsics)
+    seen = []
+    calibration = driver.run(lambda step: seen.append(step.name) or len(seen) < 4)
+    assert seen == ["initialize", "adjust", "register", "register"]
+    assert len(calibration.registered) == 4
+    assert all("not" not in reason for reason in calibration.failed.values())
+
+
+def test_calibration_round_trips_through_its_files(tmp_path) -> None:
+    sim = simulate_tracks("paper", None, noise_px=0.5, seed=9)
+    calibration = calibrate(sim.tracks, sim.intrinsics)
+    calibration.save(tmp_path)
+    loaded = type(calibration).load(tmp_path)
+    assert loaded.registered == calibration.registered
+    for name in calibration.registered:
+        np.testing.assert_allclose(loaded.poses[name][0], calibration.poses[name][0], atol=1e-12)
+        np.testing.assert_allclose(loaded.poses[name][1], calibration.poses[name][1], atol=1e-12)
+    np.testing.assert_allclose(loaded.points, calibration.points, atol=1e-8)
+    assert loaded.metrics == calibration.metrics
+    assert loaded.unit == "arbitrary"
+
+
+def test_rotation_helpers_are_inverse() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        w = rng.normal(size=3)
+        w *= rng.uniform(0, np.pi) / np.linalg.norm(w)
+        np.testing.assert_allclose(rotvec_from_matrix(matrix_from_rotvec(w)), w, atol=1e-9)
