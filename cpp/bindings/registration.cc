@@ -39,6 +39,7 @@ registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
     else if (key == "min_pair_points") o.min_pair_points = value.cast<int>();
     else if (key == "min_pnp_points") o.min_pnp_points = value.cast<int>();
     else if (key == "min_triangulation_angle_deg") o.min_triangulation_angle_deg = value.cast<double>();
+    else if (key == "min_pair_parallax_deg") o.min_pair_parallax_deg = value.cast<double>();
     else if (key == "outlier_threshold_px") o.outlier_threshold_px = value.cast<double>();
     else if (key == "outlier_sigma_factor") o.outlier_sigma_factor = value.cast<double>();
     else if (key == "max_refine_rounds") o.max_refine_rounds = value.cast<int>();
@@ -80,6 +81,7 @@ py::dict ToDict(const registration::PairCandidate& p) {
 py::dict ToDict(const registration::InitialPairResult& r) {
   py::dict d;
   d["success"] = r.success; d["reason"] = r.reason; d["homography_inliers"] = r.homography_inliers;
+  d["median_parallax_deg"] = r.median_parallax_deg;
   d["solutions"] = r.solutions; d["third_camera"] = r.third_camera; d["normal_agreement"] = r.normal_agreement;
   d["points"] = r.points;
   return d;

@@ -191,13 +191,22 @@ def camera_metrics(
     return metrics
 
 
-def fit_plane(points: np.ndarray) -> np.ndarray:
-    """Least-squares plane [n, d] (n . X = d, |n| = 1) through at least 3 points."""
+def fit_plane(points: np.ndarray, rounds: int = 3, k: float = 3.0) -> np.ndarray:
+    """Plane [n, d] (n . X = d, |n| = 1) through at least 3 points, robust to stray ones:
+    least squares, then again without the points farther than ``k`` robust sigmas."""
     if len(points) < 3:
         raise ValueError(f"cannot fit the floor plane to {len(points)} points")
-    centroid = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - centroid, full_matrices=False)
-    n = vt[-1]
+    inliers = np.ones(len(points), bool)
+    for _ in range(rounds):
+        centroid = points[inliers].mean(axis=0)
+        _, _, vt = np.linalg.svd(points[inliers] - centroid, full_matrices=False)
+        n = vt[-1]
+        distance = np.abs((points - centroid) @ n)
+        sigma = 1.4826 * np.median(distance[inliers])
+        keep = distance <= max(k * sigma, 1e-12)
+        if keep.sum() < 3 or np.array_equal(keep, inliers):
+            break
+        inliers = keep
     return np.concatenate([n, [n @ centroid]])
 
 

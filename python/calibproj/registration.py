@@ -49,6 +49,8 @@ class RegistrationOptions:
         min_pair_points: common points needed for the initial pair and the third camera.
         min_pnp_points: correspondences needed to register a camera.
         min_triangulation_angle_deg: FREE model: parallax needed to triangulate a point.
+        min_pair_parallax_deg: median parallax the initial pair's points need (two cameras
+            at nearly the same place determine neither the plane nor the points).
         outlier_threshold_px: smallest reprojection error at which an observation is
             removed (1 px in the paper).
         outlier_sigma_factor: the threshold is ``max(outlier_threshold_px, factor * sigma)``
@@ -71,6 +73,7 @@ class RegistrationOptions:
     min_pair_points: int = 15
     min_pnp_points: int = 6
     min_triangulation_angle_deg: float = 1.0
+    min_pair_parallax_deg: float = 2.0
     outlier_threshold_px: float = 1.0
     outlier_sigma_factor: float = 3.0
     max_refine_rounds: int = 10

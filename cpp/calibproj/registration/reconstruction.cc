@@ -51,6 +51,24 @@ double RobustSigma(std::vector<double> norms) {
   return *middle / std::sqrt(2.0 * std::log(2.0));
 }
 
+// Median angle between the two viewing rays of each correspondence, for the relative
+// motion of a planar-motion solution (camera 1 at the origin).
+double MedianParallaxDeg(const geometry::PlanarMotion& motion, const geometry::Points2& x1,
+                         const geometry::Points2& x2) {
+  std::vector<double> angles;
+  for (int i = 0; i < x1.rows(); ++i) {
+    const std::vector<geometry::View> views = {
+        {Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero(), x1.row(i).transpose()},
+        {motion.R, motion.t, x2.row(i).transpose()}};
+    const Eigen::Vector3d X = geometry::TriangulateLinear(views);
+    if (X.allFinite()) angles.push_back(geometry::MaxTriangulationAngle(views, X));
+  }
+  if (angles.empty()) return 0.0;
+  const auto middle = angles.begin() + static_cast<long>(angles.size() / 2);
+  std::nth_element(angles.begin(), middle, angles.end());
+  return *middle * 180.0 / M_PI;
+}
+
 }  // namespace
 
 void Options::Check() const {
@@ -60,6 +78,7 @@ void Options::Check() const {
   Require(min_pair_points >= 4, "registration: min_pair_points must be >= 4");
   Require(min_pnp_points >= 4, "registration: min_pnp_points must be >= 4");
   Require(min_triangulation_angle_deg >= 0, "registration: min_triangulation_angle_deg must be >= 0");
+  Require(min_pair_parallax_deg >= 0, "registration: min_pair_parallax_deg must be >= 0");
   Require(outlier_threshold_px > 0 && outlier_sigma_factor >= 0, "registration: bad outlier threshold");
   Require(max_refine_rounds >= 1, "registration: max_refine_rounds must be >= 1");
   Require(view_score_levels >= 1 && view_score_levels <= 12, "registration: view_score_levels must be in [1, 12]");
@@ -260,6 +279,16 @@ InitialPairResult Reconstruction::Initialize(int camera1, int camera2) {
   result.solutions = static_cast<int>(motions.size());
   if (motions.empty()) {
     result.reason = "homography decomposition: no solution puts the points in front of both cameras";
+    return result;
+  }
+
+  // Both solutions share the baseline; without parallax neither the plane nor the
+  // points are determined (two cameras at nearly the same place see the same image).
+  const double parallax_deg = MedianParallaxDeg(motions.front(), in1, in2);
+  result.median_parallax_deg = parallax_deg;
+  if (parallax_deg < options_.min_pair_parallax_deg) {
+    result.reason = "baseline too short: median triangulation angle " + std::to_string(parallax_deg) +
+                    " deg (need " + std::to_string(options_.min_pair_parallax_deg) + ")";
     return result;
   }
 

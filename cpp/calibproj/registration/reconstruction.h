@@ -27,6 +27,7 @@ struct Options {
   int min_pair_points = 15;         // common points for the initial pair and the third camera
   int min_pnp_points = 6;           // 2D-3D correspondences to register a camera
   double min_triangulation_angle_deg = 1.0;  // FREE: new points need this much parallax
+  double min_pair_parallax_deg = 2.0;        // initial pair: median parallax of its points
   double outlier_threshold_px = 1.0;    // observations above max(this, factor * sigma) are removed
   double outlier_sigma_factor = 3.0;    // 0 keeps the fixed threshold of the paper
   int max_refine_rounds = 10;
@@ -56,6 +57,7 @@ struct InitialPairResult {
   bool success = false;
   std::string reason;
   int homography_inliers = 0;
+  double median_parallax_deg = 0.0;
   int solutions = 0;          // decompositions with the points in front of both cameras
   int third_camera = -1;      // camera used to pick between two solutions; -1 if refined both
   double normal_agreement = 0.0;  // cosine between the chosen normal and the third camera's
