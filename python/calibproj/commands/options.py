@@ -1,0 +1,52 @@
+"""Command-line options generated from an options dataclass, so every knob of the API is
+also a CLI flag with the same default and the documentation of its docstring."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import re
+from typing import Any
+
+
+def attribute_docs(cls: type) -> dict[str, str]:
+    """The ``Attributes:`` entries of a Google-style class docstring, by name."""
+    doc = cls.__doc__ or ""
+    section = doc.split("Attributes:", 1)[1] if "Attributes:" in doc else ""
+    docs: dict[str, str] = {}
+    name = None
+    for line in section.splitlines():
+        match = re.match(r"\s{4,8}(\w+):\s*(.*)", line)
+        if match and (line.startswith(" " * 8) and not line.startswith(" " * 9)):
+            name = match.group(1)
+            docs[name] = match.group(2).strip()
+        elif name and line.strip():
+            docs[name] += " " + line.strip()
+    return docs
+
+
+def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, title: str) -> None:
+    """One ``--field-name`` flag per field of the dataclass ``cls``."""
+    group = parser.add_argument_group(title)
+    docs = attribute_docs(cls)
+    for f in dataclasses.fields(cls):
+        default = f.default
+        flag = "--" + f.name.replace("_", "-")
+        help_text = f"{docs.get(f.name, '')} (default: {default})".replace("%", "%%")
+        if isinstance(default, bool):
+            group.add_argument(flag, type=_parse_bool, default=default, metavar="BOOL", help=help_text)
+        else:
+            group.add_argument(flag, type=type(default), default=default, help=help_text)
+
+
+def dataclass_from_args(cls: type, args: argparse.Namespace) -> Any:
+    return cls(**{f.name: getattr(args, f.name) for f in dataclasses.fields(cls)})
+
+
+def _parse_bool(text: str) -> bool:
+    lowered = text.lower()
+    if lowered in ("1", "true", "yes", "on"):
+        return True
+    if lowered in ("0", "false", "no", "off"):
+        return False
+    raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
