@@ -14,5 +14,12 @@ logging.getLogger(__name__).addHandler(logging.NullHandler())
 from calibproj.compare import compare  # noqa: E402
 from calibproj.simulate import simulate_tracks as simulate  # noqa: E402
 
+# Marker detection in one image, and the projection sequence generator. The function
+# generate shadows the subpackage calibproj.generate in the same way: import from it
+# with "from calibproj.generate.sequence import Sequence".
+from calibproj.generate import generate  # noqa: E402
+from calibproj.markers import detect_markers  # noqa: E402
+
 __all__ = ["__version__"]
 __all__ += ["compare", "simulate"]
+__all__ += ["detect_markers", "generate"]

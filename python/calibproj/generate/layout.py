@@ -6,6 +6,12 @@ sub-cell offset, so markers of one array are ``nx`` (resp. ``ny``) grid steps
 apart and never overlap while all arrays together cover the grid densely.
 The grid spans the projector image minus a margin that keeps the largest scale
 of every marker inside the image.
+
+Centres are snapped (by at most half a pixel) so that the edges of a marker at scale
+1 fall on pixel boundaries: with an even side in pixels, on half-integer coordinates
+(OpenCV's convention puts pixel centres on integers). Every scale with an integer
+module size then has crisp edges too; the others are drawn by exact area coverage
+around the same centre (see ``calibproj.generate.raster``).
 """
 
 from __future__ import annotations
@@ -28,6 +34,8 @@ class MsmLayout:
         marker_px: side of a marker at scale 1 in projector pixels, border included.
         margin_px: distance from the image edge to the outermost centres; ``None``
             keeps the largest scale inside the image with one quiet module to spare.
+        snap_to_pixels: move every centre by at most half a pixel so that marker
+            edges at scale 1 fall on pixel boundaries (crisp projected edges).
     """
 
     projector: tuple[int, int] = (1920, 1080)
@@ -36,6 +44,7 @@ class MsmLayout:
     scales: tuple[float, ...] = (1.0, 1.4, 2.0, 3.0, 4.0, 6.0, 8.0)
     marker_px: float = 24.0
     margin_px: float | None = None
+    snap_to_pixels: bool = True
 
     def __post_init__(self) -> None:
         width, height = self.projector
@@ -102,7 +111,39 @@ class MsmLayout:
             oy, ox = divmod(array, nx)
             out[array, :, 0] = self.margin + (marker_col * nx + ox) * step_x
             out[array, :, 1] = self.margin + (marker_row * ny + oy) * step_y
+        if self.snap_to_pixels:
+            # Left edge (centre - side / 2) on a pixel boundary, i.e. on k + 0.5.
+            half_side = 0.5 * self.marker_px
+            out = np.round(out - half_side - 0.5) + 0.5 + half_side
         return out
+
+    def marker_side(self, scale: float) -> float:
+        """Side of a marker at ``scale`` in projector pixels, border included."""
+        return self.marker_px * scale
+
+    def outside_image(self, side: float) -> np.ndarray:
+        """``(arrays, markers)``: whether a marker of ``side`` pixels would leave the image.
+
+        The image covers ``[-0.5, width - 0.5] x [-0.5, height - 0.5]`` (pixel centres
+        on integers).
+        """
+        centres = self.centres()
+        limits = np.asarray(self.projector, dtype=np.float64) - 0.5
+        low = centres - 0.5 * side
+        high = centres + 0.5 * side
+        return ((low < -0.5 - 1e-9) | (high > limits + 1e-9)).any(axis=-1)
+
+    def too_close(self, side: float, gap: float) -> np.ndarray:
+        """``(arrays, markers, markers)``: pairs of markers of one array closer than ``gap``.
+
+        Two squares of ``side`` pixels (axis-aligned) leave less than ``gap`` pixels
+        between them when both centre distances are under ``side + gap``.
+        """
+        centres = self.centres()
+        distance = np.abs(centres[:, :, None, :] - centres[:, None, :, :])
+        close = (distance < side + gap - 1e-9).all(axis=-1)
+        close[:, np.arange(self.markers_per_array), np.arange(self.markers_per_array)] = False
+        return close
 
     def marker_pitch(self) -> tuple[float, float]:
         """Distance between neighbouring markers of one array ``(dx, dy)`` in pixels."""

@@ -1,0 +1,103 @@
+"""Write the projection sequence: a video for the projector and sequence.json.
+
+The video shows white and black reference frames, a start light code, every MSM
+array at every scale (array-major), an end light code and reference frames again.
+sequence.json holds everything needed to decode a recording of it later.
+
+Defaults follow the paper: 100 arrays of 4x8 ArUco markers (3200 points), scales
+1,1.4,2,3,4,6,8, white markers on black, 1920x1080 at 30 fps, 3 frames per pattern
+(so that a 25 fps camera sees every pattern in at least one clean frame).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from calibproj.cli import CommandError
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", required=True, metavar="SEQ_DIR", help="output folder")
+    parser.add_argument("--markers", default="aruco:4X4_50",
+                        help="marker family: aruco:<DICT> or apriltag:<family> (default: %(default)s)")
+    parser.add_argument("--grid", default="4x8", help="markers per array, ROWSxCOLS (default: %(default)s)")
+    parser.add_argument("--arrays", type=int, default=100, help="number of arrays (default: %(default)s)")
+    parser.add_argument("--scales", default="1,1.4,2,3,4,6,8", help="scale factors (default: %(default)s)")
+    parser.add_argument("--marker-px", type=float, default=24.0,
+                        help="marker side at scale 1 in projector pixels (default: %(default)s)")
+    parser.add_argument("--margin-px", type=float, default=None,
+                        help="image edge to outermost centres (default: keep the largest scale inside)")
+    parser.add_argument("--projector", default="1920x1080", help="projector resolution WxH (default: %(default)s)")
+    parser.add_argument("--fps", type=float, default=30.0, help="projector frame rate (default: %(default)s)")
+    parser.add_argument("--frames-per-pattern", type=int, default=None,
+                        help="frames per pattern (default: derived from --min-camera-fps)")
+    parser.add_argument("--min-camera-fps", type=float, default=25.0,
+                        help="slowest camera that must see every pattern in one clean frame (default: %(default)s)")
+    parser.add_argument("--inverted", action=argparse.BooleanOptionalAction, default=True,
+                        help="white markers on black (default: on)")
+    parser.add_argument("--min-gap-modules", type=float, default=0.5,
+                        help="smallest gap between markers of one pattern, in modules (default: %(default)s)")
+    parser.add_argument("--omit-conflicting", action="store_true",
+                        help="leave out markers that overlap or leave the image at some scale, instead of failing")
+    parser.add_argument("--code-degree", type=int, default=5,
+                        help="light codes are m-sequences of 2^N-1 bits (default: %(default)s)")
+    parser.add_argument("--code-frames-per-bit", type=int, default=None,
+                        help="frames per light-code bit (default: as frames per pattern)")
+    parser.add_argument("--reference-frames", type=int, default=15,
+                        help="frames of each white or black block around the codes (default: %(default)s)")
+    parser.add_argument("--png", action="store_true", help="also write every pattern as a PNG")
+    parser.add_argument("--no-video", dest="video", action="store_false", help="write sequence.json only")
+    parser.add_argument("--crf", type=int, default=None, help="x264 quality, lower is better, 0 lossless (default: 4)")
+    parser.add_argument("--preset", default=None, help="x264 preset (default: veryfast)")
+    parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    parser.add_argument("--json", action="store_true", help="print a JSON summary")
+
+
+def run(args: argparse.Namespace) -> int:
+    from calibproj.generate import SequenceOptions, generate
+    from calibproj.generate.video import DEFAULT_CRF, DEFAULT_PRESET
+
+    options = SequenceOptions(
+        markers=args.markers, grid=_pair(args.grid, "--grid", "4x8"), arrays=args.arrays,
+        scales=_scales(args.scales), marker_px=args.marker_px, margin_px=args.margin_px,
+        projector=_pair(args.projector, "--projector", "1920x1080"), fps=args.fps,
+        frames_per_pattern=args.frames_per_pattern, min_camera_fps=args.min_camera_fps, inverted=args.inverted,
+        min_gap_modules=args.min_gap_modules, omit_conflicting=args.omit_conflicting,
+        code_degree=args.code_degree, code_frames_per_bit=args.code_frames_per_bit,
+        reference_frames=args.reference_frames,
+    )
+    sequence = generate(args.out, options, video=args.video, png=args.png,
+                        crf=DEFAULT_CRF if args.crf is None else args.crf,
+                        preset=args.preset or DEFAULT_PRESET, progress=args.progress and not args.json)
+    summary = {
+        "sequence": f"{args.out}/sequence.json",
+        "video": f"{args.out}/projection.mp4" if args.video else None,
+        "markers": sequence.markers.spec,
+        "frames": sequence.frame_count,
+        "duration_s": round(sequence.duration_s, 3),
+        "patterns": len(sequence.patterns),
+        "points": sequence.point_count,
+        "omitted": sum(len(p.omitted) for p in sequence.patterns),
+    }
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"{summary['sequence']}: {sequence.markers.spec}, {summary['patterns']} patterns, "
+              f"{summary['points']} points, {summary['frames']} frames ({summary['duration_s']:.1f} s)")
+    return 0
+
+
+def _pair(text: str, option: str, example: str) -> tuple[int, int]:
+    try:
+        first, second = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise CommandError(f"{option} must look like {example}, got {text!r}") from None
+    return first, second
+
+
+def _scales(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise CommandError(f"--scales must look like 1,1.4,2, got {text!r}") from None
