@@ -87,17 +87,43 @@ def test_gross_outliers_leave_the_result_within_bounds(model: str) -> None:
     assert 0.9 < kept / total < 0.96
 
 
+def predicted_rotation_sigma_deg(sim, camera: str, gauge: str, model: str) -> float:
+    """Largest rotation standard deviation of a camera (Cramer-Rao bound at 0.5 px): the
+    pose covariance of a bundle adjustment of the true scene with the simulated observations."""
+    camera_index, point_index, xy = sim.tracks.bundle_arrays()
+    names = list(sim.tracks.camera_names)
+    by_name = {c.name: c for c in sim.scene.cameras}
+    poses = np.array([np.concatenate([rotvec_from_matrix(by_name[n].R), by_name[n].t]) for n in names])
+    K = np.array([by_name[n].K for n in names])
+    X = sim.msm_points[np.asarray(sim.tracks.point_ids)]
+    result = _core.ba.bundle_adjust(
+        camera_index, point_index, xy, K, poses, X, np.array([0.0, 0.0, 1.0, 0.0]), model=model,
+        gauge_camera=names.index(gauge), compute_covariance=True,
+    )
+    covariance = result["pose_covariances"][names.index(camera)][:3, :3]
+    return float(np.degrees(np.sqrt(np.linalg.eigvalsh(covariance).max())))
+
+
 @pytest.mark.parametrize("model", ["coplanar", "free"])
 def test_or_full_registers_the_close_up_camera(model: str) -> None:
+    """The zoomed camera (fx 11,100) sees 58 MSMs on 0.5 x 0.3 m of floor. At 0.5 px its
+    rotation is only known to ~0.5 deg (the near-affine view trades rotation for lateral
+    translation), so it is held to its Cramer-Rao bound; the other cameras to the paper bounds."""
     sim = simulate_tracks("or-full", None, noise_px=0.5, seed=0)
     calibration = calibrate(sim.tracks, sim.intrinsics, RegistrationOptions(model=model))
     assert calibration.failed == {}
     _, _, result = errors(calibration, sim)
     close_up = "ceiling"
-    assert close_up in calibration.registered
     assert calibration.metrics[close_up].mean_px < 1.0
-    far = [name for name in result.cameras if name != close_up]
-    assert np.sqrt(np.mean([result.cameras[n].rotation_deg ** 2 for n in far])) < 2 * MAX_ROTATION_RMSE_DEG
+    sigma = predicted_rotation_sigma_deg(sim, close_up, gauge="far1", model=model)
+    assert result.cameras[close_up].rotation_deg < 3.0 * sigma
+    # The others, aligned without the close-up camera (its centre is known to ~1 cm).
+    others = {name: pose for name, pose in calibration.poses.items() if name != close_up}
+    truth = truth_poses(sim)
+    truth_others = CameraPoses({n: p for n, p in truth.poses.items() if n != close_up}, "m")
+    result_others = compare(CameraPoses(others, calibration.unit), truth_others)
+    assert result_others.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
+    assert result_others.translation_rmse_pct < MAX_TRANSLATION_RMSE_PCT
 
 
 def relabel_points(tracks: Tracks, cameras: list[str], offset: int) -> Tracks:
