@@ -30,6 +30,7 @@ cv::Mat GrayView(const py::array& image) {
     throw std::invalid_argument("expected a 2-D grayscale image, got " + std::to_string(image.ndim()) +
                                 " dimensions");
   }
+  if (image.size() == 0) throw std::invalid_argument("image is empty");
   if (image.strides(1) != 1 || image.strides(0) < image.shape(1)) {
     throw std::invalid_argument("image rows must be contiguous (use numpy.ascontiguousarray)");
   }
