@@ -260,6 +260,19 @@ def test_bad_images_raise_value_error(markers, image, message):
         detect_markers(image, markers)
 
 
+def test_small_and_noisy_images_never_crash():
+    rng = np.random.default_rng(2)
+    detectors = [MarkerDetector("aruco:4X4_50"), MarkerDetector("apriltag:tagStandard41h12"),
+                 MarkerDetector("apriltag:tag36h11", quad_decimate=2, nthreads=2)]
+    for shape in [(8, 8), (9, 13), (13, 9), (31, 17), (97, 203)]:
+        for image in (np.zeros(shape, np.uint8), rng.integers(0, 256, shape).astype(np.uint8)):
+            for detector in detectors:
+                detector.detect(image)
+    # libapriltag reads out of bounds when decimation leaves under 3 px per side.
+    with pytest.raises(ValueError, match="too small for quad_decimate 4"):
+        detect_markers(np.zeros((8, 300), np.uint8), "apriltag:tag36h11", quad_decimate=4)
+
+
 def test_unknown_and_bad_options():
     with pytest.raises(ValueError, match="unknown aruco detection option.*quad_decimate"):
         MarkerDetector("aruco:4X4_50", quad_decimate=2)

@@ -4,6 +4,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 
@@ -27,6 +28,25 @@ const std::string& AprilTagName(const MarkerFamily& family) {
     throw std::invalid_argument(family.Spec() + " is not an AprilTag family");
   }
   return family.name;
+}
+
+// libapriltag reads out of bounds when the decimated image has a side under 3 px
+// (measured: 8 px rows at quad_decimate 4 crash); keep one pixel to spare.
+constexpr int kMinDecimatedSide = 4;
+
+// Side of the image libapriltag segments: image_u8_decimate() keeps 2 of every 3
+// pixels for a factor of 1.5, else 1 + (side - 1) / int(factor).
+int DecimatedSide(int side, float decimate) {
+  if (decimate == 1.5f) return side / 3 * 2;
+  return decimate > 1.0f ? 1 + (side - 1) / static_cast<int>(decimate) : side;
+}
+
+void CheckDecimatedSize(const cv::Mat& gray, float decimate) {
+  if (std::min(DecimatedSide(gray.cols, decimate), DecimatedSide(gray.rows, decimate)) < kMinDecimatedSide) {
+    throw std::invalid_argument("image of " + std::to_string(gray.cols) + "x" + std::to_string(gray.rows) +
+                                " px is too small for quad_decimate " + cv::format("%g", decimate) + " (needs " +
+                                std::to_string(kMinDecimatedSide) + " px per side after decimation)");
+  }
 }
 
 // Frees the detections and the array holding them.
@@ -67,6 +87,7 @@ AprilTagDetector::~AprilTagDetector() = default;
 
 Detections AprilTagDetector::Detect(const cv::Mat& gray) const {
   CheckGrayImage(gray);
+  CheckDecimatedSize(gray, options_.quad_decimate);
   cv::Mat image = options_.inverted ? cv::Mat(255 - gray) : gray;
   image_u8_t view = {image.cols, image.rows, static_cast<int32_t>(image.step[0]), image.data};
   std::unique_ptr<zarray_t, DetectionsDeleter> found;
