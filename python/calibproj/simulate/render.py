@@ -1,0 +1,432 @@
+"""Rendered simulation: the videos that the cameras of a scene record while the
+projector plays a sequence, with intrinsics and ground truth.
+
+For every camera, each distinct projector content (an MSM pattern, a white or black
+frame) is warped once through projector -> floor -> camera, lens distortion
+included (``calibproj.simulate.warp``), and turned into irradiance
+(``calibproj.simulate.photometric``). A camera frame is the exposure-weighted
+average of the contents shown during its exposure (``calibproj.simulate.timeline``),
+so cameras at any frame rate and start offset are not synchronised with the
+projector and a frame across a pattern change is a blend. Frames are rendered at
+the camera's resolution (``supersample`` > 1 integrates several samples per pixel)
+and encoded to H.264 by the ffmpeg program.
+
+All cameras advance together through the sequence in chunks of ``chunk_s`` seconds:
+each projector content is drawn once for all of them, camera frames are rendered
+in threads (OpenCV and numpy release the GIL) and every camera's encoder runs as
+its own process.
+
+Output folder::
+
+    videos/<camera>.mp4      H.264, yuv420p, at the camera's frame rate
+    intrinsics/<camera>.json
+    scene.json               the realised scene
+    truth.json               poses, plane, projector, MSM centres, timing (written last)
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+import time
+from collections import OrderedDict
+from concurrent.futures import Future, ThreadPoolExecutor, wait
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibproj.io.intrinsics import write_intrinsics_dir
+from calibproj.io.jsonio import FormatError
+from calibproj.simulate.atlas import AtlasLayout
+from calibproj.simulate.photometric import CameraResponse, SensorNoise
+from calibproj.simulate.scene import Camera, Photometric, Scene, load_scene, save_scene
+from calibproj.simulate.timeline import CameraClock, ContentKey, ProjectionTimeline, content_image
+from calibproj.simulate.truth import write_truth
+from calibproj.simulate.video_truth import video_truth_document
+from calibproj.simulate.warp import CameraSampler, FloorView, floor_view, pyramid_levels_needed
+
+logger = logging.getLogger(__name__)
+
+# x264 constant-rate factor: 18 is x264's "visually lossless"; lower is better and larger.
+DEFAULT_CRF = 18
+# The encoder is most of the cost of a render; "ultrafast" is 3-4x faster than
+# "veryfast" on noisy frames, at the price of larger files for the same quality.
+DEFAULT_PRESET = "ultrafast"
+DEFAULT_TAIL_S = 0.5
+DEFAULT_CHUNK_S = 2.0
+# Warped contents kept per camera besides the flat ones (consecutive frames share a few).
+CAMERA_CACHE_SIZE = 6
+
+# Every effect off: frames show the projector's light exactly (for accuracy tests).
+IDEAL_PHOTOMETRIC = Photometric(ambient=0.0, contrast=1.0, noise_std=0.0, blur_px=0.0, vignetting=0.0, gamma=1.0)
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """Knobs of the renderer.
+
+    Attributes:
+        crf: x264 constant-rate factor (0 lossless .. 51; default 18, high quality).
+        preset: x264 preset (default ``ultrafast``).
+        supersample: samples per pixel along each axis (default 1: render at the
+            camera's resolution, each pixel's footprint filtered by the pyramid).
+        tail_s: seconds every camera keeps recording after the sequence ends.
+        chunk_s: sequence seconds rendered between two synchronisations of the cameras.
+        threads: worker threads for camera frames; ``None`` = one per camera.
+        fresh_noise: draw new sensor noise for every frame instead of reusing two
+            pre-drawn fields at random offsets (slower, same statistics).
+        photometric: overrides the scene's photometric settings (``IDEAL_PHOTOMETRIC``
+            turns every effect off).
+    """
+
+    crf: int = DEFAULT_CRF
+    preset: str = DEFAULT_PRESET
+    supersample: int = 1
+    tail_s: float = DEFAULT_TAIL_S
+    chunk_s: float = DEFAULT_CHUNK_S
+    threads: int | None = None
+    fresh_noise: bool = False
+    photometric: Photometric | None = None
+
+    def check(self) -> None:
+        from calibproj.generate.video import PRESETS
+
+        if not 0 <= self.crf <= 51:
+            raise ValueError(f"crf must be in [0, 51], got {self.crf}")
+        if self.preset not in PRESETS:
+            raise ValueError(f"unknown x264 preset {self.preset!r} (choose from {', '.join(PRESETS)})")
+        if not (isinstance(self.supersample, int) and 1 <= self.supersample <= 8):
+            raise ValueError(f"supersample must be an integer in [1, 8], got {self.supersample}")
+        if not self.tail_s >= 0:
+            raise ValueError(f"tail must be >= 0 s, got {self.tail_s}")
+        if not self.chunk_s > 0:
+            raise ValueError(f"chunk must be > 0 s, got {self.chunk_s}")
+        if self.threads is not None and self.threads < 1:
+            raise ValueError(f"threads must be at least 1, got {self.threads}")
+
+
+@dataclass(frozen=True)
+class CameraVideo:
+    """One rendered video."""
+
+    path: Path
+    resolution: tuple[int, int]
+    fps: float
+    frame_count: int
+    size_bytes: int
+
+
+@dataclass(frozen=True)
+class VideoSimulation:
+    """What ``simulate_videos`` wrote, and how long it took."""
+
+    out: Path
+    scene: Scene
+    videos: dict[str, CameraVideo]
+    elapsed_s: float
+
+    @property
+    def frame_count(self) -> int:
+        return sum(video.frame_count for video in self.videos.values())
+
+    @property
+    def frames_per_second(self) -> float:
+        """Camera frames rendered and encoded per second of wall time."""
+        return self.frame_count / self.elapsed_s if self.elapsed_s > 0 else math.inf
+
+    @property
+    def size_bytes(self) -> int:
+        return sum(video.size_bytes for video in self.videos.values())
+
+
+def simulate_videos(
+    scene: Scene | str | os.PathLike,
+    sequence: Any,
+    out: str | os.PathLike,
+    *,
+    seed: int = 0,
+    options: RenderOptions | None = None,
+    progress: bool = False,
+) -> VideoSimulation:
+    """Render every camera's video of a projection sequence, with ground truth.
+
+    Args:
+        scene: a ``Scene``, a preset name or a scene file (presets draw their random
+            parts from ``seed``).
+        sequence: a ``calibproj.generate.Sequence`` or the path of its ``sequence.json``.
+        out: output folder (created if needed).
+        seed: seed of every random draw (sensor noise, the preset's random parts).
+        options: renderer knobs (``RenderOptions``).
+        progress: show a progress bar per camera.
+
+    Raises:
+        ValueError: bad options, a file that is not a scene or a sequence, a sequence
+            made for another projector resolution, or a camera that does not see the
+            floor; the message names the file or camera.
+    """
+    options = options or RenderOptions()
+    options.check()
+    started = time.perf_counter()
+    scene, scene_source = _load_scene(scene, seed)
+    if options.photometric is not None:
+        scene = replace(scene, photometric=options.photometric)
+    sequence = _load_sequence(sequence)
+    _check_projector(scene, scene_source, sequence)
+    timeline = ProjectionTimeline.from_sequence(sequence)
+    clocks = {camera.name: _clock(camera, timeline, options.tail_s, scene_source) for camera in scene.cameras}
+    views = _floor_views(scene, scene_source, options)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_intrinsics_dir(out / "intrinsics", {camera.name: camera.intrinsics for camera in scene.cameras})
+    save_scene(out / "scene.json", scene)
+    videos = _render_all(scene, sequence, timeline, clocks, views, out / "videos", seed, options, progress)
+    settings = {"seed": seed, "sequence_markers": sequence.markers.spec, **_settings_json(options)}
+    write_truth(out / "truth.json", video_truth_document(scene, sequence, timeline, clocks, settings))
+    simulation = VideoSimulation(out, scene, videos, time.perf_counter() - started)
+    logger.info("rendered %d frames of %d cameras in %.1f s (%.1f frames/s), %.1f MB",
+                simulation.frame_count, len(videos), simulation.elapsed_s, simulation.frames_per_second,
+                simulation.size_bytes / 1e6)
+    return simulation
+
+
+def _settings_json(options: RenderOptions) -> dict[str, Any]:
+    settings = asdict(options)
+    settings["photometric"] = None if options.photometric is None else asdict(options.photometric)
+    return settings
+
+
+def _load_scene(scene: Scene | str | os.PathLike, seed: int) -> tuple[Scene, str]:
+    if isinstance(scene, Scene):
+        return scene, "scene"
+    from calibproj.simulate.presets import PRESETS
+
+    source = f"preset {scene!r}" if isinstance(scene, str) and scene in PRESETS else str(scene)
+    return load_scene(scene, seed=seed), source
+
+
+def _load_sequence(sequence: Any) -> Any:
+    from calibproj.generate.sequence import Sequence
+
+    if isinstance(sequence, Sequence):
+        return sequence
+    if sequence is None:
+        raise ValueError("rendering videos needs a projection sequence (sequence.json from calibproj generate)")
+    path = Path(sequence)
+    if not path.is_file():
+        raise FormatError(f"{path}: no such sequence file")
+    return Sequence.load(path)
+
+
+def _check_projector(scene: Scene, scene_source: str, sequence: Any) -> None:
+    if tuple(sequence.projector) != tuple(scene.projector.resolution):
+        width, height = sequence.projector
+        scene_width, scene_height = scene.projector.resolution
+        raise ValueError(f"the sequence is made for a {width}x{height} projector but the projector of "
+                         f"{scene_source} is {scene_width}x{scene_height}; generate the sequence with "
+                         f"--projector {scene_width}x{scene_height}")
+
+
+def _clock(camera: Camera, timeline: ProjectionTimeline, tail_s: float, scene_source: str) -> CameraClock:
+    clock = CameraClock.covering(camera.fps, camera.start_offset_s, camera.exposure_s, timeline.duration_s, tail_s)
+    if clock.frame_count < 1:
+        raise ValueError(f"{scene_source}: camera {camera.name!r} starts {-camera.start_offset_s:.3f} s after a "
+                         f"sequence of {timeline.duration_s:.3f} s has ended and records nothing")
+    return clock
+
+
+def _floor_views(scene: Scene, scene_source: str, options: RenderOptions) -> dict[str, FloorView]:
+    """Trace every camera (in threads); a camera that sees no floor is an error."""
+    def trace(camera: Camera) -> FloorView:
+        return floor_view(camera, scene.projector, scene.floor, options.supersample)
+
+    with ThreadPoolExecutor(max_workers=_worker_count(options, len(scene.cameras))) as pool:
+        views = dict(zip(scene.camera_names, pool.map(trace, scene.cameras)))
+    for camera in scene.cameras:
+        view = views[camera.name]
+        if not view.on_floor.any():
+            raise ValueError(f"{scene_source}: camera {camera.name!r} does not see the floor (z = 0) at all "
+                             f"(position {list(camera.position)}, look_at {list(camera.look_at)}); "
+                             "point it at the floor")
+        if not view.in_image.any():
+            logger.warning("%s: camera %r sees the floor but none of the projected image", scene_source, camera.name)
+    return views
+
+
+def _worker_count(options: RenderOptions, cameras: int) -> int:
+    return options.threads or max(1, cameras)
+
+
+class _AtlasStore:
+    """Projector atlases of the contents in use, each built once (in a thread pool)
+    however many cameras ask for it."""
+
+    def __init__(self, sequence: Any, layout: AtlasLayout, pool: ThreadPoolExecutor) -> None:
+        self.sequence = sequence
+        self.layout = layout
+        self.pool = pool
+        self.lock = threading.Lock()
+        self.futures: dict[ContentKey, Future] = {}
+
+    def prefetch(self, keys: set[ContentKey]) -> None:
+        with self.lock:
+            for key in keys:
+                if key not in self.futures:
+                    self.futures[key] = self.pool.submit(self._build, key)
+
+    def get(self, key: ContentKey) -> np.ndarray:
+        self.prefetch({key})
+        with self.lock:
+            future = self.futures[key]
+        return future.result()
+
+    def retain(self, keys: set[ContentKey]) -> None:
+        """Forget every atlas but those of ``keys`` (and the flat ones)."""
+        with self.lock:
+            for key in list(self.futures):
+                if key not in keys and key[0] != "flat":
+                    del self.futures[key]
+
+    def _build(self, key: ContentKey) -> np.ndarray:
+        return self.layout.build(content_image(self.sequence, key))
+
+
+class _CameraRenderer:
+    """Frames of one camera: warped contents cached, blended, noised, encoded."""
+
+    def __init__(self, camera: Camera, clock: CameraClock, sampler: CameraSampler, response: CameraResponse,
+                 noise: SensorNoise, writer: Any, atlases: _AtlasStore, timeline: ProjectionTimeline,
+                 progress: Any) -> None:
+        self.camera = camera
+        self.clock = clock
+        self.sampler = sampler
+        self.response = response
+        self.noise = noise
+        self.writer = writer
+        self.atlases = atlases
+        self.progress = progress
+        self.weights = [timeline.weights(*clock.window(frame)) for frame in range(clock.frame_count)]
+        self.starts = clock.exposure_start(np.arange(clock.frame_count))
+        self.cache: OrderedDict[ContentKey, list] = OrderedDict()
+
+    def keys(self, frames: range) -> set[ContentKey]:
+        return {key for frame in frames for key in self.weights[frame]}
+
+    def render(self, frames: range) -> None:
+        for frame in frames:
+            self.writer.write(self.noise.quantise(self._encoded(self.weights[frame])))
+            self.progress.update(1)
+
+    def _encoded(self, weights: dict[ContentKey, float]) -> np.ndarray:
+        """Display-encoded frame: one content's cached values, or a blend in irradiance."""
+        import cv2
+
+        if len(weights) == 1:
+            entry = self._entry(next(iter(weights)))
+            if entry[1] is None:
+                entry[1] = self.response.encode(entry[0])
+            return entry[1]
+        irradiance = None
+        for key, weight in weights.items():
+            part = self._entry(key)[0]
+            irradiance = part * np.float32(weight) if irradiance is None else cv2.scaleAdd(
+                part, weight, irradiance)
+        return self.response.encode(irradiance)
+
+    def _entry(self, key: ContentKey) -> list:
+        """``[irradiance, encoded or None]`` of a content, warped on first use."""
+        entry = self.cache.get(key)
+        if entry is None:
+            light = self.sampler.sample(self.atlases.get(key))
+            entry = [self.response.irradiance(light), None]
+            self.cache[key] = entry
+            patterns = [k for k in self.cache if k[0] != "flat"]
+            if len(patterns) > CAMERA_CACHE_SIZE:
+                del self.cache[patterns[0]]
+        else:
+            self.cache.move_to_end(key)
+        return entry
+
+
+def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clocks: dict[str, CameraClock],
+                views: dict[str, FloorView], folder: Path, seed: int, options: RenderOptions,
+                progress: bool) -> dict[str, CameraVideo]:
+    from tqdm import tqdm
+
+    from calibproj.generate.video import GreyVideoWriter
+
+    blur_samples = scene.photometric.blur_px * options.supersample
+    layout = AtlasLayout.for_projector(scene.projector.resolution,
+                                       max(pyramid_levels_needed(view, blur_samples) for view in views.values()))
+    noise_rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(len(scene.cameras))]
+    renderers: list[_CameraRenderer] = []
+    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="atlas") as atlas_pool, \
+            ThreadPoolExecutor(max_workers=_worker_count(options, len(scene.cameras)),
+                               thread_name_prefix="camera") as camera_pool:
+        atlases = _AtlasStore(sequence, layout, atlas_pool)
+        try:
+            for index, camera in enumerate(scene.cameras):
+                sampler = CameraSampler.from_view(views.pop(camera.name), layout, camera.resolution,
+                                                  options.supersample, scene.photometric.blur_px)
+                width, height = camera.resolution
+                writer = GreyVideoWriter(folder / f"{camera.name}.mp4", camera.resolution, camera.fps,
+                                         crf=options.crf, preset=options.preset)
+                bar = tqdm(total=clocks[camera.name].frame_count, desc=camera.name, unit="frame", position=index,
+                           disable=not progress, leave=True)
+                renderers.append(_CameraRenderer(
+                    camera, clocks[camera.name], sampler, CameraResponse.for_camera(camera, scene.photometric),
+                    SensorNoise(scene.photometric.noise_std, (height, width), noise_rngs[index],
+                                fresh=options.fresh_noise),
+                    writer, atlases, timeline, bar))
+            _run_chunks(renderers, atlases, camera_pool, options.chunk_s)
+        except BaseException:
+            for renderer in renderers:
+                renderer.writer.abort()
+                renderer.progress.close()
+            raise
+    videos = {}
+    for renderer in renderers:
+        renderer.writer.close()
+        renderer.progress.close()
+        camera = renderer.camera
+        path = renderer.writer.path
+        videos[camera.name] = CameraVideo(path, camera.resolution, camera.fps, renderer.clock.frame_count,
+                                          path.stat().st_size)
+    return videos
+
+
+def _run_chunks(renderers: list[_CameraRenderer], atlases: _AtlasStore, pool: ThreadPoolExecutor,
+                chunk_s: float) -> None:
+    """Render all cameras chunk by chunk; the next chunk's contents are drawn meanwhile."""
+    first = min(float(renderer.starts[0]) for renderer in renderers)
+    last = max(float(renderer.starts[-1]) for renderer in renderers)
+    chunk_count = int((last - first) // chunk_s) + 1
+    boundaries = first + chunk_s * np.arange(chunk_count + 1)
+    boundaries[-1] = math.inf
+    ranges = [_frame_ranges(renderer.starts, boundaries) for renderer in renderers]
+
+    def chunk_keys(chunk: int) -> set[ContentKey]:
+        if chunk >= chunk_count:
+            return set()
+        return set().union(*(renderer.keys(frames[chunk]) for renderer, frames in zip(renderers, ranges)))
+
+    upcoming = chunk_keys(0)
+    atlases.prefetch(upcoming)
+    for chunk in range(chunk_count):
+        upcoming = chunk_keys(chunk + 1)
+        atlases.prefetch(upcoming)
+        futures = [pool.submit(renderer.render, frames[chunk]) for renderer, frames in zip(renderers, ranges)]
+        # Let every camera finish its chunk before an error stops the others' encoders.
+        wait(futures)
+        for future in futures:
+            future.result()
+        atlases.retain(upcoming)
+
+
+def _frame_ranges(starts: np.ndarray, boundaries: np.ndarray) -> list[range]:
+    """Frames whose exposure starts in each chunk ``[boundaries[i], boundaries[i + 1])``."""
+    edges = np.searchsorted(starts, boundaries, side="left")
+    return [range(int(edges[i]), int(edges[i + 1])) for i in range(len(boundaries) - 1)]

@@ -1,0 +1,91 @@
+"""Ground truth of a rendered simulation: the common ``truth.json`` plus what only
+videos have (timing, image positions of the MSM centres, clean frames per pattern).
+
+Extra fields of ``truth.json`` written here::
+
+    "timing": {"clock": "...", "projector_fps": 30.0, "sequence_frames": 2376,
+               "cameras": {name: {"fps", "start_offset_s", "exposure_s", "frame_count",
+                                  "first_exposure_start_s", "fps_ratio"}}},
+    "image_points": {name: {"ids": [...], "distorted": [[u, v], ...], "undistorted": [...]}},
+    "clean_frames": {name: [[frames exposed wholly inside pattern 0], [... pattern 1], ...]}
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from calibproj.simulate.geometric import project_points
+from calibproj.simulate.scene import Scene
+from calibproj.simulate.timeline import CameraClock, ProjectionTimeline
+from calibproj.simulate.truth import truth_document
+
+CLOCK_DESCRIPTION = (
+    "sequence clock: t = 0 when projector frame 0 comes on, frame k shows during "
+    "[k / projector_fps, (k + 1) / projector_fps); camera frame j exposes during "
+    "[first_exposure_start_s + j / fps, ... + exposure_s)"
+)
+
+
+def msm_floor_points(scene: Scene, sequence: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Point ids (``array * markers_per_array + marker``) and floor positions of every
+    MSM centre of a sequence."""
+    centres = np.asarray(sequence.centres, dtype=float).reshape(-1, 2)
+    return np.arange(len(centres)), scene.projector.pixels_to_floor(centres)
+
+
+def timing_json(timeline: ProjectionTimeline, clocks: dict[str, CameraClock]) -> dict[str, Any]:
+    cameras = {
+        name: {
+            "fps": clock.fps,
+            "start_offset_s": clock.start_offset_s,
+            "exposure_s": clock.exposure_s,
+            "frame_count": clock.frame_count,
+            "first_exposure_start_s": float(clock.exposure_start(0)),
+            "fps_ratio": clock.fps / timeline.fps,
+        }
+        for name, clock in clocks.items()
+    }
+    return {"clock": CLOCK_DESCRIPTION, "projector_fps": timeline.fps, "sequence_frames": timeline.frame_count,
+            "cameras": cameras}
+
+
+def image_points_json(scene: Scene, ids: np.ndarray, xyz: np.ndarray) -> dict[str, Any]:
+    """Per camera, the MSM centres inside its image: ids, distorted and undistorted pixels."""
+    out = {}
+    for camera in scene.cameras:
+        seen = project_points(camera, xyz)
+        visible = seen.visible
+        out[camera.name] = {
+            "ids": ids[visible].tolist(),
+            "distorted": seen.distorted[visible].tolist(),
+            "undistorted": seen.undistorted[visible].tolist(),
+        }
+    return out
+
+
+def clean_frames_json(sequence: Any, clocks: dict[str, CameraClock]) -> dict[str, list[list[int]]]:
+    """Per camera and pattern, the frames whose whole exposure shows only that pattern."""
+    fps = float(sequence.fps)
+    out = {}
+    for name, clock in clocks.items():
+        out[name] = [
+            clock.frames_inside(pattern.first_frame / fps, (pattern.last_frame + 1) / fps).tolist()
+            for pattern in sequence.patterns
+        ]
+    return out
+
+
+def video_truth_document(scene: Scene, sequence: Any, timeline: ProjectionTimeline,
+                         clocks: dict[str, CameraClock], settings: dict[str, Any]) -> dict[str, Any]:
+    """Body of ``truth.json`` for a rendered simulation."""
+    ids, xyz = msm_floor_points(scene, sequence)
+    markers_per_array = int(np.asarray(sequence.centres).shape[1])
+    extra = {
+        "simulation": {"kind": "video", **settings},
+        "timing": timing_json(timeline, clocks),
+        "image_points": image_points_json(scene, ids, xyz),
+        "clean_frames": clean_frames_json(sequence, clocks),
+    }
+    return truth_document(scene, (ids, xyz), markers_per_array, None, extra)
