@@ -35,17 +35,17 @@ from typing import Any
 
 import numpy as np
 
-from calibproj import _core
-
-_detect = _core.detect
-
 DEFAULT_MARKERS = "aruco:4X4_50"
 
-_REFINEMENT_METHODS = {
-    "none": _detect.CornerRefinement.none,
-    "subpix": _detect.CornerRefinement.subpix,
-    "edges": _detect.CornerRefinement.edges,
-}
+_REFINEMENT_METHODS = ("none", "subpix", "edges")
+
+
+def _core_detect() -> Any:
+    """The C++ detection module, imported on first use so that ``import calibproj``
+    stays light."""
+    from calibproj._core import detect
+
+    return detect
 
 
 @dataclass(frozen=True)
@@ -73,12 +73,12 @@ class MarkerFamilyInfo:
 
 def marker_families() -> list[str]:
     """Every marker family spec this build accepts."""
-    return list(_detect.family_specs())
+    return list(_core_detect().family_specs())
 
 
 def family_info(markers: str = DEFAULT_MARKERS) -> MarkerFamilyInfo:
     """Describe a marker family; ``ValueError`` naming the choices for an unknown one."""
-    return MarkerFamilyInfo(**_detect.family_info(markers))
+    return MarkerFamilyInfo(**_core_detect().family_info(markers))
 
 
 def marker_bits(markers: str, marker_id: int) -> np.ndarray:
@@ -87,7 +87,7 @@ def marker_bits(markers: str, marker_id: int) -> np.ndarray:
     The grid is the marker as printed black on white, border included, quiet zone
     excluded (shape ``(grid_cells, grid_cells)``).
     """
-    return _detect.marker_bits(markers, int(marker_id))
+    return _core_detect().marker_bits(markers, int(marker_id))
 
 
 def render_marker(
@@ -165,7 +165,8 @@ def _option_names(*targets: Any) -> list[str]:
 
 
 def _build_options(system: str, options: dict[str, Any]) -> tuple[Any, Any]:
-    aruco, apriltag = _detect.ArucoOptions(), _detect.AprilTagOptions()
+    core = _core_detect()
+    aruco, apriltag = core.ArucoOptions(), core.AprilTagOptions()
     own = aruco if system == "aruco" else apriltag
     refinement = own.refinement
     options = dict(options)
@@ -173,7 +174,7 @@ def _build_options(system: str, options: dict[str, Any]) -> tuple[Any, Any]:
     if method is not None:
         if method not in _REFINEMENT_METHODS:
             raise ValueError(f"corner_refinement: unknown method {method!r} (choose from {', '.join(_REFINEMENT_METHODS)})")
-        refinement.method = _REFINEMENT_METHODS[method]
+        refinement.method = getattr(core.CornerRefinement, method)
     rest = _set_options(refinement, _set_options(own, options))
     if rest:
         raise ValueError(
@@ -195,7 +196,7 @@ class MarkerDetector:
     def __init__(self, markers: str = DEFAULT_MARKERS, **options: Any) -> None:
         self.info = family_info(markers)
         aruco, apriltag = _build_options(self.info.system, options)
-        self._detector = _detect.MarkerDetector(self.info.spec, aruco, apriltag)
+        self._detector = _core_detect().MarkerDetector(self.info.spec, aruco, apriltag)
 
     @property
     def markers(self) -> str:
@@ -223,4 +224,4 @@ def detect_markers(image: Any, markers: str = DEFAULT_MARKERS, **options: Any) -
 def marker_centres(corners: np.ndarray) -> np.ndarray:
     """Centres ``(N, 2)`` of markers with corners ``(N, 4, 2)``: the intersection of the
     diagonals, the image of the marker's centre under any homography."""
-    return _detect.marker_centres(np.asarray(corners, dtype=np.float64).reshape(-1, 4, 2))
+    return _core_detect().marker_centres(np.asarray(corners, dtype=np.float64).reshape(-1, 4, 2))
