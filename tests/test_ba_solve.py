@@ -196,3 +196,13 @@ def test_bad_input_raises_value_error(name: str, args: dict, message: str) -> No
 def test_bad_options_raise_value_error(options: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         ba.bundle_adjust(**small_problem(), **options)
+
+
+@pytest.mark.parametrize("model", ["free", "coplanar"])
+def test_rotation_cache_changes_nothing(rig, model: str) -> None:
+    poses, points, plane = perturbed_start(rig, seed=12)
+    cached = solve(rig, poses, points, plane, model=model, cache_rotations=True)
+    plain = solve(rig, poses, points, plane, model=model, cache_rotations=False)
+    assert cached["iterations"] == plain["iterations"]
+    np.testing.assert_array_equal(cached["poses"], plain["poses"])
+    np.testing.assert_array_equal(cached["points"], plain["points"])

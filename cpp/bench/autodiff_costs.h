@@ -7,6 +7,7 @@
 #include <ceres/rotation.h>
 
 #include "calibproj/ba/bundle_adjuster.h"
+#include "calibproj/ba/rotation_cache.h"
 
 namespace calibproj::bench {
 
@@ -50,7 +51,8 @@ struct PlanePointResidual {
 };
 
 inline ba::CostFactory AutoDiffCosts() {
-  return [](ba::Model model, const ba::Intrinsics& K, const Eigen::Vector2d& observed) -> ceres::CostFunction* {
+  return [](ba::Model model, const ba::Intrinsics& K, const Eigen::Vector2d& observed,
+            const ba::CachedRotation* /*rotation*/) -> ceres::CostFunction* {
     if (model == ba::Model::kFree) {
       return new ceres::AutoDiffCostFunction<FreePointResidual, 2, 6, 3>(new FreePointResidual{K, observed});
     }

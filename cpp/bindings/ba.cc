@@ -86,7 +86,8 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
                         int max_iterations, double function_tolerance, double gradient_tolerance,
                         double parameter_tolerance, int num_threads, const std::string& linear_solver,
                         bool refine_poses, bool refine_points, int gauge_camera, int scale_camera,
-                        bool compute_covariance, bool full_report, const ba::CostFactory& make_cost) {
+                        bool compute_covariance, bool full_report, bool cache_rotations,
+                        const ba::CostFactory& make_cost) {
   ba::Options options;
   options.model = ParseModel(model);
   options.loss = ParseLoss(loss);
@@ -110,6 +111,7 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
   options.scale_camera = scale_camera;
   options.compute_covariance = compute_covariance;
   options.full_report = full_report;
+  options.cache_rotations = cache_rotations;
 
   ba::Data data;
   data.camera_index = camera_index;
@@ -187,11 +189,13 @@ void def_bundle_adjust(py::module_& m, const char* name, const ba::CostFactory& 
                   const std::string& model, const std::string& loss, double loss_scale, int max_iterations,
                   double function_tolerance, double gradient_tolerance, double parameter_tolerance,
                   int num_threads, const std::string& linear_solver, bool refine_poses, bool refine_points,
-                  int gauge_camera, int scale_camera, bool compute_covariance, bool full_report) {
+                  int gauge_camera, int scale_camera, bool compute_covariance, bool full_report,
+                  bool cache_rotations) {
         return BundleAdjustPy(camera_index, point_index, observed, intrinsics, poses, points, plane, model, loss,
                               loss_scale, max_iterations, function_tolerance, gradient_tolerance,
                               parameter_tolerance, num_threads, linear_solver, refine_poses, refine_points,
-                              gauge_camera, scale_camera, compute_covariance, full_report, make_cost);
+                              gauge_camera, scale_camera, compute_covariance, full_report, cache_rotations,
+                              make_cost);
       },
       py::arg("camera_index"), py::arg("point_index"), py::arg("observed"), py::arg("intrinsics"), py::arg("poses"),
       py::arg("points"), py::arg("plane") = Eigen::VectorXd(), py::kw_only(), py::arg("model") = "free",
@@ -200,6 +204,7 @@ void def_bundle_adjust(py::module_& m, const char* name, const ba::CostFactory& 
       py::arg("parameter_tolerance") = 1e-12, py::arg("num_threads") = 1, py::arg("linear_solver") = "auto",
       py::arg("refine_poses") = true, py::arg("refine_points") = true, py::arg("gauge_camera") = 0,
       py::arg("scale_camera") = -1, py::arg("compute_covariance") = false, py::arg("full_report") = false,
+      py::arg("cache_rotations") = true,
       R"doc(Bundle adjustment (Ceres).
 
 Observations: camera_index (N,), point_index (N,), observed (N, 2) undistorted pixels.

@@ -11,6 +11,7 @@
 
 #include "calibproj/ba/manifolds.h"
 #include "calibproj/ba/reprojection_cost.h"
+#include "calibproj/ba/rotation_cache.h"
 #include "calibproj/ba/rotation.h"
 #include "calibproj/ba/sphere.h"
 
@@ -163,7 +164,7 @@ struct Gauge {
 };
 
 void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, Parameters& params,
-                  const CostFactory& make_cost, ceres::LossFunction* loss, ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
+                  const CostFactory& make_cost, const RotationCache* rotations, ceres::LossFunction* loss, ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
   const bool coplanar = options.model == Model::kCoplanar;
   const int point_size = coplanar ? 2 : 3;
   for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
@@ -187,8 +188,9 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
   for (int i = 0; i < data.camera_index.size(); ++i) {
     double* pose = params.poses.row(data.camera_index(i)).data();
     double* point = PointBlock(params, options, data.point_index(i));
-    ceres::CostFunction* cost =
-        make_cost(options.model, data.intrinsics[data.camera_index(i)], data.observed.row(i).transpose());
+    const int camera = data.camera_index(i);
+    ceres::CostFunction* cost = make_cost(options.model, data.intrinsics[camera], data.observed.row(i).transpose(),
+                                          rotations != nullptr ? rotations->Entry(camera) : nullptr);
     if (coplanar) {
       problem->AddResidualBlock(cost, loss, pose, params.plane.data(), point);
     } else {
@@ -361,9 +363,10 @@ PixelMatrix ComputeResiduals(const Data& data) {
 }
 
 CostFactory AnalyticCosts() {
-  return [](Model model, const Intrinsics& K, const Eigen::Vector2d& observed) -> ceres::CostFunction* {
-    if (model == Model::kFree) return new FreePointReprojectionCost(K, observed);
-    return new PlanePointReprojectionCost(K, observed);
+  return [](Model model, const Intrinsics& K, const Eigen::Vector2d& observed,
+            const CachedRotation* rotation) -> ceres::CostFunction* {
+    if (model == Model::kFree) return new FreePointReprojectionCost(K, observed, rotation);
+    return new PlanePointReprojectionCost(K, observed, rotation);
   };
 }
 
@@ -397,13 +400,20 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
 
   Parameters params = InitialParameters(gauge_data, options);
   const std::unique_ptr<ceres::LossFunction> loss = MakeLoss(options);
+  std::unique_ptr<RotationCache> rotations;
+  if (options.cache_rotations) {
+    std::vector<const double*> pose_blocks;
+    for (int c = 0; c < num_cameras; ++c) pose_blocks.push_back(params.poses.row(c).data());
+    rotations = std::make_unique<RotationCache>(pose_blocks);
+  }
   ceres::Problem::Options problem_options;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   problem_options.enable_fast_removal = false;
   problem_options.disable_all_safety_checks = true;  // ValidateData has run
+  problem_options.evaluation_callback = rotations.get();
   ceres::Problem problem(problem_options);
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-  BuildProblem(gauge_data, options, gauge, params, make_cost, loss.get(), &problem, ordering.get());
+  BuildProblem(gauge_data, options, gauge, params, make_cost, rotations.get(), loss.get(), &problem, ordering.get());
 
   ceres::Solver::Summary summary;
   const auto start = std::chrono::steady_clock::now();
@@ -422,6 +432,7 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   result.report = options.full_report ? summary.FullReport() : summary.BriefReport();
   result.report += std::string("\nmodel: ") + ModelName(options.model);
 
+  if (rotations) rotations->Refresh();  // the last evaluation may have been a rejected step
   if (options.compute_covariance && result.usable) {
     result.pose_covariances = PoseCovariances(&problem, params, gauge, change, options);
   }

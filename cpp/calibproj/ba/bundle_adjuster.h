@@ -52,6 +52,7 @@ struct Options {
   int scale_camera = -1;      // FREE only; -1 picks the camera farthest from the gauge camera
   bool compute_covariance = false;
   bool full_report = false;
+  bool cache_rotations = true;  // one rotation per camera and evaluation (rotation_cache.h)
 
   // Throws std::invalid_argument naming the first inconsistent option.
   void Check() const;
@@ -97,8 +98,11 @@ Result BundleAdjust(const Data& data, const Options& options);
 // The cost of one observation, owned by the caller's ceres::Problem. The product
 // path uses the analytic costs of reprojection_cost.h; tools/bench swaps in
 // automatic differentiation of the same residuals to measure the difference.
-using CostFactory =
-    std::function<ceres::CostFunction*(Model model, const Intrinsics& K, const Eigen::Vector2d& observed)>;
+// `rotation` is the camera's cached rotation when Options::cache_rotations is on, else null.
+struct CachedRotation;
+using CostFactory = std::function<ceres::CostFunction*(Model model, const Intrinsics& K,
+                                                       const Eigen::Vector2d& observed,
+                                                       const CachedRotation* rotation)>;
 Result BundleAdjust(const Data& data, const Options& options, const CostFactory& make_cost);
 CostFactory AnalyticCosts();
 

@@ -15,12 +15,15 @@ using RowMajor2x2 = Eigen::Matrix<double, 2, 2, Eigen::RowMajor>;
 // Projects the world point X through the pose; fills the residual, the pose
 // Jacobian (if asked) and d(residual)/dX (if asked). Returns false behind the camera.
 bool ProjectWorldPoint(const Intrinsics& K, const Eigen::Vector2d& observed, const double* pose,
-                       const Eigen::Vector3d& X, double* residuals, double* J_pose,
+                       const CachedRotation* cached, const Eigen::Vector3d& X, double* residuals, double* J_pose,
                        Eigen::Matrix<double, 2, 3>* J_world_point) {
   const Eigen::Map<const Eigen::Vector3d> w(pose);
   const Eigen::Map<const Eigen::Vector3d> t(pose + 3);
   Eigen::Matrix3d R, J_left;
-  if (J_pose != nullptr) {
+  if (cached != nullptr) {
+    R = cached->R;
+    J_left = cached->J_left;
+  } else if (J_pose != nullptr) {
     RotationAndLeftJacobian(w, &R, &J_left);
   } else {
     R = RotationFromAngleAxis(w);
@@ -48,7 +51,7 @@ bool FreePointReprojectionCost::Evaluate(double const* const* parameters, double
   double* J_pose = jacobians != nullptr ? jacobians[0] : nullptr;
   const bool want_point = jacobians != nullptr && jacobians[1] != nullptr;
   Eigen::Matrix<double, 2, 3> J_X;
-  if (!ProjectWorldPoint(K_, observed_, parameters[0], X, residuals, J_pose, want_point ? &J_X : nullptr)) {
+  if (!ProjectWorldPoint(K_, observed_, parameters[0], rotation_, X, residuals, J_pose, want_point ? &J_X : nullptr)) {
     return false;
   }
   if (want_point) Eigen::Map<RowMajor2x3>{jacobians[1]} = J_X;
@@ -72,7 +75,7 @@ bool PlanePointReprojectionCost::Evaluate(double const* const* parameters, doubl
   const bool want_plane = jacobians != nullptr && jacobians[1] != nullptr;
   const bool want_ab = jacobians != nullptr && jacobians[2] != nullptr;
   Eigen::Matrix<double, 2, 3> J_X;
-  if (!ProjectWorldPoint(K_, observed_, parameters[0], X, residuals, J_pose,
+  if (!ProjectWorldPoint(K_, observed_, parameters[0], rotation_, X, residuals, J_pose,
                          (want_plane || want_ab) ? &J_X : nullptr)) {
     return false;
   }
