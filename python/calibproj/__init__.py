@@ -20,6 +20,12 @@ from calibproj.simulate import simulate_tracks as simulate  # noqa: E402
 from calibproj.generate import generate  # noqa: E402
 from calibproj.markers import detect_markers  # noqa: E402
 
+# Registration of the cameras from tracks, and its result.
+from calibproj.calibration import Calibration  # noqa: E402
+from calibproj.registration import RegistrationOptions, calibrate  # noqa: E402
+from calibproj.tracks import Tracks  # noqa: E402
+
 __all__ = ["__version__"]
+__all__ += ["Calibration", "RegistrationOptions", "Tracks", "calibrate"]
 __all__ += ["compare", "simulate"]
 __all__ += ["detect_markers", "generate"]
