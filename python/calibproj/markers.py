@@ -173,7 +173,8 @@ def _build_options(system: str, options: dict[str, Any]) -> tuple[Any, Any]:
     method = options.pop("corner_refinement", None)
     if method is not None:
         if method not in _REFINEMENT_METHODS:
-            raise ValueError(f"corner_refinement: unknown method {method!r} (choose from {', '.join(_REFINEMENT_METHODS)})")
+            choices = ", ".join(_REFINEMENT_METHODS)
+            raise ValueError(f"corner_refinement: unknown method {method!r} (choose from {choices})")
         refinement.method = getattr(core.CornerRefinement, method)
     rest = _set_options(refinement, _set_options(own, options))
     if rest:
@@ -189,8 +190,9 @@ def _build_options(system: str, options: dict[str, Any]) -> tuple[Any, Any]:
 class MarkerDetector:
     """Detector of one marker family; build it once and call :meth:`detect` per image.
 
-    AprilTag families build their decoding tables here (tens of milliseconds for
-    tagStandard41h12), so reusing the detector matters when processing video.
+    AprilTag families build their decoding tables here (measured at max_hamming 2:
+    0.03 s for tag36h11, 0.13 s for tagStandard41h12, 20 s for the 48,714 codes of
+    tagStandard52h13), so reusing the detector matters when processing video.
     """
 
     def __init__(self, markers: str = DEFAULT_MARKERS, **options: Any) -> None:
