@@ -10,6 +10,7 @@
 
 #include "calibproj/registration/incremental.h"
 #include "calibproj/registration/reconstruction.h"
+#include "calibproj/registration/result.h"
 #include "calibproj/registration/view_score.h"
 #include "convert.h"
 #include "registry.h"
@@ -71,6 +72,13 @@ std::vector<registration::Camera> CamerasFromArrays(const py::array_t<double, py
   return cameras;
 }
 
+py::array_t<bool> BoolArray(const std::vector<bool>& values) {
+  py::array_t<bool> out(static_cast<py::ssize_t>(values.size()));
+  auto view = out.mutable_unchecked<1>();
+  for (size_t i = 0; i < values.size(); ++i) view(i) = values[i];
+  return out;
+}
+
 py::dict ToDict(const registration::PairCandidate& p) {
   py::dict d;
   d["camera1"] = p.camera1; d["camera2"] = p.camera2; d["score1"] = p.score1; d["score2"] = p.score2;
@@ -114,11 +122,40 @@ py::dict ToDict(const registration::RefineResult& r) {
   return d;
 }
 
-py::array_t<bool> BoolArray(const std::vector<bool>& values) {
-  py::array_t<bool> out(static_cast<py::ssize_t>(values.size()));
-  auto view = out.mutable_unchecked<1>();
-  for (size_t i = 0; i < values.size(); ++i) view(i) = values[i];
-  return out;
+
+py::dict ToDict(const registration::RegistrationResult& r) {
+  const py::ssize_t n = static_cast<py::ssize_t>(r.cameras.size());
+  py::array_t<double> R({n, py::ssize_t{3}, py::ssize_t{3}}), t({n, py::ssize_t{3}});
+  py::array_t<double> mean({n}), std_dev({n});
+  py::array_t<int> observations({n}), inliers({n}), track2({n}), score({n});
+  std::vector<bool> registered(n);
+  std::vector<std::string> failures(n);
+  auto R_view = R.mutable_unchecked<3>();
+  auto t_view = t.mutable_unchecked<2>();
+  for (py::ssize_t c = 0; c < n; ++c) {
+    const auto& camera = r.cameras[c];
+    for (int i = 0; i < 3; ++i) {
+      t_view(c, i) = camera.t(i);
+      for (int j = 0; j < 3; ++j) R_view(c, i, j) = camera.R(i, j);
+    }
+    mean.mutable_at(c) = camera.mean_px;
+    std_dev.mutable_at(c) = camera.std_px;
+    observations.mutable_at(c) = camera.observations;
+    inliers.mutable_at(c) = camera.inliers;
+    track2.mutable_at(c) = camera.track2_observations;
+    score.mutable_at(c) = camera.view_score;
+    registered[c] = camera.registered;
+    failures[c] = camera.failure;
+  }
+  py::dict d;
+  d["registered"] = BoolArray(registered);
+  d["R"] = R; d["t"] = t; d["failure"] = failures;
+  d["mean_px"] = mean; d["std_px"] = std_dev; d["observations"] = observations; d["inliers"] = inliers;
+  d["track2_observations"] = track2; d["view_score"] = score;
+  d["points"] = r.points; d["point_index"] = r.point_index; d["registration_order"] = r.registration_order;
+  d["floor_rms"] = r.floor_rms;
+  d["frame_M"] = r.frame.M; d["frame_origin"] = r.frame.origin; d["frame_scale"] = r.frame.scale;
+  return d;
 }
 
 }  // namespace
@@ -214,7 +251,9 @@ of calibproj.registration.RegistrationOptions.)doc")
       .def_property_readonly("gauge_camera", &Reconstruction::gauge_camera)
       .def_property_readonly("registration_order", &Reconstruction::registration_order)
       .def("residuals", &Reconstruction::Residuals, "Residuals (N, 2) of the active observations, NaN elsewhere.")
-      .def("view_score", &Reconstruction::ViewScore, py::arg("camera"));
+      .def("view_score", &Reconstruction::ViewScore, py::arg("camera"))
+      .def("summarize", [](const Reconstruction& r) { return ToDict(registration::Summarize(r)); },
+           "Poses (R, t) and points in the floor frame, and per-camera metrics, of the current state.");
 
   m.def(
       "view_score",

@@ -20,8 +20,6 @@ import numpy as np
 
 from calibproj.io.jsonio import FormatError, atomic_write_text, read_json, write_json
 from calibproj.io.poses import read_poses, write_camera_poses
-from calibproj.synthetic import matrix_from_rotvec
-from calibproj.tracks import Tracks
 
 METRICS_KIND = "metrics"
 SCHEMA_MAJOR = 1
@@ -39,21 +37,6 @@ class CameraMetrics:
     track2_observations: int  # inliers whose point is seen by at least two registered cameras
     view_score: int  # view score (visibility pyramid) of all its observations
     failure: str | None = None
-
-
-@dataclass
-class FloorFrame:
-    """Similarity from the reconstruction frame to the floor frame: X_f = scale * M (X - origin)."""
-
-    M: np.ndarray
-    origin: np.ndarray
-    scale: float
-
-    def points(self, X: np.ndarray) -> np.ndarray:
-        return self.scale * (np.asarray(X) - self.origin) @ self.M.T
-
-    def pose(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return R @ self.M.T, self.scale * (R @ self.origin + t)
 
 
 @dataclass
@@ -79,45 +62,47 @@ class Calibration:
         return -R.T @ t
 
     @classmethod
-    def from_reconstruction(
+    def from_summary(
         cls,
-        tracks: Tracks,
-        all_cameras: Sequence[str],
-        poses: np.ndarray,
-        registered: np.ndarray,
-        registration_order: list[str],
-        points: np.ndarray,
-        reconstructed: np.ndarray,
-        plane: np.ndarray | None,
-        residuals: np.ndarray,
-        active: np.ndarray,
-        view_scores: Sequence[int],
+        summary: dict[str, Any],
+        camera_names: Sequence[str],
+        point_ids: np.ndarray,
         failed: dict[str, str],
         model: str,
     ) -> Calibration:
-        names = list(tracks.camera_names)
-        rotations = {n: matrix_from_rotvec(poses[c, :3]) for c, n in enumerate(names) if registered[c]}
-        translations = {n: poses[c, 3:].copy() for c, n in enumerate(names) if registered[c]}
-        metrics = camera_metrics(tracks, registered, residuals, active, view_scores, failed)
-        for name in all_cameras:
+        """Build from ``Reconstruction.summarize()`` (floor frame and metrics come from C++,
+        shared with the standalone executable). ``failed`` adds cameras left out before
+        registration (e.g. without intrinsics)."""
+        names = list(camera_names)
+        failed = dict(failed)
+        poses, metrics = {}, {}
+        for c, name in enumerate(names):
+            if summary["registered"][c]:
+                poses[name] = (np.array(summary["R"][c]), np.array(summary["t"][c]))
+            elif summary["failure"][c]:
+                failed[name] = summary["failure"][c]
+            registered = bool(summary["registered"][c])
+            metrics[name] = CameraMetrics(
+                mean_px=float(summary["mean_px"][c]) if registered else None,
+                std_px=float(summary["std_px"][c]) if registered else None,
+                observations=int(summary["observations"][c]),
+                inliers=int(summary["inliers"][c]),
+                track2_observations=int(summary["track2_observations"][c]),
+                view_score=int(summary["view_score"][c]),
+                failure=failed.get(name),
+            )
+        for name, reason in failed.items():
             if name not in metrics:
-                metrics[name] = CameraMetrics(None, None, 0, 0, 0, 0, failed.get(name))
-        if not rotations:
-            return cls({}, failed, metrics, np.zeros((0, 3)), np.zeros(0, dtype=np.int64), model=model)
-        X = points[reconstructed]
-        floor_plane = plane if plane is not None else fit_plane(X)
-        frame = floor_frame(rotations, translations, registration_order, floor_plane)
-        X_floor = frame.points(X)
-        floor_poses = {n: frame.pose(rotations[n], translations[n]) for n in rotations}
+                metrics[name] = CameraMetrics(None, None, 0, 0, 0, 0, reason)
         return cls(
-            poses=floor_poses,
+            poses=poses,
             failed=failed,
             metrics=metrics,
-            points=X_floor,
-            point_ids=np.asarray(tracks.point_ids)[reconstructed],
+            points=np.array(summary["points"]).reshape(-1, 3),
+            point_ids=np.asarray(point_ids)[np.asarray(summary["point_index"], dtype=np.int64)],
             model=model,
-            registration_order=registration_order,
-            floor_rms=float(np.sqrt(np.mean(X_floor[:, 2] ** 2))) if len(X_floor) else 0.0,
+            registration_order=[names[c] for c in summary["registration_order"]],
+            floor_rms=float(summary["floor_rms"]),
         )
 
     def save(self, directory: str | os.PathLike) -> None:
@@ -160,83 +145,6 @@ class Calibration:
             registration_order=list(document.get("registration_order", [])),
             floor_rms=float(document.get("floor_rms", 0.0)),
         )
-
-
-def camera_metrics(
-    tracks: Tracks,
-    registered: np.ndarray,
-    residuals: np.ndarray,
-    active: np.ndarray,
-    view_scores: Sequence[int],
-    failed: dict[str, str],
-) -> dict[str, CameraMetrics]:
-    camera_index, point_index = tracks.camera_index, tracks.point_index
-    error = np.linalg.norm(residuals, axis=1)
-    used = active & np.isfinite(error)
-    seen_by = np.bincount(point_index[used], minlength=tracks.num_points)
-    metrics = {}
-    for c, name in enumerate(tracks.camera_names):
-        mine = camera_index == c
-        inlier = mine & used
-        errors = error[inlier]
-        metrics[name] = CameraMetrics(
-            mean_px=float(errors.mean()) if registered[c] and errors.size else None,
-            std_px=float(errors.std()) if registered[c] and errors.size else None,
-            observations=int(mine.sum()),
-            inliers=int(inlier.sum()),
-            track2_observations=int((inlier & (seen_by[point_index] >= 2)).sum()),
-            view_score=int(view_scores[c]),
-            failure=failed.get(name),
-        )
-    return metrics
-
-
-def fit_plane(points: np.ndarray, rounds: int = 3, k: float = 3.0) -> np.ndarray:
-    """Plane [n, d] (n . X = d, |n| = 1) through at least 3 points, robust to stray ones:
-    least squares, then again without the points farther than ``k`` robust sigmas."""
-    if len(points) < 3:
-        raise ValueError(f"cannot fit the floor plane to {len(points)} points")
-    inliers = np.ones(len(points), bool)
-    for _ in range(rounds):
-        centroid = points[inliers].mean(axis=0)
-        _, _, vt = np.linalg.svd(points[inliers] - centroid, full_matrices=False)
-        n = vt[-1]
-        distance = np.abs((points - centroid) @ n)
-        sigma = 1.4826 * np.median(distance[inliers])
-        keep = distance <= max(k * sigma, 1e-12)
-        if keep.sum() < 3 or np.array_equal(keep, inliers):
-            break
-        inliers = keep
-    return np.concatenate([n, [n @ centroid]])
-
-
-def floor_frame(
-    rotations: dict[str, np.ndarray],
-    translations: dict[str, np.ndarray],
-    registration_order: list[str],
-    plane: np.ndarray,
-) -> FloorFrame:
-    """The floor frame of docs/conventions.md for cameras above ``plane``."""
-    n = plane[:3] / np.linalg.norm(plane[:3])
-    d = plane[3] / np.linalg.norm(plane[:3])
-    centres = {name: -rotations[name].T @ translations[name] for name in rotations}
-    heights = np.array([n @ c - d for c in centres.values()])
-    if np.mean(heights) < 0:  # z points towards the cameras
-        n, d, heights = -n, -d, -heights
-    first = next(name for name in registration_order if name in rotations)
-    first_height = n @ centres[first] - d
-    if first_height <= 0:
-        raise ValueError(f"camera {first} is not above the floor plane")
-    centroid = np.mean(list(centres.values()), axis=0)
-    origin = centroid - (n @ centroid - d) * n
-    axis = rotations[first].T @ np.array([0.0, 0.0, 1.0])
-    x_axis = axis - (axis @ n) * n
-    if np.linalg.norm(x_axis) < 1e-6:  # looking straight down: use the image x axis
-        axis = rotations[first].T @ np.array([1.0, 0.0, 0.0])
-        x_axis = axis - (axis @ n) * n
-    x_axis /= np.linalg.norm(x_axis)
-    M = np.stack([x_axis, np.cross(n, x_axis), n])
-    return FloorFrame(M=M, origin=origin, scale=1.0 / first_height)
 
 
 def write_ply(path: str | os.PathLike, points: np.ndarray, point_ids: np.ndarray) -> None:

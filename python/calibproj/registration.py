@@ -190,25 +190,12 @@ class RegistrationDriver:
 
     def result(self) -> Calibration:
         """The calibration in the floor frame, from the current state."""
-        rec = self.reconstruction
-        failed = dict(self.failed)
-        for camera, reason in enumerate(rec.failure_reasons):
-            if reason:
-                failed[self.name(camera)] = reason
-        return Calibration.from_reconstruction(
-            tracks=self.tracks,
-            all_cameras=self.all_cameras,
-            poses=rec.poses,
-            registered=rec.registered,
-            registration_order=[self.name(c) for c in rec.registration_order],
-            points=rec.points,
-            reconstructed=rec.reconstructed,
-            plane=rec.plane if self.options.model == "coplanar" else None,
-            residuals=rec.residuals(),
-            active=rec.active,
-            view_scores=[rec.view_score(c) for c in range(rec.num_cameras)],
-            failed=failed,
-            model=self.options.model,
+        return Calibration.from_summary(
+            self.reconstruction.summarize(),
+            self.tracks.camera_names,
+            self.tracks.point_ids,
+            self.failed,
+            self.options.model,
         )
 
 

@@ -130,6 +130,8 @@ class Reconstruction {
   const std::vector<bool>& active() const { return active_; }
   const Eigen::Vector4d& plane() const { return plane_; }
   int gauge_camera() const { return gauge_camera_; }
+  const Eigen::VectorXi& camera_index() const { return camera_index_; }
+  const Eigen::VectorXi& point_index() const { return point_index_; }
   std::vector<int> registration_order() const { return order_; }
   // Residuals of the active observations of registered cameras and reconstructed
   // points; NaN elsewhere.

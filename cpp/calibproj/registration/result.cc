@@ -1,0 +1,90 @@
+#include "calibproj/registration/result.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "calibproj/ba/rotation.h"
+
+namespace calibproj::registration {
+
+namespace {
+
+void FillMetrics(const Reconstruction& rec, std::vector<CameraResult>* cameras) {
+  const auto residuals = rec.Residuals();
+  const Eigen::VectorXi& camera_index = rec.camera_index();
+  const Eigen::VectorXi& point_index = rec.point_index();
+  std::vector<int> seen_by(rec.num_points(), 0);
+  for (int i = 0; i < residuals.rows(); ++i) {
+    if (std::isfinite(residuals(i, 0))) ++seen_by[point_index(i)];
+  }
+  std::vector<double> sum(rec.num_cameras(), 0.0), sum_sq(rec.num_cameras(), 0.0);
+  for (int i = 0; i < residuals.rows(); ++i) {
+    CameraResult& camera = (*cameras)[camera_index(i)];
+    ++camera.observations;
+    if (!std::isfinite(residuals(i, 0))) continue;
+    const double error = residuals.row(i).norm();
+    ++camera.inliers;
+    if (seen_by[point_index(i)] >= 2) ++camera.track2_observations;
+    sum[camera_index(i)] += error;
+    sum_sq[camera_index(i)] += error * error;
+  }
+  for (int c = 0; c < rec.num_cameras(); ++c) {
+    CameraResult& camera = (*cameras)[c];
+    camera.view_score = rec.ViewScore(c);
+    if (camera.registered && camera.inliers > 0) {
+      camera.mean_px = sum[c] / camera.inliers;
+      camera.std_px = std::sqrt(std::max(0.0, sum_sq[c] / camera.inliers - camera.mean_px * camera.mean_px));
+    }
+  }
+}
+
+}  // namespace
+
+RegistrationResult Summarize(const Reconstruction& rec) {
+  RegistrationResult result;
+  result.cameras.resize(rec.num_cameras());
+  result.registration_order = rec.registration_order();
+  std::vector<int> registered;
+  for (int c = 0; c < rec.num_cameras(); ++c) {
+    result.cameras[c].registered = rec.registered(c);
+    result.cameras[c].failure = rec.failure_reasons()[c];
+    if (rec.registered(c)) registered.push_back(c);
+  }
+  FillMetrics(rec, &result.cameras);
+  for (int p = 0; p < rec.num_points(); ++p) {
+    if (rec.reconstructed()[p]) result.point_index.push_back(p);
+  }
+  if (registered.empty()) return result;
+
+  ba::PoseMatrix poses(registered.size(), 6);
+  for (size_t k = 0; k < registered.size(); ++k) poses.row(k) = rec.poses().row(registered[k]);
+  result.points.resize(result.point_index.size(), 3);
+  for (size_t k = 0; k < result.point_index.size(); ++k) result.points.row(k) = rec.points().row(result.point_index[k]);
+  const Eigen::Vector4d plane = rec.options().model == ba::Model::kCoplanar ? rec.plane() : FitPlaneRobust(result.points);
+  int first = 0;
+  for (int c : result.registration_order) {
+    const auto it = std::find(registered.begin(), registered.end(), c);
+    if (it != registered.end()) {
+      first = static_cast<int>(it - registered.begin());
+      break;
+    }
+  }
+  result.frame = ComputeFloorFrame(poses, first, plane);
+  for (size_t k = 0; k < registered.size(); ++k) {
+    CameraResult& camera = result.cameras[registered[k]];
+    const Eigen::Matrix3d R = ba::RotationFromAngleAxis(poses.row(k).head<3>().transpose());
+    const Eigen::Vector3d t = poses.row(k).tail<3>().transpose();
+    camera.R = R * result.frame.M.transpose();
+    camera.t = result.frame.scale * (R * result.frame.origin + t);
+  }
+  double sum_sq = 0.0;
+  for (int p = 0; p < result.points.rows(); ++p) {
+    result.points.row(p) =
+        (result.frame.scale * result.frame.M * (result.points.row(p).transpose() - result.frame.origin)).transpose();
+    sum_sq += result.points(p, 2) * result.points(p, 2);
+  }
+  if (result.points.rows() > 0) result.floor_rms = std::sqrt(sum_sq / result.points.rows());
+  return result;
+}
+
+}  // namespace calibproj::registration

@@ -1,0 +1,39 @@
+#pragma once
+// The result of a registration in the floor frame, with per-camera metrics: what the
+// Python Calibration and the standalone executable both write out.
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "calibproj/registration/floor_frame.h"
+#include "calibproj/registration/reconstruction.h"
+
+namespace calibproj::registration {
+
+struct CameraResult {
+  bool registered = false;
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // cam_from_world, floor frame
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  std::string failure;
+  double mean_px = 0.0, std_px = 0.0;  // reprojection error of the inliers (registered only)
+  int observations = 0;                // in the tracks
+  int inliers = 0;                     // kept by the outlier filter
+  int track2_observations = 0;         // inliers whose point at least two registered cameras see
+  int view_score = 0;                  // of all its observations
+};
+
+struct RegistrationResult {
+  std::vector<CameraResult> cameras;
+  ba::PointMatrix points;           // reconstructed points, floor frame
+  std::vector<int> point_index;     // their indices in the tracks
+  std::vector<int> registration_order;
+  FloorFrame frame;                 // reconstruction frame -> floor frame
+  double floor_rms = 0.0;           // RMS height of the points above the floor
+};
+
+// Floor frame (plane of the COPLANAR model, or a robust plane fit to the FREE points),
+// poses, points and metrics of the current state.
+RegistrationResult Summarize(const Reconstruction& reconstruction);
+
+}  // namespace calibproj::registration
