@@ -11,7 +11,13 @@ Gaussian noise (--noise) and optional gross outliers (--outliers). OUT receives
 tracks.json, eval_tracks.json (an independent evaluation set in the working volume),
 intrinsics/<camera>.json, truth.json and scene.json (the realised scene).
 
-Without --tracks-only the camera videos are rendered from --sequence.
+Without --tracks-only the camera videos are rendered from --sequence (made by
+calibproj generate): every camera records the floor while the projector plays the
+sequence, at its own frame rate, start offset and exposure, with the scene's
+photometric effects (--ideal turns them off). OUT receives videos/<camera>.mp4
+(H.264, quality --crf, speed --preset), intrinsics/<camera>.json, scene.json and
+truth.json (poses, plane, projector, MSM centres in every image, timing); a table of
+frames, sizes and the render speed is printed.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ DEFAULT_MARKER_PX = 24.0
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from calibproj.simulate import geometric as defaults
+    from calibproj.simulate import render
 
     parser.add_argument("--scene", required=True, metavar="NAME|FILE", help="preset name or scene.json")
     parser.add_argument("--sequence", metavar="FILE", help="sequence.json to render the videos from")
@@ -49,36 +56,59 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scales", default=DEFAULT_SCALES, help="marker scales (default %(default)s)")
     parser.add_argument("--marker-px", type=float, default=DEFAULT_MARKER_PX,
                         help="marker side at scale 1, projector pixels (default %(default)s)")
+    parser.add_argument("--crf", type=int, default=render.DEFAULT_CRF, metavar="N",
+                        help="videos: x264 constant-rate factor, lower is better (default %(default)s)")
+    parser.add_argument("--preset", default=render.DEFAULT_PRESET,
+                        help="videos: x264 preset (default %(default)s)")
+    parser.add_argument("--supersample", type=int, default=1, metavar="N",
+                        help="videos: N x N samples per pixel (default %(default)s: one, prefiltered)")
+    parser.add_argument("--tail", type=float, default=render.DEFAULT_TAIL_S, metavar="S",
+                        help="videos: seconds recorded after the sequence ends (default %(default)s)")
+    parser.add_argument("--threads", type=int, default=None, metavar="N",
+                        help="videos: worker threads (default one per camera)")
+    parser.add_argument("--ideal", action="store_true",
+                        help="videos: no ambient light, noise, blur, vignetting or gamma")
+    parser.add_argument("--no-progress", action="store_true", help="videos: no progress bars")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
 
 
 def run(args: argparse.Namespace) -> int:
+    if not args.tracks_only:
+        return _render_videos(args)
     from calibproj.simulate.scene import load_scene
 
-    scene = load_scene(args.scene, seed=args.seed)
-    if not args.tracks_only:
-        return _render_videos(scene, args)
-    return _simulate_tracks(scene, args)
+    return _simulate_tracks(load_scene(args.scene, seed=args.seed), args)
 
 
-def _render_videos(scene, args: argparse.Namespace) -> int:
-    import importlib
+def _render_videos(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from calibproj.cli import CommandError
+    from calibproj.simulate import render
 
-    try:
-        render = importlib.import_module("calibproj.simulate.render")
-    except ModuleNotFoundError as error:
-        if error.name != "calibproj.simulate.render":
-            raise
-        raise CommandError(
-            "rendering videos needs calibproj.simulate.render, which this installation does not have; "
-            "use --tracks-only for geometric tracks"
-        ) from None
-    sequence = Path(args.sequence) if args.sequence else None
-    render.simulate_videos(scene, sequence, Path(args.out), seed=args.seed)
+    if not args.sequence:
+        raise CommandError("rendering videos needs --sequence SEQ_DIR/sequence.json (from calibproj generate); "
+                           "or use --tracks-only")
+    options = render.RenderOptions(crf=args.crf, preset=args.preset, supersample=args.supersample,
+                                   tail_s=args.tail, threads=args.threads,
+                                   photometric=render.IDEAL_PHOTOMETRIC if args.ideal else None)
+    # The scene goes by name or path so that errors name the file.
+    simulation = render.simulate_videos(args.scene, Path(args.sequence), Path(args.out), seed=args.seed,
+                                        options=options, progress=not args.no_progress)
+    print(_video_summary(simulation))
     return 0
+
+
+def _video_summary(simulation) -> str:
+    lines = [f"{'camera':<16}{'resolution':>12}{'fps':>8}{'frames':>8}{'MB':>9}"]
+    for name, video in simulation.videos.items():
+        width, height = video.resolution
+        lines.append(f"{name:<16}{f'{width}x{height}':>12}{video.fps:>8.2f}{video.frame_count:>8}"
+                     f"{video.size_bytes / 1e6:>9.1f}")
+    lines.append(f"{simulation.frame_count} frames, {simulation.size_bytes / 1e6:.1f} MB in "
+                 f"{simulation.elapsed_s:.1f} s ({simulation.frames_per_second:.1f} frames/s); "
+                 f"written to {simulation.out}")
+    return "\n".join(lines)
 
 
 def _simulate_tracks(scene, args: argparse.Namespace) -> int:
