@@ -6,6 +6,19 @@ From tracks (e.g. of `calibproj simulate --tracks-only` or `calibproj detect`):
 Writes camera_poses.json (world-to-camera poses in the floor frame: z up, floor z = 0),
 metrics.json (per camera: mean and std reprojection error, inliers, view score, or why
 it failed) and points.ply. An existing results folder is only overwritten with --force.
+The intrinsics used are copied into RESULTS_DIR/intrinsics/ (so that evaluate and the
+report need nothing else), and report.html with report/*.png is written unless
+--no-report.
+
+Metric scale (--scale; without it the unit is arbitrary, the first camera at height 1):
+    camera-height:NAME=METRES          height of a camera's optical centre above the floor
+    distance:CAM_A,CAM_B=METRES        distance between two cameras' optical centres
+    marker-size:[ARRAY/MARKER=]METRES  side of a projected marker at scale 1 on the floor
+                                       (default: the marker nearest the image centre;
+                                       needs --sequence)
+
+Exports (--export yaml,colmap,anipose): calibration_opencv.yaml (cv2.FileStorage),
+colmap/{cameras,images,points3D}.txt (COLMAP text model), calibration.toml (aniposelib).
 """
 
 from __future__ import annotations
@@ -26,6 +39,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="results folder")
     parser.add_argument("--force", action="store_true", help="overwrite the results of an earlier run in --out")
     parser.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
+    parser.add_argument("--scale", metavar="MEASUREMENT",
+                        help="metric scale from one measurement (see above; default: arbitrary unit)")
+    parser.add_argument("--sequence", metavar="FILE",
+                        help="sequence.json of the projection (needed by --scale marker-size)")
+    parser.add_argument("--export", metavar="FORMATS",
+                        help="also write the calibration as yaml, colmap and/or anipose (comma-separated)")
+    parser.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
     add_dataclass_arguments(parser, RegistrationOptions, "registration options")
 
 
@@ -39,17 +59,38 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from calibproj.calibration import calibration_summary
-    from calibproj.io.intrinsics import load_intrinsics_dir
+    from calibproj.export import export_all, parse_formats
+    from calibproj.io.intrinsics import load_intrinsics_dir, write_intrinsics_dir
     from calibproj.registration import RegistrationOptions, calibrate
+    from calibproj.report import write_report
+    from calibproj.scale import apply_scale, check_measurement, parse_scale, read_projected_markers
     from calibproj.tracks import Tracks
 
     out = Path(args.out)
     check_output_folder(out, args.force)
+    measurement = parse_scale(args.scale) if args.scale else None
+    if measurement is not None and measurement.kind == "marker-size" and args.sequence is None:
+        raise ValueError(f"--scale {args.scale}: marker-size needs --sequence (the projection's sequence.json)")
+    formats = parse_formats(args.export) if args.export else []
     tracks = Tracks.read(args.tracks)
     intrinsics = load_intrinsics_dir(args.intrinsics)
+    markers = read_projected_markers(args.sequence, tracks.markers_per_array) if args.sequence else None
+    if measurement is not None:
+        check_measurement(measurement, tracks.camera_names, markers)
     options = dataclass_from_args(RegistrationOptions, args)
     calibration = calibrate(tracks, intrinsics, options)
+    used = {name: intrinsics[name] for name in tracks.camera_names if name in intrinsics}
+    write_intrinsics_dir(out / "intrinsics", used)
+    if measurement is not None:
+        try:
+            calibration = apply_scale(calibration, measurement, markers)
+        except ValueError as error:
+            calibration.save(out)
+            raise ValueError(f"{error}; results written to {out} in arbitrary units") from None
     calibration.save(out)
+    export_all(calibration, formats, out, used, tracks)
+    if not args.no_report:
+        write_report(out, tracks, used)
     rows = calibration_summary(calibration)
     if args.json:
         print(json.dumps(rows, indent=1))

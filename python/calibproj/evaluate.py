@@ -1,0 +1,384 @@
+"""Evaluate a calibration on independent data, as in the paper (section 3.2, Evaluation).
+
+The evaluation data are image observations of points that took no part in the
+calibration (``eval_tracks.json``: the paper records a ChArUco board; the simulator
+draws points in the working volume). With the calibrated poses held fixed:
+
+1. every evaluation point seen by at least two registered cameras is triangulated from
+   one camera pair: the pair whose viewing rays meet at the angle closest to 90
+   degrees, the best-conditioned two-view triangulation (``initialisation="pair"``),
+   or from all its views at once (``"all-views"``), by the linear (DLT) method;
+2. all points are refined together by bundle adjustment with the poses fixed, which
+   minimises the total reprojection error over all cameras;
+3. each camera's reprojection errors (undistorted pixels) give its mean, standard
+   deviation and count; the success rate at a threshold is the percentage of cameras
+   whose mean error is below it, counting as failures the cameras that were not
+   registered, and those without a single evaluation observation.
+
+``evaluate --json`` prints ``{"success_rate": {"0.5": f, "2": f, "5": f}, "cameras":
+{name: {"mean_px", "std_px", "n"}}}`` (percentages; ``mean_px`` and ``std_px`` are
+null for a camera without an error to report).
+
+The reprojection helpers at the end (``project``, ``reprojection_errors``) are also
+what the report and the COLMAP export use to measure a calibration on its own tracks.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calibproj.calibration import Calibration
+from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir
+from calibproj.tracks import Tracks
+
+logger = logging.getLogger(__name__)
+
+THRESHOLDS_PX = (0.5, 2.0, 5.0)
+INITIALISATIONS = ("pair", "all-views")
+LOSSES = ("none", "huber", "cauchy")
+MIN_VIEWS = 2
+INTRINSICS_DIR = "intrinsics"
+
+
+@dataclass
+class EvaluationOptions:
+    """Knobs of the evaluation; the defaults follow the paper.
+
+    Attributes:
+        initialisation: first estimate of each point: ``pair`` (the camera pair whose
+            rays meet closest to a right angle, as the paper's pairwise triangulation)
+            or ``all-views`` (DLT from every registered view).
+        loss: robust loss of the refinement (``none`` minimises the plain total
+            reprojection error, as the paper).
+        loss_scale_px: scale of the robust loss in pixels.
+        max_iterations: iterations of the refinement.
+        num_threads: threads of the refinement.
+    """
+
+    initialisation: str = "pair"
+    loss: str = "none"
+    loss_scale_px: float = 1.0
+    max_iterations: int = 100
+    num_threads: int = 1
+
+    def __post_init__(self) -> None:
+        if self.initialisation not in INITIALISATIONS:
+            raise ValueError(f"initialisation must be one of {INITIALISATIONS}, got {self.initialisation!r}")
+        if self.loss not in LOSSES:
+            raise ValueError(f"loss must be one of {LOSSES}, got {self.loss!r}")
+        if self.max_iterations < 0 or self.num_threads < 1:
+            raise ValueError("max_iterations must be >= 0 and num_threads >= 1")
+
+
+@dataclass(frozen=True)
+class CameraEvaluation:
+    """One camera's reprojection errors on the evaluation data (undistorted pixels).
+
+    ``failure`` says why the camera has no error to report, or is ``None``.
+    ``behind`` counts observations of points that ended up behind the camera; they are
+    left out of the errors (a pose that puts seen points behind it is reported by a
+    warning).
+    """
+
+    mean_px: float | None
+    std_px: float | None
+    n: int
+    failure: str | None = None
+    behind: int = 0
+
+
+@dataclass(frozen=True, eq=False)  # numpy fields
+class Evaluation:
+    """Result of ``evaluate``.
+
+    Attributes:
+        cameras: per camera (the calibration's and those only in the evaluation data).
+        thresholds_px: the success thresholds.
+        point_ids: evaluation points triangulated and refined, ``(E,)``.
+        points: their refined positions in the calibration's floor frame, ``(E, 3)``.
+        errors: per camera, the reprojection error of each of its observations, pixels.
+    """
+
+    cameras: dict[str, CameraEvaluation]
+    thresholds_px: tuple[float, ...] = THRESHOLDS_PX
+    point_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    errors: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def success_rate(self, threshold_px: float) -> float:
+        """Percentage of cameras whose mean error is below ``threshold_px``."""
+        if not self.cameras:
+            return 0.0
+        passed = sum(1 for c in self.cameras.values() if c.mean_px is not None and c.mean_px < threshold_px)
+        return 100.0 * passed / len(self.cameras)
+
+    @property
+    def mean_px(self) -> float | None:
+        """Mean error over every evaluation observation of every camera."""
+        errors = [e for e in self.errors.values() if len(e)]
+        return float(np.mean(np.concatenate(errors))) if errors else None
+
+    def to_json(self) -> dict:
+        """The ``evaluate --json`` document (keys fixed by DESIGN.md)."""
+        return {
+            "success_rate": {_threshold_key(t): self.success_rate(t) for t in self.thresholds_px},
+            "cameras": {
+                name: {"mean_px": c.mean_px, "std_px": c.std_px, "n": c.n} for name, c in self.cameras.items()
+            },
+        }
+
+
+def evaluate(
+    results: Calibration | str | os.PathLike,
+    tracks: Tracks | str | os.PathLike,
+    intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None = None,
+    options: EvaluationOptions | None = None,
+    thresholds_px: tuple[float, ...] = THRESHOLDS_PX,
+) -> Evaluation:
+    """Evaluate a calibration on independent observations (module docstring).
+
+    Args:
+        results: a ``Calibration`` or a results folder (``camera_poses.json``, ...).
+        tracks: evaluation observations, ``Tracks`` or an ``eval_tracks.json``.
+        intrinsics: per-camera intrinsics or their folder; ``None`` reads
+            ``<results>/intrinsics`` (what ``calibrate`` writes there).
+        options: ``EvaluationOptions`` (defaults if ``None``).
+        thresholds_px: success thresholds.
+    """
+    options = options or EvaluationOptions()
+    calibration = load_results(results)
+    intrinsics = resolve_intrinsics(results, intrinsics)
+    tracks = tracks if isinstance(tracks, Tracks) else Tracks.read(tracks)
+    usable = [name for name in calibration.poses if name in tracks.camera_names]
+    missing_intrinsics = [name for name in usable if name not in intrinsics]
+    if missing_intrinsics:
+        raise ValueError(f"no intrinsics for registered camera(s) {', '.join(missing_intrinsics)}")
+    point_ids, points, errors, behind = _triangulate_and_refine(calibration, tracks, intrinsics, usable, options)
+    evaluation = Evaluation(_camera_results(calibration, tracks, errors, behind), tuple(thresholds_px),
+                            point_ids, points, errors)
+    logger.info("evaluation: %d points refined; success %s", len(point_ids),
+                ", ".join(f"{evaluation.success_rate(t):.0f} % under {_threshold_key(t)} px" for t in thresholds_px))
+    return evaluation
+
+
+def load_results(results: Calibration | str | os.PathLike) -> Calibration:
+    """A ``Calibration``, read from a results folder when given a path."""
+    if isinstance(results, Calibration):
+        return results
+    folder = Path(results)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{folder}: no such results folder")
+    return Calibration.load(folder)
+
+
+def resolve_intrinsics(
+    results: Calibration | str | os.PathLike,
+    intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None,
+) -> Mapping[str, Intrinsics]:
+    """Intrinsics given, read from a folder, or from ``<results>/intrinsics``."""
+    if isinstance(intrinsics, Mapping):
+        return intrinsics
+    if intrinsics is not None:
+        return load_intrinsics_dir(intrinsics)
+    if isinstance(results, Calibration):
+        raise ValueError("intrinsics are needed when the calibration is not read from a results folder")
+    folder = Path(results) / INTRINSICS_DIR
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{folder}: no intrinsics in the results folder; give them with --intrinsics DIR")
+    return load_intrinsics_dir(folder)
+
+
+# -- triangulation and refinement ----------------------------------------------------------
+
+
+def _triangulate_and_refine(
+    calibration: Calibration, tracks: Tracks, intrinsics: Mapping[str, Intrinsics], usable: list[str],
+    options: EvaluationOptions,
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], dict[str, int]]:
+    """Points seen by >= 2 registered cameras, triangulated then refined; per-camera errors
+    and per-camera counts of observations whose point lies behind the camera."""
+    tracks = tracks.keep_cameras(usable).with_min_track_length(MIN_VIEWS)
+    R = np.array([calibration.poses[name][0] for name in usable]).reshape(-1, 3, 3)
+    t = np.array([calibration.poses[name][1] for name in usable]).reshape(-1, 3)
+    K = np.array([intrinsics[name].K for name in usable]).reshape(-1, 3, 3)
+    camera_index, point_index, xy = tracks.bundle_arrays()
+    rays = normalised_rays(K[camera_index], xy)
+    points = triangulate_tracks(R, t, camera_index, point_index, rays, tracks.num_points, options.initialisation)
+    finite = np.all(np.isfinite(points), axis=1)[point_index]
+    in_front = finite & (depths(R[camera_index], t[camera_index], np.nan_to_num(points[point_index])) > 0)
+    behind = np.bincount(camera_index[finite & ~in_front], minlength=len(usable))
+    # A point left with one view in front of its cameras is not determined: drop it.
+    kept = tracks.select(in_front).with_min_track_length(MIN_VIEWS)
+    if kept.num_points == 0:
+        logger.warning("no evaluation point is seen by two registered cameras")
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), {}, _by_name(usable, behind)
+    camera_index, point_index, xy = kept.bundle_arrays()
+    points = points[np.searchsorted(tracks.point_ids, kept.point_ids)]
+    points = _refine(R, t, K, camera_index, point_index, xy, points, options)
+    projected, depth = project(K[camera_index], R[camera_index], t[camera_index], points[point_index])
+    in_front = depth > 0
+    behind = behind + np.bincount(camera_index[~in_front], minlength=len(usable))
+    error = np.linalg.norm(projected - xy, axis=1)
+    errors = {name: error[(camera_index == c) & in_front] for c, name in enumerate(usable)}
+    return kept.point_ids, points, errors, _by_name(usable, behind)
+
+
+def _by_name(names: list[str], counts: np.ndarray) -> dict[str, int]:
+    return {name: int(count) for name, count in zip(names, counts)}
+
+
+def _refine(R: np.ndarray, t: np.ndarray, K: np.ndarray, camera_index: np.ndarray, point_index: np.ndarray,
+            xy: np.ndarray, points: np.ndarray, options: EvaluationOptions) -> np.ndarray:
+    """Bundle adjustment of the points with the poses fixed (calibproj._core.ba)."""
+    import cv2
+
+    from calibproj import _core
+
+    if len(xy) == 0:
+        return points
+    poses = np.array([np.concatenate([cv2.Rodrigues(R_c)[0].ravel(), t_c]) for R_c, t_c in zip(R, t)])
+    result = _core.ba.bundle_adjust(
+        camera_index.astype(np.int32), point_index.astype(np.int32), xy, K, poses, points,
+        model="free", loss=options.loss, loss_scale=options.loss_scale_px, max_iterations=options.max_iterations,
+        num_threads=options.num_threads, refine_poses=False,
+    )
+    logger.info("evaluation points refined: cost %.6g -> %.6g in %d iterations", result["initial_cost"],
+                result["final_cost"], result["iterations"])
+    return np.asarray(result["points"], dtype=float).reshape(-1, 3)
+
+
+def normalised_rays(K: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Pinhole normalised coordinates ``K^-1 [u, v, 1]`` (first two), per observation; K is ``(N, 3, 3)``."""
+    return (xy - K[:, :2, 2]) / np.stack([K[:, 0, 0], K[:, 1, 1]], axis=1)
+
+
+def triangulate_tracks(R: np.ndarray, t: np.ndarray, camera_index: np.ndarray, point_index: np.ndarray,
+                       rays: np.ndarray, num_points: int, initialisation: str = "pair") -> np.ndarray:
+    """First estimate of every point (every point must have two views at least).
+
+    calibproj._core has no binding of the C++ ``TriangulateLinear`` yet, so the linear
+    triangulation is done here in numpy.
+    """
+    order = np.argsort(point_index, kind="stable")
+    starts = np.searchsorted(point_index[order], np.arange(num_points + 1))
+    points = np.empty((num_points, 3))
+    for p in range(num_points):
+        views = order[starts[p]:starts[p + 1]]
+        if initialisation == "pair":
+            views = views[list(best_pair(R[camera_index[views]], rays[views]))]
+        points[p] = triangulate_dlt(R[camera_index[views]], t[camera_index[views]], rays[views])
+    return points
+
+
+def best_pair(R: np.ndarray, rays: np.ndarray) -> tuple[int, int]:
+    """The two views whose world rays meet at the angle closest to 90 degrees.
+
+    The uncertainty of a two-view triangulation grows as 1 / sin(angle), so rays
+    nearly parallel or nearly opposite are both poor; the largest sine is best.
+    """
+    directions = np.einsum("nji,nj->ni", R, np.column_stack([rays, np.ones(len(rays))]))  # R^T [x, y, 1]
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    sines = np.linalg.norm(np.cross(directions[:, None, :], directions[None, :, :]), axis=2)
+    a, b = np.unravel_index(int(np.argmax(np.triu(sines, k=1))), sines.shape)
+    return int(a), int(b)
+
+
+def triangulate_dlt(R: np.ndarray, t: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """Linear (DLT) triangulation of one point from ``n >= 2`` views.
+
+    Each view ``x_cam = R X + t`` observed at normalised ``(x, y)`` gives the rows
+    ``x P_3 - P_1`` and ``y P_3 - P_2`` of ``A [X, 1] = 0`` with ``P = [R | t]``;
+    rows are scaled to unit norm so that every view weighs the same.
+    """
+    P = np.concatenate([R, t[:, :, None]], axis=2)  # (n, 3, 4)
+    A = np.concatenate([rays[:, :1] * P[:, 2] - P[:, 0], rays[:, 1:] * P[:, 2] - P[:, 1]])
+    A /= np.linalg.norm(A, axis=1, keepdims=True)
+    homogeneous = np.linalg.svd(A)[2][-1]
+    if abs(homogeneous[3]) < 1e-12:
+        return np.full(3, np.nan)  # a point at infinity: the rays are parallel
+    return homogeneous[:3] / homogeneous[3]
+
+
+# -- reprojection ---------------------------------------------------------------------------
+
+
+def project(K: np.ndarray, R: np.ndarray, t: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Undistorted pixels and depths of points ``X`` (N, 3) in cameras ``K, R, t`` (N, 3, 3), (N, 3, 3), (N, 3)."""
+    in_camera = np.einsum("nij,nj->ni", R, X) + t
+    depth = in_camera[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        normalised = in_camera[:, :2] / depth[:, None]
+    pixels = np.einsum("nij,nj->ni", K[:, :2, :2], normalised) + K[:, :2, 2]
+    return pixels, depth
+
+
+def depths(R: np.ndarray, t: np.ndarray, X: np.ndarray) -> np.ndarray:
+    return np.einsum("nj,nj->n", R[:, 2, :], X) + t[:, 2]
+
+
+def reprojection_errors(
+    calibration: Calibration, tracks: Tracks, intrinsics: Mapping[str, Intrinsics],
+) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Residuals of the calibration on tracks, per registered camera with intrinsics:
+    ``(point_ids (M,), observed xy (M, 2), projected - observed (M, 2))`` of its
+    observations of points the calibration reconstructed (in front of the camera)."""
+    lookup = {int(i): row for row, i in enumerate(calibration.point_ids)}
+    out = {}
+    for name in calibration.poses:
+        if name not in tracks.camera_names or name not in intrinsics:
+            continue
+        ids, xy = tracks.observations(name)
+        rows = np.array([lookup.get(int(i), -1) for i in ids], dtype=np.int64)
+        ids, xy, rows = ids[rows >= 0], xy[rows >= 0], rows[rows >= 0]
+        R, t = calibration.poses[name]
+        n = len(rows)
+        projected, depth = project(np.broadcast_to(intrinsics[name].K, (n, 3, 3)), np.broadcast_to(R, (n, 3, 3)),
+                                   np.broadcast_to(t, (n, 3)), calibration.points[rows])
+        front = depth > 0
+        out[name] = (ids[front], xy[front], projected[front] - xy[front])
+    return out
+
+
+# -- per-camera results ---------------------------------------------------------------------
+
+
+def _camera_results(calibration: Calibration, tracks: Tracks, errors: dict[str, np.ndarray],
+                    behind: dict[str, int]) -> dict[str, CameraEvaluation]:
+    names = list(dict.fromkeys([*calibration.metrics, *calibration.poses, *calibration.failed,
+                                *tracks.camera_names]))
+    cameras = {}
+    for name in names:
+        camera_errors = errors.get(name, np.zeros(0))
+        failure = _failure(calibration, tracks, name, len(camera_errors))
+        if behind.get(name):
+            logger.warning("camera %s: %d evaluation points triangulated behind it; its pose is suspect",
+                           name, behind[name])
+        if failure:
+            cameras[name] = CameraEvaluation(None, None, 0, failure, behind.get(name, 0))
+        else:
+            cameras[name] = CameraEvaluation(float(np.mean(camera_errors)), float(np.std(camera_errors)),
+                                             len(camera_errors), None, behind.get(name, 0))
+    return cameras
+
+
+def _failure(calibration: Calibration, tracks: Tracks, name: str, count: int) -> str | None:
+    if name in calibration.failed:
+        return f"not registered: {calibration.failed[name]}"
+    if name not in calibration.poses:
+        return "not in the calibration"
+    if name not in tracks.camera_names:
+        return "not in the evaluation data"
+    if count == 0:
+        return "no evaluation point seen by this camera and another registered one"
+    return None
+
+
+def _threshold_key(threshold: float) -> str:
+    """``0.5 -> "0.5"``, ``2.0 -> "2"`` (the keys of ``evaluate --json``)."""
+    return f"{threshold:g}"

@@ -1,0 +1,271 @@
+"""The report's plots, drawn on matplotlib's Agg canvas (no display, no pyplot state).
+
+Each function returns PNG bytes. Scene plots use the calibration's floor frame (z up,
+floor z = 0); per-camera plots use image pixels with y pointing down, as OpenCV.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from calibproj.calibration import Calibration
+from calibproj.report.data import CameraView
+
+DEFAULT_DPI = 80
+# Points drawn in the scene plots at most (every k-th point beyond that).
+MAX_SCENE_POINTS = 4000
+# Frustum depth as a share of the scene's extent.
+FRUSTUM_SHARE = 0.12
+# Coverage grid: cells along the longer image side.
+COVERAGE_CELLS = 16
+# Mean-residual arrows: cells along the longer image side.
+ARROW_CELLS = 10
+FAILED_COLOUR = "#c0392b"
+
+
+def png_bytes(figure: Figure, dpi: int = DEFAULT_DPI) -> bytes:
+    FigureCanvasAgg(figure)
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi)
+    return buffer.getvalue()
+
+
+def camera_colours(count: int) -> list[tuple[float, float, float, float]]:
+    from matplotlib import colormaps
+
+    cmap = colormaps["tab10" if count <= 10 else "tab20"]
+    return [cmap(i % cmap.N) for i in range(count)]
+
+
+# -- scene --------------------------------------------------------------------------------
+
+
+def frustum(view: CameraView, depth: float) -> np.ndarray:
+    """The camera centre and the four image corners at ``depth`` in front of it, world frame (5, 3)."""
+    R, t = view.pose
+    width, height = view.image_size()
+    corners = np.array([[-0.5, -0.5], [width - 0.5, -0.5], [width - 0.5, height - 0.5], [-0.5, height - 0.5]])
+    rays = np.column_stack([view.intrinsics.normalize(corners), np.ones(4)]) * depth
+    centre = -R.T @ t
+    return np.vstack([centre, rays @ R + centre])  # R^T ray for each row
+
+
+def _scene_extent(calibration: Calibration) -> tuple[np.ndarray, float]:
+    centres = np.array([calibration.center(name) for name in calibration.poses]).reshape(-1, 3)
+    everything = np.vstack([centres, calibration.points.reshape(-1, 3)])
+    low, high = everything.min(axis=0), everything.max(axis=0)
+    return everything, float(np.max(high - low)) or 1.0
+
+
+def _subsampled(points: np.ndarray) -> np.ndarray:
+    step = max(1, int(np.ceil(len(points) / MAX_SCENE_POINTS)))
+    return points[::step]
+
+
+def _drawable(views: Sequence[CameraView]) -> list[CameraView]:
+    return [v for v in views if v.registered and v.intrinsics is not None]
+
+
+def scene_3d(calibration: Calibration, views: Sequence[CameraView], dpi: int = DEFAULT_DPI) -> bytes:
+    """Cameras as frusta, the floor rectangle under the points and the points, in 3D."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    figure = Figure(figsize=(8.0, 6.5))
+    axes = figure.add_subplot(projection="3d")
+    everything, extent = _scene_extent(calibration)
+    points = _subsampled(calibration.points)
+    if len(points):
+        low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
+        floor = [[low[0], low[1], 0], [high[0], low[1], 0], [high[0], high[1], 0], [low[0], high[1], 0]]
+        axes.add_collection3d(Poly3DCollection([floor], facecolor="#d9d9d9", edgecolor="#999999", alpha=0.35))
+        axes.scatter(points[:, 0], points[:, 1], points[:, 2], s=1, c="#555555", depthshade=False)
+    drawable = _drawable(views)
+    for view, colour in zip(drawable, camera_colours(len(drawable))):
+        corners = frustum(view, FRUSTUM_SHARE * extent)
+        for i in range(1, 5):
+            axes.plot(*corners[[0, i]].T, color=colour, linewidth=1)
+        axes.plot(*corners[[1, 2, 3, 4, 1]].T, color=colour, linewidth=1.5)
+        axes.text(*corners[0], f" {view.name}", color=colour, fontsize=8)
+    low, high = everything.min(axis=0), everything.max(axis=0)
+    axes.set_box_aspect(np.maximum(high - low, 1e-3 * extent))
+    unit = _unit_label(calibration)
+    axes.set_xlabel(f"x {unit}")
+    axes.set_ylabel(f"y {unit}")
+    axes.set_zlabel(f"z {unit}")
+    axes.set_title("cameras, floor and points (floor frame, z up)")
+    figure.subplots_adjust(left=0.0, right=0.95, bottom=0.03, top=0.95)
+    return png_bytes(figure, dpi)
+
+
+def scene_views(calibration: Calibration, views: Sequence[CameraView], dpi: int = DEFAULT_DPI) -> bytes:
+    """Top view (x, y) and side view (x, z) of the cameras, their optical axes and the points."""
+    figure = Figure(figsize=(12.0, 5.0))
+    top, side = figure.subplots(1, 2)
+    _, extent = _scene_extent(calibration)
+    points = _subsampled(calibration.points)
+    drawable = _drawable(views)
+    unit = _unit_label(calibration)
+    for axes, (i, j), title in ((top, (0, 1), "from above"), (side, (0, 2), "from the side (y towards the viewer)")):
+        if len(points):
+            axes.scatter(points[:, i], points[:, j], s=1, c="#777777", label="points")
+        for view, colour in zip(drawable, camera_colours(len(drawable))):
+            corners = frustum(view, FRUSTUM_SHARE * extent)
+            axis_end = corners[1:].mean(axis=0)
+            axes.plot(*corners[0, [i, j]], "o", color=colour, markersize=6)
+            axes.plot([corners[0, i], axis_end[i]], [corners[0, j], axis_end[j]], color=colour, linewidth=1.5)
+            axes.annotate(view.name, corners[0, [i, j]], textcoords="offset points", xytext=(4, 4),
+                          fontsize=8, color=colour)
+        axes.set_aspect("equal", adjustable="datalim")
+        axes.set_xlabel(f"{'xyz'[i]} {unit}")
+        axes.set_ylabel(f"{'xyz'[j]} {unit}")
+        axes.set_title(title)
+        axes.grid(True, linewidth=0.3)
+    side.axhline(0.0, color="#999999", linewidth=1)
+    figure.subplots_adjust(left=0.06, right=0.98, bottom=0.11, top=0.93, wspace=0.18)
+    return png_bytes(figure, dpi)
+
+
+def _unit_label(calibration: Calibration) -> str:
+    return "[m]" if calibration.unit == "m" else "[arbitrary unit]"
+
+
+# -- errors of all cameras --------------------------------------------------------------------
+
+
+def error_bars(views: Sequence[CameraView], dpi: int = DEFAULT_DPI) -> bytes:
+    """Mean reprojection error per camera with its standard deviation; failed cameras marked."""
+    figure = Figure(figsize=(max(6.0, 0.7 * len(views) + 2.0), 3.6))
+    axes = figure.subplots()
+    positions = np.arange(len(views))
+    means = [v.metrics.mean_px if v.metrics and v.metrics.mean_px is not None else 0.0 for v in views]
+    stds = [v.metrics.std_px if v.metrics and v.metrics.std_px is not None else 0.0 for v in views]
+    colours = ["#2b7bba" if v.registered else FAILED_COLOUR for v in views]
+    axes.bar(positions, means, yerr=stds, color=colours, capsize=3)
+    for position, view in zip(positions, views):
+        if not view.registered:
+            axes.text(position, 0.0, "failed", rotation=90, ha="center", va="bottom", color=FAILED_COLOUR)
+    axes.set_xticks(positions, [v.name for v in views], rotation=30, ha="right")
+    axes.set_ylabel("reprojection error [px]")
+    axes.set_title("mean (bar) and standard deviation (whisker) of the inlier reprojection errors")
+    axes.grid(True, axis="y", linewidth=0.3)
+    figure.tight_layout()  # camera names of any length below the bars
+    return png_bytes(figure, dpi)
+
+
+# -- one camera -------------------------------------------------------------------------------
+
+
+def camera_panels(view: CameraView, dpi: int = DEFAULT_DPI) -> bytes:
+    """Error histogram, residuals over the image and image coverage of one camera."""
+    figure = Figure(figsize=(14.0, 4.0))
+    histogram, residuals, coverage = figure.subplots(1, 3, gridspec_kw={"width_ratios": [1.0, 1.45, 1.3]})
+    if view.registered and len(view.residuals):
+        _histogram(histogram, view.errors, view.metrics)
+        _residual_map(figure, residuals, view)
+    else:
+        reason = view.failure or "no observation of a reconstructed point"
+        for axes in (histogram, residuals):
+            axes.text(0.5, 0.5, f"failed: {reason}" if view.failure else reason, ha="center", va="center",
+                      wrap=True, color=FAILED_COLOUR if view.failure else "black", transform=axes.transAxes)
+            axes.set_axis_off()
+    _coverage(figure, coverage, view)
+    figure.suptitle(view.name, fontsize=12, x=0.01, ha="left")
+    figure.subplots_adjust(left=0.05, right=0.94, bottom=0.13, top=0.84, wspace=0.42)
+    return png_bytes(figure, dpi)
+
+
+def _histogram(axes, errors: np.ndarray, metrics) -> None:
+    limit = max(float(np.percentile(errors, 99.0)), 3.0 * float(np.mean(errors)), 1e-3)
+    shown = errors[errors <= limit]
+    axes.hist(shown, bins=40, range=(0.0, limit), color="#2b7bba")
+    mean = float(np.mean(errors))
+    axes.axvline(mean, color="black", linewidth=1, label=f"mean of all {mean:.3f} px")
+    if metrics is not None and metrics.mean_px is not None:
+        axes.axvline(metrics.mean_px, color="#e67e22", linewidth=1, linestyle="--",
+                     label=f"mean of inliers {metrics.mean_px:.3f} px")
+    hidden = len(errors) - len(shown)
+    title = f"reprojection error, {len(errors)} observations"
+    axes.set_title(title + (f"\n({hidden} beyond {limit:.2f} px not shown)" if hidden else ""), fontsize=10)
+    axes.set_xlabel("error [px]")
+    axes.set_ylabel("observations")
+    axes.legend(fontsize=8)
+
+
+def _image_frame(axes, view: CameraView) -> None:
+    size = view.image_size()
+    if size is not None:
+        width, height = size
+        axes.set_xlim(-0.5, width - 0.5)
+        axes.set_ylim(height - 0.5, -0.5)  # y down, as the image
+    axes.set_aspect("equal")
+    axes.set_xlabel("x [px]")
+    axes.set_ylabel("y [px]")
+
+
+def _residual_map(figure: Figure, axes, view: CameraView) -> None:
+    """Each observation as a dot coloured by its error, and the mean residual of each
+    coverage cell as an arrow: noise averages out in the arrows, a systematic error
+    (a wrong distortion model, a bad pose) shows as a pattern."""
+    errors = view.errors
+    clip = max(float(np.percentile(errors, 99.0)), 1e-6)
+    x, y = view.residual_at_px.T
+    dots = axes.scatter(x, y, s=2, c=np.minimum(errors, clip), cmap="viridis", vmin=0.0, vmax=clip)
+    colourbar = figure.colorbar(dots, ax=axes, fraction=0.046, pad=0.02)
+    colourbar.set_label("error [px]")
+    size = view.image_size() or (float(np.ptp(x)) + 1.0, float(np.ptp(y)) + 1.0)
+    centres, means = _cell_means(view.residual_at_px, view.residuals, size, ARROW_CELLS)
+    longest = float(np.max(np.linalg.norm(means, axis=1))) if len(means) else 0.0
+    if longest > 0:
+        magnify = 0.8 * max(size) / ARROW_CELLS / longest  # the longest arrow spans most of a cell
+        axes.quiver(centres[:, 0], centres[:, 1], magnify * means[:, 0], magnify * means[:, 1], color="#d62728",
+                    angles="xy", scale_units="xy", scale=1.0, width=0.004)
+        note = f"arrows: mean residual per cell x{magnify:.0f} (longest {longest:.2f} px)"
+    else:
+        note = "no residual"
+    _image_frame(axes, view)
+    axes.set_title(f"error over the image\n{note}", fontsize=10)
+
+
+def _cell_means(at: np.ndarray, residuals: np.ndarray, size: tuple[float, float],
+                cells: int) -> tuple[np.ndarray, np.ndarray]:
+    """Centres of the cells of a grid over the image holding observations, and the mean residual in each."""
+    width, height = size
+    step = max(width, height) / cells
+    column = np.clip(((at[:, 0] + 0.5) // step).astype(int), 0, int(np.ceil(width / step)) - 1)
+    row = np.clip(((at[:, 1] + 0.5) // step).astype(int), 0, int(np.ceil(height / step)) - 1)
+    keys, inverse, counts = np.unique(np.column_stack([column, row]), axis=0, return_inverse=True,
+                                      return_counts=True)
+    inverse = inverse.ravel()
+    sums = np.zeros((len(keys), 2))
+    np.add.at(sums, inverse, residuals)
+    centres = (keys + 0.5) * step - 0.5
+    return centres, sums / counts[:, None]
+
+
+def _coverage(figure: Figure, axes, view: CameraView) -> None:
+    size = view.image_size()
+    points = view.observed_px
+    if size is None:
+        axes.text(0.5, 0.5, "no intrinsics", ha="center", va="center", transform=axes.transAxes)
+        axes.set_axis_off()
+        return
+    width, height = size
+    cells_x = COVERAGE_CELLS if width >= height else max(1, round(COVERAGE_CELLS * width / height))
+    cells_y = COVERAGE_CELLS if height > width else max(1, round(COVERAGE_CELLS * height / width))
+    counts, _, _ = np.histogram2d(points[:, 0], points[:, 1], bins=(cells_x, cells_y),
+                                  range=((-0.5, width - 0.5), (-0.5, height - 0.5)))
+    image = axes.imshow(counts.T, extent=(-0.5, width - 0.5, height - 0.5, -0.5), cmap="Greens",
+                        interpolation="nearest", vmin=0)
+    if len(points):
+        axes.scatter(points[:, 0], points[:, 1], s=0.3, c="#333333", alpha=0.5)
+    colourbar = figure.colorbar(image, ax=axes, fraction=0.046, pad=0.02)
+    colourbar.set_label("observations per cell")
+    _image_frame(axes, view)
+    covered = 100.0 * np.count_nonzero(counts) / counts.size
+    axes.set_title(f"coverage: {len(points)} observations\nin {covered:.0f} % of {cells_x}x{cells_y} cells",
+                   fontsize=10)
