@@ -24,7 +24,7 @@ Eigen::Vector4d FitPlaneRobust(const ba::PointMatrix& points, int rounds, double
   const int n_points = static_cast<int>(points.rows());
   if (n_points < 3) throw std::invalid_argument("cannot fit the floor plane to " + std::to_string(n_points) + " points");
   std::vector<bool> inlier(n_points, true);
-  Eigen::Vector3d normal, centroid;
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(), centroid = Eigen::Vector3d::Zero();
   for (int round = 0; round < rounds; ++round) {
     centroid.setZero();
     int count = 0;

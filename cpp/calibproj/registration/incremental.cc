@@ -12,7 +12,12 @@ void Log(const std::function<void(const std::string&)>& log, const std::string& 
 
 }  // namespace
 
-RunSummary Run(Reconstruction& reconstruction, const std::function<void(const std::string&)>& log) {
+RunSummary Run(Reconstruction& reconstruction, const std::function<void(const std::string&)>& log,
+               const std::vector<std::string>& camera_names) {
+  const auto name = [&camera_names](int camera) {
+    return camera >= 0 && camera < static_cast<int>(camera_names.size()) ? camera_names[camera]
+                                                                          : std::to_string(camera);
+  };
   RunSummary summary;
   for (const PairCandidate& pair : reconstruction.RankInitialPairs()) {
     summary.initial = reconstruction.Initialize(pair.camera1, pair.camera2);
@@ -21,7 +26,7 @@ RunSummary Run(Reconstruction& reconstruction, const std::function<void(const st
       summary.initialized = true;
       break;
     }
-    Log(log, "initial pair " + std::to_string(pair.camera1) + "-" + std::to_string(pair.camera2) +
+    Log(log, "initial pair " + name(pair.camera1) + "-" + name(pair.camera2) +
                  " rejected: " + summary.initial.reason);
   }
   if (!summary.initialized) {
@@ -29,20 +34,19 @@ RunSummary Run(Reconstruction& reconstruction, const std::function<void(const st
     return summary;
   }
   reconstruction.Adjust(false);
-  Log(log, "initial pair " + std::to_string(summary.initial_pair.camera1) + "-" +
-               std::to_string(summary.initial_pair.camera2) + ": " + std::to_string(summary.initial.points) +
+  Log(log, "initial pair " + name(summary.initial_pair.camera1) + "-" + name(summary.initial_pair.camera2) + ": " + std::to_string(summary.initial.points) +
                " points");
   for (NextCameraCandidate next = reconstruction.ChooseNextCamera(); next.camera >= 0;
        next = reconstruction.ChooseNextCamera()) {
     const RegisterResult registered = reconstruction.RegisterCamera(next.camera);
     if (!registered.success) {
-      Log(log, "camera " + std::to_string(next.camera) + " failed: " + registered.reason);
+      Log(log, "camera " + name(next.camera) + " failed: " + registered.reason);
       continue;
     }
     const int added = reconstruction.AddPoints(next.camera);
     reconstruction.Adjust(false);
     reconstruction.FilterOutliers();
-    Log(log, "camera " + std::to_string(next.camera) + " registered: " + std::to_string(registered.inliers) +
+    Log(log, "camera " + name(next.camera) + " registered: " + std::to_string(registered.inliers) +
                  " inliers, " + std::to_string(added) + " new points");
   }
   reconstruction.FailUnregistered();

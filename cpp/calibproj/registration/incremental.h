@@ -4,6 +4,7 @@
 
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "calibproj/registration/reconstruction.h"
 
@@ -16,7 +17,9 @@ struct RunSummary {
   RefineResult refined;
 };
 
-// Progress messages (one per step) go to `log` when it is set.
-RunSummary Run(Reconstruction& reconstruction, const std::function<void(const std::string&)>& log = {});
+// Progress messages (one per step) go to `log` when it is set; they name cameras by
+// `camera_names` when given, else by index.
+RunSummary Run(Reconstruction& reconstruction, const std::function<void(const std::string&)>& log = {},
+               const std::vector<std::string>& camera_names = {});
 
 }  // namespace calibproj::registration

@@ -336,7 +336,7 @@ InitialPairResult Reconstruction::Initialize(int camera1, int camera2) {
   double best_cost = std::numeric_limits<double>::infinity();
   ba::PoseMatrix best_poses;
   ba::PointMatrix best_points;
-  Eigen::Vector4d best_plane;
+  Eigen::Vector4d best_plane = Eigen::Vector4d::Zero();
   std::vector<bool> best_reconstructed;
   for (const auto& motion : motions) {
     SetInitialStructure(camera1, camera2, motion.R, motion.t, motion.n);

@@ -1,0 +1,28 @@
+#pragma once
+// `calibproj-native calibrate`: tracks + intrinsics -> camera_poses.json, metrics.json,
+// points.ply, with the same registration steps (calibproj::registration::Run) and
+// options as `calibproj calibrate --tracks`.
+
+#include <CLI/CLI.hpp>
+#include <memory>
+#include <string>
+
+#include "calibproj/registration/reconstruction.h"
+
+namespace calibproj::app {
+
+struct CalibrateArguments {
+  std::string tracks, intrinsics, out;
+  bool force = false;
+  std::string model = "coplanar";
+  std::string loss = "none";
+  registration::Options options;
+};
+
+// Adds the subcommand and its options to the app; the returned arguments are filled
+// when the command line is parsed.
+std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App** command);
+
+int RunCalibrate(const CalibrateArguments& arguments);
+
+}  // namespace calibproj::app

@@ -1,0 +1,31 @@
+#pragma once
+// Schema-versioned JSON files of calibproj (docs/conventions.md), read and written
+// with the messages of the Python package, and atomic writes.
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <string>
+
+namespace calibproj::app {
+
+// A bad input file or argument: printed as one line, exit status 2.
+class InputError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Reads a calibproj JSON file of the given kind ("tracks", "intrinsics", ...), checking
+// its "schema" tag; InputError names the file and the problem.
+nlohmann::json ReadSchemaJson(const std::filesystem::path& path, const std::string& kind, int major);
+
+// Parses any JSON file (InputError naming the file when it is not JSON).
+nlohmann::json ReadJson(const std::filesystem::path& path);
+
+// Writes text to a temporary file in the same folder, then renames it over `path`.
+void AtomicWrite(const std::filesystem::path& path, const std::string& text);
+
+// The document with its schema tag first, indented like the Python writer.
+std::string DumpSchemaJson(const std::string& kind, int major, const nlohmann::ordered_json& body);
+
+}  // namespace calibproj::app

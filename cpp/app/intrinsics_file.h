@@ -1,0 +1,30 @@
+#pragma once
+// Per-camera intrinsics files: ours (calibproj.intrinsics/1 JSON), the reference code's
+// JSON (sensors.RGB.intrinsics.data) and OpenCV YAML/XML, as the Python package reads them.
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace calibproj::app {
+
+struct CameraIntrinsics {
+  std::string name;
+  bool has_resolution = false;
+  double width = 0.0, height = 0.0;
+  Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
+  std::vector<double> dist;
+
+  // The image size, or twice the principal point when the file gives none.
+  double ImageWidth() const { return has_resolution ? width : 2.0 * K(0, 2) + 1.0; }
+  double ImageHeight() const { return has_resolution ? height : 2.0 * K(1, 2) + 1.0; }
+};
+
+CameraIntrinsics ReadIntrinsics(const std::filesystem::path& path);
+
+// Every intrinsics file of a folder, keyed by camera name (the file stem).
+std::map<std::string, CameraIntrinsics> LoadIntrinsicsDir(const std::filesystem::path& directory);
+
+}  // namespace calibproj::app

@@ -1,0 +1,114 @@
+#include "tracks_file.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "files.h"
+
+namespace calibproj::app {
+
+namespace fs = std::filesystem;
+
+Tracks MakeTracks(std::vector<std::string> cameras, const std::vector<int>& camera,
+                  const std::vector<std::int64_t>& ids, const std::vector<Eigen::Vector2d>& xy,
+                  std::optional<int> markers_per_array) {
+  std::vector<size_t> order(ids.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return std::tie(camera[a], ids[a]) < std::tie(camera[b], ids[b]);
+  });
+  Tracks tracks;
+  tracks.cameras = std::move(cameras);
+  tracks.markers_per_array = markers_per_array;
+  tracks.point_ids = ids;
+  std::sort(tracks.point_ids.begin(), tracks.point_ids.end());
+  tracks.point_ids.erase(std::unique(tracks.point_ids.begin(), tracks.point_ids.end()), tracks.point_ids.end());
+  const int n = static_cast<int>(order.size());
+  tracks.camera_index.resize(n);
+  tracks.point_index.resize(n);
+  tracks.xy.resize(n, 2);
+  for (int k = 0; k < n; ++k) {
+    const size_t i = order[k];
+    if (k > 0 && camera[i] == camera[order[k - 1]] && ids[i] == ids[order[k - 1]]) {
+      throw std::invalid_argument("camera '" + tracks.cameras[camera[i]] + "' observes point " +
+                                  std::to_string(ids[i]) + " twice");
+    }
+    tracks.camera_index(k) = camera[i];
+    tracks.point_index(k) = static_cast<int>(
+        std::lower_bound(tracks.point_ids.begin(), tracks.point_ids.end(), ids[i]) - tracks.point_ids.begin());
+    tracks.xy.row(k) = xy[i].transpose();
+  }
+  return tracks;
+}
+
+Tracks Tracks::WithoutCameras(const std::vector<std::string>& names) const {
+  std::vector<std::string> kept;
+  std::vector<int> remap(cameras.size(), -1);
+  for (size_t c = 0; c < cameras.size(); ++c) {
+    if (std::find(names.begin(), names.end(), cameras[c]) == names.end()) {
+      remap[c] = static_cast<int>(kept.size());
+      kept.push_back(cameras[c]);
+    }
+  }
+  std::vector<int> camera;
+  std::vector<std::int64_t> ids;
+  std::vector<Eigen::Vector2d> pixels;
+  for (int i = 0; i < camera_index.size(); ++i) {
+    if (remap[camera_index(i)] < 0) continue;
+    camera.push_back(remap[camera_index(i)]);
+    ids.push_back(point_ids[point_index(i)]);
+    pixels.push_back(xy.row(i).transpose());
+  }
+  return MakeTracks(kept, camera, ids, pixels, markers_per_array);
+}
+
+Tracks ReadTracks(const fs::path& path) {
+  const nlohmann::json document = ReadSchemaJson(path, "tracks", 1);
+  try {
+    const auto& names_json = document.at("cameras");
+    const auto& observations = document.at("observations");
+    if (!names_json.is_array()) throw std::invalid_argument("cameras: expected a list of names");
+    if (!observations.is_object()) throw std::invalid_argument("observations: expected an object {camera: {point_ids, xy}}");
+    if (!document.value("undistorted", true)) throw std::invalid_argument("only undistorted observations are supported");
+    std::vector<std::string> names = names_json.get<std::vector<std::string>>();
+    std::vector<int> camera;
+    std::vector<std::int64_t> ids;
+    std::vector<Eigen::Vector2d> pixels;
+    for (const auto& [name, entry] : observations.items()) {
+      if (std::find(names.begin(), names.end(), name) == names.end()) {
+        throw std::invalid_argument("observations of camera(s) ['" + name + "'] not listed in cameras");
+      }
+    }
+    for (size_t c = 0; c < names.size(); ++c) {
+      if (!observations.contains(names[c])) continue;
+      const auto& entry = observations.at(names[c]);
+      const auto camera_ids = entry.at("point_ids").get<std::vector<std::int64_t>>();
+      const auto camera_xy = entry.at("xy").get<std::vector<std::vector<double>>>();
+      if (camera_ids.size() != camera_xy.size()) {
+        throw std::invalid_argument("observations." + names[c] + ": " + std::to_string(camera_ids.size()) +
+                                    " point_ids but " + std::to_string(camera_xy.size()) + " xy");
+      }
+      for (size_t k = 0; k < camera_ids.size(); ++k) {
+        if (camera_xy[k].size() != 2 || !std::isfinite(camera_xy[k][0]) || !std::isfinite(camera_xy[k][1])) {
+          throw std::invalid_argument("observations must be finite pixel pairs");
+        }
+        if (camera_ids[k] < 0) throw std::invalid_argument("point ids must be non-negative");
+        camera.push_back(static_cast<int>(c));
+        ids.push_back(camera_ids[k]);
+        pixels.emplace_back(camera_xy[k][0], camera_xy[k][1]);
+      }
+    }
+    std::optional<int> markers;
+    if (document.contains("markers_per_array") && !document.at("markers_per_array").is_null()) {
+      markers = document.at("markers_per_array").get<int>();
+    }
+    return MakeTracks(names, camera, ids, pixels, markers);
+  } catch (const nlohmann::json::exception& error) {
+    throw InputError(path.string() + ": " + error.what());
+  } catch (const std::invalid_argument& error) {
+    throw InputError(path.string() + ": " + error.what());
+  }
+}
+
+}  // namespace calibproj::app

@@ -1,0 +1,35 @@
+#pragma once
+// tracks.json (calibproj.tracks/1): per camera the undistorted pixels of the points it
+// sees. Observations are ordered by camera, then point id, as the Python Tracks does,
+// so both drive the registration with identical inputs.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "calibproj/ba/bundle_adjuster.h"
+
+namespace calibproj::app {
+
+struct Tracks {
+  std::vector<std::string> cameras;
+  std::vector<std::int64_t> point_ids;  // sorted, unique
+  Eigen::VectorXi camera_index;         // per observation
+  Eigen::VectorXi point_index;          // per observation, into point_ids
+  ba::PixelMatrix xy;                   // per observation
+  std::optional<int> markers_per_array;
+
+  // The same tracks without the named cameras; points nobody sees any more are dropped.
+  Tracks WithoutCameras(const std::vector<std::string>& names) const;
+};
+
+Tracks ReadTracks(const std::filesystem::path& path);
+
+// Builds tracks from unordered observations (checks duplicates, sorts, indexes points).
+Tracks MakeTracks(std::vector<std::string> cameras, const std::vector<int>& camera, const std::vector<std::int64_t>& ids,
+                  const std::vector<Eigen::Vector2d>& xy, std::optional<int> markers_per_array);
+
+}  // namespace calibproj::app

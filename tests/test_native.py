@@ -1,0 +1,110 @@
+"""The standalone executable calibproj-native against the Python command line."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibproj.simulate import simulate_tracks
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def find_native() -> Path:
+    """The installed executable (next to this interpreter), else the developer build."""
+    candidates = [
+        Path(sys.executable).parent / "calibproj-native",
+        Path(shutil.which("calibproj-native") or "/nonexistent"),
+        REPO / "build" / "dev" / "cpp" / "app" / "calibproj-native",
+    ]
+    for candidate in candidates:
+        if candidate.is_file() and os.access(candidate, os.X_OK):
+            return candidate
+    raise FileNotFoundError(f"calibproj-native not found in {[str(c) for c in candidates]}")
+
+
+NATIVE = find_native()
+
+
+def run_python(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "calibproj", *args], capture_output=True, text=True)
+
+
+def run_native(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([str(NATIVE), *args], capture_output=True, text=True, env=env)
+
+
+@pytest.fixture(scope="module")
+def simulation(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("sim")
+    simulate_tracks("paper", out, noise_px=0.5, seed=11, outlier_fraction=0.02)
+    return out
+
+
+@pytest.mark.parametrize("model", ["coplanar", "free"])
+def test_native_and_python_give_the_same_calibration(simulation: Path, tmp_path: Path, model: str) -> None:
+    common = ["--tracks", str(simulation / "tracks.json"), "--intrinsics", str(simulation / "intrinsics"),
+              "--model", model]
+    python = run_python("calibrate", *common, "--out", str(tmp_path / "python"))
+    assert python.returncode == 0, python.stderr
+    # No Python on PATH: the executable needs none.
+    native = run_native("calibrate", *common, "--out", str(tmp_path / "native"), env={"PATH": "/nonexistent"})
+    assert native.returncode == 0, native.stderr
+
+    poses_py = json.loads((tmp_path / "python" / "camera_poses.json").read_text())
+    poses_cc = json.loads((tmp_path / "native" / "camera_poses.json").read_text())
+    assert poses_py["cameras"].keys() == poses_cc["cameras"].keys()
+    for name, pose in poses_py["cameras"].items():
+        np.testing.assert_allclose(poses_cc["cameras"][name]["R"], pose["R"], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(poses_cc["cameras"][name]["t"], pose["t"], rtol=0, atol=1e-9)
+    assert poses_cc["failed"] == poses_py["failed"]
+
+    metrics_py = json.loads((tmp_path / "python" / "metrics.json").read_text())
+    metrics_cc = json.loads((tmp_path / "native" / "metrics.json").read_text())
+    assert metrics_cc["registration_order"] == metrics_py["registration_order"]
+    for name, entry in metrics_py["cameras"].items():
+        for key, value in entry.items():
+            if isinstance(value, float):
+                assert metrics_cc["cameras"][name][key] == pytest.approx(value, rel=1e-9, abs=1e-12), (name, key)
+            else:
+                assert metrics_cc["cameras"][name][key] == value, (name, key)
+    ply_py = (tmp_path / "python" / "points.ply").read_text().splitlines()
+    ply_cc = (tmp_path / "native" / "points.ply").read_text().splitlines()
+    assert len(ply_py) == len(ply_cc)
+
+
+def error_line(result: subprocess.CompletedProcess) -> str:
+    """The message after 'error: ' of the one-line error report."""
+    lines = [line for line in result.stderr.splitlines() if ": error: " in line]
+    assert len(lines) == 1, result.stderr
+    return lines[0].split(": error: ", 1)[1]
+
+
+def test_bad_inputs_fail_with_the_same_messages(simulation: Path, tmp_path: Path) -> None:
+    tracks, intrinsics = str(simulation / "tracks.json"), str(simulation / "intrinsics")
+    existing = tmp_path / "existing"
+    assert run_python("calibrate", "--tracks", tracks, "--intrinsics", intrinsics, "--out", str(existing)).returncode == 0
+    cases = [
+        ["--tracks", str(tmp_path / "missing.json"), "--intrinsics", intrinsics, "--out", str(tmp_path / "a")],
+        ["--tracks", str(simulation / "truth.json"), "--intrinsics", intrinsics, "--out", str(tmp_path / "b")],
+        ["--tracks", tracks, "--intrinsics", str(tmp_path / "nowhere"), "--out", str(tmp_path / "c")],
+        ["--tracks", tracks, "--intrinsics", intrinsics, "--out", str(existing)],
+    ]
+    for case in cases:
+        python, native = run_python("calibrate", *case), run_native("calibrate", *case)
+        assert python.returncode == 2 and native.returncode == 2, (case, python.stderr, native.stderr)
+        assert error_line(native) == error_line(python)
+
+
+def test_native_help_and_unknown_options() -> None:
+    assert run_native("--help").returncode == 0
+    assert "--tracks" in run_native("calibrate", "--help").stdout
+    assert run_native("calibrate", "--no-such-option").returncode != 0
+    assert run_native().returncode != 0
