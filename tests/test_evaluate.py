@@ -1,0 +1,119 @@
+"""Evaluation on independent data (paper section 3.2): triangulation, refinement with the
+poses fixed, per-camera errors and success rates."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from calibproj.cli import main
+from calibproj.evaluate import EvaluationOptions, best_pair, evaluate, triangulate_dlt
+from calibproj.registration import calibrate
+from calibproj.simulate import simulate_tracks
+from calibproj.synthetic import matrix_from_rotvec
+
+NOISE_PX = 0.5
+
+
+@pytest.fixture(scope="module")
+def paper():
+    sim = simulate_tracks("paper", None, noise_px=NOISE_PX, seed=7)
+    return sim, calibrate(sim.tracks, sim.intrinsics)
+
+
+def test_paper_rig_is_a_full_success_at_2_px(paper) -> None:
+    sim, calibration = paper
+    evaluation = evaluate(calibration, sim.eval_tracks, sim.intrinsics)
+    document = evaluation.to_json()
+    assert set(document) == {"success_rate", "cameras"}
+    assert set(document["success_rate"]) == {"0.5", "2", "5"}
+    assert document["success_rate"]["2"] == 100.0 and document["success_rate"]["5"] == 100.0
+    assert list(document["cameras"]) == sim.scene.camera_names
+    for camera in document["cameras"].values():
+        assert set(camera) == {"mean_px", "std_px", "n"}
+        assert camera["n"] > 100
+        # Gaussian noise of sigma per coordinate: errors average about 1.25 sigma, less
+        # what the refined points absorb; a calibration error would add to it.
+        assert 0.6 * NOISE_PX < camera["mean_px"] < 1.3 * NOISE_PX
+
+
+def test_both_initialisations_refine_to_the_same_points(paper) -> None:
+    sim, calibration = paper
+    pair = evaluate(calibration, sim.eval_tracks, sim.intrinsics, EvaluationOptions(initialisation="pair"))
+    views = evaluate(calibration, sim.eval_tracks, sim.intrinsics, EvaluationOptions(initialisation="all-views"))
+    np.testing.assert_array_equal(pair.point_ids, views.point_ids)
+    np.testing.assert_allclose(pair.points, views.points, atol=1e-6)
+
+
+def test_failed_and_wrong_cameras_count_as_failures(paper) -> None:
+    sim, calibration = paper
+    poses = dict(calibration.poses)
+    del poses["near2"]
+    R, t = poses["far3"]
+    poses["far3"] = (matrix_from_rotvec(np.radians([0.0, 2.0, 0.0])) @ R, t)  # two degrees off
+    broken = dataclasses.replace(calibration, poses=poses, failed={"near2": "too few points"})
+    evaluation = evaluate(broken, sim.eval_tracks, sim.intrinsics)
+    assert evaluation.cameras["near2"].mean_px is None and "too few points" in evaluation.cameras["near2"].failure
+    assert evaluation.cameras["far3"].mean_px > 5.0
+    assert evaluation.to_json()["success_rate"]["5"] == pytest.approx(80.0)  # 8 of 10 cameras
+    assert evaluation.to_json()["cameras"]["near2"] == {"mean_px": None, "std_px": None, "n": 0}
+
+
+def test_linear_triangulation_and_pair_choice() -> None:
+    rng = np.random.default_rng(0)
+    X = np.array([0.3, -0.2, 0.5])
+    R = np.array([matrix_from_rotvec(w) for w in rng.normal(0.0, 0.3, size=(4, 3))])
+    t = np.array([-R_c @ c for R_c, c in zip(R, [[0, 0, -3.0], [3.0, 0, 0.5], [0.1, 0.1, -3.1], [0, 3.0, 0.2]])])
+    in_camera = np.einsum("nij,j->ni", R, X) + t
+    rays = in_camera[:, :2] / in_camera[:, 2:]
+    np.testing.assert_allclose(triangulate_dlt(R, t, rays), X, atol=1e-9)
+    np.testing.assert_allclose(triangulate_dlt(R[:2], t[:2], rays[:2]), X, atol=1e-9)
+    # Cameras 0 and 2 look along nearly the same ray; a right-angled pair is preferred.
+    assert set(best_pair(R, rays)) != {0, 2}
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    """A results folder written by the command line, and the simulation it came from."""
+    root = tmp_path_factory.mktemp("evaluate")
+    simulate_tracks("small", root / "sim", noise_px=0.3, seed=4)
+    status = main(["calibrate", "--tracks", str(root / "sim" / "tracks.json"), "--intrinsics",
+                   str(root / "sim" / "intrinsics"), "--out", str(root / "results"), "--no-report"])
+    assert status == 0
+    return root
+
+
+def test_cli_json_with_the_results_intrinsics(results, capsys) -> None:
+    capsys.readouterr()
+    status = main(["evaluate", str(results / "results"), "--tracks", str(results / "sim" / "eval_tracks.json"),
+                   "--json"])
+    assert status == 0
+    document = json.loads(capsys.readouterr().out)
+    assert document["success_rate"] == {"0.5": 100.0, "2": 100.0, "5": 100.0}
+    assert set(document["cameras"]) == {"cam1", "cam2", "cam3"}
+    status = main(["evaluate", str(results / "results"), "--tracks", str(results / "sim" / "eval_tracks.json"),
+                   "--intrinsics", str(results / "sim" / "intrinsics")])
+    assert status == 0
+    assert "100 % under 2 px" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "arguments, message",
+    [
+        (["{root}/absent", "--tracks", "{root}/sim/eval_tracks.json"], "no such results folder"),
+        (["{root}/sim", "--tracks", "{root}/sim/eval_tracks.json"], "camera_poses.json: no such file"),
+        (["{root}/results", "--tracks", "{root}/sim/absent.json"], "absent.json: no such file"),
+        (["{root}/results", "--tracks", "{root}/sim/eval_tracks.json", "--intrinsics", "{root}/none"],
+         "no such intrinsics directory"),
+        (["{root}/results", "--tracks", "{root}/sim/eval_tracks.json", "--initialisation", "best"],
+         "initialisation must be one of"),
+    ],
+)
+def test_cli_bad_invocations_exit_with_one_line(results, capsys, arguments: list[str], message: str) -> None:
+    capsys.readouterr()
+    assert main(["evaluate", *(a.format(root=results) for a in arguments)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and message in error

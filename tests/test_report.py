@@ -1,0 +1,88 @@
+"""The HTML report: self-contained, every plot embedded and saved, every camera named,
+a failed camera shown with its reason."""
+
+from __future__ import annotations
+
+import base64
+import re
+
+import numpy as np
+import pytest
+
+from calibproj.cli import main
+from calibproj.io.intrinsics import write_intrinsics_dir
+from calibproj.registration import calibrate
+from calibproj.report import write_report
+from calibproj.simulate import simulate_tracks
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+# Plots of the whole calibration: errors per camera, 3D scene, top and side views.
+SCENE_PLOTS = 3
+
+
+def starved(tracks, camera: str, keep: int):
+    """The tracks with only ``keep`` observations left to one camera, so that it fails."""
+    rows = np.flatnonzero(tracks.camera_index == tracks.camera_names.index(camera))
+    mask = np.ones(len(tracks), dtype=bool)
+    mask[rows[keep:]] = False
+    return tracks.select(mask)
+
+
+@pytest.fixture(scope="module")
+def report_with_a_failed_camera(tmp_path_factory):
+    sim = simulate_tracks("small", None, noise_px=0.3, seed=6)
+    tracks = starved(sim.tracks, "cam3", 4)
+    calibration = calibrate(tracks, sim.intrinsics)
+    assert list(calibration.failed) == ["cam3"]
+    out = tmp_path_factory.mktemp("report")
+    calibration.save(out)
+    write_intrinsics_dir(out / "intrinsics", sim.intrinsics)
+    return write_report(out, tracks), calibration
+
+
+def embedded_images(page: str) -> list[bytes]:
+    return [base64.b64decode(data) for data in re.findall(r'<img [^>]*src="data:image/png;base64,([^"]+)"', page)]
+
+
+def test_report_embeds_every_plot_and_saves_it(report_with_a_failed_camera) -> None:
+    path, calibration = report_with_a_failed_camera
+    page = path.read_text(encoding="utf-8")
+    images = embedded_images(page)
+    assert len(images) == page.count("<img ") == SCENE_PLOTS + len(calibration.metrics)
+    assert all(image.startswith(PNG_SIGNATURE) for image in images)
+    files = sorted((path.parent / "report").glob("*.png"))
+    assert len(files) == len(images)
+    assert sorted(f.read_bytes() for f in files) == sorted(images)
+
+
+def test_report_is_self_contained(report_with_a_failed_camera) -> None:
+    page = report_with_a_failed_camera[0].read_text(encoding="utf-8")
+    assert "http://" not in page and "https://" not in page
+    assert "<script" not in page and "<link" not in page
+
+
+def test_report_names_every_camera_and_the_failure(report_with_a_failed_camera) -> None:
+    path, calibration = report_with_a_failed_camera
+    page = path.read_text(encoding="utf-8")
+    for name in ("cam1", "cam2", "cam3"):
+        assert f"<h3>{name}</h3>" in page
+    reason = calibration.failed["cam3"]
+    failed_cells = re.findall(r'<td class="failed"[^>]*>([^<]*)</td>', page)
+    assert failed_cells == [f"FAILED: {reason}"]
+    assert page.count('class="failed"') == 2  # in the table and in the camera's section
+
+
+def test_calibrate_writes_the_report_by_default(tmp_path, capsys) -> None:
+    simulate_tracks("small", tmp_path / "sim", noise_px=0.3, seed=6)
+    status = main(["calibrate", "--tracks", str(tmp_path / "sim" / "tracks.json"), "--intrinsics",
+                   str(tmp_path / "sim" / "intrinsics"), "--out", str(tmp_path / "r")])
+    assert status == 0
+    page = (tmp_path / "r" / "report.html").read_text(encoding="utf-8")
+    assert len(embedded_images(page)) == SCENE_PLOTS + 3
+    assert (tmp_path / "r" / "report" / "scene_3d.png").is_file()
+    assert sorted(p.name for p in (tmp_path / "r" / "intrinsics").iterdir()) == ["cam1.json", "cam2.json", "cam3.json"]
+
+
+def test_missing_results_folder_is_one_clear_error(tmp_path) -> None:
+    with pytest.raises(FileNotFoundError, match="no such results folder"):
+        write_report(tmp_path / "absent", tmp_path / "tracks.json")
