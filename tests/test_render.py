@@ -19,7 +19,7 @@ from calibproj.io.poses import read_poses
 from calibproj.markers import MarkerDetector, marker_centres
 from calibproj.simulate.atlas import AtlasLayout
 from calibproj.simulate.geometric import project_points
-from calibproj.simulate.render import IDEAL_PHOTOMETRIC, RenderOptions, simulate_videos
+from calibproj.simulate.render import IDEAL_PHOTOMETRIC, RenderOptions, render_stills, simulate_videos
 from calibproj.simulate.scene import load_scene, save_scene
 from calibproj.simulate.timeline import ProjectionTimeline
 from calibproj.simulate.warp import floor_view
@@ -183,6 +183,18 @@ def cubic_at(image: np.ndarray, x: float, y: float, margin: int = 5) -> float:
     column, row = int(round(x)) - margin, int(round(y)) - margin
     patch = image[row:row + 2 * margin + 1, column:column + 2 * margin + 1]
     return float(map_coordinates(patch, [[y - row], [x - column]], order=3, mode="nearest")[0])
+
+
+def test_stills_match_clean_video_frames(rendered):
+    simulation, sequence, truth = rendered
+    pattern = 3
+    stills = render_stills(simulation.scene, sequence, pattern, cameras=["cam1", "cam3"])
+    for name, still in stills.items():
+        clean = truth["clean_frames"][name][pattern]
+        frame = read_frames(simulation.out / "videos" / f"{name}.mp4")[clean[0]]
+        assert still.shape == frame.shape
+        # The video adds only H.264 (crf 18) coding error.
+        assert np.mean(np.abs(still.astype(float) - frame)) < 1.0
 
 
 def test_pixel_maps_follow_opencv_convention():

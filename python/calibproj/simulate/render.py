@@ -29,10 +29,9 @@ from __future__ import annotations
 import logging
 import math
 import os
-import threading
 import time
 from collections import OrderedDict
-from concurrent.futures import Future, ThreadPoolExecutor, wait
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -42,9 +41,10 @@ import numpy as np
 from calibproj.io.intrinsics import write_intrinsics_dir
 from calibproj.io.jsonio import FormatError
 from calibproj.simulate.atlas import AtlasLayout
+from calibproj.simulate.contents import AtlasStore
 from calibproj.simulate.photometric import CameraResponse, SensorNoise
 from calibproj.simulate.scene import Camera, Photometric, Scene, load_scene, save_scene
-from calibproj.simulate.timeline import CameraClock, ContentKey, ProjectionTimeline, content_image
+from calibproj.simulate.timeline import CameraClock, ContentKey, ProjectionTimeline
 from calibproj.simulate.truth import write_truth
 from calibproj.simulate.video_truth import video_truth_document
 from calibproj.simulate.warp import CameraSampler, FloorView, floor_view, pyramid_levels_needed
@@ -193,6 +193,47 @@ def simulate_videos(
     return simulation
 
 
+def render_stills(
+    scene: Scene | str | os.PathLike,
+    sequence: Any,
+    pattern: int,
+    *,
+    cameras: list[str] | None = None,
+    seed: int = 0,
+    options: RenderOptions | None = None,
+) -> dict[str, np.ndarray]:
+    """One frame per camera exposed wholly while pattern ``pattern`` is shown, made
+    exactly as video frames are (lens, photometry, noise) but without a video.
+
+    Args:
+        scene, sequence, seed, options: as for ``simulate_videos`` (encoder options unused).
+        pattern: index into the sequence's patterns.
+        cameras: names of the cameras to render (default all, in scene order).
+
+    Returns:
+        Camera name -> ``uint8`` grey image.
+    """
+    options = options or RenderOptions()
+    options.check()
+    scene, scene_source = _load_scene(scene, seed)
+    if options.photometric is not None:
+        scene = replace(scene, photometric=options.photometric)
+    if cameras is not None:
+        scene = scene.subset(list(cameras))
+    sequence = _load_sequence(sequence)
+    _check_projector(scene, scene_source, sequence)
+    if not 0 <= pattern < len(sequence.patterns):
+        raise ValueError(f"pattern {pattern} outside the sequence's patterns 0..{len(sequence.patterns) - 1}")
+    views = _floor_views(scene, scene_source, options)
+    layout = _atlas_layout(scene, views, options)
+    atlas = layout.build(sequence.pattern_image(pattern))
+    stills = {}
+    for camera, rng in zip(scene.cameras, _noise_generators(seed, len(scene.cameras))):
+        sampler, response, noise = _camera_model(camera, views[camera.name], layout, scene.photometric, options, rng)
+        stills[camera.name] = noise.quantise(response.encode(response.irradiance(sampler.sample(atlas))))
+    return stills
+
+
 def _settings_json(options: RenderOptions) -> dict[str, Any]:
     settings = asdict(options)
     settings["photometric"] = None if options.photometric is None else asdict(options.photometric)
@@ -260,45 +301,11 @@ def _worker_count(options: RenderOptions, cameras: int) -> int:
     return options.threads or max(1, cameras)
 
 
-class _AtlasStore:
-    """Projector atlases of the contents in use, each built once (in a thread pool)
-    however many cameras ask for it."""
-
-    def __init__(self, sequence: Any, layout: AtlasLayout, pool: ThreadPoolExecutor) -> None:
-        self.sequence = sequence
-        self.layout = layout
-        self.pool = pool
-        self.lock = threading.Lock()
-        self.futures: dict[ContentKey, Future] = {}
-
-    def prefetch(self, keys: set[ContentKey]) -> None:
-        with self.lock:
-            for key in keys:
-                if key not in self.futures:
-                    self.futures[key] = self.pool.submit(self._build, key)
-
-    def get(self, key: ContentKey) -> np.ndarray:
-        self.prefetch({key})
-        with self.lock:
-            future = self.futures[key]
-        return future.result()
-
-    def retain(self, keys: set[ContentKey]) -> None:
-        """Forget every atlas but those of ``keys`` (and the flat ones)."""
-        with self.lock:
-            for key in list(self.futures):
-                if key not in keys and key[0] != "flat":
-                    del self.futures[key]
-
-    def _build(self, key: ContentKey) -> np.ndarray:
-        return self.layout.build(content_image(self.sequence, key))
-
-
 class _CameraRenderer:
     """Frames of one camera: warped contents cached, blended, noised, encoded."""
 
     def __init__(self, camera: Camera, clock: CameraClock, sampler: CameraSampler, response: CameraResponse,
-                 noise: SensorNoise, writer: Any, atlases: _AtlasStore, timeline: ProjectionTimeline,
+                 noise: SensorNoise, writer: Any, atlases: AtlasStore, timeline: ProjectionTimeline,
                  progress: Any) -> None:
         self.camera = camera
         self.clock = clock
@@ -351,6 +358,27 @@ class _CameraRenderer:
         return entry
 
 
+def _atlas_layout(scene: Scene, views: dict[str, FloorView], options: RenderOptions) -> AtlasLayout:
+    """One layout for all cameras, deep enough for the blurriest sample of any."""
+    blur_samples = scene.photometric.blur_px * options.supersample
+    levels = max(pyramid_levels_needed(view, blur_samples) for view in views.values())
+    return AtlasLayout.for_projector(scene.projector.resolution, levels)
+
+
+def _noise_generators(seed: int, count: int) -> list[np.random.Generator]:
+    """Independent noise streams, one per camera, from one seed."""
+    return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(count)]
+
+
+def _camera_model(camera: Camera, view: FloorView, layout: AtlasLayout, photometric: Photometric,
+                  options: RenderOptions, rng: np.random.Generator) -> tuple[CameraSampler, CameraResponse, SensorNoise]:
+    """Sampler, photometric response and sensor noise of one camera."""
+    width, height = camera.resolution
+    sampler = CameraSampler.from_view(view, layout, camera.resolution, options.supersample, photometric.blur_px)
+    noise = SensorNoise(photometric.noise_std, (height, width), rng, fresh=options.fresh_noise)
+    return sampler, CameraResponse.for_camera(camera, photometric), noise
+
+
 def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clocks: dict[str, CameraClock],
                 views: dict[str, FloorView], folder: Path, seed: int, options: RenderOptions,
                 progress: bool) -> dict[str, CameraVideo]:
@@ -358,29 +386,21 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
 
     from calibproj.generate.video import GreyVideoWriter
 
-    blur_samples = scene.photometric.blur_px * options.supersample
-    layout = AtlasLayout.for_projector(scene.projector.resolution,
-                                       max(pyramid_levels_needed(view, blur_samples) for view in views.values()))
-    noise_rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(len(scene.cameras))]
+    layout = _atlas_layout(scene, views, options)
+    generators = _noise_generators(seed, len(scene.cameras))
     renderers: list[_CameraRenderer] = []
-    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="atlas") as atlas_pool, \
+    with AtlasStore(sequence, layout) as atlases, \
             ThreadPoolExecutor(max_workers=_worker_count(options, len(scene.cameras)),
                                thread_name_prefix="camera") as camera_pool:
-        atlases = _AtlasStore(sequence, layout, atlas_pool)
         try:
             for index, camera in enumerate(scene.cameras):
-                sampler = CameraSampler.from_view(views.pop(camera.name), layout, camera.resolution,
-                                                  options.supersample, scene.photometric.blur_px)
-                width, height = camera.resolution
+                model = _camera_model(camera, views.pop(camera.name), layout, scene.photometric, options,
+                                      generators[index])
                 writer = GreyVideoWriter(folder / f"{camera.name}.mp4", camera.resolution, camera.fps,
                                          crf=options.crf, preset=options.preset)
                 bar = tqdm(total=clocks[camera.name].frame_count, desc=camera.name, unit="frame", position=index,
                            disable=not progress, leave=True)
-                renderers.append(_CameraRenderer(
-                    camera, clocks[camera.name], sampler, CameraResponse.for_camera(camera, scene.photometric),
-                    SensorNoise(scene.photometric.noise_std, (height, width), noise_rngs[index],
-                                fresh=options.fresh_noise),
-                    writer, atlases, timeline, bar))
+                renderers.append(_CameraRenderer(camera, clocks[camera.name], *model, writer, atlases, timeline, bar))
             _run_chunks(renderers, atlases, camera_pool, options.chunk_s)
         except BaseException:
             for renderer in renderers:
@@ -398,7 +418,7 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
     return videos
 
 
-def _run_chunks(renderers: list[_CameraRenderer], atlases: _AtlasStore, pool: ThreadPoolExecutor,
+def _run_chunks(renderers: list[_CameraRenderer], atlases: AtlasStore, pool: ThreadPoolExecutor,
                 chunk_s: float) -> None:
     """Render all cameras chunk by chunk; the next chunk's contents are drawn meanwhile."""
     first = min(float(renderer.starts[0]) for renderer in renderers)
