@@ -25,9 +25,8 @@ import numpy as np
 
 from calibproj.simulate.scene import Camera, Photometric
 
-# Noise fields drawn once per camera; every frame adds two crops of them at random
-# offsets, so that no frame's noise is a shifted copy of another's.
-NOISE_FIELDS = 2
+# Every frame adds crops, at random offsets up to this, of two noise fields drawn once
+# per camera: a sum of two, so that no frame's noise is a shifted copy of another's.
 NOISE_OFFSET_RANGE_PX = 256
 
 
@@ -98,7 +97,7 @@ class SensorNoise:
         if self.std > 0 and not fresh:
             height, width = self.shape
             size = (height + NOISE_OFFSET_RANGE_PX, width + NOISE_OFFSET_RANGE_PX)
-            self.fields = [rng.standard_normal(size, dtype=np.float32) for _ in range(NOISE_FIELDS)]
+            self.fields = [rng.standard_normal(size, dtype=np.float32) for _ in range(2)]
 
     def quantise(self, encoded: np.ndarray) -> np.ndarray:
         """``uint8`` frame: ``255 * encoded`` plus noise, rounded and clipped to 0-255."""
@@ -115,9 +114,8 @@ class SensorNoise:
         if self.fresh:
             return self.rng.standard_normal(self.shape, dtype=np.float32) * np.float32(self.std)
         height, width = self.shape
-        crops = []
-        for field in self.fields:
-            y, x = self.rng.integers(0, NOISE_OFFSET_RANGE_PX, size=2)
-            crops.append(field[y:y + height, x:x + width])
-        weight = self.std / np.sqrt(len(crops))
-        return cv2.addWeighted(crops[0], weight, crops[1], weight, 0.0)
+        (y1, x1), (y2, x2) = self.rng.integers(0, NOISE_OFFSET_RANGE_PX, size=(2, 2))
+        first = self.fields[0][y1:y1 + height, x1:x1 + width]
+        second = self.fields[1][y2:y2 + height, x2:x2 + width]
+        weight = self.std / np.sqrt(2.0)
+        return cv2.addWeighted(first, weight, second, weight, 0.0)

@@ -32,7 +32,7 @@ import os
 import time
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor, wait
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -370,8 +370,10 @@ def _noise_generators(seed: int, count: int) -> list[np.random.Generator]:
     return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(count)]
 
 
-def _camera_model(camera: Camera, view: FloorView, layout: AtlasLayout, photometric: Photometric,
-                  options: RenderOptions, rng: np.random.Generator) -> tuple[CameraSampler, CameraResponse, SensorNoise]:
+def _camera_model(
+    camera: Camera, view: FloorView, layout: AtlasLayout, photometric: Photometric, options: RenderOptions,
+    rng: np.random.Generator,
+) -> tuple[CameraSampler, CameraResponse, SensorNoise]:
     """Sampler, photometric response and sensor noise of one camera."""
     width, height = camera.resolution
     sampler = CameraSampler.from_view(view, layout, camera.resolution, options.supersample, photometric.blur_px)

@@ -21,7 +21,6 @@ magnifies the projector image, level 0 is read with bilinear interpolation.
 
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 
@@ -29,8 +28,6 @@ import numpy as np
 
 from calibproj.simulate.atlas import AtlasLayout, level_variance
 from calibproj.simulate.scene import Camera, Floor, Projector
-
-logger = logging.getLogger(__name__)
 
 # Pixels whose undistorted position, distorted again, misses them by more than this
 # lie where the lens model is not one-to-one; they are rendered black.
