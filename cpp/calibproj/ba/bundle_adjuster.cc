@@ -349,8 +349,13 @@ void ValidateData(const Data& data, const Options& options) {
 PixelMatrix ComputeResiduals(const Data& data) {
   const int num_obs = static_cast<int>(data.camera_index.size());
   PixelMatrix residuals(num_obs, 2);
+  std::vector<const double*> pose_blocks;
+  for (int c = 0; c < data.poses.rows(); ++c) pose_blocks.push_back(data.poses.row(c).data());
+  const RotationCache rotations(pose_blocks);  // one rotation per camera, not per observation
   for (int i = 0; i < num_obs; ++i) {
-    const FreePointReprojectionCost cost(data.intrinsics[data.camera_index(i)], data.observed.row(i).transpose());
+    const int camera = data.camera_index(i);
+    const FreePointReprojectionCost cost(data.intrinsics[camera], data.observed.row(i).transpose(),
+                                         rotations.Entry(camera));
     const double* blocks[2] = {data.poses.row(data.camera_index(i)).data(), data.points.row(data.point_index(i)).data()};
     double r[2];
     if (cost.Evaluate(blocks, r, nullptr)) {

@@ -457,10 +457,16 @@ RegisterResult Reconstruction::RegisterCamera(int camera) {
   return result;
 }
 
-bool Reconstruction::InFront(int observation) const {
+std::vector<Eigen::Matrix3d> Reconstruction::Rotations() const {
+  std::vector<Eigen::Matrix3d> rotations(num_cameras());
+  for (int c = 0; c < num_cameras(); ++c) rotations[c] = PoseRotation(poses_, c);
+  return rotations;
+}
+
+bool Reconstruction::InFront(int observation, const std::vector<Eigen::Matrix3d>& rotations) const {
   const int c = camera_index_(observation);
   const Eigen::Vector3d X = points_.row(point_index_(observation)).transpose();
-  return (PoseRotation(poses_, c) * X + PoseTranslation(poses_, c)).z() > 0.0;
+  return (rotations[c] * X + PoseTranslation(poses_, c)).z() > 0.0;
 }
 
 bool Reconstruction::ReconstructPoint(int point) {
@@ -516,9 +522,10 @@ AdjustResult Reconstruction::Adjust(bool final) {
   // Observations that take part: active, registered camera, reconstructed point in front.
   std::vector<int> used;
   std::vector<int> point_uses(num_points_, 0);
+  const std::vector<Eigen::Matrix3d> rotations = Rotations();
   for (int i = 0; i < static_cast<int>(active_.size()); ++i) {
     if (!active_[i] || !registered_[camera_index_(i)] || !reconstructed_[point_index_(i)]) continue;
-    if (!InFront(i)) {
+    if (!InFront(i, rotations)) {
       active_[i] = false;
       continue;
     }
@@ -595,10 +602,11 @@ AdjustResult Reconstruction::Adjust(bool final) {
 Reconstruction::PixelMatrix Reconstruction::AllResiduals() const {
   PixelMatrix residuals(observed_.rows(), 2);
   residuals.setConstant(std::numeric_limits<double>::quiet_NaN());
+  const std::vector<Eigen::Matrix3d> rotations = Rotations();
   for (int i = 0; i < observed_.rows(); ++i) {
     const int c = camera_index_(i), p = point_index_(i);
     if (!registered_[c] || !reconstructed_[p]) continue;
-    const Eigen::Vector3d x = PoseRotation(poses_, c) * points_.row(p).transpose() + PoseTranslation(poses_, c);
+    const Eigen::Vector3d x = rotations[c] * points_.row(p).transpose() + PoseTranslation(poses_, c);
     if (x.z() <= 0.0) continue;
     const ba::Intrinsics& K = cameras_[c].K;
     const double xn = x.x() / x.z(), yn = x.y() / x.z();

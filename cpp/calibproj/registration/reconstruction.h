@@ -150,7 +150,8 @@ class Reconstruction {
                            const Eigen::Vector3d& n);
   void ResetStructure();
   bool ReconstructPoint(int point);
-  bool InFront(int observation) const;
+  std::vector<Eigen::Matrix3d> Rotations() const;  // per camera, from the poses
+  bool InFront(int observation, const std::vector<Eigen::Matrix3d>& rotations) const;
   int ThirdCamera(int camera1, int camera2) const;
 
   std::vector<Camera> cameras_;
