@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Developer build: compiles the extension modules into build/dev and links them into
+# Developer build: compiles the extension modules into build/dev and copies them into
 # python/calibproj, so that `PYTHONPATH=python python -m pytest` runs the working tree.
 # Serialised with a lock, so several shells can call it at once.
 set -euo pipefail
@@ -12,6 +12,10 @@ if [ ! -f build/dev/CMakeCache.txt ]; then
     -Dpybind11_DIR="$pybind11_dir" -DPython_EXECUTABLE="$(command -v python3)" > /dev/null
 fi
 cmake --build build/dev "$@"
+# Copy, then rename: a test that imports the module meanwhile sees the old or the new
+# file, never one half-written by the linker.
 for module in build/dev/_*.so; do
-  ln -sf "../../$module" "python/calibproj/$(basename "$module")"
+  target="python/calibproj/$(basename "$module")"
+  cp "$module" "$target.tmp"
+  mv -f "$target.tmp" "$target"
 done
