@@ -25,7 +25,12 @@ from calibproj.calibration import Calibration  # noqa: E402
 from calibproj.registration import RegistrationOptions, calibrate  # noqa: E402
 from calibproj.tracks import Tracks  # noqa: E402
 
+# Evaluation on independent data; like compare, the function shadows its module
+# calibproj.evaluate as an attribute (import from it with "from calibproj.evaluate import ...").
+from calibproj.evaluate import evaluate  # noqa: E402
+
 __all__ = ["__version__"]
 __all__ += ["Calibration", "RegistrationOptions", "Tracks", "calibrate"]
 __all__ += ["compare", "simulate"]
+__all__ += ["evaluate"]
 __all__ += ["detect_markers", "generate"]

@@ -23,8 +23,10 @@ MAX_SCENE_POINTS = 4000
 FRUSTUM_SHARE = 0.12
 # Coverage grid: cells along the longer image side.
 COVERAGE_CELLS = 16
-# Mean-residual arrows: cells along the longer image side.
+# Mean-residual arrows: cells along the longer image side, and the observations a cell
+# needs for its mean to be drawn.
 ARROW_CELLS = 10
+MIN_CELL_OBSERVATIONS = 5
 FAILED_COLOUR = "#c0392b"
 
 
@@ -62,6 +64,14 @@ def _scene_extent(calibration: Calibration) -> tuple[np.ndarray, float]:
     return everything, float(np.max(high - low)) or 1.0
 
 
+def floor_outline(points: np.ndarray) -> np.ndarray:
+    """Convex hull of the points' floor positions (x, y), the area the projector covered."""
+    import cv2
+
+    hull = cv2.convexHull(np.asarray(points[:, :2], dtype=np.float32))
+    return hull.reshape(-1, 2).astype(float)
+
+
 def _subsampled(points: np.ndarray) -> np.ndarray:
     step = max(1, int(np.ceil(len(points) / MAX_SCENE_POINTS)))
     return points[::step]
@@ -75,15 +85,17 @@ def scene_3d(calibration: Calibration, views: Sequence[CameraView], dpi: int = D
     """Cameras as frusta, the floor rectangle under the points and the points, in 3D."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    figure = Figure(figsize=(8.0, 6.5))
+    figure = Figure(figsize=(10.0, 8.0))
     axes = figure.add_subplot(projection="3d")
     everything, extent = _scene_extent(calibration)
     points = _subsampled(calibration.points)
-    if len(points):
-        low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
-        floor = [[low[0], low[1], 0], [high[0], low[1], 0], [high[0], high[1], 0], [low[0], high[1], 0]]
+    if len(points) >= 3:
+        outline = floor_outline(calibration.points)
+        floor = np.column_stack([outline, np.zeros(len(outline))])
         axes.add_collection3d(Poly3DCollection([floor], facecolor="#d9d9d9", edgecolor="#999999", alpha=0.35))
-        axes.scatter(points[:, 0], points[:, 1], points[:, 2], s=1, c="#555555", depthshade=False)
+    if len(points):
+        axes.scatter(points[:, 0], points[:, 1], points[:, 2], s=0.5, c="#666666", alpha=0.5, linewidths=0,
+                     depthshade=False)
     drawable = _drawable(views)
     for view, colour in zip(drawable, camera_colours(len(drawable))):
         corners = frustum(view, FRUSTUM_SHARE * extent)
@@ -98,7 +110,7 @@ def scene_3d(calibration: Calibration, views: Sequence[CameraView], dpi: int = D
     axes.set_ylabel(f"y {unit}")
     axes.set_zlabel(f"z {unit}")
     axes.set_title("cameras, floor and points (floor frame, z up)")
-    figure.subplots_adjust(left=0.0, right=0.95, bottom=0.03, top=0.95)
+    figure.subplots_adjust(left=0.0, right=0.95, bottom=0.02, top=0.96)
     return png_bytes(figure, dpi)
 
 
@@ -151,7 +163,7 @@ def error_bars(views: Sequence[CameraView], dpi: int = DEFAULT_DPI) -> bytes:
             axes.text(position, 0.0, "failed", rotation=90, ha="center", va="bottom", color=FAILED_COLOUR)
     axes.set_xticks(positions, [v.name for v in views], rotation=30, ha="right")
     axes.set_ylabel("reprojection error [px]")
-    axes.set_title("mean (bar) and standard deviation (whisker) of the inlier reprojection errors")
+    axes.set_title("inlier reprojection error: mean (bar), std (whisker)")
     axes.grid(True, axis="y", linewidth=0.3)
     figure.tight_layout()  # camera names of any length below the bars
     return png_bytes(figure, dpi)
@@ -168,14 +180,14 @@ def camera_panels(view: CameraView, dpi: int = DEFAULT_DPI) -> bytes:
         _histogram(histogram, view.errors, view.metrics)
         _residual_map(figure, residuals, view)
     else:
-        reason = view.failure or "no observation of a reconstructed point"
-        for axes in (histogram, residuals):
-            axes.text(0.5, 0.5, f"failed: {reason}" if view.failure else reason, ha="center", va="center",
-                      wrap=True, color=FAILED_COLOUR if view.failure else "black", transform=axes.transAxes)
-            axes.set_axis_off()
+        # The page states the reason of a failure; the plot only says why it is empty.
+        message = "not registered: no reprojection errors" if not view.registered else \
+            "no observation of a reconstructed point"
+        histogram.text(1.2, 0.5, message, ha="center", va="center", transform=histogram.transAxes)
+        histogram.set_axis_off()
+        residuals.set_axis_off()
     _coverage(figure, coverage, view)
-    figure.suptitle(view.name, fontsize=12, x=0.01, ha="left")
-    figure.subplots_adjust(left=0.05, right=0.94, bottom=0.13, top=0.84, wspace=0.42)
+    figure.subplots_adjust(left=0.05, right=0.94, bottom=0.13, top=0.86, wspace=0.42)
     return png_bytes(figure, dpi)
 
 
@@ -193,7 +205,8 @@ def _histogram(axes, errors: np.ndarray, metrics) -> None:
     axes.set_title(title + (f"\n({hidden} beyond {limit:.2f} px not shown)" if hidden else ""), fontsize=10)
     axes.set_xlabel("error [px]")
     axes.set_ylabel("observations")
-    axes.legend(fontsize=8)
+    axes.set_ylim(0.0, 1.3 * axes.get_ylim()[1])  # room for the legend above the bars
+    axes.legend(fontsize=8, loc="upper right")
 
 
 def _image_frame(axes, view: CameraView) -> None:
@@ -219,14 +232,16 @@ def _residual_map(figure: Figure, axes, view: CameraView) -> None:
     colourbar.set_label("error [px]")
     size = view.image_size() or (float(np.ptp(x)) + 1.0, float(np.ptp(y)) + 1.0)
     centres, means = _cell_means(view.residual_at_px, view.residuals, size, ARROW_CELLS)
-    longest = float(np.max(np.linalg.norm(means, axis=1))) if len(means) else 0.0
-    if longest > 0:
-        magnify = 0.8 * max(size) / ARROW_CELLS / longest  # the longest arrow spans most of a cell
+    # An arrow as long as the camera's mean error spans a cell: pure noise, which
+    # averages out over a cell, leaves short arrows; a systematic error does not.
+    unit = float(np.mean(errors))
+    if len(means) and unit > 0:
+        magnify = 0.8 * max(size) / ARROW_CELLS / unit
         axes.quiver(centres[:, 0], centres[:, 1], magnify * means[:, 0], magnify * means[:, 1], color="#d62728",
                     angles="xy", scale_units="xy", scale=1.0, width=0.004)
-        note = f"arrows: mean residual per cell x{magnify:.0f} (longest {longest:.2f} px)"
+        note = f"arrows: cell means, 1 cell long = {unit:.2f} px"
     else:
-        note = "no residual"
+        note = f"no cell with {MIN_CELL_OBSERVATIONS} observations"
     _image_frame(axes, view)
     axes.set_title(f"error over the image\n{note}", fontsize=10)
 
@@ -243,8 +258,9 @@ def _cell_means(at: np.ndarray, residuals: np.ndarray, size: tuple[float, float]
     inverse = inverse.ravel()
     sums = np.zeros((len(keys), 2))
     np.add.at(sums, inverse, residuals)
-    centres = (keys + 0.5) * step - 0.5
-    return centres, sums / counts[:, None]
+    enough = counts >= MIN_CELL_OBSERVATIONS
+    centres = (keys[enough] + 0.5) * step - 0.5
+    return centres, sums[enough] / counts[enough, None]
 
 
 def _coverage(figure: Figure, axes, view: CameraView) -> None:
@@ -262,7 +278,7 @@ def _coverage(figure: Figure, axes, view: CameraView) -> None:
     image = axes.imshow(counts.T, extent=(-0.5, width - 0.5, height - 0.5, -0.5), cmap="Greens",
                         interpolation="nearest", vmin=0)
     if len(points):
-        axes.scatter(points[:, 0], points[:, 1], s=0.3, c="#333333", alpha=0.5)
+        axes.scatter(points[:, 0], points[:, 1], s=0.2, c="#222222", alpha=0.3, linewidths=0)
     colourbar = figure.colorbar(image, ax=axes, fraction=0.046, pad=0.02)
     colourbar.set_label("observations per cell")
     _image_frame(axes, view)

@@ -141,7 +141,7 @@ def _summary(calibration: Calibration, views: list[CameraView]) -> str:
         ("model", calibration.model),
         ("unit", unit),
         ("points", str(len(calibration.points))),
-        ("floor RMS", f"{calibration.floor_rms:.4g}"),
+        ("floor RMS", f"{calibration.floor_rms:.4g}" + (" m" if calibration.unit == "m" else "")),
         ("registration order", ", ".join(calibration.registration_order) or "-"),
     ]
     body = "".join(f"<tr><th class=\"name\">{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
@@ -168,13 +168,14 @@ def _camera_table(views: list[CameraView], cameras: dict[str, Plot]) -> str:
 def _camera_section(view: CameraView, plot: Plot) -> str:
     title = f'<section class="camera" id="{_anchor(plot)}"><h3>{html.escape(view.name)}</h3>'
     status = "" if view.registered else f'<p class="failed">FAILED: {html.escape(view.failure or "")}</p>'
-    return title + status + _figure(plot) + "</section>"
+    return title + status + _figure(plot, with_caption=False) + "</section>"
 
 
-def _figure(plot: Plot) -> str:
+def _figure(plot: Plot, with_caption: bool = True) -> str:
     data = base64.b64encode(plot.png).decode("ascii")
     caption = html.escape(plot.caption)
-    return f'<figure><img alt="{caption}" src="data:image/png;base64,{data}"><figcaption>{caption}</figcaption></figure>'
+    below = f"<figcaption>{caption}</figcaption>" if with_caption else ""
+    return f'<figure><img alt="{caption}" src="data:image/png;base64,{data}">{below}</figure>'
 
 
 def _anchor(plot: Plot) -> str:
