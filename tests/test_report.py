@@ -37,7 +37,8 @@ def report_with_a_failed_camera(tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
     calibration.save(out)
     write_intrinsics_dir(out / "intrinsics", sim.intrinsics)
-    return write_report(out, tracks), calibration
+    tracks.write(out / "tracks.json")
+    return write_report(out), calibration  # tracks and intrinsics from the results folder
 
 
 def embedded_images(page: str) -> list[bytes]:

@@ -75,25 +75,25 @@ def parse_formats(text: str) -> list[str]:
 
 def export(
     calibration: Calibration,
-    format: str,  # noqa: A002 - the name the API documents
+    format_name: str,
     out_dir: str | os.PathLike,
     intrinsics: Mapping[str, Intrinsics],
     tracks: Tracks | None = None,
 ) -> list[Path]:
-    """Write the calibration in ``format`` (``yaml``, ``colmap`` or ``anipose``) into
+    """Write the calibration in ``format_name`` (``yaml``, ``colmap`` or ``anipose``) into
     ``out_dir``; returns the files written. ``tracks`` (the calibration's) give COLMAP
     its 2D points and tracks; the other formats do not use them."""
-    if format not in FORMATS:
-        raise ValueError(f"export format {format!r} unknown (expected one of {', '.join(FORMATS)})")
+    if format_name not in FORMATS:
+        raise ValueError(f"export format {format_name!r} unknown (expected one of {', '.join(FORMATS)})")
     missing = [name for name in calibration.poses if name not in intrinsics]
     if missing:
         raise ValueError(f"no intrinsics for registered camera(s) {', '.join(missing)}")
     if not calibration.poses:
         raise ValueError("no registered camera to export")
     out_dir = Path(out_dir)
-    writer = {"yaml": write_opencv_yaml, "colmap": write_colmap, "anipose": write_anipose_toml}[format]
+    writer = {"yaml": write_opencv_yaml, "colmap": write_colmap, "anipose": write_anipose_toml}[format_name]
     files = writer(calibration, out_dir, intrinsics, tracks)
-    logger.info("exported %s: %s", format, ", ".join(str(f) for f in files))
+    logger.info("exported %s: %s", format_name, ", ".join(str(f) for f in files))
     return files
 
 

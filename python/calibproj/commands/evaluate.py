@@ -25,7 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("results", metavar="RESULTS", help="results folder of calibproj calibrate")
     parser.add_argument("--tracks", required=True, metavar="FILE", help="evaluation observations (eval_tracks.json)")
-    parser.add_argument("--intrinsics", metavar="DIR", help="per-camera intrinsics folder (default: RESULTS/intrinsics)")
+    parser.add_argument("--intrinsics", metavar="DIR",
+                        help="per-camera intrinsics folder (default: RESULTS/intrinsics)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON (for programs)")
     add_dataclass_arguments(parser, EvaluationOptions, "evaluation options")
 

@@ -1,7 +1,8 @@
 """The calibration report: one self-contained HTML page and its plots as PNG files.
 
 ``write_report(results_dir, tracks, intrinsics)`` reads a results folder (what
-``calibproj calibrate`` writes) and writes ``<results_dir>/report.html`` (no network:
+``calibproj calibrate`` writes; the tracks and intrinsics default to its tracks.json
+and intrinsics/) and writes ``<results_dir>/report.html`` (no network:
 every plot is embedded as a base64 PNG) and the same plots as ``<results_dir>/report/*.png``:
 
 - ``scene_3d.png``: the cameras as frusta, the floor and the points, in 3D;

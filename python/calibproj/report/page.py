@@ -22,6 +22,7 @@ from calibproj.tracks import Tracks
 logger = logging.getLogger(__name__)
 
 REPORT_FILE = "report.html"
+TRACKS_FILE = "tracks.json"
 FIGURES_DIR = "report"
 
 STYLE = """
@@ -50,7 +51,7 @@ class Plot:
 
 def write_report(
     results_dir: str | os.PathLike,
-    tracks: Tracks | str | os.PathLike,
+    tracks: Tracks | str | os.PathLike | None = None,
     intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None = None,
     dpi: int = figures.DEFAULT_DPI,
 ) -> Path:
@@ -58,7 +59,8 @@ def write_report(
 
     Args:
         results_dir: a folder written by ``calibproj calibrate`` (``camera_poses.json``, ...).
-        tracks: the tracks the calibration was made from, ``Tracks`` or ``tracks.json``.
+        tracks: the tracks the calibration was made from, ``Tracks`` or ``tracks.json``;
+            ``None`` reads ``<results_dir>/tracks.json``.
         intrinsics: per-camera intrinsics or their folder; ``None`` reads
             ``<results_dir>/intrinsics``.
         dpi: resolution of the plots.
@@ -68,6 +70,8 @@ def write_report(
     results_dir = Path(results_dir)
     calibration = load_results(results_dir)
     intrinsics = resolve_intrinsics(results_dir, intrinsics)
+    if tracks is None:
+        tracks = results_dir / TRACKS_FILE
     tracks = tracks if isinstance(tracks, Tracks) else Tracks.read(tracks)
     views = camera_views(calibration, tracks, intrinsics)
     scene, cameras = draw_plots(calibration, views, dpi)
