@@ -121,13 +121,17 @@ class RegistrationDriver:
         tracks: Tracks,
         intrinsics: Mapping[str, Intrinsics],
         options: RegistrationOptions | None = None,
+        left_out: Mapping[str, str] | None = None,
     ) -> None:
         self.options = options or RegistrationOptions()
-        self.failed: dict[str, str] = {}
-        missing = [name for name in tracks.camera_names if name not in intrinsics]
-        for name in missing:
-            self.failed[name] = "no intrinsics for this camera"
-            logger.warning("camera %s: no intrinsics, left out", name)
+        # Cameras that failed before registration (e.g. their video), with the reason.
+        self.failed: dict[str, str] = {name: reason for name, reason in (left_out or {}).items()
+                                       if name in tracks.camera_names}
+        for name in tracks.camera_names:
+            if name not in intrinsics and name not in self.failed:
+                self.failed[name] = "no intrinsics for this camera"
+                logger.warning("camera %s: no intrinsics, left out", name)
+        missing = list(self.failed)
         self.all_cameras = tuple(tracks.camera_names)
         self.tracks = tracks.drop_cameras(missing) if missing else tracks
         self.intrinsics = {name: intrinsics[name] for name in self.tracks.camera_names}
@@ -204,6 +208,10 @@ def calibrate(
     intrinsics: Mapping[str, Intrinsics],
     options: RegistrationOptions | None = None,
     callback: Callable[[Step], bool | None] | None = None,
+    left_out: Mapping[str, str] | None = None,
 ) -> Calibration:
-    """Register every camera of ``tracks`` and return the ``Calibration`` (floor frame)."""
-    return RegistrationDriver(tracks, intrinsics, options).run(callback)
+    """Register every camera of ``tracks`` and return the ``Calibration`` (floor frame).
+
+    ``left_out`` names cameras that failed before registration, with the reason.
+    """
+    return RegistrationDriver(tracks, intrinsics, options, left_out).run(callback)

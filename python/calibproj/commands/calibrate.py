@@ -1,14 +1,16 @@
 """Calibrate the cameras: register every camera and refine, then write the results.
 
+From the camera videos of a projection (sync, frame picking, marker detection, tracks):
+    calibproj calibrate VIDEOS_DIR --sequence sequence.json --intrinsics INTRINSICS_DIR --out RESULTS_DIR
 From tracks (e.g. of `calibproj simulate --tracks-only` or `calibproj detect`):
     calibproj calibrate --tracks tracks.json --intrinsics INTRINSICS_DIR --out RESULTS_DIR
 
 Writes camera_poses.json (world-to-camera poses in the floor frame: z up, floor z = 0),
 metrics.json (per camera: mean and std reprojection error, inliers, view score, or why
-it failed) and points.ply. An existing results folder is only overwritten with --force.
-The intrinsics used are copied into RESULTS_DIR/intrinsics/ (so that evaluate and the
-report need nothing else), and report.html with report/*.png is written unless
---no-report.
+it failed), points.ply and tracks.json (and detect_report.json from videos). An
+existing results folder is only overwritten with --force. The intrinsics used are
+copied into RESULTS_DIR/intrinsics/ (so that evaluate and the report need nothing
+else), and report.html with report/*.png is written unless --no-report.
 
 Metric scale (--scale; without it the unit is arbitrary, the first camera at height 1):
     camera-height:NAME=METRES          height of a camera's optical centre above the floor
@@ -28,13 +30,12 @@ from pathlib import Path
 
 from calibproj.commands.options import add_dataclass_arguments, dataclass_from_args
 
-RESULT_FILES = ("camera_poses.json", "metrics.json", "points.ply")
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from calibproj.registration import RegistrationOptions
 
-    parser.add_argument("--tracks", required=True, metavar="FILE", help="tracks.json to calibrate from")
+    parser.add_argument("videos", nargs="?", metavar="VIDEOS_DIR", help="folder of camera videos (<camera>.mp4)")
+    parser.add_argument("--tracks", metavar="FILE", help="tracks.json to calibrate from, instead of videos")
     parser.add_argument("--intrinsics", required=True, metavar="DIR", help="folder of per-camera intrinsics files")
     parser.add_argument("--out", required=True, metavar="DIR", help="results folder")
     parser.add_argument("--force", action="store_true", help="overwrite the results of an earlier run in --out")
@@ -42,61 +43,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scale", metavar="MEASUREMENT",
                         help="metric scale from one measurement (see above; default: arbitrary unit)")
     parser.add_argument("--sequence", metavar="FILE",
-                        help="sequence.json of the projection (needed by --scale marker-size)")
+                        help="sequence.json of the projection (needed with videos and by --scale marker-size)")
     parser.add_argument("--export", metavar="FORMATS",
                         help="also write the calibration as yaml, colmap and/or anipose (comma-separated)")
     parser.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
+    parser.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_dataclass_arguments(parser, RegistrationOptions, "registration options")
-
-
-def check_output_folder(out: Path, force: bool) -> None:
-    existing = [name for name in RESULT_FILES if (out / name).exists()]
-    if existing and not force:
-        raise ValueError(f"{out}: already holds results ({', '.join(existing)}); use --force to overwrite them")
 
 
 def run(args: argparse.Namespace) -> int:
     import json
 
     from calibproj.calibration import calibration_summary
-    from calibproj.export import export_all, parse_formats
-    from calibproj.io.intrinsics import load_intrinsics_dir, write_intrinsics_dir
-    from calibproj.registration import RegistrationOptions, calibrate
-    from calibproj.report import write_report
-    from calibproj.scale import apply_scale, check_measurement, parse_scale, read_projected_markers
-    from calibproj.tracks import Tracks
+    from calibproj.pipeline import calibrate
+    from calibproj.registration import RegistrationOptions
 
-    out = Path(args.out)
-    check_output_folder(out, args.force)
-    measurement = parse_scale(args.scale) if args.scale else None
-    if measurement is not None and measurement.kind == "marker-size" and args.sequence is None:
-        raise ValueError(f"--scale {args.scale}: marker-size needs --sequence (the projection's sequence.json)")
-    formats = parse_formats(args.export) if args.export else []
-    tracks = Tracks.read(args.tracks)
-    intrinsics = load_intrinsics_dir(args.intrinsics)
-    markers = read_projected_markers(args.sequence, tracks.markers_per_array) if args.sequence else None
-    if measurement is not None:
-        check_measurement(measurement, tracks.camera_names, markers)
-    options = dataclass_from_args(RegistrationOptions, args)
-    calibration = calibrate(tracks, intrinsics, options)
-    used = {name: intrinsics[name] for name in tracks.camera_names if name in intrinsics}
-    write_intrinsics_dir(out / "intrinsics", used)
-    if measurement is not None:
-        try:
-            calibration = apply_scale(calibration, measurement, markers)
-        except ValueError as error:
-            calibration.save(out)
-            raise ValueError(f"{error}; results written to {out} in arbitrary units") from None
-    calibration.save(out)
-    export_all(calibration, formats, out, used, tracks)
-    if not args.no_report:
-        write_report(out, tracks, used)
+    if (args.videos is None) == (args.tracks is None):
+        raise ValueError("give either VIDEOS_DIR (with --sequence) or --tracks FILE")
+    if args.videos is not None and args.sequence is None:
+        raise ValueError(f"{args.videos}: calibrating from videos needs --sequence sequence.json")
+    calibration = calibrate(
+        args.tracks or args.videos,
+        args.intrinsics,
+        sequence=args.sequence,
+        out=args.out,
+        options=dataclass_from_args(RegistrationOptions, args),
+        scale=args.scale,
+        exports=[args.export] if args.export else [],
+        report=not args.no_report,
+        force=args.force,
+        workers=args.workers,
+        progress=not args.no_progress,
+    )
     rows = calibration_summary(calibration)
     if args.json:
         print(json.dumps(rows, indent=1))
     else:
         print(format_summary(rows))
-        print(f"results in {out} (unit: {calibration.unit})")
+        print(f"results in {args.out} (unit: {calibration.unit})")
     return 0 if calibration.registered else 1
 
 
