@@ -23,4 +23,10 @@ PYBIND11_MODULE(_core, m) {
   calibproj::bindings::register_registration(registration);
   auto detect = m.def_submodule("detect", "ArUco and AprilTag marker families and detection");
   calibproj::bindings::register_detect(detect);
+  auto video = m.def_submodule("video", "Streaming video decode and per-frame luma");
+  calibproj::bindings::register_video(video);
+  auto sync = m.def_submodule("sync", "Light-code synchronisation of a camera with the sequence");
+  calibproj::bindings::register_sync(sync);
+  auto ingest = m.def_submodule("ingest", "One camera's video to MSM centres (sync, frame picking, detection)");
+  calibproj::bindings::register_ingest(ingest);
 }

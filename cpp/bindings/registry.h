@@ -11,6 +11,9 @@ void register_ba(pybind11::module_& m);
 void register_geometry(pybind11::module_& m);
 void register_registration(pybind11::module_& m);
 void register_detect(pybind11::module_& m);
+void register_video(pybind11::module_& m);
+void register_sync(pybind11::module_& m);
+void register_ingest(pybind11::module_& m);
 
 // Defines m.<name>(...) solving with the given costs; register_ba uses the analytic
 // ones, the benchmark-only module calibproj._bench the AutoDiff ones.

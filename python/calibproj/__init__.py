@@ -29,8 +29,13 @@ from calibproj.tracks import Tracks  # noqa: E402
 # calibproj.evaluate as an attribute (import from it with "from calibproj.evaluate import ...").
 from calibproj.evaluate import evaluate  # noqa: E402
 
+# From camera videos to MSM tracks (synchronisation, frame picking, detection).
+from calibproj.ingest import detect  # noqa: E402
+from calibproj.ingest_options import IngestOptions  # noqa: E402
+
 __all__ = ["__version__"]
 __all__ += ["Calibration", "RegistrationOptions", "Tracks", "calibrate"]
 __all__ += ["compare", "simulate"]
 __all__ += ["evaluate"]
 __all__ += ["detect_markers", "generate"]
+__all__ += ["IngestOptions", "detect"]

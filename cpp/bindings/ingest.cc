@@ -1,0 +1,242 @@
+// Bindings of calibproj::ingest: one camera's video to MSM centres. The sequence comes
+// as the body of sequence.json (Sequence.to_dict()); results come back as numpy arrays.
+
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "calibproj/ingest/camera_ingest.h"
+#include "ingest_options.h"
+#include "registry.h"
+#include "sync_convert.h"
+
+namespace py = pybind11;
+
+namespace calibproj::bindings {
+
+namespace {
+
+using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+ingest::PatternSpec PatternFromDict(const py::dict& d) {
+  ingest::PatternSpec p;
+  p.array = d["array"].cast<int>();
+  p.scale_index = d["scale_index"].cast<int>();
+  p.scale = d["scale"].cast<double>();
+  p.marker_side_px = d["marker_side_px"].cast<double>();
+  p.first_frame = d["first_frame"].cast<int>();
+  p.last_frame = d["last_frame"].cast<int>();
+  p.omitted = d["omitted"].cast<std::vector<int>>();
+  return p;
+}
+
+ingest::SequenceDescription SequenceFromDict(const py::dict& d) {
+  ingest::SequenceDescription s;
+  const py::dict markers = d["markers"], projector = d["projector"], layout = d["layout"], codes = d["codes"];
+  s.markers = markers["spec"].cast<std::string>();
+  s.inverted = markers["inverted"].cast<bool>();
+  const auto resolution = projector["resolution"].cast<std::vector<int>>();
+  if (resolution.size() != 2) throw std::invalid_argument("sequence: projector resolution must be [width, height]");
+  s.projector_width = resolution[0];
+  s.projector_height = resolution[1];
+  s.fps = projector["fps"].cast<double>();
+  s.scales = layout["scales"].cast<std::vector<double>>();
+  const auto centres = d["centres"].cast<std::vector<std::vector<std::vector<double>>>>();
+  s.arrays = static_cast<int>(centres.size());
+  s.markers_per_array = centres.empty() ? 0 : static_cast<int>(centres[0].size());
+  for (const auto& array : centres) {
+    if (static_cast<int>(array.size()) != s.markers_per_array) {
+      throw std::invalid_argument("sequence: every array needs the same number of centres");
+    }
+    for (const auto& xy : array) {
+      if (xy.size() != 2) throw std::invalid_argument("sequence: centres must be [x, y] pairs");
+      s.centres.emplace_back(xy[0], xy[1]);
+    }
+  }
+  for (const auto& p : d["patterns"]) s.patterns.push_back(PatternFromDict(p.cast<py::dict>()));
+  for (const auto& item : d["segments"]) {
+    const py::dict seg = item.cast<py::dict>();
+    s.segments.push_back({seg["kind"].cast<std::string>(), seg["first_frame"].cast<int>(),
+                          seg["last_frame"].cast<int>()});
+  }
+  s.start_code = LightCodeFromDict(codes["start"]);
+  s.end_code = LightCodeFromDict(codes["end"]);
+  s.Check();
+  return s;
+}
+
+ingest::CameraModel CameraFromArrays(const DoubleArray& K, const DoubleArray& dist,
+                                     const std::optional<std::pair<int, int>>& resolution, const std::string& source) {
+  if (K.size() != 9) throw std::invalid_argument("K must have 9 values (3x3)");
+  ingest::CameraModel camera;
+  for (int i = 0; i < 9; ++i) camera.lens.K(i / 3, i % 3) = K.data()[i];
+  camera.lens.dist.assign(dist.data(), dist.data() + dist.size());
+  if (resolution) camera.resolution = cv::Size(resolution->first, resolution->second);
+  camera.source = source;
+  camera.lens.Check();
+  return camera;
+}
+
+ingest::IngestOptions IngestOptionsFromKwargs(const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
+                                              const py::kwargs& kwargs) {
+  ingest::IngestOptions options;
+  options.detector = {aruco, apriltag};
+  for (const auto& item : kwargs) {
+    const std::string key = py::str(item.first);
+    if (!SetIngestOption(&options, key, item.second)) ThrowUnknownOption("ingest", key, IngestOptionDefaults());
+  }
+  return options;
+}
+
+template <typename T>
+py::array_t<T> Column(const std::vector<detect::ScaleRecord>& records, T (*get)(const detect::ScaleRecord&)) {
+  py::array_t<T> out(static_cast<py::ssize_t>(records.size()));
+  for (std::size_t i = 0; i < records.size(); ++i) out.mutable_data()[i] = get(records[i]);
+  return out;
+}
+
+py::dict RecordsDict(const std::vector<detect::ScaleRecord>& records) {
+  using R = detect::ScaleRecord;
+  const auto n = static_cast<py::ssize_t>(records.size());
+  py::array_t<double> centre({n, py::ssize_t{2}}), corners({n, py::ssize_t{4}, py::ssize_t{2}});
+  for (py::ssize_t i = 0; i < n; ++i) {
+    centre.mutable_at(i, 0) = records[i].centre.x;
+    centre.mutable_at(i, 1) = records[i].centre.y;
+    for (int k = 0; k < 4; ++k) {
+      corners.mutable_at(i, k, 0) = records[i].corners[k].x;
+      corners.mutable_at(i, k, 1) = records[i].corners[k].y;
+    }
+  }
+  py::dict d;
+  d["pattern"] = Column<int>(records, [](const R& r) { return r.pattern; });
+  d["array"] = Column<int>(records, [](const R& r) { return r.array; });
+  d["marker"] = Column<int>(records, [](const R& r) { return r.marker; });
+  d["scale_index"] = Column<int>(records, [](const R& r) { return r.scale_index; });
+  d["centre"] = centre;
+  d["corners"] = corners;
+  d["side_px"] = Column<double>(records, [](const R& r) { return r.side_px; });
+  d["first_frame"] = Column<int>(records, [](const R& r) { return r.first_frame; });
+  d["frame_count"] = Column<int>(records, [](const R& r) { return r.frame_count; });
+  d["in_region"] = Column<bool>(records, [](const R& r) { return r.in_region; });
+  d["kept"] = Column<bool>(records, [](const R& r) { return r.kept; });
+  d["deviation_px"] = Column<double>(records, [](const R& r) { return r.deviation_px; });
+  return d;
+}
+
+py::dict CentresDict(const std::vector<detect::MergedCentre>& centres) {
+  const auto n = static_cast<py::ssize_t>(centres.size());
+  py::array_t<int> array(n), marker(n), kept(n), rejected(n);
+  py::array_t<double> xy({n, py::ssize_t{2}});
+  for (py::ssize_t i = 0; i < n; ++i) {
+    array.mutable_at(i) = centres[i].array;
+    marker.mutable_at(i) = centres[i].marker;
+    kept.mutable_at(i) = centres[i].scales_kept;
+    rejected.mutable_at(i) = centres[i].scales_rejected;
+    xy.mutable_at(i, 0) = centres[i].centre.x;
+    xy.mutable_at(i, 1) = centres[i].centre.y;
+  }
+  py::dict d;
+  d["array"] = array;
+  d["marker"] = marker;
+  d["xy"] = xy;
+  d["scales_kept"] = kept;
+  d["scales_rejected"] = rejected;
+  return d;
+}
+
+py::list ScalesList(const std::vector<ingest::ScaleStats>& scales) {
+  py::list out;
+  for (const auto& s : scales) {
+    py::dict d;
+    d["patterns"] = s.patterns;
+    d["detected_patterns"] = s.detected_patterns;
+    d["skipped_patterns"] = s.skipped_patterns;
+    d["searched"] = s.searched;
+    d["too_small"] = s.too_small;
+    d["outside"] = s.outside;
+    d["detected"] = s.detected;
+    d["kept"] = s.kept;
+    out.append(d);
+  }
+  return out;
+}
+
+py::dict ResultDict(const ingest::CameraIngestResult& r) {
+  py::dict d;
+  d["video"] = py::dict(py::arg("path") = r.video.path, py::arg("width") = r.video.width,
+                        py::arg("height") = r.video.height, py::arg("fps") = r.video.fps,
+                        py::arg("frame_count") = r.video.frame_count);
+  d["sync"] = SyncResultDict(r.sync);
+  d["frames_decoded"] = r.frames_decoded;
+  d["frames_converted"] = r.frames_converted;
+  d["frames_detected"] = r.frames_detected;
+  d["patterns_whole_frame"] = r.patterns_whole_frame;
+  d["patterns_in_regions"] = r.patterns_in_regions;
+  d["patterns_dropped"] = r.patterns_dropped;
+  d["patterns_missing"] = r.patterns_missing;
+  d["detections_rejected"] = r.detections_rejected;
+  d["scales"] = ScalesList(r.scales);
+  d["records"] = RecordsDict(r.records);
+  d["centres"] = CentresDict(r.centres);
+  py::array_t<double> signal(static_cast<py::ssize_t>(r.signal.size()));
+  std::copy(r.signal.begin(), r.signal.end(), signal.mutable_data());
+  d["signal"] = signal;
+  d["homography_valid"] = r.homography_valid;
+  py::array_t<double> H({py::ssize_t{3}, py::ssize_t{3}});
+  for (int i = 0; i < 9; ++i) H.mutable_data()[i] = r.homography(i / 3, i % 3);
+  d["homography"] = H;
+  d["homography_rms_px"] = r.homography_rms_px;
+  d["seconds_total"] = r.seconds_total;
+  d["seconds_detection"] = r.seconds_detection;
+  return d;
+}
+
+}  // namespace
+
+void register_ingest(py::module_& m) {
+  m.def("option_defaults", &IngestOptionDefaults, "Every ingest option (sync ones included) with its default.");
+  m.def(
+      "light_levels",
+      [](const py::dict& sequence) {
+        const sync::LightTimeline timeline = SequenceFromDict(sequence).LightLevels();
+        py::array_t<double> out(timeline.frame_count());
+        for (int k = 0; k < timeline.frame_count(); ++k) out.mutable_data()[k] = timeline.Level(k);
+        return out;
+      },
+      py::arg("sequence"), "Projector level of every sequence frame (1 white, 0 black, NaN for patterns).");
+  m.def(
+      "ingest_camera",
+      [](const std::string& video, const py::dict& sequence, const DoubleArray& K, const DoubleArray& dist,
+         const std::optional<std::pair<int, int>>& resolution, const std::string& source,
+         const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
+         const std::optional<py::function>& progress, const py::kwargs& kwargs) {
+        const ingest::SequenceDescription description = SequenceFromDict(sequence);
+        const ingest::CameraModel camera = CameraFromArrays(K, dist, resolution, source);
+        const ingest::IngestOptions options = IngestOptionsFromKwargs(aruco, apriltag, kwargs);
+        ingest::ProgressCallback callback;
+        if (progress) {
+          callback = [function = *progress](int decoded, int total) {
+            py::gil_scoped_acquire acquire;
+            function(decoded, total);
+          };
+        }
+        ingest::CameraIngestResult result;
+        {
+          py::gil_scoped_release release;
+          result = ingest::IngestCamera(video, description, camera, options, callback);
+        }
+        return ResultDict(result);
+      },
+      py::arg("video"), py::arg("sequence"), py::arg("K"), py::arg("dist"), py::arg("resolution"),
+      py::arg("source"), py::arg("aruco"), py::arg("apriltag"), py::arg("progress") = py::none(),
+      "Synchronise one camera's video with the sequence (dict of sequence.json) and detect its "
+      "MSMs: sync, statistics, per-scale records and merged centres (undistorted pixels). "
+      "`progress(decoded, total)` is called now and then. Keyword options: see option_defaults().");
+}
+
+}  // namespace calibproj::bindings

@@ -1,0 +1,28 @@
+#pragma once
+// Keyword options of the video, sync and ingest bindings, mapped onto the C++ option
+// structs by name (unknown names are a ValueError listing the known ones).
+
+#include <pybind11/pybind11.h>
+
+#include <map>
+#include <string>
+
+#include "calibproj/ingest/camera_ingest.h"
+#include "calibproj/sync/synchronise.h"
+
+namespace calibproj::bindings {
+
+// Sets one sync option by name; false when `key` is not a sync option.
+bool SetSyncOption(sync::SyncOptions* o, const std::string& key, const pybind11::handle& value);
+
+// Sets one ingest option by name (sync options included); false when unknown.
+bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const pybind11::handle& value);
+
+// Every option name with its C++ default, for documentation and consistency tests.
+pybind11::dict SyncOptionDefaults();
+pybind11::dict IngestOptionDefaults();
+
+// Throws std::invalid_argument naming `key` and listing `known`.
+[[noreturn]] void ThrowUnknownOption(const std::string& what, const std::string& key, const pybind11::dict& known);
+
+}  // namespace calibproj::bindings

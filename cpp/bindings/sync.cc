@@ -1,0 +1,84 @@
+// Bindings of calibproj::sync: light-code search and synchronisation of a brightness
+// signal (numpy arrays in, dicts out).
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <string>
+#include <vector>
+
+#include "calibproj/sync/synchronise.h"
+#include "ingest_options.h"
+#include "registry.h"
+#include "sync_convert.h"
+
+namespace py = pybind11;
+
+namespace calibproj::bindings {
+
+namespace {
+
+using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+std::vector<double> ToVector(const DoubleArray& array) {
+  if (array.ndim() != 1) throw std::invalid_argument("expected a 1-D array");
+  return std::vector<double>(array.data(), array.data() + array.size());
+}
+
+sync::SyncOptions SyncOptionsFromKwargs(const py::kwargs& kwargs) {
+  sync::SyncOptions options;
+  for (const auto& item : kwargs) {
+    const std::string key = py::str(item.first);
+    if (!SetSyncOption(&options, key, item.second)) ThrowUnknownOption("sync", key, SyncOptionDefaults());
+  }
+  options.Check();
+  return options;
+}
+
+}  // namespace
+
+void register_sync(py::module_& m) {
+  m.def("option_defaults", &SyncOptionDefaults, "Every sync option with its default.");
+  m.def(
+      "synchronise",
+      [](const DoubleArray& signal, const DoubleArray& levels, const py::dict& start, const py::dict& end,
+         double nominal_rate, const std::string& source, const py::kwargs& kwargs) {
+        const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
+        const std::vector<double> values = ToVector(signal);
+        const sync::LightTimeline timeline(ToVector(levels));
+        const sync::LightCode start_code = LightCodeFromDict(start), end_code = LightCodeFromDict(end);
+        sync::SyncResult result;
+        {
+          py::gil_scoped_release release;
+          result = sync::Synchronise(values, timeline, start_code, end_code, nominal_rate, options, source);
+        }
+        return SyncResultDict(result);
+      },
+      py::arg("signal"), py::arg("levels"), py::arg("start_code"), py::arg("end_code"), py::arg("nominal_rate"),
+      py::arg("source") = "signal",
+      "Frame map of a camera from its per-frame brightness `signal` (NaN = not measured), the "
+      "projector's per-frame `levels` (0..1, NaN = unknown) and the light codes ({bits, "
+      "frames_per_bit, first_frame}); `nominal_rate` = camera fps / projector fps. Keyword "
+      "options: see option_defaults(). RuntimeError naming `source` when a code is missing or "
+      "the codes disagree.");
+  m.def(
+      "locate_code",
+      [](const DoubleArray& signal, const DoubleArray& levels, const py::dict& code, double nominal_rate,
+         const std::string& source, const py::kwargs& kwargs) {
+        const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
+        const std::vector<double> values = ToVector(signal);
+        const sync::LightTimeline timeline(ToVector(levels));
+        const sync::LightCode light_code = LightCodeFromDict(code);
+        sync::CodeLocation location;
+        {
+          py::gil_scoped_release release;
+          location = sync::LocateCode(values, timeline, light_code, nominal_rate, options, source, "light");
+        }
+        return CodeLocationDict(location);
+      },
+      py::arg("signal"), py::arg("levels"), py::arg("code"), py::arg("nominal_rate"), py::arg("source") = "signal",
+      "Where one light code lies in a brightness signal (see synchronise).");
+}
+
+}  // namespace calibproj::bindings

@@ -1,0 +1,52 @@
+#pragma once
+// Conversions of sync types between Python dicts and C++ (shared by sync.cc and ingest.cc).
+
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include "calibproj/sync/synchronise.h"
+
+namespace calibproj::bindings {
+
+// {"bits": [...], "frames_per_bit": n, "first_frame": k} (LightCode.to_dict()).
+inline sync::LightCode LightCodeFromDict(const pybind11::dict& d) {
+  sync::LightCode code;
+  code.bits = d["bits"].cast<std::vector<int>>();
+  code.frames_per_bit = d["frames_per_bit"].cast<int>();
+  code.first_frame = d["first_frame"].cast<int>();
+  return code;
+}
+
+inline pybind11::dict FrameMapDict(const sync::FrameMap& map) {
+  pybind11::dict d;
+  d["offset"] = map.offset;
+  d["rate"] = map.rate;
+  d["exposure"] = map.exposure;
+  return d;
+}
+
+inline pybind11::dict CodeLocationDict(const sync::CodeLocation& location) {
+  pybind11::dict d;
+  d["correlation"] = location.correlation;
+  d["frame"] = location.frame;
+  d["uncertainty"] = location.uncertainty;
+  d["map"] = FrameMapDict(location.map);
+  d["window_map"] = FrameMapDict(location.window_map);
+  d["rms"] = location.rms;
+  d["sharp"] = location.sharp;
+  return d;
+}
+
+inline pybind11::dict SyncResultDict(const sync::SyncResult& result) {
+  pybind11::dict d = FrameMapDict(result.map);
+  d["window_map"] = FrameMapDict(result.window_map);
+  d["offset_uncertainty"] = result.offset_uncertainty;
+  d["rate_uncertainty"] = result.rate_uncertainty;
+  d["sharp"] = result.sharp;
+  d["rms"] = result.rms;
+  d["start"] = CodeLocationDict(result.start);
+  d["end"] = CodeLocationDict(result.end);
+  return d;
+}
+
+}  // namespace calibproj::bindings

@@ -1,0 +1,177 @@
+#include "calibproj/detect/roi.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <stdexcept>
+#include <string>
+
+#include "calibproj/detect/marker_centre.h"
+
+namespace calibproj::detect {
+
+namespace {
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument("ROI options: " + message);
+}
+
+int AlignDown(int value, int alignment) {
+  return static_cast<int>(std::floor(static_cast<double>(value) / alignment)) * alignment;
+}
+
+// Points along the edges of the square of side `side` centred on `centre`, mapped to
+// distorted image pixels; the first four are the corners (top-left, top-right,
+// bottom-right, bottom-left).
+std::vector<cv::Point2d> SquareOutline(const ProjectorHomography& homography, const LensModel& lens,
+                                       const cv::Point2d& centre, double side, int edge_points) {
+  const double h = 0.5 * side;
+  const cv::Point2d corners[4] = {centre + cv::Point2d(-h, -h), centre + cv::Point2d(h, -h),
+                                  centre + cv::Point2d(h, h), centre + cv::Point2d(-h, h)};
+  std::vector<cv::Point2d> undistorted;
+  for (const auto& corner : corners) undistorted.push_back(homography.Map(corner));
+  for (int edge = 0; edge < 4; ++edge) {
+    for (int k = 1; k < edge_points; ++k) {
+      const double s = static_cast<double>(k) / edge_points;
+      undistorted.push_back(homography.Map(corners[edge] * (1.0 - s) + corners[(edge + 1) % 4] * s));
+    }
+  }
+  return DistortPixels(lens, undistorted);
+}
+
+cv::Rect2d BoundingBox(const std::vector<cv::Point2d>& points) {
+  double x0 = points[0].x, y0 = points[0].y, x1 = x0, y1 = y0;
+  for (const auto& p : points) {
+    x0 = std::min(x0, p.x);
+    y0 = std::min(y0, p.y);
+    x1 = std::max(x1, p.x);
+    y1 = std::max(y1, p.y);
+  }
+  return {x0, y0, x1 - x0, y1 - y0};
+}
+
+double ShortestSide(const std::vector<cv::Point2d>& outline) {
+  double shortest = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 4; ++k) shortest = std::min(shortest, cv::norm(outline[k] - outline[(k + 1) % 4]));
+  return shortest;
+}
+
+double AllowedOffset(double side_px, const RoiOptions& options) {
+  return std::max(options.max_offset_px, options.max_offset_fraction * side_px);
+}
+
+}  // namespace
+
+void RoiOptions::Check() const {
+  Require(padding_fraction >= 0.0, "padding_fraction must be non-negative");
+  Require(padding_px >= 0, "padding_px must be non-negative");
+  Require(alignment >= 1, "alignment must be at least 1");
+  Require(min_module_px > 0.0, "min_module_px must be positive");
+  Require(border_px >= 0, "border_px must be non-negative");
+  Require(max_area_fraction > 0.0, "max_area_fraction must be positive");
+  Require(max_offset_px > 0.0 && max_offset_fraction >= 0.0, "max_offset_px must be positive, "
+                                                             "max_offset_fraction non-negative");
+  Require(edge_points >= 1, "edge_points must be at least 1");
+}
+
+const MarkerPrediction* PatternPlan::Find(int id) const {
+  for (const auto& marker : markers) {
+    if (marker.id == id) return &marker;
+  }
+  return nullptr;
+}
+
+PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
+                        const PatternMarkers& markers, const RoiOptions& options) {
+  options.Check();
+  if (!homography.valid()) throw std::logic_error("PlanPattern needs a valid homography");
+  PatternPlan plan;
+  const cv::Rect image(0, 0, image_size.width, image_size.height);
+  const cv::Rect inner(options.border_px, options.border_px, image_size.width - 2 * options.border_px,
+                       image_size.height - 2 * options.border_px);
+  double area = 0.0;
+  for (std::size_t i = 0; i < markers.ids.size(); ++i) {
+    const auto outline = SquareOutline(homography, lens, markers.centres[i], markers.side_px, options.edge_points);
+    const cv::Rect2d box = BoundingBox(outline);
+    if (!(box.x >= inner.x && box.y >= inner.y && box.x + box.width <= inner.x + inner.width &&
+          box.y + box.height <= inner.y + inner.height)) {
+      ++plan.outside;
+      continue;
+    }
+    MarkerPrediction prediction;
+    prediction.id = markers.ids[i];
+    prediction.side_px = ShortestSide(outline);
+    if (prediction.side_px / markers.grid_cells < options.min_module_px) {
+      ++plan.too_small;
+      continue;
+    }
+    prediction.centre = DistortPixels(lens, {homography.Map(markers.centres[i])})[0];
+    const double pad = std::max<double>(options.padding_px, options.padding_fraction * prediction.side_px);
+    const int x0 = AlignDown(static_cast<int>(std::floor(box.x - pad)), options.alignment);
+    const int y0 = AlignDown(static_cast<int>(std::floor(box.y - pad)), options.alignment);
+    const int x1 = static_cast<int>(std::ceil(box.x + box.width + pad)) + 1;
+    const int y1 = static_cast<int>(std::ceil(box.y + box.height + pad)) + 1;
+    prediction.region = cv::Rect(x0, y0, x1 - x0, y1 - y0) & image;
+    area += prediction.region.area();
+    plan.markers.push_back(prediction);
+  }
+  plan.whole_frame = area > options.max_area_fraction * image.area();
+  return plan;
+}
+
+Detections DetectInRegions(const MarkerDetector& detector, const PatternPlan& plan,
+                           const std::vector<RegionImage>& regions, const RoiOptions& options) {
+  if (regions.size() != plan.markers.size()) throw std::invalid_argument("one region image per planned marker");
+  Detections out;
+  for (std::size_t i = 0; i < regions.size(); ++i) {
+    const MarkerPrediction& marker = plan.markers[i];
+    const Detections found = detector.Detect(regions[i].gray);
+    const cv::Point2d origin(regions[i].origin.x, regions[i].origin.y);
+    double best = AllowedOffset(marker.side_px, options);
+    int chosen = -1;
+    for (std::size_t k = 0; k < found.size(); ++k) {
+      if (found.ids[k] != marker.id) continue;
+      const double offset = cv::norm(DiagonalIntersection(found.corners[k]) + origin - marker.centre);
+      if (offset <= best) {
+        best = offset;
+        chosen = static_cast<int>(k);
+      }
+    }
+    if (chosen < 0) continue;
+    Quad quad = found.corners[chosen];
+    for (auto& corner : quad) corner += origin;
+    out.ids.push_back(marker.id);
+    out.corners.push_back(quad);
+  }
+  SortById(&out);
+  return out;
+}
+
+Detections FilterDetections(const Detections& found, const std::vector<int>& ids, const PatternPlan* plan,
+                            const RoiOptions& options, int* rejected) {
+  std::map<int, int> seen;
+  for (int id : found.ids) ++seen[id];
+  Detections out;
+  int dropped = 0;
+  for (std::size_t k = 0; k < found.size(); ++k) {
+    const int id = found.ids[k];
+    const bool shown = std::find(ids.begin(), ids.end(), id) != ids.end();
+    bool keep = shown && seen[id] == 1;
+    if (keep && plan != nullptr) {
+      const MarkerPrediction* marker = plan->Find(id);
+      keep = marker != nullptr && cv::norm(DiagonalIntersection(found.corners[k]) - marker->centre) <=
+                                      AllowedOffset(marker->side_px, options);
+    }
+    if (keep) {
+      out.ids.push_back(id);
+      out.corners.push_back(found.corners[k]);
+    } else {
+      ++dropped;
+    }
+  }
+  if (rejected != nullptr) *rejected += dropped;
+  return out;
+}
+
+}  // namespace calibproj::detect

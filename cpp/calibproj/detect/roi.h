@@ -1,0 +1,95 @@
+#pragma once
+// Region-of-interest detection of the markers of one projected pattern.
+//
+// With the projector-to-image homography known, each marker's drawn square is mapped
+// into the undistorted image, then through the lens distortion into the image; its
+// bounding box, padded, is the region searched. Markers too small to decode or not
+// wholly inside the image are not searched at all. Regions start on multiples of
+// `alignment` pixels so that detectors working on tiles (libapriltag thresholds 4x4
+// tiles) see the same tiles as on the whole frame, and the padding covers every
+// neighbourhood the detectors and the corner refinement read: a marker found in its
+// region has the corners it has in the whole frame.
+
+#include <opencv2/core.hpp>
+
+#include <vector>
+
+#include "calibproj/detect/detections.h"
+#include "calibproj/detect/lens.h"
+#include "calibproj/detect/marker_detector.h"
+#include "calibproj/detect/projector_homography.h"
+
+namespace calibproj::detect {
+
+struct RoiOptions {
+  // Padding around a marker's predicted bounding box: the larger of padding_px and
+  // padding_fraction of its predicted side.
+  double padding_fraction = 0.25;
+  int padding_px = 16;
+  // Regions start on multiples of this many pixels.
+  int alignment = 8;
+  // Markers whose predicted module (cell) is smaller than this are not searched.
+  double min_module_px = 1.5;
+  // A marker counts as inside the image when its predicted square stays this far
+  // from the image edges.
+  int border_px = 4;
+  // Above this share of the image, regions are dropped for one whole-frame detection.
+  double max_area_fraction = 0.5;
+  // A detection counts only within this distance of its predicted centre: the larger
+  // of max_offset_px and max_offset_fraction of the predicted side.
+  double max_offset_px = 4.0;
+  double max_offset_fraction = 0.25;
+  // Points per edge of the drawn square mapped through the lens to bound it.
+  int edge_points = 4;
+
+  // Throws std::invalid_argument naming the first bad field.
+  void Check() const;
+};
+
+// Where one marker of a pattern should appear.
+struct MarkerPrediction {
+  int id = -1;
+  cv::Point2d centre;     // distorted image pixels
+  double side_px = 0.0;   // shortest side of its drawn square in the image
+  cv::Rect region;        // padded, aligned, inside the image
+};
+
+struct PatternPlan {
+  std::vector<MarkerPrediction> markers;  // those worth searching
+  int too_small = 0;                      // predicted too small to decode
+  int outside = 0;                        // not wholly inside the image
+  bool whole_frame = false;               // one whole-frame detection is cheaper
+
+  const MarkerPrediction* Find(int id) const;
+};
+
+// Markers drawn by a pattern: ids and centres in projector pixels, with the side of
+// their drawn square (border included) and its number of cells.
+struct PatternMarkers {
+  std::vector<int> ids;
+  std::vector<cv::Point2d> centres;
+  double side_px = 0.0;
+  int grid_cells = 1;
+};
+
+PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
+                        const PatternMarkers& markers, const RoiOptions& options);
+
+// A grey crop of the frame and where it sits in it.
+struct RegionImage {
+  cv::Mat gray;
+  cv::Point origin;
+};
+
+// Detections of planned markers in their regions (regions[i] holds markers[i] of the
+// plan), in whole-frame coordinates: for each marker the detection of its id closest
+// to the prediction, if within the allowed offset.
+Detections DetectInRegions(const MarkerDetector& detector, const PatternPlan& plan,
+                           const std::vector<RegionImage>& regions, const RoiOptions& options);
+
+// Keeps the detections of a whole frame that a pattern can show: ids in `ids`, seen
+// once, and, when a plan is given, close to their prediction.
+Detections FilterDetections(const Detections& found, const std::vector<int>& ids, const PatternPlan* plan,
+                            const RoiOptions& options, int* rejected);
+
+}  // namespace calibproj::detect

@@ -1,0 +1,409 @@
+#include "calibproj/ingest/camera_ingest.h"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <utility>
+
+#include "calibproj/detect/marker_centre.h"
+#include "calibproj/ingest/detection_pipeline.h"
+#include "calibproj/sync/code_search.h"
+#include "calibproj/video/frame_ring.h"
+#include "calibproj/video/luma.h"
+
+namespace calibproj::ingest {
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr int kProgressInterval = 25;
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument("ingest options: " + message);
+}
+
+enum class PatternStatus { kNotSeen, kSkipped, kSubmitted };
+
+// The frames of one pattern being collected (and averaged) before detection.
+struct PendingPattern {
+  int pattern = -1;
+  bool skip = false;
+  DetectionJob job;
+  std::vector<cv::Rect> rects;
+  std::vector<cv::Mat> sums;  // CV_16U accumulators when averaging
+  std::vector<int> frames;
+};
+
+double MeanSide(const detect::Quad& quad) {
+  double total = 0.0;
+  for (int k = 0; k < 4; ++k) total += cv::norm(quad[k] - quad[(k + 1) % 4]);
+  return 0.25 * total;
+}
+
+class CameraIngest {
+ public:
+  CameraIngest(const std::string& path, const SequenceDescription& sequence, const CameraModel& camera,
+               const IngestOptions& options, const ProgressCallback& progress)
+      : path_(path),
+        sequence_(sequence),
+        camera_(camera),
+        options_(Prepared(options, sequence)),
+        progress_(progress),
+        reader_(path),
+        family_(detect::ParseMarkerFamily(sequence.markers)),
+        geometry_(detect::GetMarkerGeometry(family_)),
+        timeline_(sequence.LightLevels()),
+        nominal_rate_(reader_.info().fps / sequence.fps),
+        luma_(options_.luma_gamma, options_.mean_row_step),
+        ring_(options_.lookback_frames),
+        homography_(cv::Size(reader_.info().width, reader_.info().height), options_.homography),
+        pipeline_(family_, options_.detector, options_.roi, options_.detection_threads, options_.max_pending_jobs),
+        status_(sequence.patterns.size(), PatternStatus::kNotSeen),
+        used_frames_(sequence.patterns.size()) {
+    CheckResolution();
+    tracker_ = std::make_unique<sync::CodeTracker>(
+        timeline_, sync::CodeWindow(timeline_, sequence.start_code, options_.sync), nominal_rate_,
+        options_.sync.search, options_.sync.min_correlation, options_.sync.guard_samples);
+    result_.video = reader_.info();
+    result_.scales.resize(sequence.scales.size());
+    for (const PatternSpec& p : sequence.patterns) ++result_.scales[p.scale_index].patterns;
+  }
+
+  CameraIngestResult Run() {
+    const auto started = std::chrono::steady_clock::now();
+    while (reader_.Grab()) {
+      const int frame = reader_.frame_index();
+      converted_ = false;
+      if (started_) {
+        OnFrameAfterStart(frame);
+      } else {
+        OnFrameBeforeStart(frame);
+      }
+      if (progress_ && frame % kProgressInterval == 0) progress_(frame + 1, reader_.info().frame_count);
+    }
+    result_.frames_decoded = reader_.frame_index() + 1;
+    if (progress_) progress_(result_.frames_decoded, result_.frames_decoded);
+    if (!started_) ThrowStartNotFound();
+    SubmitPending();
+    Absorb(pipeline_.Finish());
+    result_.sync = sync::SynchroniseFromStart(result_.signal, timeline_, sequence_.start_code, sequence_.end_code,
+                                              start_, nominal_rate_, options_.sync, path_);
+    DropUncleanPatterns();
+    Summarise();
+    result_.seconds_total = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    return std::move(result_);
+  }
+
+ private:
+  // The options with what the sequence fixes (marker polarity) filled in.
+  static IngestOptions Prepared(IngestOptions options, const SequenceDescription& sequence) {
+    sequence.Check();
+    options.detector.aruco.inverted = sequence.inverted;
+    options.detector.apriltag.inverted = sequence.inverted;
+    options.Check();
+    return options;
+  }
+
+  void CheckResolution() const {
+    const cv::Size expected = camera_.resolution;
+    const auto& info = reader_.info();
+    if (expected.area() > 0 && (expected.width != info.width || expected.height != info.height)) {
+      throw std::invalid_argument(path_ + ": frames are " + std::to_string(info.width) + "x" +
+                                  std::to_string(info.height) + " but the intrinsics (" + camera_.source +
+                                  ") are for " + std::to_string(expected.width) + "x" +
+                                  std::to_string(expected.height));
+    }
+  }
+
+  // ------------------------------------------------------------------ decoding
+
+  const cv::Mat& Colour() {
+    if (!converted_) {
+      converted_ = true;
+      ++result_.frames_converted;
+    }
+    return reader_.Colour();
+  }
+
+  void OnFrameBeforeStart(int frame) {
+    cv::Mat gray;
+    cv::cvtColor(Colour(), gray, cv::COLOR_BGR2GRAY);
+    result_.signal.push_back(luma_.Mean(gray));
+    ring_.Push(frame, std::move(gray));
+    if (frame % options_.search_interval == 0 && tracker_->Update(result_.signal)) OnStartFound();
+  }
+
+  void OnStartFound() {
+    start_ = sync::FitCode(result_.signal, timeline_, sequence_.start_code, tracker_->best(), options_.sync);
+    // The start code's conservative window, carried on at the nominal rate.
+    const double first = sequence_.start_code.first_frame;
+    provisional_ = sync::FrameMap{start_.window_map.CameraFrame(first) - nominal_rate_ * first, nominal_rate_,
+                                  start_.window_map.exposure};
+    PlanPicks();
+    PlanEndCodeMeans();
+    started_ = true;
+    for (const auto& [index, gray] : ring_.frames()) {
+      const auto pick = frame_pattern_.find(index);
+      if (pick != frame_pattern_.end()) HandlePick(index, pick->second, [&]() -> const cv::Mat& { return gray; });
+    }
+    ring_.Clear();
+  }
+
+  void OnFrameAfterStart(int frame) {
+    const bool measure = frame >= end_means_first_ && frame <= end_means_last_;
+    const auto pick = frame_pattern_.find(frame);
+    result_.signal.push_back(measure ? luma_.Mean(Colour()) : kNaN);
+    if (pick != frame_pattern_.end()) {
+      HandlePick(frame, pick->second, [&]() -> const cv::Mat& { return Colour(); });
+    }
+  }
+
+  // Frames to detect on, per pattern, from the start code's conservative exposure
+  // window and the nominal rate; the slack covers the clock drift since the code.
+  void PlanPicks() {
+    const video::PickOptions& pick = options_.pick;
+    picks_.assign(sequence_.patterns.size(), {});
+    for (std::size_t p = 0; p < sequence_.patterns.size(); ++p) {
+      const PatternSpec& pattern = sequence_.patterns[p];
+      const double begin = pattern.first_frame, end = pattern.last_frame + 1.0;
+      const double slack = pick.max_clock_drift * std::abs(begin - sequence_.start_code.first_frame);
+      picks_[p] = video::PickFrames(provisional_, begin, end, pick.margin, slack, pick.average_frames);
+      if (picks_[p].empty()) picks_[p] = video::PickFrames(provisional_, begin, end, pick.margin, 0.0, 1);
+      for (int frame : picks_[p]) frame_pattern_.emplace(frame, static_cast<int>(p));
+    }
+  }
+
+  // Frames whose mean luma the end code search needs.
+  void PlanEndCodeMeans() {
+    const sync::FrameWindow window = sync::CodeWindow(timeline_, sequence_.end_code, options_.sync);
+    const double spread =
+        options_.sync.max_rate_deviation * nominal_rate_ * (window.end - sequence_.start_code.first_frame) + 3.0;
+    end_means_first_ = static_cast<int>(std::floor(provisional_.CameraFrame(window.begin) - spread));
+    end_means_last_ = static_cast<int>(std::ceil(provisional_.CameraFrame(window.end) + spread));
+  }
+
+  [[noreturn]] void ThrowStartNotFound() {
+    // The full search gives the message (best correlation seen); it cannot succeed
+    // where the incremental one failed unless the code ends with the video.
+    sync::Synchronise(result_.signal, timeline_, sequence_.start_code, sequence_.end_code, nominal_rate_,
+                      options_.sync, path_);
+    throw std::runtime_error(path_ + ": the start light code ends too close to the end of the video");
+  }
+
+  // ----------------------------------------------------------------- patterns
+
+  template <typename ImageFn>
+  void HandlePick(int frame, int pattern, ImageFn image) {
+    if (pending_.pattern != pattern) {
+      SubmitPending();
+      BeginPattern(pattern);
+    }
+    if (pending_.skip) return;
+    AddFrame(frame, image());
+    if (frame == picks_[pattern].back()) SubmitPending();
+  }
+
+  void BeginPattern(int index) {
+    Absorb(pipeline_.Poll());
+    homography_.Update();
+    pending_ = PendingPattern{};
+    pending_.pattern = index;
+    const detect::PatternMarkers markers = sequence_.Markers(index, geometry_.grid_cells);
+    ScaleStats& stats = result_.scales[sequence_.patterns[index].scale_index];
+    DetectionJob& job = pending_.job;
+    job.pattern = index;
+    job.ids = markers.ids;
+    const cv::Rect whole(0, 0, reader_.info().width, reader_.info().height);
+    if (!homography_.valid()) {
+      job.whole_frame = true;
+      stats.searched += static_cast<int>(markers.ids.size());
+      pending_.rects = {whole};
+      return;
+    }
+    job.has_plan = true;
+    job.plan = detect::PlanPattern(homography_, camera_.lens, whole.size(), markers, options_.roi);
+    stats.too_small += job.plan.too_small;
+    stats.outside += job.plan.outside;
+    if (job.plan.markers.empty()) {
+      pending_.skip = true;
+      status_[index] = PatternStatus::kSkipped;
+      ++stats.skipped_patterns;
+      return;
+    }
+    stats.searched += static_cast<int>(job.plan.markers.size());
+    job.whole_frame = !options_.use_roi || job.plan.whole_frame;
+    if (job.whole_frame) {
+      pending_.rects = {whole};
+    } else {
+      for (const auto& marker : job.plan.markers) pending_.rects.push_back(marker.region);
+    }
+  }
+
+  void AddFrame(int frame, const cv::Mat& image) {
+    const bool first = pending_.frames.empty();
+    const bool averaging = picks_[pending_.pattern].size() > 1;
+    if (first) {
+      pending_.job.regions.resize(pending_.rects.size());
+      pending_.sums.resize(pending_.rects.size());
+    }
+    for (std::size_t i = 0; i < pending_.rects.size(); ++i) {
+      cv::Mat gray = video::GrayRegion(image, pending_.rects[i]);
+      if (averaging) {
+        if (first) {
+          gray.convertTo(pending_.sums[i], CV_16U);
+        } else {
+          cv::add(pending_.sums[i], gray, pending_.sums[i], cv::noArray(), CV_16U);
+        }
+      }
+      if (first) pending_.job.regions[i] = detect::RegionImage{std::move(gray), pending_.rects[i].tl()};
+    }
+    pending_.frames.push_back(frame);
+  }
+
+  void SubmitPending() {
+    PendingPattern pending = std::exchange(pending_, PendingPattern{});
+    if (pending.pattern < 0 || pending.skip || pending.frames.empty()) return;
+    const int count = static_cast<int>(pending.frames.size());
+    if (count > 1) {
+      for (std::size_t i = 0; i < pending.sums.size(); ++i) {
+        pending.sums[i].convertTo(pending.job.regions[i].gray, CV_8U, 1.0 / count);
+      }
+    }
+    pending.job.first_frame = pending.frames.front();
+    pending.job.frame_count = count;
+    status_[pending.pattern] = PatternStatus::kSubmitted;
+    used_frames_[pending.pattern] = pending.frames;
+    ++result_.scales[sequence_.patterns[pending.pattern].scale_index].detected_patterns;
+    result_.frames_detected += count;
+    ++(pending.job.whole_frame ? result_.patterns_whole_frame : result_.patterns_in_regions);
+    pipeline_.Submit(std::move(pending.job));
+  }
+
+  // Detections -> undistorted centres (records) and homography correspondences.
+  void Absorb(const std::vector<DetectionOutput>& outputs) {
+    for (const DetectionOutput& output : outputs) {
+      result_.seconds_detection += output.seconds;
+      result_.detections_rejected += output.rejected;
+      const PatternSpec& pattern = sequence_.patterns[output.pattern];
+      for (std::size_t k = 0; k < output.detections.size(); ++k) {
+        const detect::Quad& quad = output.detections.corners[k];
+        const auto undistorted = detect::UndistortPixels(camera_.lens, {quad.begin(), quad.end()});
+        const cv::Point2d centre =
+            detect::DiagonalIntersection({undistorted[0], undistorted[1], undistorted[2], undistorted[3]});
+        if (!std::isfinite(centre.x) || !std::isfinite(centre.y)) continue;
+        detect::ScaleRecord record;
+        record.pattern = output.pattern;
+        record.array = pattern.array;
+        record.marker = output.detections.ids[k];
+        record.scale_index = pattern.scale_index;
+        record.corners = quad;
+        record.centre = centre;
+        record.side_px = MeanSide(quad);
+        record.first_frame = output.first_frame;
+        record.frame_count = output.frame_count;
+        record.in_region = !output.whole_frame;
+        result_.records.push_back(record);
+        homography_.Add(sequence_.centres[pattern.array * sequence_.markers_per_array + record.marker], centre);
+      }
+    }
+  }
+
+  // ------------------------------------------------------------------- finish
+
+  void DropUncleanPatterns() {
+    const sync::FrameMap& map = result_.sync.window_map;
+    std::vector<bool> dropped(sequence_.patterns.size(), false);
+    for (std::size_t p = 0; p < sequence_.patterns.size(); ++p) {
+      if (status_[p] == PatternStatus::kNotSeen) ++result_.patterns_missing;
+      if (status_[p] != PatternStatus::kSubmitted) continue;
+      const PatternSpec& pattern = sequence_.patterns[p];
+      for (int frame : used_frames_[p]) {
+        if (!video::IsClean(map, frame, pattern.first_frame, pattern.last_frame + 1.0, options_.pick.margin)) {
+          dropped[p] = true;
+        }
+      }
+      if (dropped[p]) ++result_.patterns_dropped;
+    }
+    auto& records = result_.records;
+    records.erase(std::remove_if(records.begin(), records.end(),
+                                 [&](const detect::ScaleRecord& r) { return dropped[r.pattern]; }),
+                  records.end());
+  }
+
+  void Summarise() {
+    std::sort(result_.records.begin(), result_.records.end(), [](const auto& a, const auto& b) {
+      return std::tie(a.array, a.marker, a.scale_index) < std::tie(b.array, b.marker, b.scale_index);
+    });
+    result_.centres = detect::MergeScales(&result_.records, options_.merge);
+    for (const detect::ScaleRecord& r : result_.records) {
+      ++result_.scales[r.scale_index].detected;
+      if (r.kept) ++result_.scales[r.scale_index].kept;
+    }
+    homography_.Update();
+    result_.homography_valid = homography_.valid();
+    result_.homography = homography_.H();
+    result_.homography_rms_px = homography_.rms_px();
+  }
+
+  std::string path_;
+  const SequenceDescription& sequence_;
+  CameraModel camera_;
+  IngestOptions options_;
+  ProgressCallback progress_;
+  video::VideoReader reader_;
+  detect::MarkerFamily family_;
+  detect::MarkerGeometry geometry_;
+  sync::LightTimeline timeline_;
+  double nominal_rate_;
+  std::unique_ptr<sync::CodeTracker> tracker_;
+  video::LumaMeter luma_;
+  video::FrameRing ring_;
+  detect::ProjectorHomography homography_;
+  DetectionPipeline pipeline_;
+
+  bool started_ = false;
+  bool converted_ = false;
+  sync::CodeLocation start_;
+  sync::FrameMap provisional_;
+  std::vector<std::vector<int>> picks_;
+  std::map<int, int> frame_pattern_;
+  int end_means_first_ = 0;
+  int end_means_last_ = -1;
+  PendingPattern pending_;
+  std::vector<PatternStatus> status_;
+  std::vector<std::vector<int>> used_frames_;
+  CameraIngestResult result_;
+};
+
+}  // namespace
+
+void IngestOptions::Check() const {
+  sync.Check();
+  pick.Check();
+  detector.aruco.Check();
+  detector.apriltag.Check();
+  roi.Check();
+  homography.Check();
+  merge.Check();
+  Require(mean_row_step >= 1, "mean_row_step must be at least 1");
+  Require(luma_gamma > 0.0, "luma_gamma must be positive");
+  Require(lookback_frames >= 0, "lookback_frames must be non-negative");
+  Require(search_interval >= 1, "search_interval must be at least 1");
+  Require(detection_threads >= 1, "detection_threads must be at least 1");
+  Require(max_pending_jobs >= 1, "max_pending_jobs must be at least 1");
+}
+
+CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,
+                                const CameraModel& camera, const IngestOptions& options,
+                                const ProgressCallback& progress) {
+  camera.lens.Check();
+  return CameraIngest(video_path, sequence, camera, options, progress).Run();
+}
+
+}  // namespace calibproj::ingest

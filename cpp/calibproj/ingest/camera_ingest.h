@@ -1,0 +1,104 @@
+#pragma once
+// From one camera's video to the image positions of the MSM centres it saw.
+//
+// One decoding pass: every frame is decoded once; its mean luma is measured until the
+// start light code is found (incrementally, code_search.h) and around where the end
+// code must be. From the start code on, the frames that show each pattern cleanly are
+// known, so only those are converted and handed (whole, or as regions of interest
+// once the projector-to-image homography is known) to detection threads while
+// decoding goes on. After the last frame both codes give the final frame map; a pattern
+// whose frames turn out not to be clean under it is dropped. The detections of every
+// MSM over its scales are undistorted and merged (msm_merge.h).
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "calibproj/detect/lens.h"
+#include "calibproj/detect/marker_detector.h"
+#include "calibproj/detect/msm_merge.h"
+#include "calibproj/detect/projector_homography.h"
+#include "calibproj/detect/roi.h"
+#include "calibproj/ingest/sequence_description.h"
+#include "calibproj/sync/synchronise.h"
+#include "calibproj/video/frame_picker.h"
+#include "calibproj/video/video_reader.h"
+
+namespace calibproj::ingest {
+
+struct CameraModel {
+  detect::LensModel lens;
+  cv::Size resolution;     // expected frame size; 0 x 0 = not checked
+  std::string source;      // where the intrinsics come from, for messages
+};
+
+struct IngestOptions {
+  sync::SyncOptions sync;
+  video::PickOptions pick;
+  detect::DetectorOptions detector;  // `inverted` is taken from the sequence
+  detect::RoiOptions roi;
+  detect::HomographyOptions homography;
+  detect::MergeOptions merge;
+  // Detect in regions of interest once the homography is known (false: whole frames,
+  // with the same filtering; for verification).
+  bool use_roi = true;
+  // Mean luma over every mean_row_step-th row, linearised by luma_gamma (the video's
+  // display gamma; 1 = use the encoded values).
+  int mean_row_step = 2;
+  double luma_gamma = 2.2;
+  // Decoded grey frames kept while the start code is being looked for.
+  int lookback_frames = 16;
+  // Frames decoded between two incremental searches of the start code.
+  int search_interval = 4;
+  int detection_threads = 1;
+  int max_pending_jobs = 4;
+
+  // Throws std::invalid_argument naming the first bad field.
+  void Check() const;
+};
+
+// What happened to the patterns of one scale.
+struct ScaleStats {
+  int patterns = 0;          // patterns of this scale in the sequence
+  int detected_patterns = 0; // patterns whose frames went to detection
+  int skipped_patterns = 0;  // no marker resolvable or inside the image
+  int searched = 0;          // markers searched (planned, or all on whole frames)
+  int too_small = 0;
+  int outside = 0;
+  int detected = 0;          // markers found
+  int kept = 0;              // used in merged centres
+};
+
+struct CameraIngestResult {
+  video::VideoInfo video;
+  sync::SyncResult sync;
+  int frames_decoded = 0;
+  int frames_converted = 0;    // decoded frames converted to colour (for luma or detection)
+  int frames_detected = 0;     // frames that went into a detection
+  int patterns_whole_frame = 0;
+  int patterns_in_regions = 0;
+  int patterns_dropped = 0;    // frames not clean under the final frame map
+  int patterns_missing = 0;    // not recorded (before the video starts or after it ends)
+  int detections_rejected = 0; // unexpected id, duplicate, or off the prediction
+  std::vector<ScaleStats> scales;
+  std::vector<detect::ScaleRecord> records;
+  std::vector<detect::MergedCentre> centres;
+  std::vector<double> signal;  // mean luma per decoded frame, NaN where not measured
+  bool homography_valid = false;
+  cv::Matx33d homography = cv::Matx33d::eye();  // projector pixels -> undistorted pixels
+  double homography_rms_px = 0.0;
+  double seconds_total = 0.0;
+  double seconds_detection = 0.0;  // summed over detection threads
+};
+
+// Called now and then with the frames decoded so far and the declared total.
+using ProgressCallback = std::function<void(int decoded, int total)>;
+
+// Ingests one camera. Throws std::runtime_error / std::invalid_argument naming the
+// video (or the intrinsics source) when the video cannot be read, has another frame
+// size than the intrinsics, or cannot be synchronised with the sequence.
+CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,
+                                const CameraModel& camera, const IngestOptions& options,
+                                const ProgressCallback& progress = {});
+
+}  // namespace calibproj::ingest

@@ -1,0 +1,108 @@
+#include "calibproj/ingest/detection_pipeline.h"
+
+#include <chrono>
+#include <stdexcept>
+#include <utility>
+
+namespace calibproj::ingest {
+
+DetectionPipeline::DetectionPipeline(const detect::MarkerFamily& family,
+                                     const detect::DetectorOptions& detector_options,
+                                     const detect::RoiOptions& roi_options, int threads, int max_pending)
+    : roi_options_(roi_options), max_pending_(max_pending) {
+  if (threads < 1) throw std::invalid_argument("detection threads must be at least 1");
+  if (max_pending < 1) throw std::invalid_argument("max pending detection jobs must be at least 1");
+  for (int i = 0; i < threads; ++i) {
+    detectors_.push_back(std::make_unique<detect::MarkerDetector>(family, detector_options));
+  }
+  for (const auto& detector : detectors_) workers_.emplace_back([this, d = detector.get()] { Work(*d); });
+}
+
+DetectionPipeline::~DetectionPipeline() { Stop(); }
+
+void DetectionPipeline::Stop() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  work_ready_.notify_all();
+  space_ready_.notify_all();
+  for (auto& worker : workers_) {
+    if (worker.joinable()) worker.join();
+  }
+}
+
+void DetectionPipeline::RethrowLocked() {
+  if (error_) std::rethrow_exception(error_);
+}
+
+void DetectionPipeline::Submit(DetectionJob job) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  space_ready_.wait(lock, [&] { return static_cast<int>(queue_.size()) < max_pending_ || error_ || stopping_; });
+  RethrowLocked();
+  queue_.push_back(std::move(job));
+  work_ready_.notify_one();
+}
+
+std::vector<DetectionOutput> DetectionPipeline::Poll() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  RethrowLocked();
+  return std::exchange(finished_, {});
+}
+
+std::vector<DetectionOutput> DetectionPipeline::Finish() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  all_done_.wait(lock, [&] { return (queue_.empty() && running_ == 0) || error_; });
+  RethrowLocked();
+  return std::exchange(finished_, {});
+}
+
+void DetectionPipeline::Work(const detect::MarkerDetector& detector) {
+  while (true) {
+    DetectionJob job;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      work_ready_.wait(lock, [&] { return !queue_.empty() || stopping_; });
+      if (stopping_) return;
+      job = std::move(queue_.front());
+      queue_.pop_front();
+      ++running_;
+    }
+    space_ready_.notify_one();
+    DetectionOutput output;
+    std::exception_ptr error;
+    try {
+      output = Run(detector, job);
+    } catch (...) {
+      error = std::current_exception();
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      --running_;
+      if (error && !error_) error_ = error;
+      if (!error) finished_.push_back(std::move(output));
+    }
+    all_done_.notify_all();
+    space_ready_.notify_all();
+  }
+}
+
+DetectionOutput DetectionPipeline::Run(const detect::MarkerDetector& detector, const DetectionJob& job) const {
+  const auto started = std::chrono::steady_clock::now();
+  DetectionOutput output;
+  output.pattern = job.pattern;
+  output.whole_frame = job.whole_frame;
+  output.first_frame = job.first_frame;
+  output.frame_count = job.frame_count;
+  if (job.whole_frame) {
+    const detect::Detections found = detector.Detect(job.regions.at(0).gray);
+    output.detections = detect::FilterDetections(found, job.ids, job.has_plan ? &job.plan : nullptr, roi_options_,
+                                                 &output.rejected);
+  } else {
+    output.detections = detect::DetectInRegions(detector, job.plan, job.regions, roi_options_);
+  }
+  output.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return output;
+}
+
+}  // namespace calibproj::ingest

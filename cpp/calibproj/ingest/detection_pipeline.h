@@ -1,0 +1,78 @@
+#pragma once
+// Marker detection on worker threads while the video keeps decoding.
+//
+// The decoding thread submits one job per pattern (a whole grey frame, or the grey
+// regions of its markers) and collects finished jobs when it likes. At most
+// `max_pending` jobs wait at any time (Submit blocks beyond), so memory stays bounded
+// whatever the video length. Each worker owns its detector (libapriltag's detector is
+// not re-entrant).
+
+#include <condition_variable>
+#include <deque>
+#include <exception>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "calibproj/detect/marker_detector.h"
+#include "calibproj/detect/roi.h"
+
+namespace calibproj::ingest {
+
+struct DetectionJob {
+  int pattern = -1;
+  std::vector<int> ids;               // ids the pattern shows
+  bool whole_frame = true;            // regions[0] is the whole frame
+  bool has_plan = false;              // plan holds predictions (the homography was known)
+  detect::PatternPlan plan;
+  std::vector<detect::RegionImage> regions;
+  int first_frame = -1;
+  int frame_count = 0;
+};
+
+struct DetectionOutput {
+  int pattern = -1;
+  bool whole_frame = true;
+  int first_frame = -1;
+  int frame_count = 0;
+  detect::Detections detections;  // whole-image distorted pixels, filtered
+  int rejected = 0;               // detections dropped (unexpected id, duplicate, off prediction)
+  double seconds = 0.0;           // detection time
+};
+
+class DetectionPipeline {
+ public:
+  DetectionPipeline(const detect::MarkerFamily& family, const detect::DetectorOptions& detector_options,
+                    const detect::RoiOptions& roi_options, int threads, int max_pending);
+  ~DetectionPipeline();
+  DetectionPipeline(const DetectionPipeline&) = delete;
+  DetectionPipeline& operator=(const DetectionPipeline&) = delete;
+
+  // Queues a job; blocks while max_pending jobs wait. Rethrows a worker's exception.
+  void Submit(DetectionJob job);
+  // Jobs finished since the last call (in completion order).
+  std::vector<DetectionOutput> Poll();
+  // Waits for every queued job and returns the remaining outputs.
+  std::vector<DetectionOutput> Finish();
+
+ private:
+  void Work(const detect::MarkerDetector& detector);
+  DetectionOutput Run(const detect::MarkerDetector& detector, const DetectionJob& job) const;
+  void RethrowLocked();
+  void Stop();
+
+  detect::RoiOptions roi_options_;
+  int max_pending_;
+  std::vector<std::unique_ptr<detect::MarkerDetector>> detectors_;
+  std::vector<std::thread> workers_;
+  std::mutex mutex_;
+  std::condition_variable work_ready_, space_ready_, all_done_;
+  std::deque<DetectionJob> queue_;
+  std::vector<DetectionOutput> finished_;
+  int running_ = 0;
+  bool stopping_ = false;
+  std::exception_ptr error_;
+};
+
+}  // namespace calibproj::ingest

@@ -1,0 +1,85 @@
+#include "calibproj/ingest/sequence_description.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace calibproj::ingest {
+
+namespace {
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument("sequence: " + message);
+}
+
+}  // namespace
+
+int SequenceDescription::FrameCount() const { return segments.empty() ? 0 : segments.back().last_frame + 1; }
+
+void SequenceDescription::Check() const {
+  Require(!markers.empty(), "no marker family");
+  Require(projector_width > 0 && projector_height > 0, "projector resolution must be positive");
+  Require(fps > 0.0, "projector fps must be positive");
+  Require(arrays > 0 && markers_per_array > 0, "arrays and markers_per_array must be positive");
+  Require(static_cast<int>(centres.size()) == arrays * markers_per_array,
+          "expected " + std::to_string(arrays * markers_per_array) + " centres, got " +
+              std::to_string(centres.size()));
+  Require(!patterns.empty(), "no patterns");
+  Require(!segments.empty(), "no segments");
+  int expected_first = 0;
+  for (const SegmentSpec& s : segments) {
+    Require(s.first_frame == expected_first && s.last_frame >= s.first_frame,
+            "segments must tile the frames from 0 without gaps");
+    Require(s.kind == "white" || s.kind == "black" || s.kind == "start_code" || s.kind == "end_code" ||
+                s.kind == "patterns",
+            "unknown segment kind '" + s.kind + "'");
+    expected_first = s.last_frame + 1;
+  }
+  start_code.Check("sequence start code");
+  end_code.Check("sequence end code");
+  Require(start_code.EndFrame() <= end_code.first_frame, "the start code must come before the end code");
+  Require(end_code.EndFrame() <= FrameCount(), "the end code ends after the sequence");
+  for (std::size_t i = 0; i < patterns.size(); ++i) {
+    const PatternSpec& p = patterns[i];
+    const std::string where = "pattern " + std::to_string(i) + ": ";
+    Require(p.array >= 0 && p.array < arrays, where + "array out of range");
+    Require(p.scale_index >= 0 && p.scale_index < static_cast<int>(scales.size()), where + "scale out of range");
+    Require(p.marker_side_px > 0.0, where + "marker side must be positive");
+    Require(p.first_frame >= 0 && p.last_frame >= p.first_frame && p.last_frame < FrameCount(),
+            where + "frames outside the sequence");
+    Require(i == 0 || p.first_frame > patterns[i - 1].last_frame, where + "patterns must be in time order");
+    for (int m : p.omitted) Require(m >= 0 && m < markers_per_array, where + "omitted marker out of range");
+  }
+}
+
+sync::LightTimeline SequenceDescription::LightLevels() const {
+  std::vector<double> levels(FrameCount(), std::numeric_limits<double>::quiet_NaN());
+  for (const SegmentSpec& s : segments) {
+    for (int frame = s.first_frame; frame <= s.last_frame; ++frame) {
+      if (s.kind == "white") levels[frame] = 1.0;
+      if (s.kind == "black") levels[frame] = 0.0;
+    }
+  }
+  for (const sync::LightCode* code : {&start_code, &end_code}) {
+    for (int frame = code->first_frame; frame < code->EndFrame(); ++frame) {
+      levels[frame] = code->bits[(frame - code->first_frame) / code->frames_per_bit];
+    }
+  }
+  return sync::LightTimeline(std::move(levels));
+}
+
+detect::PatternMarkers SequenceDescription::Markers(int index, int grid_cells) const {
+  const PatternSpec& pattern = patterns.at(index);
+  detect::PatternMarkers out;
+  out.side_px = pattern.marker_side_px;
+  out.grid_cells = grid_cells;
+  for (int marker = 0; marker < markers_per_array; ++marker) {
+    if (std::find(pattern.omitted.begin(), pattern.omitted.end(), marker) != pattern.omitted.end()) continue;
+    out.ids.push_back(marker);
+    out.centres.push_back(centres[pattern.array * markers_per_array + marker]);
+  }
+  return out;
+}
+
+}  // namespace calibproj::ingest

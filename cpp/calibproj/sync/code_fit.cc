@@ -1,0 +1,317 @@
+#include "calibproj/sync/code_fit.h"
+
+#include <ceres/ceres.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+namespace calibproj::sync {
+
+namespace {
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument("code fit options: " + message);
+}
+
+struct Sample {
+  int frame;
+  double value;
+};
+
+// Frames of one window that stay inside it for every offset and exposure searched.
+std::vector<Sample> WindowSamples(const std::vector<double>& signal, const FrameWindow& window, const FrameMap& map,
+                                  const CodeFitOptions& options) {
+  const double first = map.offset + options.offset_range + map.rate * window.begin;
+  const double last = map.offset - options.offset_range - options.max_exposure + map.rate * window.end;
+  std::vector<Sample> samples;
+  const int begin = std::max(0, static_cast<int>(std::ceil(first)));
+  const int end = std::min(static_cast<int>(signal.size()) - 1, static_cast<int>(std::floor(last)));
+  for (int j = begin; j <= end; ++j) {
+    if (!std::isnan(signal[j])) samples.push_back({j, signal[j]});
+  }
+  return samples;
+}
+
+// Sum of squares of the best a + b * W fit to the samples of one window.
+double LinearFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const FrameMap& map) {
+  double sw = 0, sww = 0, sm = 0, swm = 0, smm = 0;
+  const double duration = map.ProjectorExposure();
+  for (const Sample& s : samples) {
+    const double w = timeline.Average(map.ProjectorTime(s.frame), duration);
+    sw += w;
+    sww += w * w;
+    sm += s.value;
+    swm += w * s.value;
+    smm += s.value * s.value;
+  }
+  const double n = static_cast<double>(samples.size());
+  const double denominator = n * sww - sw * sw;
+  const double b = denominator > 1e-12 * n * n ? (n * swm - sw * sm) / denominator : 0.0;
+  const double a = (sm - b * sw) / n;
+  return std::max(0.0, smm - a * sm - b * swm);
+}
+
+double SampleVariance(const std::vector<std::vector<Sample>>& windows) {
+  double total = 0.0;
+  for (const auto& samples : windows) {
+    double mean = 0.0;
+    for (const Sample& s : samples) mean += s.value;
+    mean /= static_cast<double>(samples.size());
+    for (const Sample& s : samples) total += (s.value - mean) * (s.value - mean);
+  }
+  return total;
+}
+
+// Residual a + b * W_j - value_j of one camera frame, with analytic derivatives with
+// respect to (offset, rate, exposure) and (a, b).
+class SampleCost : public ceres::SizedCostFunction<1, 3, 2> {
+ public:
+  SampleCost(const LightTimeline& timeline, Sample sample) : timeline_(timeline), sample_(sample) {}
+
+  bool Evaluate(double const* const* parameters, double* residual, double** jacobians) const override {
+    const double offset = parameters[0][0], rate = parameters[0][1], exposure = parameters[0][2];
+    const double a = parameters[1][0], b = parameters[1][1];
+    const double t = (sample_.frame - offset) / rate;
+    const double duration = exposure / rate;
+    const double w = timeline_.Average(t, duration);
+    residual[0] = a + b * w - sample_.value;
+    if (jacobians == nullptr) return true;
+    if (jacobians[0] != nullptr) {
+      const double level_start = timeline_.LevelAt(t), level_end = timeline_.LevelAt(t + duration);
+      const double dw_dt = (level_end - level_start) / duration;
+      const double dw_dduration = (level_end - w) / duration;
+      jacobians[0][0] = b * dw_dt * (-1.0 / rate);
+      jacobians[0][1] = b * (dw_dt * (-t / rate) + dw_dduration * (-duration / rate));
+      jacobians[0][2] = b * dw_dduration / rate;
+    }
+    if (jacobians[1] != nullptr) {
+      jacobians[1][0] = 1.0;
+      jacobians[1][1] = w;
+    }
+    return true;
+  }
+
+ private:
+  const LightTimeline& timeline_;
+  Sample sample_;
+};
+
+std::vector<double> ExposureGrid(const CodeFitOptions& options) {
+  std::vector<double> exposures;
+  for (int e = 0; e < options.exposure_steps; ++e) {
+    const double share = options.exposure_steps > 1 ? static_cast<double>(e) / (options.exposure_steps - 1) : 1.0;
+    exposures.push_back(options.min_exposure + share * (options.max_exposure - options.min_exposure));
+  }
+  return exposures;
+}
+
+// The set of (offset, exposure) that fit as well as the best one.
+struct FeasibleSet {
+  FrameMap best;            // lowest cost found
+  double offset_low = 0.0;  // offsets of the set
+  double offset_high = 0.0;
+  double exposure_low = 0.0;  // exposures of the set
+  double exposure_high = 0.0;
+  double latest_end = 0.0;  // largest exposure - offset in the set (end of the latest window)
+};
+
+class CostSurface {
+ public:
+  CostSurface(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows, double rate)
+      : timeline_(timeline), windows_(windows), rate_(rate) {}
+
+  double operator()(double offset, double exposure) const {
+    const FrameMap map{offset, rate_, exposure};
+    double total = 0.0;
+    for (const auto& samples : windows_) total += LinearFitCost(timeline_, samples, map);
+    return total;
+  }
+
+  // Minimum over offsets in [low, high] (golden-section search).
+  std::pair<double, double> MinimiseOffset(double low, double high, double exposure) const {
+    constexpr double kInverseGolden = 0.6180339887498949;
+    constexpr int kIterations = 24;
+    double a = low, b = high;
+    for (int i = 0; i < kIterations; ++i) {
+      const double x1 = b - kInverseGolden * (b - a), x2 = a + kInverseGolden * (b - a);
+      if ((*this)(x1, exposure) <= (*this)(x2, exposure)) {
+        b = x2;
+      } else {
+        a = x1;
+      }
+    }
+    const double offset = 0.5 * (a + b);
+    return {offset, (*this)(offset, exposure)};
+  }
+
+  // Last offset from `inside` towards `outside` whose cost stays under `threshold`.
+  double Boundary(double inside, double outside, double exposure, double threshold) const {
+    constexpr int kIterations = 16;
+    for (int i = 0; i < kIterations; ++i) {
+      const double middle = 0.5 * (inside + outside);
+      ((*this)(middle, exposure) <= threshold ? inside : outside) = middle;
+    }
+    return inside;
+  }
+
+ private:
+  const LightTimeline& timeline_;
+  const std::vector<std::vector<Sample>>& windows_;
+  double rate_;
+};
+
+// Profiles the cost over offsets for every exposure of the grid, then bounds the set
+// of points within the tolerance of the best: on each feasible exposure, the offsets
+// are followed outwards on the grid and the edges located by bisection.
+FeasibleSet ExploreCost(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows,
+                        const FrameMap& initial, const CodeFitOptions& options) {
+  const CostSurface cost(timeline, windows, initial.rate);
+  const int offsets = 2 * static_cast<int>(std::round(options.offset_range / options.offset_step)) + 1;
+  const int half = offsets / 2;
+  const auto offset_at = [&](int i) { return initial.offset + (i - half) * options.offset_step; };
+  const std::vector<double> exposures = ExposureGrid(options);
+  std::vector<double> best_offset(exposures.size()), best_cost(exposures.size());
+  FeasibleSet set;
+  double minimum = std::numeric_limits<double>::infinity();
+  for (std::size_t e = 0; e < exposures.size(); ++e) {
+    int best_index = 0;
+    double lowest = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < offsets; ++i) {
+      const double c = cost(offset_at(i), exposures[e]);
+      if (c < lowest) lowest = c, best_index = i;
+    }
+    const auto [offset, refined] = cost.MinimiseOffset(offset_at(std::max(best_index - 1, 0)),
+                                                       offset_at(std::min(best_index + 1, offsets - 1)), exposures[e]);
+    best_offset[e] = refined <= lowest ? offset : offset_at(best_index);
+    best_cost[e] = std::min(refined, lowest);
+    if (best_cost[e] < minimum) {
+      minimum = best_cost[e];
+      set.best = FrameMap{best_offset[e], initial.rate, exposures[e]};
+    }
+  }
+  int samples = 0;
+  for (const auto& w : windows) samples += static_cast<int>(w.size());
+  const int parameters = 2 + 2 * static_cast<int>(windows.size());
+  const double noise_variance = minimum / std::max(1, samples - parameters);
+  const double threshold = minimum + std::max(options.feasible_chi2 * noise_variance,
+                                              options.plateau_tolerance * std::max(SampleVariance(windows), 1e-300));
+  set.offset_low = set.exposure_low = set.latest_end = std::numeric_limits<double>::infinity();
+  set.offset_high = set.exposure_high = -set.offset_low;
+  set.latest_end = -set.offset_low;
+  const double step = options.offset_step;
+  for (std::size_t e = 0; e < exposures.size(); ++e) {
+    if (best_cost[e] > threshold) continue;
+    const double exposure = exposures[e];
+    double low = best_offset[e], high = best_offset[e];
+    while (low - initial.offset > -options.offset_range && cost(low - step, exposure) <= threshold) low -= step;
+    while (high - initial.offset < options.offset_range && cost(high + step, exposure) <= threshold) high += step;
+    low = cost.Boundary(low, low - step, exposure, threshold);
+    high = cost.Boundary(high, high + step, exposure, threshold);
+    set.offset_low = std::min(set.offset_low, low);
+    set.offset_high = std::max(set.offset_high, high);
+    set.exposure_low = std::min(set.exposure_low, exposure);
+    set.exposure_high = std::max(set.exposure_high, exposure);
+    set.latest_end = std::max(set.latest_end, exposure - low);
+  }
+  return set;
+}
+
+// Least-squares refinement of (offset, rate, exposure) and each window's (a, b).
+FrameMap Refine(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows, const FrameMap& start,
+                bool fit_rate, const CodeFitOptions& options, double* rms, double* contrast) {
+  double map[3] = {start.offset, start.rate, start.exposure};
+  std::vector<std::array<double, 2>> levels(windows.size(), {0.0, 1.0});
+  ceres::Problem problem;
+  problem.AddParameterBlock(map, 3);
+  for (std::size_t w = 0; w < windows.size(); ++w) {
+    // Start (a, b) at the window's darkest and brightest samples.
+    double low = std::numeric_limits<double>::infinity(), high = -low;
+    for (const Sample& s : windows[w]) {
+      low = std::min(low, s.value);
+      high = std::max(high, s.value);
+    }
+    levels[w] = {low, high - low};
+    for (const Sample& s : windows[w]) {
+      problem.AddResidualBlock(new SampleCost(timeline, s), nullptr, map, levels[w].data());
+    }
+  }
+  if (!fit_rate) problem.SetManifold(map, new ceres::SubsetManifold(3, {1}));
+  problem.SetParameterLowerBound(map, 2, options.min_exposure);
+  problem.SetParameterUpperBound(map, 2, options.max_exposure);
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = options.max_iterations;
+  solver.num_threads = 1;
+  solver.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+  int samples = 0;
+  *contrast = std::numeric_limits<double>::infinity();
+  for (std::size_t w = 0; w < windows.size(); ++w) {
+    samples += static_cast<int>(windows[w].size());
+    *contrast = std::min(*contrast, levels[w][1]);
+  }
+  *rms = std::sqrt(2.0 * summary.final_cost / samples) / std::max(std::abs(*contrast), 1e-12);
+  return FrameMap{map[0], map[1], map[2]};
+}
+
+}  // namespace
+
+void CodeFitOptions::Check() const {
+  Require(offset_range > 0.0, "offset_range must be positive");
+  Require(offset_step > 0.0 && offset_step <= offset_range, "offset_step must be in (0, offset_range]");
+  Require(min_exposure > 0.0 && min_exposure <= max_exposure && max_exposure <= 1.0,
+          "exposures must satisfy 0 < min_exposure <= max_exposure <= 1");
+  Require(exposure_steps >= 1, "exposure_steps must be at least 1");
+  Require(feasible_chi2 >= 0.0, "feasible_chi2 must be non-negative");
+  Require(plateau_tolerance >= 0.0, "plateau_tolerance must be non-negative");
+  Require(max_iterations >= 1, "max_iterations must be at least 1");
+}
+
+CodeFit FitCodeWindows(const std::vector<double>& signal, const LightTimeline& timeline,
+                       const std::vector<FrameWindow>& windows, const FrameMap& initial, bool fit_rate,
+                       const CodeFitOptions& options) {
+  options.Check();
+  std::vector<std::vector<Sample>> samples;
+  for (const FrameWindow& window : windows) {
+    samples.push_back(WindowSamples(signal, window, initial, options));
+    if (samples.back().size() < 4) {
+      throw std::runtime_error("light code window of projector frames " + std::to_string(window.begin) + ".." +
+                               std::to_string(window.end - 1) + " holds only " +
+                               std::to_string(samples.back().size()) + " measured camera frames");
+    }
+  }
+  const FeasibleSet set = ExploreCost(timeline, samples, initial, options);
+  double rms = 0.0, contrast = 0.0;
+  const FrameMap refined = Refine(timeline, samples, set.best, fit_rate, options, &rms, &contrast);
+  CodeFit fit;
+  const double half_width = 0.5 * (set.offset_high - set.offset_low);
+  fit.sharp = half_width <= options.offset_step;
+  // A narrow set: least squares gives the best point (a result outside the set, a far
+  // local minimum, is not taken). A wide one (few or no frames across light changes):
+  // its centre, which is off by at most the half-width whatever the truth.
+  const bool inside = refined.offset >= set.offset_low - options.offset_step &&
+                      refined.offset <= set.offset_high + options.offset_step;
+  if (fit.sharp && inside) {
+    fit.map = refined;
+  } else {
+    fit.map = FrameMap{0.5 * (set.offset_low + set.offset_high), refined.rate,
+                       0.5 * (set.exposure_low + set.exposure_high)};
+  }
+  fit.offset_uncertainty =
+      std::max(fit.map.offset - set.offset_low, set.offset_high - fit.map.offset) + 0.5 * options.offset_step;
+  // Latest start and latest end of any window that fits, with half a step of slack.
+  const double slack = 0.5 * options.offset_step;
+  fit.window_map = FrameMap{set.offset_high + slack, fit.map.rate, set.latest_end + set.offset_high + 2.0 * slack};
+  fit.rms = rms;
+  fit.contrast = contrast;
+  for (const auto& window : samples) fit.samples += static_cast<int>(window.size());
+  return fit;
+}
+
+}  // namespace calibproj::sync

@@ -1,0 +1,160 @@
+#include "calibproj/sync/code_search.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace calibproj::sync {
+
+namespace {
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument("code search options: " + message);
+}
+
+CodeTemplate MakeTemplate(const LightTimeline& timeline, const FrameWindow& window, double rate, double phase,
+                          double exposure) {
+  CodeTemplate t{rate, phase, {}, 0.0};
+  const double duration = exposure / rate;
+  for (int i = 0;; ++i) {
+    const double start = window.begin + (i + phase) / rate;
+    if (start + duration > window.end) break;
+    t.values.push_back(timeline.Average(start, duration));
+  }
+  if (t.values.empty()) return t;
+  double mean = 0.0;
+  for (double v : t.values) mean += v;
+  mean /= static_cast<double>(t.values.size());
+  for (double& v : t.values) {
+    v -= mean;
+    t.norm += v * v;
+  }
+  t.norm = std::sqrt(t.norm);
+  return t;
+}
+
+// Candidate rates, the nominal one first and then outwards: when several explain the
+// signal equally well (a code seen without a frame across a light change), the search
+// keeps the one closest to the nominal rate.
+std::vector<double> CandidateRates(double nominal_rate, const CodeSearchOptions& options) {
+  const int steps = static_cast<int>(std::floor(options.rate_search / options.rate_step + 1e-9));
+  std::vector<double> rates{nominal_rate};
+  for (int s = 1; s <= steps; ++s) {
+    rates.push_back(nominal_rate * (1.0 - s * options.rate_step));
+    rates.push_back(nominal_rate * (1.0 + s * options.rate_step));
+  }
+  return rates;
+}
+
+// Correlations closer than this count as equal (their order is then the rates' order).
+constexpr double kCorrelationTie = 1e-9;
+
+// Prefix sums of the signal, its square and its unmeasured (NaN) samples.
+struct SignalSums {
+  std::vector<double> sum, squares;
+  std::vector<int> missing;
+
+  explicit SignalSums(const std::vector<double>& signal, int end) {
+    sum.assign(end + 1, 0.0);
+    squares.assign(end + 1, 0.0);
+    missing.assign(end + 1, 0);
+    for (int j = 0; j < end; ++j) {
+      const double v = signal[j];
+      const bool nan = std::isnan(v);
+      sum[j + 1] = sum[j] + (nan ? 0.0 : v);
+      squares[j + 1] = squares[j] + (nan ? 0.0 : v * v);
+      missing[j + 1] = missing[j] + (nan ? 1 : 0);
+    }
+  }
+};
+
+double Correlation(const std::vector<double>& signal, const SignalSums& sums, const CodeTemplate& t, int shift) {
+  const int n = static_cast<int>(t.values.size());
+  const double sum = sums.sum[shift + n] - sums.sum[shift];
+  const double squares = sums.squares[shift + n] - sums.squares[shift];
+  const double variance = squares - sum * sum / n;
+  if (!(variance > 1e-12) || !(t.norm > 0.0)) return 0.0;
+  double dot = 0.0;
+  for (int i = 0; i < n; ++i) dot += signal[shift + i] * t.values[i];
+  return dot / (std::sqrt(variance) * t.norm);
+}
+
+}  // namespace
+
+void CodeSearchOptions::Check() const {
+  Require(rate_search >= 0.0 && rate_search < 0.5, "rate_search must be in [0, 0.5)");
+  Require(rate_step > 0.0, "rate_step must be positive");
+  Require(phases >= 1, "phases must be at least 1");
+  Require(exposure > 0.0 && exposure <= 1.0, "exposure must be in (0, 1] camera frames");
+}
+
+std::vector<CodeTemplate> MakeCodeTemplates(const LightTimeline& timeline, const FrameWindow& window,
+                                            double nominal_rate, const CodeSearchOptions& options) {
+  options.Check();
+  if (!(nominal_rate > 0.0)) throw std::invalid_argument("code search: the nominal rate must be positive");
+  std::vector<CodeTemplate> templates;
+  for (double rate : CandidateRates(nominal_rate, options)) {
+    for (int p = 0; p < options.phases; ++p) {
+      CodeTemplate t = MakeTemplate(timeline, window, rate, static_cast<double>(p) / options.phases, options.exposure);
+      if (t.values.size() >= 2) templates.push_back(std::move(t));
+    }
+  }
+  return templates;
+}
+
+CodeMatch SearchCode(const std::vector<double>& signal, const std::vector<CodeTemplate>& templates,
+                     const FrameWindow& window, double exposure, int first_shift, int end_shift) {
+  const int end = static_cast<int>(signal.size());
+  const int shift_limit = end_shift < 0 ? end : end_shift;
+  const SignalSums sums(signal, end);
+  CodeMatch best;
+  for (const CodeTemplate& t : templates) {
+    const int n = static_cast<int>(t.values.size());
+    for (int shift = std::max(first_shift, 0); shift < shift_limit && shift + n <= end; ++shift) {
+      if (sums.missing[shift + n] != sums.missing[shift]) continue;
+      const double correlation = Correlation(signal, sums, t, shift);
+      if (correlation > best.correlation + kCorrelationTie) {
+        best.correlation = correlation;
+        // Sample i = camera frame shift + i starts at window.begin + (i + phase) / rate.
+        best.map = FrameMap{shift - t.phase - t.rate * window.begin, t.rate, exposure};
+        best.first_sample = shift;
+        best.sample_count = n;
+      }
+    }
+  }
+  return best;
+}
+
+CodeMatch SearchCode(const std::vector<double>& signal, const LightTimeline& timeline, const FrameWindow& window,
+                     double nominal_rate, const CodeSearchOptions& options, int first_shift, int end_shift) {
+  return SearchCode(signal, MakeCodeTemplates(timeline, window, nominal_rate, options), window, options.exposure,
+                    first_shift, end_shift);
+}
+
+CodeTracker::CodeTracker(const LightTimeline& timeline, FrameWindow window, double nominal_rate,
+                         CodeSearchOptions options, double min_correlation, int guard_samples)
+    : window_(window),
+      templates_(MakeCodeTemplates(timeline, window, nominal_rate, options)),
+      exposure_(options.exposure),
+      min_correlation_(min_correlation),
+      guard_samples_(guard_samples) {
+  for (const CodeTemplate& t : templates_) {
+    longest_template_ = std::max(longest_template_, static_cast<int>(t.values.size()));
+  }
+}
+
+bool CodeTracker::Update(const std::vector<double>& signal) {
+  if (found_) return true;
+  // Shifts where every candidate template fits; the next call starts where these end.
+  const int complete_shifts = static_cast<int>(signal.size()) - longest_template_ + 1;
+  if (complete_shifts <= next_shift_) return false;
+  const CodeMatch match = SearchCode(signal, templates_, window_, exposure_, next_shift_, complete_shifts);
+  if (match.valid() && match.correlation > best_.correlation + kCorrelationTie) best_ = match;
+  next_shift_ = complete_shifts;
+  found_ = best_.valid() && best_.correlation >= min_correlation_ &&
+           next_shift_ > best_.first_sample + guard_samples_;
+  return found_;
+}
+
+}  // namespace calibproj::sync

@@ -1,0 +1,61 @@
+#include "calibproj/sync/light_timeline.h"
+
+#include <algorithm>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace calibproj::sync {
+
+void LightCode::Check(const char* what) const {
+  const std::string name(what);
+  if (bits.empty()) throw std::invalid_argument(name + ": the light code has no bits");
+  if (frames_per_bit < 1) throw std::invalid_argument(name + ": frames_per_bit must be at least 1");
+  int ones = 0;
+  for (int bit : bits) {
+    if (bit != 0 && bit != 1) throw std::invalid_argument(name + ": light code bits must be 0 or 1");
+    ones += bit;
+  }
+  if (ones == 0 || ones == static_cast<int>(bits.size())) {
+    throw std::invalid_argument(name + ": a constant light code cannot be located in time");
+  }
+}
+
+LightTimeline::LightTimeline(std::vector<double> levels) : levels_(std::move(levels)) {
+  cumulative_.assign(levels_.size() + 1, 0.0);
+  for (std::size_t k = 0; k < levels_.size(); ++k) {
+    const double level = levels_[k];
+    if (!std::isnan(level) && (level < 0.0 || level > 1.0)) {
+      throw std::invalid_argument("light timeline: level " + std::to_string(level) + " of frame " +
+                                  std::to_string(k) + " is outside [0, 1]");
+    }
+    cumulative_[k + 1] = cumulative_[k] + (std::isnan(level) ? 0.0 : level);
+  }
+}
+
+double LightTimeline::Level(int frame) const {
+  if (frame < 0 || frame >= frame_count()) return std::numeric_limits<double>::quiet_NaN();
+  return levels_[frame];
+}
+
+double LightTimeline::Integral(double t) const {
+  const double clamped = std::clamp(t, 0.0, static_cast<double>(frame_count()));
+  const int frame = std::min(static_cast<int>(clamped), frame_count() - 1);
+  const double level = std::isnan(levels_[frame]) ? 0.0 : levels_[frame];
+  return cumulative_[frame] + (clamped - frame) * level;
+}
+
+double LightTimeline::Average(double t, double duration) const {
+  if (!(duration > 1e-9)) return LevelAt(t);
+  return (Integral(t + duration) - Integral(t)) / duration;
+}
+
+FrameWindow LightTimeline::KnownWindow(const LightCode& code, int context_before, int context_after) const {
+  FrameWindow window{code.first_frame, code.EndFrame()};
+  const auto known = [&](int frame) { return !std::isnan(Level(frame)); };
+  while (window.begin > code.first_frame - context_before && known(window.begin - 1)) --window.begin;
+  while (window.end < code.EndFrame() + context_after && known(window.end)) ++window.end;
+  return window;
+}
+
+}  // namespace calibproj::sync

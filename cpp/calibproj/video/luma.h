@@ -1,0 +1,33 @@
+#pragma once
+// Luma (grey) from decoded BGR frames, with OpenCV's BT.601 weights and rounding, so
+// that a mean taken from a BGR frame equals the mean of its cv::cvtColor grey image.
+
+#include <opencv2/core.hpp>
+
+#include <array>
+
+namespace calibproj::video {
+
+// Mean brightness of frames for synchronisation. Each pixel's luma is first linearised
+// by the video's display gamma (value^gamma), so that a frame exposed across a light
+// change measures the exposure-weighted mean of the two light levels (a mean of
+// gamma-encoded values would not be linear in the exposure shares). gamma = 1 keeps
+// the encoded values.
+class LumaMeter {
+ public:
+  // Throws std::invalid_argument for row_step < 1 or gamma <= 0.
+  LumaMeter(double gamma, int row_step);
+
+  // Mean linearised luma over every row_step-th row of an 8-bit BGR or grey image
+  // (full scale 1).
+  double Mean(const cv::Mat& image) const;
+
+ private:
+  std::array<float, 256> linear_;
+  int row_step_;
+};
+
+// Grey copy of `region` of an 8-bit BGR or grey image (only the region is converted).
+cv::Mat GrayRegion(const cv::Mat& image, const cv::Rect& region);
+
+}  // namespace calibproj::video

@@ -1,0 +1,91 @@
+"""Synchronise camera videos with the projection sequence and detect the MSMs: tracks.json.
+
+Every video in VIDEOS_DIR (<camera>.mp4, .mov, ...) is decoded once: the start and end
+light codes of --sequence give the map from sequence time to the camera's frames
+(offset, rate, exposure); the frames showing each pattern cleanly are picked; the
+markers are detected (in regions of interest once the camera's projector-to-image
+homography is known), undistorted with --intrinsics DIR/<camera>.json and their centres
+merged over the scales.
+
+Writes --out (tracks.json) and, next to it, detect_report.json (per camera: sync offset
+and rate, frames used, markers detected per scale, MSMs kept, or why the camera
+failed), and prints the summary. A camera that fails is reported; the others still
+give tracks. Exit status 1 when every camera failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from calibproj.commands.options import add_dataclass_arguments, dataclass_from_args
+
+REPORT_NAME = "detect_report.json"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from calibproj.ingest import DEFAULT_WORKERS
+    from calibproj.ingest_options import IngestOptions
+
+    parser.add_argument("videos", metavar="VIDEOS_DIR", help="folder of camera videos (<camera>.mp4)")
+    parser.add_argument("--sequence", required=True, metavar="FILE", help="sequence.json of the projection")
+    parser.add_argument("--intrinsics", required=True, metavar="DIR", help="folder of per-camera intrinsics files")
+    parser.add_argument("--out", required=True, metavar="FILE", help="tracks file to write (tracks.json)")
+    parser.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
+                        help=f"cameras processed at once (default {DEFAULT_WORKERS})")
+    parser.add_argument("--detector-option", action="append", default=[], metavar="NAME=VALUE",
+                        help="marker detector option as calibproj.detect_markers takes it, e.g. quad_decimate=2 "
+                             "(repeatable; default: the detector's defaults)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON instead of a table")
+    add_dataclass_arguments(parser, IngestOptions, "ingest options")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    from calibproj.ingest import ingest
+    from calibproj.ingest_options import IngestOptions
+
+    out = Path(args.out)
+    result = ingest(args.videos, args.sequence, args.intrinsics, options=dataclass_from_args(IngestOptions, args),
+                    detector_options=_detector_options(args.detector_option), workers=args.workers,
+                    progress=not args.no_progress)
+    result.tracks.write(out)
+    result.write_report(out.parent / REPORT_NAME)
+    report = result.report()
+    print(json.dumps(report, indent=1) if args.json else format_report(report))
+    return 0 if len(result.failed) < len(result.cameras) else 1
+
+
+def _detector_options(items: list[str]) -> dict:
+    import ast
+
+    options = {}
+    for item in items:
+        name, separator, text = item.partition("=")
+        if not separator or not name:
+            raise ValueError(f"--detector-option expects NAME=VALUE, got {item!r}")
+        try:
+            options[name.strip()] = ast.literal_eval(text.strip())
+        except (ValueError, SyntaxError):
+            options[name.strip()] = text.strip()
+    return options
+
+
+def format_report(report: dict) -> str:
+    """Per camera: sync, frames, markers per scale, MSMs kept (or the error)."""
+    lines = []
+    for name, camera in report["cameras"].items():
+        if camera["status"] != "ok":
+            lines.append(f"{name}: FAILED: {camera['error']}")
+            continue
+        sync, frames = camera["sync"], camera["frames"]
+        lines.append(
+            f"{name}: offset {sync['offset_s']:.4f} s ({sync['offset_frames']:.3f} +- "
+            f"{sync['offset_uncertainty_frames']:.3f} frames), {sync['camera_fps']:.4f} fps "
+            f"({sync['drift_ppm']:+.0f} ppm), codes {sync['start_correlation']:.3f}/{sync['end_correlation']:.3f}; "
+            f"frames {frames['decoded']} decoded, {frames['detected']} detected; {camera['msms_kept']} MSMs kept")
+        per_scale = ", ".join(f"{s['scale']:g}: {s['detected']}/{s['searched']}" for s in camera["scales"])
+        lines.append(f"    markers found/searched per scale: {per_scale}")
+    return "\n".join(lines)

@@ -1,0 +1,355 @@
+"""From camera videos to MSM tracks.
+
+For every camera (the video's file stem names it), the C++ ingest
+(``calibproj._core.ingest``) decodes the video once, finds the start and end light
+codes of the sequence in its per-frame brightness (the map from sequence time to
+camera frames: offset, rate, exposure), picks the frames that show each projected
+pattern cleanly, detects the markers (in regions of interest once the
+projector-to-image homography is known), undistorts their corners, takes the
+diagonal intersection as the centre and merges the scales of each MSM. Cameras run
+in parallel threads (the C++ core releases the GIL).
+
+A camera that fails (unreadable or truncated video, a recording of another sequence,
+no intrinsics, another resolution) is reported with a message naming the file; the
+others still give tracks. Failed cameras stay in the tracks with no observations, so
+that calibration reports them as not registered.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+from collections.abc import Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibproj.ingest_options import IngestOptions
+from calibproj.io.intrinsics import INTRINSICS_SUFFIXES, Intrinsics, read_intrinsics
+from calibproj.io.jsonio import write_json
+from calibproj.tracks import Tracks, msm_point_ids
+
+logger = logging.getLogger(__name__)
+
+VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v", ".mts", ".webm")
+REPORT_KIND = "detect_report"
+REPORT_MAJOR = 1
+DEFAULT_WORKERS = 2
+
+
+@dataclass
+class CameraIngest:
+    """What the ingest of one camera produced (or why it failed).
+
+    Attributes:
+        name: camera name (the video's file stem).
+        video: path of the video.
+        intrinsics: path (or description) of the intrinsics used.
+        error: the failure, or None.
+        raw: everything the C++ ingest returned (sync, statistics, per-scale
+            ``records`` and merged ``centres`` as numpy arrays, the luma ``signal``).
+    """
+
+    name: str
+    video: str
+    intrinsics: str
+    error: str | None = None
+    raw: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+    def summary(self, projector_fps: float, scales: list[float]) -> dict[str, Any]:
+        """The camera's entry of ``detect_report.json``."""
+        entry: dict[str, Any] = {"video": self.video, "intrinsics": self.intrinsics,
+                                 "status": "ok" if self.ok else "failed"}
+        if not self.ok:
+            entry["error"] = self.error
+            return entry
+        raw = self.raw
+        entry["sync"] = _sync_summary(raw["sync"], raw["video"]["fps"], projector_fps)
+        entry["video_info"] = {key: raw["video"][key] for key in ("width", "height", "fps", "frame_count")}
+        entry["frames"] = {"decoded": raw["frames_decoded"], "converted": raw["frames_converted"],
+                           "detected": raw["frames_detected"]}
+        entry["patterns"] = {key: raw[f"patterns_{key}"] for key in ("whole_frame", "in_regions", "dropped",
+                                                                       "missing")}
+        entry["detections_rejected"] = raw["detections_rejected"]
+        entry["scales"] = [{"scale": scale, **stats} for scale, stats in zip(scales, raw["scales"])]
+        entry["msms_kept"] = int(len(raw["centres"]["array"]))
+        entry["homography_rms_px"] = raw["homography_rms_px"] if raw["homography_valid"] else None
+        entry["seconds"] = {"total": raw["seconds_total"], "detection": raw["seconds_detection"]}
+        return entry
+
+
+@dataclass
+class IngestResult:
+    """Tracks of every camera plus the per-camera reports."""
+
+    tracks: Tracks
+    cameras: dict[str, CameraIngest]
+    sequence_source: str
+    markers: str
+    projector_fps: float
+    scales: list[float]
+
+    @property
+    def failed(self) -> dict[str, str]:
+        """Camera name -> error message of the cameras that failed."""
+        return {name: camera.error for name, camera in self.cameras.items() if camera.error is not None}
+
+    def report(self) -> dict[str, Any]:
+        """The body of ``detect_report.json``."""
+        return {
+            "sequence": self.sequence_source,
+            "markers": self.markers,
+            "cameras": {name: camera.summary(self.projector_fps, self.scales) for name, camera in self.cameras.items()},
+        }
+
+    def write_report(self, path: str | os.PathLike) -> None:
+        """Write ``detect_report.json`` (``calibproj.detect_report/1``) atomically."""
+        write_json(path, REPORT_KIND, REPORT_MAJOR, self.report())
+
+
+def detect(
+    videos: str | os.PathLike | Mapping[str, str | os.PathLike] | Iterable[str | os.PathLike],
+    sequence: Any,
+    intrinsics: str | os.PathLike | Mapping[str, Intrinsics | str | os.PathLike],
+    *,
+    options: IngestOptions | None = None,
+    detector_options: Mapping[str, Any] | None = None,
+    workers: int = DEFAULT_WORKERS,
+    progress: bool = True,
+) -> Tracks:
+    """MSM tracks of every camera's video (see :func:`ingest`, which also returns the
+    per-camera reports). Failed cameras are logged and kept without observations."""
+    result = ingest(videos, sequence, intrinsics, options=options, detector_options=detector_options,
+                    workers=workers, progress=progress)
+    for name, error in result.failed.items():
+        logger.error("camera %s failed: %s", name, error)
+    return result.tracks
+
+
+def ingest(
+    videos: str | os.PathLike | Mapping[str, str | os.PathLike] | Iterable[str | os.PathLike],
+    sequence: Any,
+    intrinsics: str | os.PathLike | Mapping[str, Intrinsics | str | os.PathLike],
+    *,
+    options: IngestOptions | None = None,
+    detector_options: Mapping[str, Any] | None = None,
+    workers: int = DEFAULT_WORKERS,
+    progress: bool = True,
+) -> IngestResult:
+    """Synchronise and detect every camera's video; tracks and reports.
+
+    Args:
+        videos: a folder of videos (``<camera>.mp4``, ...), a list of video paths or
+            a mapping camera name -> path.
+        sequence: a ``calibproj.generate.Sequence`` or the path of ``sequence.json``.
+        intrinsics: a folder with ``<camera>.json`` (or ``.yaml``/``.yml``/``.xml``), or a
+            mapping camera name -> ``Intrinsics`` or file path.
+        options: :class:`calibproj.ingest_options.IngestOptions` (defaults documented there).
+        detector_options: marker detector options as ``calibproj.detect_markers`` takes
+            them (``corner_refinement``, ``quad_decimate``, ...); ``inverted`` comes from
+            the sequence.
+        workers: cameras processed at once (each also uses FFmpeg's decoding threads).
+        progress: show a progress bar per camera (on terminals).
+
+    Raises:
+        ValueError: no videos, an unreadable sequence file, bad options. Per-camera
+            failures do not raise; they are in ``IngestResult.failed``.
+    """
+    sequence, sequence_source = _load_sequence(sequence)
+    options = options or IngestOptions()
+    video_paths = _video_paths(videos)
+    aruco, apriltag = _detector_options(sequence.markers.system, detector_options or {})
+    document = sequence.to_dict()
+    names = list(video_paths)
+    bars = _ProgressBars(names, enabled=progress)
+    camera_options = _CameraJob(document, options, aruco, apriltag, bars)
+
+    def run(name: str) -> CameraIngest:
+        return camera_options.run(name, video_paths[name], _intrinsics_for(intrinsics, name))
+
+    try:
+        with ThreadPoolExecutor(max_workers=max(1, workers), thread_name_prefix="ingest") as pool:
+            cameras = dict(zip(names, pool.map(run, names)))
+    finally:
+        bars.close()
+    tracks = _tracks(cameras, sequence.centres.shape[1])
+    return IngestResult(tracks, cameras, sequence_source, sequence.markers.spec, float(sequence.fps),
+                        [float(s) for s in sequence.layout.scales])
+
+
+class _CameraJob:
+    """Runs the C++ ingest of one camera and turns failures into reports."""
+
+    def __init__(self, document: dict[str, Any], options: IngestOptions, aruco: Any, apriltag: Any,
+                 bars: _ProgressBars) -> None:
+        self.document = document
+        self.kwargs = options.to_kwargs()
+        self.aruco = aruco
+        self.apriltag = apriltag
+        self.bars = bars
+
+    def run(self, name: str, video: Path, intrinsics: tuple[Intrinsics | None, str]) -> CameraIngest:
+        from calibproj import _core
+
+        camera_intrinsics, source = intrinsics
+        report = CameraIngest(name, str(video), source)
+        try:
+            if camera_intrinsics is None:
+                raise ValueError(source)
+            resolution = camera_intrinsics.resolution
+            report.raw = _core.ingest.ingest_camera(
+                str(video), self.document, camera_intrinsics.K, camera_intrinsics.dist, resolution, source,
+                self.aruco, self.apriltag, self.bars.callback(name), **self.kwargs)
+        except (ValueError, RuntimeError, OSError) as error:
+            report.error = str(error)
+            logger.warning("camera %s: %s", name, error)
+        else:
+            logger.info("camera %s: %d MSMs", name, len(report.raw["centres"]["array"]))
+        return report
+
+
+class _ProgressBars:
+    """One tqdm bar per camera, updated from the C++ threads (tqdm locks internally)."""
+
+    def __init__(self, names: list[str], enabled: bool) -> None:
+        self.enabled = enabled
+        self.bars: dict[str, Any] = {}
+        self.lock = threading.Lock()
+        self.positions = {name: index for index, name in enumerate(names)}
+
+    def callback(self, name: str) -> Any:
+        if not self.enabled:
+            return None
+
+        def update(decoded: int, total: int) -> None:
+            bar = self._bar(name, total)
+            if total > 0 and bar.total != max(total, decoded):
+                bar.total = max(total, decoded)
+            bar.update(decoded - bar.n)
+
+        return update
+
+    def _bar(self, name: str, total: int) -> Any:
+        from tqdm import tqdm
+
+        with self.lock:
+            if name not in self.bars:
+                self.bars[name] = tqdm(total=total or None, desc=name, unit="frame", position=self.positions[name],
+                                       leave=True, disable=None)
+            return self.bars[name]
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
+
+
+def _load_sequence(sequence: Any) -> tuple[Any, str]:
+    from calibproj.generate.sequence import Sequence
+
+    if isinstance(sequence, Sequence):
+        return sequence, "sequence"
+    return Sequence.load(sequence), str(sequence)
+
+
+def _video_paths(videos: Any) -> dict[str, Path]:
+    """Camera name -> video path, in name order."""
+    if isinstance(videos, Mapping):
+        paths = {str(name): Path(path) for name, path in videos.items()}
+    elif isinstance(videos, (str, os.PathLike)):
+        folder = Path(videos)
+        if not folder.is_dir():
+            raise ValueError(f"{folder}: no such videos folder")
+        files = [p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES]
+        paths = {}
+        for path in files:
+            if path.stem in paths:
+                raise ValueError(f"{path}: a second video for camera {path.stem!r}")
+            paths[path.stem] = path
+        if not paths:
+            raise ValueError(f"{folder}: no videos ({', '.join('*' + s for s in VIDEO_SUFFIXES)})")
+    else:
+        paths = {}
+        for item in videos:
+            path = Path(item)
+            if path.stem in paths:
+                raise ValueError(f"{path}: a second video for camera {path.stem!r}")
+            paths[path.stem] = path
+    if not paths:
+        raise ValueError("no videos given")
+    return dict(sorted(paths.items()))
+
+
+def _intrinsics_for(intrinsics: Any, name: str) -> tuple[Intrinsics | None, str]:
+    """The camera's intrinsics and where they come from; (None, message) when missing.
+
+    Errors stay per camera: a broken file only fails its own camera."""
+    from calibproj.io.jsonio import FormatError
+
+    if isinstance(intrinsics, Mapping):
+        entry = intrinsics.get(name)
+        if entry is None:
+            return None, f"no intrinsics for camera {name!r} (cameras with intrinsics: {', '.join(sorted(intrinsics))})"
+        if isinstance(entry, Intrinsics):
+            return entry, f"intrinsics of {name}"
+        path = Path(entry)
+    else:
+        folder = Path(intrinsics)
+        if not folder.is_dir():
+            return None, f"{folder}: no such intrinsics folder"
+        candidates = [folder / f"{name}{suffix}" for suffix in INTRINSICS_SUFFIXES]
+        found = [p for p in candidates if p.is_file()]
+        if not found:
+            return None, f"{candidates[0]}: no intrinsics file for camera {name!r} (also looked for " \
+                         f"{', '.join(p.name for p in candidates[1:])})"
+        path = found[0]
+    try:
+        return read_intrinsics(path, name), str(path)
+    except FormatError as error:
+        return None, str(error)
+
+
+def _detector_options(system: str, options: Mapping[str, Any]) -> tuple[Any, Any]:
+    from calibproj.markers import _build_options
+
+    return _build_options(system, dict(options))
+
+
+def _tracks(cameras: dict[str, CameraIngest], markers_per_array: int) -> Tracks:
+    names, ids, xy = [], [], []
+    for index, camera in enumerate(cameras.values()):
+        if not camera.ok:
+            continue
+        centres = camera.raw["centres"]
+        point_ids = msm_point_ids(centres["array"], centres["marker"], markers_per_array)
+        names.append(np.full(len(point_ids), index, dtype=np.int32))
+        ids.append(point_ids)
+        xy.append(np.asarray(centres["xy"], dtype=float).reshape(-1, 2))
+    if not ids:
+        return Tracks.empty(list(cameras), markers_per_array)
+    return Tracks.from_observations(list(cameras), np.concatenate(names), np.concatenate(ids), np.concatenate(xy),
+                                    markers_per_array)
+
+
+def _sync_summary(sync: dict[str, Any], video_fps: float, projector_fps: float) -> dict[str, Any]:
+    nominal_rate = video_fps / projector_fps
+    return {
+        "offset_frames": sync["offset"],
+        "offset_s": sync["offset"] / video_fps,
+        "offset_uncertainty_frames": sync["offset_uncertainty"],
+        "rate": sync["rate"],
+        "camera_fps": sync["rate"] * projector_fps,
+        "drift_ppm": (sync["rate"] / nominal_rate - 1.0) * 1e6,
+        "exposure_frames": sync["exposure"],
+        "sharp": sync["sharp"],
+        "start_correlation": sync["start"]["correlation"],
+        "end_correlation": sync["end"]["correlation"],
+        "fit_rms": sync["rms"],
+    }

@@ -1,0 +1,146 @@
+"""Options of the video ingest (``calibproj.detect``), with their defaults.
+
+Every field maps one-to-one onto a knob of the C++ ingest (``cpp/calibproj/ingest``);
+``tests/test_ingest.py`` checks that the defaults here equal the C++ ones.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class IngestOptions:
+    """Knobs of synchronisation, frame picking, detection and merging.
+
+    Synchronisation finds the start and end light codes in the per-frame mean luma
+    (``cpp/calibproj/sync``); frames are picked from the resulting frame map; markers
+    are detected in regions of interest predicted by the projector-to-image homography
+    once the first detections give it; the scales of each MSM are merged.
+
+    Attributes:
+        min_correlation: normalised cross-correlation a light code must reach.
+        max_rate_deviation: largest relative difference between the rate the two codes
+            give and the video's nominal rate before they count as disagreeing.
+        context_before: projector frames of known light (reference frames) used before
+            each code.
+        context_after: projector frames of known light used after each code.
+        guard_samples: camera frames searched past the best start-code match before it
+            is accepted while decoding.
+        rate_search: candidate rates span the nominal rate x (1 +- rate_search).
+        rate_step: relative step between candidate rates.
+        phases: sub-frame phases per candidate rate in the coarse search.
+        coarse_exposure: exposure assumed by the coarse search, camera frames.
+        offset_range: the sub-frame fit searches +- this many camera frames around the
+            coarse offset.
+        offset_step: grid step of the sub-frame fit, camera frames.
+        min_exposure: shortest exposure the fit tries, camera frames.
+        max_exposure: longest exposure the fit tries, camera frames.
+        exposure_steps: exposures the fit tries between the two.
+        feasible_chi2: a frame map fits as well as the best when its cost exceeds the
+            best by less than this many residual variances per frame; the offsets of
+            those maps give the reported uncertainty and the exposure windows that
+            count for picking clean frames.
+        plateau_tolerance: a frame map also fits as well when its cost exceeds the best
+            by less than this share of the signal's variance (noise-free plateaus).
+        fit_iterations: Levenberg-Marquardt iterations of the fit.
+        margin: projector frames kept clear of each pattern change, on either side.
+        average_frames: clean frames averaged per pattern before detection.
+        max_clock_drift: largest relative camera clock drift; widens the frames kept
+            clear while decoding, before the end code is seen.
+        use_roi: detect in predicted regions once the projector-to-image homography is
+            known (false: whole frames, for verification).
+        roi_padding_fraction: padding around a predicted marker, as a share of its side
+            (the larger of this and roi_padding_px).
+        roi_padding_px: padding around a predicted marker, pixels.
+        roi_alignment: regions start on multiples of this many pixels.
+        min_module_px: markers whose predicted cell is smaller are not searched.
+        border_px: a marker must lie this far inside the image to be searched.
+        max_roi_area_fraction: above this share of the image, one whole-frame detection
+            replaces the regions.
+        max_offset_px: a detection must lie within the larger of this and
+            max_offset_fraction of its side from its prediction, pixels.
+        max_offset_fraction: see max_offset_px.
+        homography_min_points: marker centres needed before the homography is trusted.
+        homography_min_spread: those centres must spread over this share of the image
+            diagonal.
+        homography_threshold_px: RANSAC inlier threshold of the homography fit.
+        homography_min_inlier_share: share of inliers the fit needs.
+        homography_max_rms_px: inlier RMS the fit must stay under.
+        max_deviation_px: scales of an MSM farther than this from their median are
+            rejected.
+        min_scales: scales an MSM needs (after rejection) to give a centre.
+        mean_row_step: the mean luma is taken over every n-th row.
+        luma_gamma: the video's display gamma, undone per pixel before the mean, so that
+            a frame across a light change measures the exposure-weighted mean (1 keeps
+            the encoded values).
+        lookback_frames: decoded frames kept while the start code is searched.
+        search_interval: frames between two searches of the start code.
+        detection_threads: detection threads per camera.
+        max_pending_jobs: patterns waiting for detection at most (bounds memory).
+    """
+
+    min_correlation: float = 0.8
+    max_rate_deviation: float = 0.01
+    context_before: int = 30
+    context_after: int = 6
+    guard_samples: int = 4
+    rate_search: float = 0.02
+    rate_step: float = 0.002
+    phases: int = 4
+    coarse_exposure: float = 0.5
+    offset_range: float = 1.0
+    offset_step: float = 0.02
+    min_exposure: float = 0.02
+    max_exposure: float = 1.0
+    exposure_steps: int = 50
+    feasible_chi2: float = 9.0
+    plateau_tolerance: float = 1e-6
+    fit_iterations: int = 50
+    margin: float = 0.1
+    average_frames: int = 1
+    max_clock_drift: float = 2e-4
+    use_roi: bool = True
+    roi_padding_fraction: float = 0.25
+    roi_padding_px: int = 16
+    roi_alignment: int = 8
+    min_module_px: float = 1.5
+    border_px: int = 4
+    max_roi_area_fraction: float = 0.5
+    max_offset_px: float = 4.0
+    max_offset_fraction: float = 0.25
+    homography_min_points: int = 8
+    homography_min_spread: float = 0.02
+    homography_threshold_px: float = 2.0
+    homography_min_inlier_share: float = 0.8
+    homography_max_rms_px: float = 1.0
+    max_deviation_px: float = 0.5
+    min_scales: int = 1
+    mean_row_step: int = 2
+    luma_gamma: float = 2.2
+    lookback_frames: int = 16
+    search_interval: int = 4
+    detection_threads: int = 1
+    max_pending_jobs: int = 4
+
+    def replace(self, **changes: Any) -> IngestOptions:
+        """A copy with some fields changed; ValueError naming an unknown field."""
+        known = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(changes) - known)
+        if unknown:
+            raise ValueError(f"unknown ingest option(s) {', '.join(unknown)} (choose from {', '.join(sorted(known))})")
+        return dataclasses.replace(self, **changes)
+
+    def to_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of ``calibproj._core.ingest.ingest_camera``."""
+        return dataclasses.asdict(self)
+
+
+def sync_kwargs(options: IngestOptions) -> dict[str, Any]:
+    """The synchronisation part of the options (``calibproj._core.sync`` keywords)."""
+    from calibproj import _core
+
+    names = set(_core.sync.option_defaults())
+    return {name: value for name, value in options.to_kwargs().items() if name in names}
