@@ -444,11 +444,10 @@ RegisterResult Reconstruction::RegisterCamera(int camera) {
   }
   registered_[camera] = true;
   order_.push_back(camera);
-  // Its observations that disagree with the pose are outliers until shown otherwise.
-  const PixelMatrix residuals = AllResiduals();
-  for (int i : camera_observations_[camera]) {
-    if (std::isfinite(residuals(i, 0)) && residuals.row(i).norm() > options_.pnp_threshold_px) active_[i] = false;
-  }
+  // Observations the PnP pose does not explain stay in: a zoomed camera resolves the
+  // points far better than the cameras that placed them, so its residuals are large
+  // until the points move. The intermediate adjustment's robust loss caps gross
+  // outliers, and FilterOutliers decides afterwards.
   // Cameras that failed earlier may succeed now that more points are reconstructed.
   for (int c = 0; c < num_cameras(); ++c) {
     if (!registered_[c]) failure_[c].clear();
@@ -579,6 +578,11 @@ AdjustResult Reconstruction::Adjust(bool final) {
   ba_options.model = options_.model;
   ba_options.loss = options_.loss;
   ba_options.loss_scale_px = options_.loss_scale_px;
+  if (!final && options_.loss == ba::Loss::kNone) {
+    // Before outliers are filtered, a robust loss keeps them from dragging the solution.
+    ba_options.loss = ba::Loss::kHuber;
+    ba_options.loss_scale_px = options_.pnp_threshold_px;
+  }
   ba_options.num_threads = options_.num_threads;
   ba_options.gauge_camera = camera_map[gauge_camera_];
   ba_options.max_iterations = final ? options_.final_ba_iterations : options_.intermediate_ba_iterations;
