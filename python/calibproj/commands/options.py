@@ -34,7 +34,10 @@ def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, title: s
         flag = "--" + f.name.replace("_", "-")
         help_text = f"{docs.get(f.name, '')} (default: {default})".replace("%", "%%")
         if isinstance(default, bool):
-            group.add_argument(flag, type=_parse_bool, default=default, metavar="BOOL", help=help_text)
+            group.add_argument(flag, action=argparse.BooleanOptionalAction, default=default, help=help_text)
+        elif isinstance(default, tuple):
+            item_type = type(default[0]) if default else str
+            group.add_argument(flag, type=_comma_list(item_type), default=default, metavar="A,B,...", help=help_text)
         else:
             group.add_argument(flag, type=type(default), default=default, help=help_text)
 
@@ -43,10 +46,11 @@ def dataclass_from_args(cls: type, args: argparse.Namespace) -> Any:
     return cls(**{f.name: getattr(args, f.name) for f in dataclasses.fields(cls)})
 
 
-def _parse_bool(text: str) -> bool:
-    lowered = text.lower()
-    if lowered in ("1", "true", "yes", "on"):
-        return True
-    if lowered in ("0", "false", "no", "off"):
-        return False
-    raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
+def _comma_list(item_type: type):
+    def parse(text: str) -> tuple:
+        try:
+            return tuple(item_type(part) for part in text.split(",") if part.strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list of {item_type.__name__}, got {text!r}")
+
+    return parse
