@@ -96,6 +96,13 @@ int RunCalibrate(const CalibrateArguments& arguments) {
     camera.height = in.ImageHeight();
     cameras.push_back(camera);
   }
+  names.cameras = tracks.cameras;
+  names.point_ids = tracks.point_ids;
+  if (cameras.empty()) {  // every camera failed before registration
+    WriteResults(out, registration::RegistrationResult{}, names);
+    for (const auto& [name, reason] : names.left_out) std::cout << name << ": FAILED " << reason << "\n";
+    return 1;
+  }
   registration::Options options = arguments.options;
   options.model = arguments.model == "free" ? ba::Model::kFree : ba::Model::kCoplanar;
   options.loss = arguments.loss == "huber" ? ba::Loss::kHuber : arguments.loss == "cauchy" ? ba::Loss::kCauchy
@@ -106,8 +113,6 @@ int RunCalibrate(const CalibrateArguments& arguments) {
       reconstruction, [](const std::string& message) { std::cerr << message << "\n"; }, tracks.cameras);
   const registration::RegistrationResult result = registration::Summarize(reconstruction);
 
-  names.cameras = tracks.cameras;
-  names.point_ids = tracks.point_ids;
   WriteResults(out, result, names);
   int registered = 0;
   for (size_t c = 0; c < result.cameras.size(); ++c) {

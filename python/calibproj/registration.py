@@ -134,6 +134,10 @@ class RegistrationDriver:
         missing = list(self.failed)
         self.all_cameras = tuple(tracks.camera_names)
         self.tracks = tracks.drop_cameras(missing) if missing else tracks
+        self.initial_pair: tuple[str, str] | None = None
+        if not self.tracks.camera_names:
+            self.reconstruction = None  # every camera failed before registration
+            return
         self.intrinsics = {name: intrinsics[name] for name in self.tracks.camera_names}
         K = np.array([self.intrinsics[name].K for name in self.tracks.camera_names]).reshape(-1, 3, 3)
         sizes = np.array([image_size(self.intrinsics[name]) for name in self.tracks.camera_names]).reshape(-1, 2)
@@ -141,7 +145,6 @@ class RegistrationDriver:
         self.reconstruction = _core.registration.Reconstruction(
             K, sizes, self.tracks.num_points, camera_index, point_index, xy, **self.options.to_kwargs()
         )
-        self.initial_pair: tuple[str, str] | None = None
 
     def name(self, camera: int) -> str:
         return self.tracks.camera_names[camera]
@@ -149,6 +152,9 @@ class RegistrationDriver:
     def steps(self) -> Iterator[Step]:
         """The steps of the C++ ``run()``, in its order, yielding after each one."""
         rec = self.reconstruction
+        if rec is None:
+            yield Step("done", None, {"reason": "no camera to register"})
+            return
         for pair in rec.rank_initial_pairs():
             info = rec.initialize(pair["camera1"], pair["camera2"])
             names = (self.name(pair["camera1"]), self.name(pair["camera2"]))
@@ -194,6 +200,8 @@ class RegistrationDriver:
 
     def result(self) -> Calibration:
         """The calibration in the floor frame, from the current state."""
+        if self.reconstruction is None:
+            return Calibration.nothing_registered(self.failed, self.options.model)
         return Calibration.from_summary(
             self.reconstruction.summarize(),
             self.tracks.camera_names,
