@@ -20,9 +20,10 @@ from calibproj.simulate import simulate_tracks as simulate  # noqa: E402
 from calibproj.generate import generate  # noqa: E402
 from calibproj.markers import detect_markers  # noqa: E402
 
-# Registration of the cameras from tracks, and its result.
+# Calibration from videos or tracks (calibproj.pipeline), its options and its result.
 from calibproj.calibration import Calibration  # noqa: E402
-from calibproj.registration import RegistrationOptions, calibrate  # noqa: E402
+from calibproj.pipeline import calibrate  # noqa: E402
+from calibproj.registration import RegistrationOptions  # noqa: E402
 from calibproj.tracks import Tracks  # noqa: E402
 
 # Evaluation on independent data; like compare, the function shadows its module
