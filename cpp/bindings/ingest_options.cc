@@ -10,9 +10,10 @@ namespace calibproj::bindings {
 
 namespace {
 
-// One table drives both setting and listing, so the two cannot disagree.
+// One table drives both setting and listing, so the two cannot disagree. The ingest
+// takes the exposure in seconds (exposure_s), the bare sync in camera frames.
 template <typename Options, typename Visitor>
-void VisitSync(Options& o, Visitor&& visit) {
+void VisitSyncCommon(Options& o, Visitor&& visit) {
   visit("min_correlation", o.min_correlation);
   visit("max_rate_deviation", o.max_rate_deviation);
   visit("context_before", o.context_before);
@@ -33,8 +34,14 @@ void VisitSync(Options& o, Visitor&& visit) {
 }
 
 template <typename Options, typename Visitor>
+void VisitSync(Options& o, Visitor&& visit) {
+  VisitSyncCommon(o, visit);
+  visit("fixed_exposure", o.fit.fixed_exposure);
+}
+
+template <typename Options, typename Visitor>
 void VisitIngest(Options& o, Visitor&& visit) {
-  VisitSync(o.sync, visit);
+  VisitSyncCommon(o.sync, visit);
   visit("margin", o.pick.margin);
   visit("average_frames", o.pick.average_frames);
   visit("max_clock_drift", o.pick.max_clock_drift);
@@ -56,6 +63,7 @@ void VisitIngest(Options& o, Visitor&& visit) {
   visit("min_scales", o.merge.min_scales);
   visit("mean_row_step", o.mean_row_step);
   visit("luma_gamma", o.luma_gamma);
+  visit("exposure_s", o.exposure_s);
   visit("lookback_frames", o.lookback_frames);
   visit("search_interval", o.search_interval);
   visit("detection_threads", o.detection_threads);

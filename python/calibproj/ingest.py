@@ -124,11 +124,12 @@ def detect(
     detector_options: Mapping[str, Any] | None = None,
     workers: int = DEFAULT_WORKERS,
     progress: bool = True,
+    exposures: Mapping[str, float] | None = None,
 ) -> Tracks:
     """MSM tracks of every camera's video (see :func:`ingest`, which also returns the
     per-camera reports). Failed cameras are logged and kept without observations."""
     result = ingest(videos, sequence, intrinsics, options=options, detector_options=detector_options,
-                    workers=workers, progress=progress)
+                    workers=workers, progress=progress, exposures=exposures)
     for name, error in result.failed.items():
         logger.error("camera %s failed: %s", name, error)
     return result.tracks
@@ -143,6 +144,7 @@ def ingest(
     detector_options: Mapping[str, Any] | None = None,
     workers: int = DEFAULT_WORKERS,
     progress: bool = True,
+    exposures: Mapping[str, float] | None = None,
 ) -> IngestResult:
     """Synchronise and detect every camera's video; tracks and reports.
 
@@ -158,6 +160,8 @@ def ingest(
             the sequence.
         workers: cameras processed at once (each also uses FFmpeg's decoding threads).
         progress: show a progress bar per camera (on terminals).
+        exposures: known exposure times in seconds of some cameras (camera name ->
+            seconds), overriding ``options.exposure_s`` (see there when it matters).
 
     Raises:
         ValueError: no videos, an unreadable sequence file, bad options. Per-camera
@@ -170,10 +174,15 @@ def ingest(
     document = sequence.to_dict()
     names = list(video_paths)
     bars = _ProgressBars(names, enabled=progress)
-    camera_options = _CameraJob(document, options, aruco, apriltag, bars)
+    exposures = dict(exposures or {})
+    unknown = sorted(set(exposures) - set(names))
+    if unknown:
+        raise ValueError(f"exposures given for camera(s) without a video: {', '.join(unknown)}")
 
     def run(name: str) -> CameraIngest:
-        return camera_options.run(name, video_paths[name], _intrinsics_for(intrinsics, name))
+        camera_options = options.replace(exposure_s=exposures.get(name, options.exposure_s))
+        job = _CameraJob(document, camera_options, aruco, apriltag, bars)
+        return job.run(name, video_paths[name], _intrinsics_for(intrinsics, name))
 
     try:
         with ThreadPoolExecutor(max_workers=max(1, workers), thread_name_prefix="ingest") as pool:
@@ -249,6 +258,38 @@ class _ProgressBars:
     def close(self) -> None:
         for bar in self.bars.values():
             bar.close()
+
+
+def luma_signal(video: str | os.PathLike, options: IngestOptions | None = None) -> np.ndarray:
+    """Mean linearised luma of every frame of a video (one decoding pass), as the
+    synchronisation measures it (``luma_gamma``, ``mean_row_step``)."""
+    from calibproj import _core
+
+    options = options or IngestOptions()
+    return _core.video.luma_signal(str(video), options.luma_gamma, options.mean_row_step)
+
+
+def synchronise(signal: np.ndarray, sequence: Any, camera_fps: float, options: IngestOptions | None = None,
+                source: str = "signal") -> dict[str, Any]:
+    """Frame map of a camera from its per-frame mean luma (NaN = not measured).
+
+    Returns a dict: ``offset`` (camera frame at which the sequence's frame 0 starts),
+    ``rate`` (camera frames per projector frame), ``exposure`` (camera frames),
+    ``offset_uncertainty`` (camera frames: the offsets that explain the signal as well;
+    about a frame when no camera frame spans a light change), ``sharp``, ``window_map``
+    (a map whose exposure windows cover every one that fits), and per code ``start`` /
+    ``end`` (correlation, position). RuntimeError naming ``source`` when a code is not
+    found (with the best correlation seen) or the two codes disagree.
+    """
+    from calibproj import _core
+    from calibproj.ingest_options import sync_kwargs
+
+    sequence, _ = _load_sequence(sequence)
+    document = sequence.to_dict()
+    levels = _core.ingest.light_levels(document)
+    return _core.sync.synchronise(np.asarray(signal, dtype=float), levels, document["codes"]["start"],
+                                  document["codes"]["end"], float(camera_fps) / float(sequence.fps), source,
+                                  **sync_kwargs(options or IngestOptions(), camera_fps))
 
 
 def _load_sequence(sequence: Any) -> tuple[Any, str]:

@@ -46,6 +46,11 @@ class IngestOptions:
         plateau_tolerance: a frame map also fits as well when its cost exceeds the best
             by less than this share of the signal's variance (noise-free plateaus).
         fit_iterations: Levenberg-Marquardt iterations of the fit.
+        exposure_s: known exposure time of the cameras, seconds, or 0 to estimate it from
+            the codes. Where every light change falls at the same phase of a camera's
+            frames (camera at the projector's rate or a multiple of it), a frame across a
+            change only tells how its exposure splits, and the offset is known exactly
+            only with the exposure.
         margin: projector frames kept clear of each pattern change, on either side.
         average_frames: clean frames averaged per pattern before detection.
         max_clock_drift: largest relative camera clock drift; widens the frames kept
@@ -99,6 +104,7 @@ class IngestOptions:
     feasible_chi2: float = 9.0
     plateau_tolerance: float = 1e-6
     fit_iterations: int = 50
+    exposure_s: float = 0.0
     margin: float = 0.1
     average_frames: int = 1
     max_clock_drift: float = 2e-4
@@ -138,9 +144,12 @@ class IngestOptions:
         return dataclasses.asdict(self)
 
 
-def sync_kwargs(options: IngestOptions) -> dict[str, Any]:
-    """The synchronisation part of the options (``calibproj._core.sync`` keywords)."""
+def sync_kwargs(options: IngestOptions, camera_fps: float) -> dict[str, Any]:
+    """The synchronisation part of the options (``calibproj._core.sync`` keywords), the
+    exposure in the camera's frames."""
     from calibproj import _core
 
     names = set(_core.sync.option_defaults())
-    return {name: value for name, value in options.to_kwargs().items() if name in names}
+    kwargs = {name: value for name, value in options.to_kwargs().items() if name in names}
+    kwargs["fixed_exposure"] = options.exposure_s * camera_fps
+    return kwargs

@@ -53,9 +53,9 @@ class CameraIngest {
       : path_(path),
         sequence_(sequence),
         camera_(camera),
-        options_(Prepared(options, sequence)),
-        progress_(progress),
         reader_(path),
+        options_(Prepared(options, sequence, reader_.info().fps)),
+        progress_(progress),
         family_(detect::ParseMarkerFamily(sequence.markers)),
         geometry_(detect::GetMarkerGeometry(family_)),
         timeline_(sequence.LightLevels()),
@@ -102,10 +102,11 @@ class CameraIngest {
 
  private:
   // The options with what the sequence fixes (marker polarity) filled in.
-  static IngestOptions Prepared(IngestOptions options, const SequenceDescription& sequence) {
+  static IngestOptions Prepared(IngestOptions options, const SequenceDescription& sequence, double video_fps) {
     sequence.Check();
     options.detector.aruco.inverted = sequence.inverted;
     options.detector.apriltag.inverted = sequence.inverted;
+    if (options.exposure_s > 0.0) options.sync.fit.fixed_exposure = options.exposure_s * video_fps;
     options.Check();
     return options;
   }
@@ -140,7 +141,8 @@ class CameraIngest {
   }
 
   void OnStartFound() {
-    start_ = sync::FitCode(result_.signal, timeline_, sequence_.start_code, tracker_->best(), options_.sync);
+    start_ = sync::FitCode(result_.signal, timeline_, sequence_.start_code, tracker_->best(), nominal_rate_,
+                           options_.sync);
     // The start code's conservative window, carried on at the nominal rate.
     const double first = sequence_.start_code.first_frame;
     provisional_ = sync::FrameMap{start_.window_map.CameraFrame(first) - nominal_rate_ * first, nominal_rate_,
@@ -354,9 +356,9 @@ class CameraIngest {
   std::string path_;
   const SequenceDescription& sequence_;
   CameraModel camera_;
+  video::VideoReader reader_;
   IngestOptions options_;
   ProgressCallback progress_;
-  video::VideoReader reader_;
   detect::MarkerFamily family_;
   detect::MarkerGeometry geometry_;
   sync::LightTimeline timeline_;
@@ -393,6 +395,7 @@ void IngestOptions::Check() const {
   merge.Check();
   Require(mean_row_step >= 1, "mean_row_step must be at least 1");
   Require(luma_gamma > 0.0, "luma_gamma must be positive");
+  Require(exposure_s >= 0.0, "exposure_s must be non-negative (0: estimate it)");
   Require(lookback_frames >= 0, "lookback_frames must be non-negative");
   Require(search_interval >= 1, "search_interval must be at least 1");
   Require(detection_threads >= 1, "detection_threads must be at least 1");

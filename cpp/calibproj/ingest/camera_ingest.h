@@ -42,6 +42,9 @@ struct IngestOptions {
   // Detect in regions of interest once the homography is known (false: whole frames,
   // with the same filtering; for verification).
   bool use_roi = true;
+  // Known exposure time of the camera in seconds, or 0 to estimate it from the codes
+  // (see CodeFitOptions::fixed_exposure).
+  double exposure_s = 0.0;
   // Mean luma over every mean_row_step-th row, linearised by luma_gamma (the video's
   // display gamma; 1 = use the encoded values).
   int mean_row_step = 2;

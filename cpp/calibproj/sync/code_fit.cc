@@ -27,7 +27,8 @@ struct Sample {
 std::vector<Sample> WindowSamples(const std::vector<double>& signal, const FrameWindow& window, const FrameMap& map,
                                   const CodeFitOptions& options) {
   const double first = map.offset + options.offset_range + map.rate * window.begin;
-  const double last = map.offset - options.offset_range - options.max_exposure + map.rate * window.end;
+  const double longest = options.fixed_exposure > 0.0 ? options.fixed_exposure : options.max_exposure;
+  const double last = map.offset - options.offset_range - longest + map.rate * window.end;
   std::vector<Sample> samples;
   const int begin = std::max(0, static_cast<int>(std::ceil(first)));
   const int end = std::min(static_cast<int>(signal.size()) - 1, static_cast<int>(std::floor(last)));
@@ -102,6 +103,7 @@ class SampleCost : public ceres::SizedCostFunction<1, 3, 2> {
 };
 
 std::vector<double> ExposureGrid(const CodeFitOptions& options) {
+  if (options.fixed_exposure > 0.0) return {options.fixed_exposure};
   std::vector<double> exposures;
   for (int e = 0; e < options.exposure_steps; ++e) {
     const double share = options.exposure_steps > 1 ? static_cast<double>(e) / (options.exposure_steps - 1) : 1.0;
@@ -240,9 +242,14 @@ FrameMap Refine(const LightTimeline& timeline, const std::vector<std::vector<Sam
       problem.AddResidualBlock(new SampleCost(timeline, s), nullptr, map, levels[w].data());
     }
   }
-  if (!fit_rate) problem.SetManifold(map, new ceres::SubsetManifold(3, {1}));
-  problem.SetParameterLowerBound(map, 2, options.min_exposure);
-  problem.SetParameterUpperBound(map, 2, options.max_exposure);
+  std::vector<int> constant;
+  if (!fit_rate) constant.push_back(1);
+  if (options.fixed_exposure > 0.0) constant.push_back(2);
+  if (!constant.empty()) problem.SetManifold(map, new ceres::SubsetManifold(3, constant));
+  if (options.fixed_exposure <= 0.0) {
+    problem.SetParameterLowerBound(map, 2, options.min_exposure);
+    problem.SetParameterUpperBound(map, 2, options.max_exposure);
+  }
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::DENSE_QR;
   solver.max_num_iterations = options.max_iterations;
@@ -268,6 +275,7 @@ void CodeFitOptions::Check() const {
   Require(min_exposure > 0.0 && min_exposure <= max_exposure && max_exposure <= 1.0,
           "exposures must satisfy 0 < min_exposure <= max_exposure <= 1");
   Require(exposure_steps >= 1, "exposure_steps must be at least 1");
+  Require(fixed_exposure >= 0.0, "fixed_exposure must be non-negative (0: fit it)");
   Require(feasible_chi2 >= 0.0, "feasible_chi2 must be non-negative");
   Require(plateau_tolerance >= 0.0, "plateau_tolerance must be non-negative");
   Require(max_iterations >= 1, "max_iterations must be at least 1");

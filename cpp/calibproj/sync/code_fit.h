@@ -31,6 +31,11 @@ struct CodeFitOptions {
   double min_exposure = 0.02;
   double max_exposure = 1.0;
   int exposure_steps = 50;
+  // Known exposure (camera frames), or 0 to fit it. Where every light change falls at
+  // the same phase of the camera's frames (camera and projector at the same rate, or
+  // one a multiple of the other), a frame across a change gives only the share of its
+  // exposure on either side: the offset is then fixed only if the exposure is known.
+  double fixed_exposure = 0.0;
   // Points whose cost exceeds the best by less than feasible_chi2 times the residual
   // variance per frame (or plateau_tolerance times the signal's variance, whichever is
   // larger) fit as well as the best.

@@ -77,9 +77,12 @@ FrameWindow CodeWindow(const LightTimeline& timeline, const LightCode& code, con
 }
 
 CodeLocation FitCode(const std::vector<double>& signal, const LightTimeline& timeline, const LightCode& code,
-                     const CodeMatch& match, const SyncOptions& options) {
-  const CodeFit fit =
-      FitCodeWindows(signal, timeline, {CodeWindow(timeline, code, options)}, match.map, false, options.fit);
+                     const CodeMatch& match, double nominal_rate, const SyncOptions& options) {
+  const FrameWindow window = CodeWindow(timeline, code, options);
+  // The match's position at the middle of the window, carried at the nominal rate.
+  const double middle = 0.5 * (window.begin + window.end);
+  const FrameMap initial{match.map.CameraFrame(middle) - nominal_rate * middle, nominal_rate, match.map.exposure};
+  const CodeFit fit = FitCodeWindows(signal, timeline, {window}, initial, false, options.fit);
   return FromFit(fit, code, match.correlation);
 }
 
@@ -100,7 +103,7 @@ CodeLocation LocateCode(const std::vector<double>& signal, const LightTimeline& 
                                     match.first_sample, options.min_correlation) +
                              "; is the projector in view and is this a recording of this sequence?");
   }
-  return FitCode(signal, timeline, code, match, options);
+  return FitCode(signal, timeline, code, match, nominal_rate, options);
 }
 
 SyncResult SynchroniseFromStart(const std::vector<double>& signal, const LightTimeline& timeline,
@@ -120,8 +123,19 @@ SyncResult SynchroniseFromStart(const std::vector<double>& signal, const LightTi
                                                                     "code puts it; is the recording truncated?",
                                                                     predicted));
   }
-  CodeLocation end_location =
-      LocateCode(signal, timeline, end, nominal_rate, options, source, "end", first_shift, end_shift);
+  CodeLocation end_location;
+  try {
+    end_location = LocateCode(signal, timeline, end, nominal_rate, options, source, "end", first_shift, end_shift);
+  } catch (const std::runtime_error&) {
+    // Anywhere else after the start code, the codes disagree (another sequence);
+    // nowhere, the first error stands.
+    const int after_start = static_cast<int>(std::ceil(start_location.frame + nominal_rate * start.FrameCount()));
+    const CodeMatch elsewhere = SearchCode(signal, timeline, end_window, nominal_rate, options.search, after_start);
+    if (!elsewhere.valid() || elsewhere.correlation < options.min_correlation) throw;
+    MapThroughCodes(start_location, FitCode(signal, timeline, end, elsewhere, nominal_rate, options), start, end,
+                    nominal_rate, options, source);
+    throw;
+  }
 
   // Positions -> rate -> both codes refitted at that rate -> positions again.
   SyncResult result;

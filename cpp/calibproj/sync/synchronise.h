@@ -69,9 +69,11 @@ CodeLocation LocateCode(const std::vector<double>& signal, const LightTimeline& 
                         double nominal_rate, const SyncOptions& options, const std::string& source,
                         const std::string& what, int first_shift = 0, int end_shift = -1);
 
-// Refines a coarse match of one code (from LocateCode or a CodeTracker).
+// Refines a coarse match of one code (from LocateCode or a CodeTracker) at the
+// nominal rate: within one code window the rate is poorly determined (the coarse
+// search's best candidate rate mostly follows the noise), across both codes it is not.
 CodeLocation FitCode(const std::vector<double>& signal, const LightTimeline& timeline, const LightCode& code,
-                     const CodeMatch& match, const SyncOptions& options);
+                     const CodeMatch& match, double nominal_rate, const SyncOptions& options);
 
 // Full synchronisation from both codes. `signal[j]` is the mean brightness of camera
 // frame j (NaN where not measured); `nominal_rate` = video fps / projector fps.
