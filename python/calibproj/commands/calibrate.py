@@ -54,6 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import json
+    import sys
 
     from calibproj.calibration import calibration_summary
     from calibproj.pipeline import calibrate
@@ -82,7 +83,11 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(format_summary(rows))
         print(f"results in {args.out} (unit: {calibration.unit})")
-    return 0 if calibration.registered else 1
+    if calibration.failed:
+        failures = "; ".join(f"{name}: {reason}" for name, reason in calibration.failed.items())
+        print(f"calibproj calibrate: {len(calibration.failed)} camera(s) failed: {failures}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def format_summary(rows: list[dict]) -> str:

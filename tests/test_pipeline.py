@@ -1,0 +1,107 @@
+"""The whole pipeline as a user meets it: rendered videos in, a results folder out."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import pytest
+
+from calibproj.compare import compare
+from calibproj.generate import generate
+from calibproj.pipeline import calibrate
+from calibproj.registration import RegistrationOptions
+from calibproj.simulate.render import simulate_videos
+
+# The small room: 3 cameras at 640x360 (fx 305) 3.5 m from the floor centre; its poses
+# are known less well than the paper rig's, hence looser bounds than the registration's.
+MAX_ROTATION_RMSE_DEG = 0.3
+MAX_TRANSLATION_RMSE_PCT = 0.2
+
+
+@pytest.fixture(scope="module", params=["aruco:4X4_50", "apriltag:tag36h11"])
+def room(request, tmp_path_factory) -> Path:
+    """A short sequence of the given markers, rendered in the small room."""
+    out = tmp_path_factory.mktemp(request.param.replace(":", "_"))
+    sequence = generate(out / "sequence", markers=request.param, arrays=12, scales=(3.0, 5.0, 8.0), video=False)
+    simulate_videos("small", sequence, out / "room", seed=1)
+    return out
+
+
+def calibrate_room(room: Path, results: Path, **options):
+    return calibrate(room / "room" / "videos", room / "room" / "intrinsics",
+                     sequence=room / "sequence" / "sequence.json", out=results, progress=False, **options)
+
+
+def test_videos_to_results_in_both_models(room: Path, tmp_path: Path) -> None:
+    results = tmp_path / "results"
+    calibration = calibrate_room(room, results, exports=["yaml", "colmap", "anipose"])
+    assert calibration.failed == {}
+    for name in ("camera_poses.json", "metrics.json", "points.ply", "tracks.json", "detect_report.json",
+                 "report.html", "calibration_opencv.yaml", "calibration.toml", "colmap/images.txt"):
+        assert (results / name).is_file(), name
+    assert (results / "intrinsics").is_dir()
+    truth = room / "room" / "truth.json"
+    errors = compare(results / "camera_poses.json", truth)
+    assert errors.missing == []
+    assert errors.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
+    assert errors.translation_rmse_pct < MAX_TRANSLATION_RMSE_PCT
+    assert all(m.mean_px < 0.5 for m in calibration.metrics.values())
+    # The FREE model from the tracks the videos gave.
+    free = calibrate(results / "tracks.json", results / "intrinsics", out=tmp_path / "free",
+                     options=RegistrationOptions(model="free"), report=False)
+    assert free.failed == {}
+    errors = compare(tmp_path / "free" / "camera_poses.json", truth)
+    assert errors.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
+    assert errors.translation_rmse_pct < MAX_TRANSLATION_RMSE_PCT
+    # The report page embeds its plots.
+    page = (results / "report.html").read_text()
+    assert page.count("<img") >= 4 and all(name in page for name in calibration.registered)
+    assert cv2.FileStorage(str(results / "calibration_opencv.yaml"), cv2.FILE_STORAGE_READ).isOpened()
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "calibproj", *args], capture_output=True, text=True)
+
+
+def one_error_line(result: subprocess.CompletedProcess) -> str:
+    lines = [line for line in result.stderr.splitlines() if line.startswith("calibproj calibrate:")]
+    assert len(lines) == 1, result.stderr
+    return lines[0]
+
+
+@pytest.mark.parametrize("room", ["aruco:4X4_50"], indirect=True)
+def test_bad_invocations_exit_non_zero_with_one_clear_line(room: Path, tmp_path: Path) -> None:
+    videos, intrinsics = room / "room" / "videos", room / "room" / "intrinsics"
+    sequence = room / "sequence" / "sequence.json"
+    missing = run_cli("calibrate", str(tmp_path / "nowhere"), "--sequence", str(sequence),
+                      "--intrinsics", str(intrinsics), "--out", str(tmp_path / "a"))
+    assert missing.returncode == 2 and "nowhere" in one_error_line(missing)
+
+    (tmp_path / "empty").mkdir()
+    no_videos = run_cli("calibrate", str(tmp_path / "empty"), "--sequence", str(sequence),
+                        "--intrinsics", str(intrinsics), "--out", str(tmp_path / "b"))
+    assert no_videos.returncode == 2 and "empty" in one_error_line(no_videos)
+
+    other = run_cli("calibrate", str(videos), "--sequence", str(room / "room" / "truth.json"),
+                    "--intrinsics", str(intrinsics), "--out", str(tmp_path / "c"))
+    assert other.returncode == 2 and "truth.json" in one_error_line(other)
+
+    no_sequence = run_cli("calibrate", str(videos), "--intrinsics", str(intrinsics), "--out", str(tmp_path / "d"))
+    assert no_sequence.returncode == 2 and "--sequence" in one_error_line(no_sequence)
+
+    # Intrinsics missing for one camera: that camera is reported, the others calibrated.
+    partial = tmp_path / "partial"
+    shutil.copytree(intrinsics, partial)
+    (partial / "cam2.json").unlink()
+    result = run_cli("calibrate", str(videos), "--sequence", str(sequence), "--intrinsics", str(partial),
+                     "--out", str(tmp_path / "e"), "--no-report", "--no-progress")
+    assert result.returncode == 1
+    line = one_error_line(result)
+    assert "cam2" in line and "intrinsics" in line
+    poses = json.loads((tmp_path / "e" / "camera_poses.json").read_text())
+    assert sorted(poses["cameras"]) == ["cam1", "cam3"] and "cam2" in poses["failed"]
