@@ -212,7 +212,9 @@ class CameraIngest {
   }
 
   void BeginPattern(int index) {
-    Absorb(pipeline_.Poll());
+    // Until the homography is known every pattern costs a whole-frame detection:
+    // waiting for the ones under way gives it as early as possible.
+    Absorb(homography_.valid() ? pipeline_.Poll() : pipeline_.Finish());
     homography_.Update();
     pending_ = PendingPattern{};
     pending_.pattern = index;

@@ -131,10 +131,19 @@ SyncResult SynchroniseFromStart(const std::vector<double>& signal, const LightTi
     // nowhere, the first error stands.
     const int after_start = static_cast<int>(std::ceil(start_location.frame + nominal_rate * start.FrameCount()));
     const CodeMatch elsewhere = SearchCode(signal, timeline, end_window, nominal_rate, options.search, after_start);
-    if (!elsewhere.valid() || elsewhere.correlation < options.min_correlation) throw;
-    MapThroughCodes(start_location, FitCode(signal, timeline, end, elsewhere, nominal_rate, options), start, end,
-                    nominal_rate, options, source);
-    throw;
+    if (elsewhere.valid() && elsewhere.correlation >= options.min_correlation) {
+      MapThroughCodes(start_location, FitCode(signal, timeline, end, elsewhere, nominal_rate, options), start,
+                      end, nominal_rate, options, source);
+    }
+    const CodeMatch near = SearchCode(signal, timeline, end_window, nominal_rate, options.search, first_shift,
+                                      end_shift);
+    throw std::runtime_error(
+        source + ": end light code not found " +
+        Format("within camera frames %.0f..%.0f, where the start code and the video's frame rate put it ",
+               first_shift, end_shift - 1) +
+        Format("(best correlation %.3f, needs %.2f)", near.valid() ? near.correlation : -1.0,
+               options.min_correlation) +
+        "; is this a recording of another sequence, or was the projector out of view?");
   }
 
   // Positions -> rate -> both codes refitted at that rate -> positions again.

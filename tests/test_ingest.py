@@ -1,0 +1,247 @@
+"""From rendered camera videos to MSM tracks: centre accuracy against the simulation's
+truth (ArUco and AprilTag), region-of-interest detection against whole frames, frame
+picking, scale merging, the report and command line, and failing cameras."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibproj.cli import main
+from calibproj.generate.builder import build_sequence
+from calibproj.ingest import ingest
+from calibproj.ingest_options import IngestOptions
+from calibproj.io.intrinsics import read_intrinsics, write_intrinsics
+from calibproj.simulate.render import simulate_videos
+from calibproj.tracks import Tracks
+
+# Centres of markers at least this wide (detected side, pixels) must be within
+# MAX_RMS_PX of the truth; smaller ones are left to the detector's own tests.
+MIN_SIDE_PX = 20.0
+MAX_RMS_PX = 0.1
+MAX_ROI_DIFFERENCE_PX = 0.01
+
+
+def msm_sequence(markers: str, arrays: int = 4):
+    """Arrays of 4 x 8 markers at three scales (12, 24 and ~30 px in the small preset's
+    cameras) with 15-bit codes: about 6 s of projection."""
+    return build_sequence(markers=markers, arrays=arrays, scales=(1.0, 2.0, 3.0), marker_px=48.0, code_degree=4,
+                          reference_frames=8)
+
+
+def render(tmp_path_factory, name: str, markers: str, arrays: int = 4):
+    out = tmp_path_factory.mktemp(name)
+    sequence = msm_sequence(markers, arrays)
+    simulate_videos("small", sequence, out, seed=7)
+    return out, sequence, json.loads((out / "truth.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def aruco(tmp_path_factory):
+    return render(tmp_path_factory, "aruco", "aruco:4X4_50")
+
+
+@pytest.fixture(scope="module")
+def apriltag(tmp_path_factory):
+    # One array fewer than the ArUco sequence: its videos are "of another sequence".
+    return render(tmp_path_factory, "apriltag", "apriltag:tag36h11", arrays=3)
+
+
+@pytest.fixture(scope="module")
+def aruco_results(aruco):
+    out, sequence, _ = aruco
+    return {roi: ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(use_roi=roi),
+                        progress=False) for roi in (True, False)}
+
+
+@pytest.fixture(scope="module")
+def apriltag_results(apriltag):
+    out, sequence, _ = apriltag
+    return {roi: ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(use_roi=roi),
+                        progress=False) for roi in (True, False)}
+
+
+def centre_errors(result, truth, camera: str) -> tuple[np.ndarray, np.ndarray]:
+    """Errors of the merged centres (px) and the smallest detected side of each."""
+    points = truth["image_points"][camera]
+    true_xy = dict(zip(points["ids"], points["undistorted"]))
+    raw = result.cameras[camera].raw
+    records = raw["records"]
+    markers_per_array = result.tracks.markers_per_array
+    record_ids = records["array"] * markers_per_array + records["marker"]
+    ids, xy = result.tracks.observations(camera)
+    errors, sides = [], []
+    for point_id, centre in zip(ids, xy):
+        kept = (record_ids == point_id) & records["kept"]
+        errors.append(np.linalg.norm(centre - true_xy[int(point_id)]))
+        sides.append(records["side_px"][kept].min())
+    return np.array(errors), np.array(sides)
+
+
+def check_accuracy(results, truth):
+    result = results[True]
+    assert not result.failed
+    for camera in result.cameras:
+        errors, sides = centre_errors(result, truth, camera)
+        wide = sides >= MIN_SIDE_PX
+        assert wide.sum() >= 30, camera
+        rms = float(np.sqrt(np.mean(errors[wide] ** 2)))
+        assert rms < MAX_RMS_PX, (camera, rms)
+
+
+def test_aruco_centres_match_the_truth(aruco, aruco_results):
+    check_accuracy(aruco_results, aruco[2])
+
+
+def test_apriltag_centres_match_the_truth(apriltag, apriltag_results):
+    check_accuracy(apriltag_results, apriltag[2])
+
+
+def check_roi_equals_whole_frame(results):
+    for camera in results[True].cameras:
+        roi, whole = (results[flag].cameras[camera].raw["records"] for flag in (True, False))
+        assert roi["in_region"].sum() > 0, camera
+        assert not whole["in_region"].any()
+        key = lambda r: list(zip(r["pattern"].tolist(), r["marker"].tolist()))  # noqa: E731
+        assert key(roi) == key(whole), camera
+        assert np.abs(roi["centre"] - whole["centre"]).max() < MAX_ROI_DIFFERENCE_PX, camera
+
+
+def test_roi_detection_equals_whole_frame_detection_aruco(aruco_results):
+    check_roi_equals_whole_frame(aruco_results)
+
+
+def test_roi_detection_equals_whole_frame_detection_apriltag(apriltag_results):
+    check_roi_equals_whole_frame(apriltag_results)
+
+
+def test_detections_come_from_clean_frames_only(aruco, aruco_results):
+    _, sequence, truth = aruco
+    for camera, report in aruco_results[True].cameras.items():
+        raw = report.raw
+        clean = truth["clean_frames"][camera]
+        records = raw["records"]
+        for pattern, first, count in zip(records["pattern"], records["first_frame"], records["frame_count"]):
+            assert set(range(first, first + count)) <= set(clean[pattern]), (camera, pattern)
+        assert raw["patterns_dropped"] == 0
+        # Frames between the codes that show no pattern to detect are never converted.
+        assert raw["frames_converted"] < raw["frames_decoded"]
+        assert raw["frames_detected"] <= len(sequence.patterns)
+
+
+def test_merged_centre_is_the_mean_of_the_kept_scales(aruco_results):
+    result = aruco_results[True]
+    options = IngestOptions()
+    for camera, report in result.cameras.items():
+        raw = report.raw
+        records, centres = raw["records"], raw["centres"]
+        for array, marker, xy in zip(centres["array"], centres["marker"], centres["xy"]):
+            mine = (records["array"] == array) & (records["marker"] == marker)
+            kept = mine & records["kept"]
+            assert np.allclose(records["centre"][kept].mean(axis=0), xy)
+            assert np.all(records["deviation_px"][kept] <= options.max_deviation_px)
+            assert np.all(records["deviation_px"][mine & ~records["kept"]] > options.max_deviation_px)
+
+
+def test_averaged_frames_stay_accurate(aruco):
+    out, sequence, truth = aruco
+    result = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(average_frames=2),
+                    progress=False)
+    counts = np.concatenate([c.raw["records"]["frame_count"] for c in result.cameras.values()])
+    assert counts.max() == 2
+    check_accuracy({True: result}, truth)
+
+
+def test_scales_a_camera_cannot_resolve_are_skipped(aruco, aruco_results):
+    out, sequence, _ = aruco
+    coarse = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(min_module_px=4.5),
+                    progress=False)
+    for camera, report in coarse.cameras.items():
+        smallest = report.raw["scales"][0]
+        assert smallest["skipped_patterns"] > 0, camera
+        assert report.raw["frames_detected"] < aruco_results[True].cameras[camera].raw["frames_detected"]
+
+
+def test_detect_command_writes_tracks_and_report(aruco, tmp_path, capsys):
+    out, sequence, _ = aruco
+    sequence_file = tmp_path / "sequence.json"
+    sequence.save(sequence_file)
+    tracks_file = tmp_path / "results" / "tracks.json"
+    status = main(["detect", str(out / "videos"), "--sequence", str(sequence_file), "--intrinsics",
+                   str(out / "intrinsics"), "--out", str(tracks_file), "--no-progress"])
+    assert status == 0
+    tracks = Tracks.read(tracks_file)
+    assert tracks.camera_names == ("cam1", "cam2", "cam3")
+    assert tracks.markers_per_array == 32
+    report = json.loads((tracks_file.parent / "detect_report.json").read_text())
+    assert report["schema"] == "calibproj.detect_report/1"
+    for name in tracks.camera_names:
+        camera = report["cameras"][name]
+        assert camera["status"] == "ok"
+        assert set(camera["sync"]) >= {"offset_s", "offset_frames", "rate", "camera_fps", "drift_ppm"}
+        assert camera["msms_kept"] == tracks.counts_per_camera()[name]
+        assert [s["scale"] for s in camera["scales"]] == [1.0, 2.0, 3.0]
+        assert camera["frames"]["detected"] > 0
+    printed = capsys.readouterr().out
+    assert "cam2: offset" in printed and "markers found/searched per scale" in printed
+
+
+# -------------------------------------------------------------------- failures
+
+def failing_setup(aruco, apriltag, folder: Path) -> dict[str, str]:
+    """A videos and an intrinsics folder where cam1 is fine and every other camera is
+    broken in its own way; returns the file each error must name."""
+    out, _, _ = aruco
+    other, _, _ = apriltag
+    videos, intrinsics = folder / "videos", folder / "intrinsics"
+    videos.mkdir()
+    intrinsics.mkdir()
+    good = out / "videos" / "cam1.mp4"
+    shutil.copy(good, videos / "cam1.mp4")
+    data = good.read_bytes()
+    (videos / "corrupt.mp4").write_bytes(bytes(reversed(data[:20000])))
+    (videos / "halfbytes.mp4").write_bytes(data[: len(data) // 2])
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(good), "-frames:v", "100", "-c", "copy",
+                    str(videos / "cut.mp4")], check=True)
+    shutil.copy(other / "videos" / "cam1.mp4", videos / "other.mp4")
+    shutil.copy(good, videos / "nointrinsics.mp4")
+    shutil.copy(good, videos / "wrongsize.mp4")
+    cam1 = read_intrinsics(out / "intrinsics" / "cam1.json")
+    for name in ("cam1", "corrupt", "halfbytes", "cut", "other", "wrongsize"):
+        write_intrinsics(intrinsics / f"{name}.json", cam1)
+    wrong = read_intrinsics(out / "intrinsics" / "cam1.json")
+    text = json.loads((intrinsics / "wrongsize.json").read_text())
+    text["resolution"] = [wrong.resolution[0] * 2, wrong.resolution[1] * 2]
+    (intrinsics / "wrongsize.json").write_text(json.dumps(text))
+    return {
+        "corrupt": str(videos / "corrupt.mp4"),
+        "halfbytes": str(videos / "halfbytes.mp4"),
+        "cut": str(videos / "cut.mp4"),
+        "other": str(videos / "other.mp4"),
+        "nointrinsics": str(intrinsics / "nointrinsics.json"),
+        "wrongsize": str(videos / "wrongsize.mp4"),
+    }
+
+
+def test_failing_cameras_are_reported_and_the_others_give_tracks(aruco, apriltag, tmp_path):
+    expected = failing_setup(aruco, apriltag, tmp_path)
+    _, sequence, _ = aruco
+    result = ingest(tmp_path / "videos", sequence, tmp_path / "intrinsics", progress=False)
+    assert set(result.failed) == set(expected)
+    for name, path in expected.items():
+        assert path in result.failed[name], (name, result.failed[name])
+    assert "cannot open" in result.failed["corrupt"]
+    assert "end light code not found" in result.failed["cut"]
+    assert "another sequence" in result.failed["other"]
+    assert "no intrinsics file" in result.failed["nointrinsics"]
+    assert "640x360" in result.failed["wrongsize"] and "1280x720" in result.failed["wrongsize"]
+    assert result.tracks.counts_per_camera()["cam1"] > 30
+    assert set(result.tracks.camera_names) == set(expected) | {"cam1"}
+    report = result.report()["cameras"]
+    assert report["cam1"]["status"] == "ok"
+    assert all(report[name]["status"] == "failed" for name in expected)
