@@ -56,19 +56,12 @@ def matrix_from_rotvec(w: np.ndarray) -> np.ndarray:
 
 
 def look_at_pose(position: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """cam_from_world [angle-axis, t] of a camera at ``position`` looking at ``target``.
+    """cam_from_world [angle-axis, t] of a camera at ``position`` looking at ``target``
+    (the scene convention of ``calibproj.simulate.scene.look_at_rotation``)."""
+    from calibproj.simulate.scene import look_at_rotation
 
-    Image "up" is world +z where possible (world +y for a camera looking straight down).
-    """
-    forward = np.asarray(target, float) - np.asarray(position, float)
-    forward /= np.linalg.norm(forward)
-    up = np.array([0.0, 0.0, 1.0]) if abs(forward[2]) < 0.999 else np.array([0.0, 1.0, 0.0])
-    right = np.cross(forward, up)
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    R = np.stack([right, down, forward])  # rows: camera axes in world coordinates
-    t = -R @ np.asarray(position, float)
-    return np.concatenate([rotvec_from_matrix(R), t])
+    R = look_at_rotation(position, target)
+    return np.concatenate([rotvec_from_matrix(R), -R @ np.asarray(position, float)])
 
 
 def project(K: np.ndarray, pose: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
