@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from calibproj.generate import generate
+from calibproj.ingest_options import IngestOptions
 from calibproj.simulate import simulate_tracks
+from calibproj.simulate.render import simulate_videos
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -108,3 +113,81 @@ def test_native_help_and_unknown_options() -> None:
     assert "--tracks" in run_native("calibrate", "--help").stdout
     assert run_native("calibrate", "--no-such-option").returncode != 0
     assert run_native().returncode != 0
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory) -> Path:
+    """A short ArUco sequence rendered in the small room (3 cameras)."""
+    out = tmp_path_factory.mktemp("room")
+    sequence = generate(out / "sequence", markers="aruco:4X4_50", arrays=12, scales=(3.0, 5.0, 8.0), video=False)
+    simulate_videos("small", sequence, out / "room", seed=1)
+    return out
+
+
+def detect_args(room: Path, videos: Path, out: Path) -> list[str]:
+    return ["detect", str(videos), "--sequence", str(room / "sequence" / "sequence.json"),
+            "--intrinsics", str(room / "room" / "intrinsics"), "--out", str(out / "tracks.json"), "--no-progress"]
+
+
+def timed(run, *args: str) -> tuple[subprocess.CompletedProcess, float]:
+    start = time.perf_counter()
+    result = run(*args)
+    return result, time.perf_counter() - start
+
+
+def test_native_and_python_detect_the_same_tracks(room: Path, tmp_path: Path) -> None:
+    # A camera without intrinsics fails in both and stays in the tracks without observations.
+    videos = tmp_path / "videos"
+    shutil.copytree(room / "room" / "videos", videos)
+    first = sorted(videos.iterdir())[0]
+    shutil.copy(first, videos / f"stray{first.suffix}")
+    # Whole frames: with regions of interest the centre of an MSM can move by ~1e-5 px
+    # from run to run (of either command), depending on when the homography is known.
+    python, python_s = timed(run_python, *detect_args(room, videos, tmp_path / "python"), "--no-use-roi")
+    assert python.returncode == 0, python.stderr
+    native, native_s = timed(run_native, *detect_args(room, videos, tmp_path / "native"), "--no-use-roi")
+    assert native.returncode == 0, native.stderr
+    print(f"detect on the small room: python {python_s:.2f} s, native {native_s:.2f} s")
+
+    tracks_py = json.loads((tmp_path / "python" / "tracks.json").read_text())
+    tracks_cc = json.loads((tmp_path / "native" / "tracks.json").read_text())
+    assert tracks_cc["cameras"] == tracks_py["cameras"] and "stray" in tracks_cc["cameras"]
+    assert tracks_cc["markers_per_array"] == tracks_py["markers_per_array"]
+    assert tracks_cc["observations"].keys() == tracks_py["observations"].keys()
+    for name, entry in tracks_py["observations"].items():
+        assert tracks_cc["observations"][name]["point_ids"] == entry["point_ids"], name
+        np.testing.assert_allclose(np.reshape(tracks_cc["observations"][name]["xy"], (-1, 2)),
+                                   np.reshape(entry["xy"], (-1, 2)), rtol=0, atol=1e-9)
+    assert tracks_cc["observations"]["stray"]["point_ids"] == []
+    assert sum(len(e["point_ids"]) for e in tracks_cc["observations"].values()) > 0
+    # The same file, byte for byte, and the same report per camera.
+    assert (tmp_path / "native" / "tracks.json").read_text() == (tmp_path / "python" / "tracks.json").read_text()
+    report_py = json.loads((tmp_path / "python" / "detect_report.json").read_text())
+    report_cc = json.loads((tmp_path / "native" / "detect_report.json").read_text())
+    for name, camera in report_py["cameras"].items():
+        assert report_cc["cameras"][name]["status"] == camera["status"], name
+        assert report_cc["cameras"][name].get("error") == camera.get("error"), name
+        assert report_cc["cameras"][name].get("msms_kept") == camera.get("msms_kept"), name
+    assert "camera stray: " in native.stderr
+    assert python.stdout.splitlines()[-1] == native.stdout.splitlines()[-1]
+
+
+def test_native_detect_bad_inputs_fail_with_the_same_messages(room: Path, tmp_path: Path) -> None:
+    videos = room / "room" / "videos"
+    not_a_sequence = tmp_path / "tracks_as_sequence.json"
+    not_a_sequence.write_text(json.dumps({"schema": "calibproj.tracks/1"}))
+    cases = [
+        detect_args(room, tmp_path / "missing", tmp_path / "a"),
+        [*detect_args(room, videos, tmp_path / "c")[:2], "--sequence", str(not_a_sequence),
+         *detect_args(room, videos, tmp_path / "c")[4:]],
+    ]
+    for case in cases:
+        python, native = run_python(*case), run_native(*case)
+        assert python.returncode == 2 and native.returncode == 2, (case, python.stderr, native.stderr)
+        assert error_line(native) == error_line(python)
+
+
+def test_native_detect_takes_every_ingest_option() -> None:
+    help_text = run_native("detect", "--help").stdout
+    for field in dataclasses.fields(IngestOptions):
+        assert "--" + field.name.replace("_", "-") in help_text, field.name

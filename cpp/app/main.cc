@@ -6,6 +6,7 @@
 #include <iostream>
 
 #include "calibrate_command.h"
+#include "detect_command.h"
 #include "files.h"
 
 int main(int argc, char** argv) {
@@ -13,14 +14,17 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   CLI::App* calibrate = nullptr;
   const auto calibrate_args = calibproj::app::AddCalibrateCommand(app, &calibrate);
+  CLI::App* detect = nullptr;
+  const auto detect_args = calibproj::app::AddDetectCommand(app, &detect);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {
     return app.exit(error);
   }
-  const std::string command = calibrate->parsed() ? "calibrate" : "";
+  const std::string command = calibrate->parsed() ? "calibrate" : detect->parsed() ? "detect" : "";
   try {
     if (calibrate->parsed()) return calibproj::app::RunCalibrate(*calibrate_args);
+    if (detect->parsed()) return calibproj::app::RunDetect(*detect_args);
   } catch (const std::exception& error) {
     std::cerr << "calibproj-native " << command << ": error: " << error.what() << "\n";
     return 2;

@@ -111,4 +111,37 @@ Tracks ReadTracks(const fs::path& path) {
   }
 }
 
+namespace {
+
+// Compact JSON with non-ASCII escaped, as Python's json.dumps writes it.
+std::string CompactJson(const nlohmann::json& value) { return value.dump(-1, ' ', true); }
+
+std::string CameraBlock(const Tracks& tracks, int camera) {
+  nlohmann::json ids = nlohmann::json::array(), xy = nlohmann::json::array();
+  for (int i = 0; i < tracks.camera_index.size(); ++i) {
+    if (tracks.camera_index(i) != camera) continue;
+    ids.push_back(tracks.point_ids[tracks.point_index(i)]);
+    xy.push_back({tracks.xy(i, 0), tracks.xy(i, 1)});
+  }
+  return "  " + CompactJson(tracks.cameras[camera]) + ": {\n   \"point_ids\": " + CompactJson(ids) +
+         ",\n   \"xy\": " + CompactJson(xy) + "\n  }";
+}
+
+}  // namespace
+
+void WriteTracks(const fs::path& path, const Tracks& tracks) {
+  nlohmann::ordered_json header;
+  header["markers_per_array"] = tracks.markers_per_array ? nlohmann::json(*tracks.markers_per_array) : nullptr;
+  header["undistorted"] = true;
+  header["cameras"] = tracks.cameras;
+  std::string text = DumpSchemaJson("tracks", 1, header);
+  text.resize(text.size() - 3);  // drop the closing "\n}\n" but keep the last entry
+  text += ",\n \"observations\": {\n";
+  for (size_t c = 0; c < tracks.cameras.size(); ++c) {
+    text += (c ? ",\n" : "") + CameraBlock(tracks, static_cast<int>(c));
+  }
+  text += "\n }\n}\n";
+  AtomicWrite(path, text);
+}
+
 }  // namespace calibproj::app

@@ -28,6 +28,11 @@ struct Tracks {
 
 Tracks ReadTracks(const std::filesystem::path& path);
 
+// Writes tracks.json atomically in the Python writer's layout: the header indented,
+// then per camera its point ids and pixels on one line each (every camera listed,
+// those without observations with empty lists).
+void WriteTracks(const std::filesystem::path& path, const Tracks& tracks);
+
 // Builds tracks from unordered observations (checks duplicates, sorts, indexes points).
 Tracks MakeTracks(std::vector<std::string> cameras, const std::vector<int>& camera, const std::vector<std::int64_t>& ids,
                   const std::vector<Eigen::Vector2d>& xy, std::optional<int> markers_per_array);

@@ -1,0 +1,263 @@
+#include "detect_command.h"
+
+#include <algorithm>
+#include <atomic>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "detect_report.h"
+#include "files.h"
+#include "intrinsics_file.h"
+#include "sequence_file.h"
+#include "tracks_file.h"
+
+namespace calibproj::app {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::vector<std::string> kVideoSuffixes = {".mp4", ".mov", ".mkv", ".avi", ".m4v", ".mts", ".webm"};
+const std::vector<std::string> kIntrinsicsSuffixes = {".json", ".yaml", ".yml", ".xml"};
+const char kReportName[] = "detect_report.json";
+
+// One flag per field of the Python IngestOptions, in its order, so that both commands
+// take the same command lines; the defaults are those of the C++ structs.
+template <typename Visitor>
+void VisitIngestFlags(ingest::IngestOptions& o, Visitor&& visit) {
+  sync::SyncOptions& s = o.sync;
+  visit("min-correlation", s.min_correlation, "normalised cross-correlation a light code must reach");
+  visit("max-rate-deviation", s.max_rate_deviation, "largest relative rate difference between codes and video");
+  visit("context-before", s.context_before, "projector frames of known light used before each code");
+  visit("context-after", s.context_after, "projector frames of known light used after each code");
+  visit("guard-samples", s.guard_samples, "camera frames searched past the best start-code match");
+  visit("rate-search", s.search.rate_search, "candidate rates span the nominal rate x (1 +- rate-search)");
+  visit("rate-step", s.search.rate_step, "relative step between candidate rates");
+  visit("phases", s.search.phases, "sub-frame phases per candidate rate in the coarse search");
+  visit("coarse-exposure", s.search.exposure, "exposure assumed by the coarse search, camera frames");
+  visit("offset-range", s.fit.offset_range, "sub-frame fit range around the coarse offset, camera frames");
+  visit("offset-step", s.fit.offset_step, "grid step of the sub-frame fit, camera frames");
+  visit("min-exposure", s.fit.min_exposure, "shortest exposure the fit tries, camera frames");
+  visit("max-exposure", s.fit.max_exposure, "longest exposure the fit tries, camera frames");
+  visit("exposure-steps", s.fit.exposure_steps, "exposures the fit tries between the two");
+  visit("feasible-chi2", s.fit.feasible_chi2, "cost excess (residual variances per frame) that fits as well");
+  visit("plateau-tolerance", s.fit.plateau_tolerance, "cost excess (share of signal variance) that fits as well");
+  visit("fit-iterations", s.fit.max_iterations, "Levenberg-Marquardt iterations of the fit");
+  visit("exposure-s", o.exposure_s, "known exposure time of the cameras, seconds (0: estimate it)");
+  visit("margin", o.pick.margin, "projector frames kept clear of each pattern change");
+  visit("average-frames", o.pick.average_frames, "clean frames averaged per pattern before detection");
+  visit("max-clock-drift", o.pick.max_clock_drift, "largest relative camera clock drift");
+  visit("roi-padding-fraction", o.roi.padding_fraction, "padding around a predicted marker, share of its side");
+  visit("roi-padding-px", o.roi.padding_px, "padding around a predicted marker, pixels");
+  visit("roi-alignment", o.roi.alignment, "regions start on multiples of this many pixels");
+  visit("min-module-px", o.roi.min_module_px, "markers whose predicted cell is smaller are not searched");
+  visit("border-px", o.roi.border_px, "a marker must lie this far inside the image to be searched");
+  visit("max-roi-area-fraction", o.roi.max_area_fraction, "above this image share, one whole-frame detection");
+  visit("max-offset-px", o.roi.max_offset_px, "largest distance of a detection from its prediction, pixels");
+  visit("max-offset-fraction", o.roi.max_offset_fraction, "the same as a share of the marker side");
+  visit("homography-min-points", o.homography.min_points, "marker centres needed before the homography");
+  visit("homography-min-spread", o.homography.min_spread, "their spread, share of the image diagonal");
+  visit("homography-threshold-px", o.homography.ransac_threshold_px, "RANSAC threshold of the homography fit");
+  visit("homography-min-inlier-share", o.homography.min_inlier_share, "share of inliers the fit needs");
+  visit("homography-max-rms-px", o.homography.max_rms_px, "inlier RMS the fit must stay under");
+  visit("max-deviation-px", o.merge.max_deviation_px, "scales farther than this from their median are rejected");
+  visit("min-scales", o.merge.min_scales, "scales an MSM needs to give a centre");
+  visit("mean-row-step", o.mean_row_step, "the mean luma is taken over every n-th row");
+  visit("luma-gamma", o.luma_gamma, "the video's display gamma, undone before the mean (1: encoded values)");
+  visit("lookback-frames", o.lookback_frames, "decoded frames kept while the start code is searched");
+  visit("search-interval", o.search_interval, "frames between two searches of the start code");
+  visit("detection-threads", o.detection_threads, "detection threads per camera");
+  visit("max-pending-jobs", o.max_pending_jobs, "patterns waiting for detection at most");
+}
+
+std::string Lower(std::string text) {
+  std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::tolower(c); });
+  return text;
+}
+
+bool HasSuffix(const fs::path& path, const std::vector<std::string>& suffixes) {
+  return std::find(suffixes.begin(), suffixes.end(), Lower(path.extension().string())) != suffixes.end();
+}
+
+// Camera name (file stem) -> video, sorted by name.
+std::map<std::string, fs::path> VideoPaths(const fs::path& folder) {
+  if (!fs::is_directory(folder)) throw InputError(folder.string() + ": no such videos folder");
+  std::map<std::string, fs::path> paths;
+  for (const auto& entry : fs::directory_iterator(folder)) {
+    if (!entry.is_regular_file() || !HasSuffix(entry.path(), kVideoSuffixes)) continue;
+    const std::string name = entry.path().stem().string();
+    if (paths.count(name)) throw InputError(entry.path().string() + ": a second video for camera '" + name + "'");
+    paths[name] = entry.path();
+  }
+  if (paths.empty()) {
+    std::string patterns;
+    for (const auto& suffix : kVideoSuffixes) patterns += (patterns.empty() ? "*" : ", *") + suffix;
+    throw InputError(folder.string() + ": no videos (" + patterns + ")");
+  }
+  return paths;
+}
+
+// The camera's intrinsics file, read; InputError with the message the camera reports.
+CameraIntrinsics IntrinsicsFor(const fs::path& folder, const std::string& name, std::string* source) {
+  if (!fs::is_directory(folder)) throw InputError(folder.string() + ": no such intrinsics folder");
+  std::vector<fs::path> candidates;
+  for (const auto& suffix : kIntrinsicsSuffixes) candidates.push_back(folder / (name + suffix));
+  const auto found = std::find_if(candidates.begin(), candidates.end(), [](const fs::path& p) {
+    return fs::is_regular_file(p);
+  });
+  if (found == candidates.end()) {
+    std::string others;
+    for (size_t i = 1; i < candidates.size(); ++i) others += (i > 1 ? ", " : "") + candidates[i].filename().string();
+    throw InputError(candidates[0].string() + ": no intrinsics file for camera '" + name + "' (also looked for " +
+                     others + ")");
+  }
+  *source = found->string();
+  return ReadIntrinsics(*found);
+}
+
+ingest::CameraModel CameraModelFrom(const CameraIntrinsics& in, const std::string& source) {
+  ingest::CameraModel camera;
+  for (int i = 0; i < 9; ++i) camera.lens.K(i / 3, i % 3) = in.K(i / 3, i % 3);
+  camera.lens.dist = in.dist;
+  if (in.has_resolution) camera.resolution = cv::Size(static_cast<int>(in.width), static_cast<int>(in.height));
+  camera.source = source;
+  camera.lens.Check();
+  return camera;
+}
+
+// Progress lines on stderr, a few per camera, never interleaved.
+class ProgressPrinter {
+ public:
+  explicit ProgressPrinter(bool enabled) : enabled_(enabled) {}
+
+  ingest::ProgressCallback For(const std::string& name) {
+    if (!enabled_) return {};
+    return [this, name, next = std::make_shared<int>(0)](int decoded, int total) {
+      const int percent = total > 0 ? std::min(100, 100 * decoded / total) : 0;
+      if (percent < *next) return;
+      *next = percent / 25 * 25 + 25;
+      std::lock_guard<std::mutex> lock(mutex_);
+      std::cerr << name << ": " << decoded << "/" << total << " frames decoded\n";
+    };
+  }
+
+  void Say(const std::string& line) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    std::cerr << line << "\n";
+  }
+
+ private:
+  bool enabled_;
+  std::mutex mutex_;
+};
+
+CameraOutcome IngestOne(const std::string& name, const fs::path& video, const DetectArguments& arguments,
+                        const ingest::SequenceDescription& sequence, ProgressPrinter& printer) {
+  CameraOutcome outcome{name, video.string(), "", "", {}};
+  try {
+    const CameraIntrinsics intrinsics = IntrinsicsFor(arguments.intrinsics, name, &outcome.intrinsics);
+    const ingest::CameraModel camera = CameraModelFrom(intrinsics, outcome.intrinsics);
+    outcome.result = ingest::IngestCamera(video.string(), sequence, camera, arguments.options, printer.For(name));
+  } catch (const std::exception& error) {
+    outcome.error = error.what();
+    // Without a readable intrinsics file the message stands where its path would.
+    if (outcome.intrinsics.empty()) outcome.intrinsics = outcome.error;
+    printer.Say("camera " + name + ": " + outcome.error);
+    return outcome;
+  }
+  printer.Say("camera " + name + ": " + std::to_string(outcome.result.centres.size()) + " MSMs");
+  return outcome;
+}
+
+// Every camera through the ingest, `workers` at a time; results in name order.
+std::vector<CameraOutcome> IngestAll(const std::map<std::string, fs::path>& videos, const DetectArguments& arguments,
+                                     const ingest::SequenceDescription& sequence) {
+  const std::vector<std::pair<std::string, fs::path>> jobs(videos.begin(), videos.end());
+  std::vector<CameraOutcome> outcomes(jobs.size());
+  ProgressPrinter printer(!arguments.no_progress);
+  std::atomic<size_t> next{0};
+  const auto work = [&] {
+    for (size_t k = next++; k < jobs.size(); k = next++) {
+      outcomes[k] = IngestOne(jobs[k].first, jobs[k].second, arguments, sequence, printer);
+    }
+  };
+  const size_t threads = std::min(jobs.size(), static_cast<size_t>(std::max(1, arguments.workers)));
+  std::vector<std::thread> pool;
+  for (size_t t = 0; t < threads; ++t) pool.emplace_back(work);
+  for (auto& thread : pool) thread.join();
+  return outcomes;
+}
+
+// Point id of an MSM: array * markers_per_array + marker (docs/conventions.md).
+Tracks TracksFrom(const std::vector<CameraOutcome>& outcomes, int markers_per_array) {
+  std::vector<std::string> names;
+  std::vector<int> camera;
+  std::vector<std::int64_t> ids;
+  std::vector<Eigen::Vector2d> xy;
+  for (const CameraOutcome& outcome : outcomes) {
+    const int index = static_cast<int>(names.size());
+    names.push_back(outcome.name);
+    if (!outcome.ok()) continue;  // kept without observations, so that calibration reports it
+    for (const detect::MergedCentre& centre : outcome.result.centres) {
+      camera.push_back(index);
+      ids.push_back(static_cast<std::int64_t>(centre.array) * markers_per_array + centre.marker);
+      xy.emplace_back(centre.centre.x, centre.centre.y);
+    }
+  }
+  return MakeTracks(names, camera, ids, xy, markers_per_array);
+}
+
+}  // namespace
+
+std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** command) {
+  auto args = std::make_shared<DetectArguments>();
+  CLI::App* cmd = app.add_subcommand(
+      "detect",
+      "Synchronise camera videos with the projection sequence and detect the MSMs: writes --out (tracks.json) and, "
+      "next to it, detect_report.json. A camera that fails is reported; the others still give tracks. Exit status 1 "
+      "when every camera failed.");
+  cmd->add_option("videos", args->videos, "folder of camera videos (<camera>.mp4)")->required()->type_name("VIDEOS_DIR");
+  cmd->add_option("--sequence", args->sequence, "sequence.json of the projection")->required()->type_name("FILE");
+  cmd->add_option("--intrinsics", args->intrinsics, "folder of per-camera intrinsics files")
+      ->required()
+      ->type_name("DIR");
+  cmd->add_option("--out", args->out, "tracks file to write (tracks.json)")->required()->type_name("FILE");
+  cmd->add_option("--workers", args->workers, "cameras processed at once")->capture_default_str();
+  cmd->add_flag("--no-progress", args->no_progress, "no progress lines");
+  cmd->add_flag("--json", args->json, "print the report as JSON instead of a table");
+  const std::string group = "ingest options";
+  cmd->add_flag("--use-roi,!--no-use-roi", args->options.use_roi,
+                "detect in predicted regions once the homography is known (--no-use-roi: whole frames)")
+      ->capture_default_str()
+      ->group(group);
+  VisitIngestFlags(args->options, [cmd, &group](const std::string& name, auto& field, const std::string& help) {
+    cmd->add_option("--" + name, field, help)->capture_default_str()->group(group);
+  });
+  *command = cmd;
+  return args;
+}
+
+int RunDetect(const DetectArguments& arguments) {
+  const ingest::SequenceDescription sequence = ReadSequence(arguments.sequence);
+  const auto videos = VideoPaths(arguments.videos);
+  try {
+    arguments.options.Check();
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
+  }
+  const std::vector<CameraOutcome> outcomes = IngestAll(videos, arguments, sequence);
+
+  const fs::path out(arguments.out);
+  WriteTracks(out, TracksFrom(outcomes, sequence.markers_per_array));
+  const nlohmann::ordered_json report = DetectReport(outcomes, arguments.sequence, sequence);
+  AtomicWrite(out.parent_path() / kReportName, DumpSchemaJson("detect_report", 1, report));
+  std::cout << (arguments.json ? report.dump(1) : FormatDetectReport(report)) << "\n";
+  const bool all_failed = std::none_of(outcomes.begin(), outcomes.end(), [](const auto& o) { return o.ok(); });
+  return all_failed ? 1 : 0;
+}
+
+}  // namespace calibproj::app

@@ -1,0 +1,33 @@
+#pragma once
+// `calibproj-native detect`: camera videos + sequence.json + intrinsics -> tracks.json
+// and detect_report.json, with the same C++ ingest (calibproj::ingest::IngestCamera),
+// options and messages as `calibproj detect`.
+
+#include <CLI/CLI.hpp>
+#include <memory>
+#include <string>
+
+#include "calibproj/ingest/camera_ingest.h"
+
+namespace calibproj::app {
+
+// Cameras processed at once, as in the Python command (each camera decodes with FFmpeg's
+// own threads too).
+constexpr int kDefaultDetectWorkers = 2;
+
+struct DetectArguments {
+  std::string videos, sequence, intrinsics, out;
+  int workers = kDefaultDetectWorkers;
+  bool no_progress = false;
+  bool json = false;
+  ingest::IngestOptions options;
+};
+
+// Adds the subcommand and its options (one flag per ingest option, named and defaulted
+// like the Python IngestOptions fields) to the app.
+std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** command);
+
+// 0 when at least one camera gave tracks, 1 when every camera failed.
+int RunDetect(const DetectArguments& arguments);
+
+}  // namespace calibproj::app

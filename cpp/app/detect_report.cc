@@ -1,0 +1,119 @@
+#include "detect_report.h"
+
+#include <cstdio>
+
+namespace calibproj::app {
+
+namespace {
+
+using nlohmann::ordered_json;
+
+ordered_json SyncSummary(const sync::SyncResult& sync, double video_fps, double projector_fps) {
+  const double nominal_rate = video_fps / projector_fps;
+  ordered_json entry;
+  entry["offset_frames"] = sync.map.offset;
+  entry["offset_s"] = sync.map.offset / video_fps;
+  entry["offset_uncertainty_frames"] = sync.offset_uncertainty;
+  entry["rate"] = sync.map.rate;
+  entry["camera_fps"] = sync.map.rate * projector_fps;
+  entry["drift_ppm"] = (sync.map.rate / nominal_rate - 1.0) * 1e6;
+  entry["exposure_frames"] = sync.map.exposure;
+  entry["sharp"] = sync.sharp;
+  entry["start_correlation"] = sync.start.correlation;
+  entry["end_correlation"] = sync.end.correlation;
+  entry["fit_rms"] = sync.rms;
+  return entry;
+}
+
+ordered_json ScalesSummary(const std::vector<ingest::ScaleStats>& stats, const std::vector<double>& scales) {
+  ordered_json out = ordered_json::array();
+  for (size_t i = 0; i < stats.size() && i < scales.size(); ++i) {
+    const ingest::ScaleStats& s = stats[i];
+    out.push_back({{"scale", scales[i]},
+                   {"patterns", s.patterns},
+                   {"detected_patterns", s.detected_patterns},
+                   {"skipped_patterns", s.skipped_patterns},
+                   {"searched", s.searched},
+                   {"too_small", s.too_small},
+                   {"outside", s.outside},
+                   {"detected", s.detected},
+                   {"kept", s.kept}});
+  }
+  return out;
+}
+
+ordered_json CameraSummary(const CameraOutcome& camera, const ingest::SequenceDescription& sequence) {
+  ordered_json entry;
+  entry["video"] = camera.video;
+  entry["intrinsics"] = camera.intrinsics;
+  entry["status"] = camera.ok() ? "ok" : "failed";
+  if (!camera.ok()) {
+    entry["error"] = camera.error;
+    return entry;
+  }
+  const ingest::CameraIngestResult& r = camera.result;
+  entry["sync"] = SyncSummary(r.sync, r.video.fps, sequence.fps);
+  entry["video_info"] = {{"width", r.video.width}, {"height", r.video.height}, {"fps", r.video.fps},
+                         {"frame_count", r.video.frame_count}};
+  entry["frames"] = {{"decoded", r.frames_decoded}, {"converted", r.frames_converted},
+                     {"detected", r.frames_detected}};
+  entry["patterns"] = {{"whole_frame", r.patterns_whole_frame}, {"in_regions", r.patterns_in_regions},
+                       {"dropped", r.patterns_dropped}, {"missing", r.patterns_missing}};
+  entry["detections_rejected"] = r.detections_rejected;
+  entry["scales"] = ScalesSummary(r.scales, sequence.scales);
+  entry["msms_kept"] = r.centres.size();
+  entry["homography_rms_px"] = r.homography_valid ? ordered_json(r.homography_rms_px) : ordered_json(nullptr);
+  entry["seconds"] = {{"total", r.seconds_total}, {"detection", r.seconds_detection}};
+  return entry;
+}
+
+std::string Format(const char* format, double a, double b = 0.0, double c = 0.0) {
+  char text[64];
+  std::snprintf(text, sizeof text, format, a, b, c);
+  return text;
+}
+
+std::string CameraLines(const std::string& name, const ordered_json& camera) {
+  if (camera.at("status") != "ok") return name + ": FAILED: " + camera.at("error").get<std::string>();
+  const ordered_json& sync = camera.at("sync");
+  const ordered_json& frames = camera.at("frames");
+  std::string line = name + ": offset " + Format("%.4f", sync.at("offset_s").get<double>()) + " s (" +
+                     Format("%.3f +- %.3f", sync.at("offset_frames").get<double>(),
+                            sync.at("offset_uncertainty_frames").get<double>()) +
+                     " frames), " + Format("%.4f", sync.at("camera_fps").get<double>()) + " fps (" +
+                     Format("%+.0f", sync.at("drift_ppm").get<double>()) + " ppm), codes " +
+                     Format("%.3f/%.3f", sync.at("start_correlation").get<double>(),
+                            sync.at("end_correlation").get<double>()) +
+                     "; frames " + std::to_string(frames.at("decoded").get<int>()) + " decoded, " +
+                     std::to_string(frames.at("detected").get<int>()) + " detected; " +
+                     std::to_string(camera.at("msms_kept").get<int>()) + " MSMs kept";
+  std::string per_scale;
+  for (const auto& s : camera.at("scales")) {
+    per_scale += (per_scale.empty() ? "" : ", ") + Format("%g", s.at("scale").get<double>()) + ": " +
+                 std::to_string(s.at("detected").get<int>()) + "/" + std::to_string(s.at("searched").get<int>());
+  }
+  return line + "\n    markers found/searched per scale: " + per_scale;
+}
+
+}  // namespace
+
+ordered_json DetectReport(const std::vector<CameraOutcome>& cameras, const std::string& sequence_source,
+                          const ingest::SequenceDescription& sequence) {
+  ordered_json report;
+  report["sequence"] = sequence_source;
+  report["markers"] = sequence.markers;
+  ordered_json entries = ordered_json::object();
+  for (const CameraOutcome& camera : cameras) entries[camera.name] = CameraSummary(camera, sequence);
+  report["cameras"] = entries;
+  return report;
+}
+
+std::string FormatDetectReport(const ordered_json& report) {
+  std::string text;
+  for (const auto& [name, camera] : report.at("cameras").items()) {
+    text += (text.empty() ? "" : "\n") + CameraLines(name, camera);
+  }
+  return text;
+}
+
+}  // namespace calibproj::app

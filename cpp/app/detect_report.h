@@ -1,0 +1,31 @@
+#pragma once
+// detect_report.json (calibproj.detect_report/1) and the printed summary of the detect
+// command, in the layout of the Python package (calibproj.ingest.CameraIngest.summary).
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "calibproj/ingest/camera_ingest.h"
+
+namespace calibproj::app {
+
+// What the ingest of one camera gave, or why it failed.
+struct CameraOutcome {
+  std::string name;        // the video's file stem
+  std::string video;       // path of the video
+  std::string intrinsics;  // path of the intrinsics file, or why there is none
+  std::string error;       // empty when the camera succeeded
+  ingest::CameraIngestResult result;
+
+  bool ok() const { return error.empty(); }
+};
+
+// The body of detect_report.json.
+nlohmann::ordered_json DetectReport(const std::vector<CameraOutcome>& cameras, const std::string& sequence_source,
+                                    const ingest::SequenceDescription& sequence);
+
+// Per camera: sync, frames, markers per scale, MSMs kept (or the error).
+std::string FormatDetectReport(const nlohmann::ordered_json& report);
+
+}  // namespace calibproj::app
