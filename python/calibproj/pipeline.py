@@ -88,7 +88,7 @@ def calibrate(
     if measurement is not None:
         check_measurement(measurement, tracks.camera_names, markers)
     calibration = register(tracks, intrinsics, options, left_out=left_out)
-    if measurement is not None:
+    if measurement is not None and calibration.registered:
         try:
             calibration = apply_scale(calibration, measurement, markers)
         except ValueError as error:
