@@ -159,7 +159,6 @@ py::list ScalesList(const std::vector<ingest::ScaleStats>& scales) {
     d["searched"] = s.searched;
     d["too_small"] = s.too_small;
     d["outside"] = s.outside;
-    d["unresolvable"] = s.unresolvable;
     d["detected"] = s.detected;
     d["kept"] = s.kept;
     out.append(d);

@@ -46,16 +46,6 @@ void VisitIngest(Options& o, Visitor&& visit) {
   visit("average_frames", o.pick.average_frames);
   visit("max_clock_drift", o.pick.max_clock_drift);
   visit("use_roi", o.use_roi);
-  visit("refine_undistorted", o.refine_undistorted);
-  visit("edge_search_fraction", o.edges.search_fraction);
-  visit("edge_outward_fraction", o.edges.outward_fraction);
-  visit("edge_gap_share", o.edge_gap_share);
-  visit("edge_spacing_px", o.edges.spacing_px);
-  visit("edge_min_samples", o.edges.min_samples);
-  visit("edge_profile_samples_per_px", o.edges.profile_samples_per_px);
-  visit("edge_end_margin", o.edges.end_margin);
-  visit("edge_min_contrast", o.edges.min_contrast);
-  visit("edge_passes", o.edges.passes);
   visit("roi_padding_fraction", o.roi.padding_fraction);
   visit("roi_padding_px", o.roi.padding_px);
   visit("roi_alignment", o.roi.alignment);
@@ -64,10 +54,6 @@ void VisitIngest(Options& o, Visitor&& visit) {
   visit("max_roi_area_fraction", o.roi.max_area_fraction);
   visit("max_offset_px", o.roi.max_offset_px);
   visit("max_offset_fraction", o.roi.max_offset_fraction);
-  visit("learn_resolution", o.learn_resolution);
-  visit("resolution_bin_px", o.resolution.bin_px);
-  visit("resolution_min_trials", o.resolution.min_trials);
-  visit("resolution_min_found_share", o.resolution.min_found_share);
   visit("homography_min_points", o.homography.min_points);
   visit("homography_min_spread", o.homography.min_spread);
   visit("homography_threshold_px", o.homography.ransac_threshold_px);

@@ -83,7 +83,7 @@ const MarkerPrediction* PatternPlan::Find(int id) const {
 }
 
 PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
-                        const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit) {
+                        const PatternMarkers& markers, const RoiOptions& options) {
   options.Check();
   if (!homography.valid()) throw std::logic_error("PlanPattern needs a valid homography");
   PatternPlan plan;
@@ -102,13 +102,8 @@ PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& 
     MarkerPrediction prediction;
     prediction.id = markers.ids[i];
     prediction.side_px = ShortestSide(outline);
-    prediction.module_px = prediction.side_px / markers.grid_cells;
-    if (prediction.module_px < options.min_module_px) {
+    if (prediction.side_px / markers.grid_cells < options.min_module_px) {
       ++plan.too_small;
-      continue;
-    }
-    if (limit != nullptr && limit->Hopeless(prediction.module_px)) {
-      ++plan.unresolvable;
       continue;
     }
     prediction.centre = DistortPixels(lens, {homography.Map(markers.centres[i])})[0];

@@ -18,7 +18,6 @@
 #include "calibproj/detect/lens.h"
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/detect/projector_homography.h"
-#include "calibproj/detect/resolution_limit.h"
 
 namespace calibproj::detect {
 
@@ -52,7 +51,6 @@ struct MarkerPrediction {
   int id = -1;
   cv::Point2d centre;     // distorted image pixels
   double side_px = 0.0;   // shortest side of its drawn square in the image
-  double module_px = 0.0; // side_px over the marker's cells
   cv::Rect region;        // padded, aligned, inside the image
 };
 
@@ -60,7 +58,6 @@ struct PatternPlan {
   std::vector<MarkerPrediction> markers;  // those worth searching
   int too_small = 0;                      // predicted too small to decode
   int outside = 0;                        // not wholly inside the image
-  int unresolvable = 0;                   // of a size this camera has not been decoding
   bool whole_frame = false;               // one whole-frame detection is cheaper
 
   const MarkerPrediction* Find(int id) const;
@@ -75,9 +72,8 @@ struct PatternMarkers {
   int grid_cells = 1;
 };
 
-// `limit` (may be null) leaves out markers of sizes the camera does not resolve.
 PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
-                        const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit);
+                        const PatternMarkers& markers, const RoiOptions& options);
 
 // A grey crop of the frame and where it sits in it.
 struct RegionImage {

@@ -63,10 +63,7 @@ class CameraIngest {
         luma_(options_.luma_gamma, options_.mean_row_step),
         ring_(options_.lookback_frames),
         homography_(cv::Size(reader_.info().width, reader_.info().height), options_.homography),
-        resolution_(options_.resolution),
-        pipeline_(family_, options_.detector, options_.roi,
-                  CornerOptions{camera.lens, geometry_.quad_cells, options_.refine_undistorted, options_.edges},
-                  options_.detection_threads, options_.max_pending_jobs),
+        pipeline_(family_, options_.detector, options_.roi, options_.detection_threads, options_.max_pending_jobs),
         status_(sequence.patterns.size(), PatternStatus::kNotSeen),
         used_frames_(sequence.patterns.size()) {
     CheckResolution();
@@ -109,11 +106,6 @@ class CameraIngest {
     sequence.Check();
     options.detector.aruco.inverted = sequence.inverted;
     options.detector.apriltag.inverted = sequence.inverted;
-    if (options.refine_undistorted) {
-      // The undistorted edge fit refines the detector's raw corners.
-      options.detector.aruco.refinement.method = detect::CornerRefinement::kNone;
-      options.detector.apriltag.refinement.method = detect::CornerRefinement::kNone;
-    }
     if (options.exposure_s > 0.0) options.sync.fit.fixed_exposure = options.exposure_s * video_fps;
     options.Check();
     return options;
@@ -231,8 +223,6 @@ class CameraIngest {
     DetectionJob& job = pending_.job;
     job.pattern = index;
     job.ids = markers.ids;
-    job.outward_fraction = std::min(options_.edges.outward_fraction,
-                                    options_.edge_gap_share * sequence_.GapModules(index, geometry_.grid_cells));
     const cv::Rect whole(0, 0, reader_.info().width, reader_.info().height);
     if (!homography_.valid()) {
       job.whole_frame = true;
@@ -241,11 +231,9 @@ class CameraIngest {
       return;
     }
     job.has_plan = true;
-    job.plan = detect::PlanPattern(homography_, camera_.lens, whole.size(), markers, options_.roi,
-                                   options_.learn_resolution ? &resolution_ : nullptr);
+    job.plan = detect::PlanPattern(homography_, camera_.lens, whole.size(), markers, options_.roi);
     stats.too_small += job.plan.too_small;
     stats.outside += job.plan.outside;
-    stats.unresolvable += job.plan.unresolvable;
     if (job.plan.markers.empty()) {
       pending_.skip = true;
       status_[index] = PatternStatus::kSkipped;
@@ -306,14 +294,12 @@ class CameraIngest {
     for (const DetectionOutput& output : outputs) {
       result_.seconds_detection += output.seconds;
       result_.detections_rejected += output.rejected;
-      for (const detect::MarkerPrediction& marker : output.searched) {
-        const auto& ids = output.detections.ids;
-        resolution_.Record(marker.module_px, std::find(ids.begin(), ids.end(), marker.id) != ids.end());
-      }
       const PatternSpec& pattern = sequence_.patterns[output.pattern];
       for (std::size_t k = 0; k < output.detections.size(); ++k) {
         const detect::Quad& quad = output.detections.corners[k];
-        const cv::Point2d centre = detect::DiagonalIntersection(output.undistorted[k]);
+        const auto undistorted = detect::UndistortPixels(camera_.lens, {quad.begin(), quad.end()});
+        const cv::Point2d centre =
+            detect::DiagonalIntersection({undistorted[0], undistorted[1], undistorted[2], undistorted[3]});
         if (!std::isfinite(centre.x) || !std::isfinite(centre.y)) continue;
         detect::ScaleRecord record;
         record.pattern = output.pattern;
@@ -383,7 +369,6 @@ class CameraIngest {
   video::LumaMeter luma_;
   video::FrameRing ring_;
   detect::ProjectorHomography homography_;
-  detect::ResolutionLimit resolution_;
   DetectionPipeline pipeline_;
 
   bool started_ = false;
@@ -417,8 +402,6 @@ void IngestOptions::Check() const {
   Require(search_interval >= 1, "search_interval must be at least 1");
   Require(detection_threads >= 1, "detection_threads must be at least 1");
   Require(max_pending_jobs >= 1, "max_pending_jobs must be at least 1");
-  edges.Check();
-  Require(edge_gap_share > 0.0 && edge_gap_share <= 1.0, "edge_gap_share must be in (0, 1]");
 }
 
 CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,
