@@ -159,6 +159,7 @@ py::list ScalesList(const std::vector<ingest::ScaleStats>& scales) {
     d["searched"] = s.searched;
     d["too_small"] = s.too_small;
     d["outside"] = s.outside;
+    d["unresolvable"] = s.unresolvable;
     d["detected"] = s.detected;
     d["kept"] = s.kept;
     out.append(d);
@@ -196,9 +197,62 @@ py::dict ResultDict(const ingest::CameraIngestResult& r) {
   return d;
 }
 
+py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, const DoubleArray& corners,
+                         const DoubleArray& K, const DoubleArray& dist, int cells, double outward_fraction,
+                         int passes) {
+  if (image.ndim() != 2) throw std::invalid_argument("expected a 2-D uint8 image");
+  if (corners.size() != 8) throw std::invalid_argument("corners: expected 4 x 2 values");
+  const cv::Mat gray(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
+                     const_cast<uint8_t*>(image.data()));
+  const ingest::CameraModel camera = CameraFromArrays(K, dist, std::nullopt, "lens");
+  detect::Quad quad;
+  for (int k = 0; k < 4; ++k) quad[k] = cv::Point2d(corners.data()[2 * k], corners.data()[2 * k + 1]);
+  detect::UndistortedEdgeOptions options;
+  options.outward_fraction = outward_fraction;
+  options.passes = passes;
+  std::optional<detect::Quad> refined;
+  {
+    py::gil_scoped_release release;
+    const detect::LensTables tables(camera.lens, gray.size());
+    refined = detect::RefineUndistortedCorners(gray, cv::Point(0, 0), tables, cells, quad, options);
+  }
+  if (!refined) return py::none();
+  py::array_t<double> out({py::ssize_t{4}, py::ssize_t{2}});
+  for (int k = 0; k < 4; ++k) {
+    out.mutable_at(k, 0) = (*refined)[k].x;
+    out.mutable_at(k, 1) = (*refined)[k].y;
+  }
+  return out;
+}
+
 }  // namespace
 
+py::array_t<double> MapWithTables(const DoubleArray& K, const DoubleArray& dist, std::pair<int, int> resolution,
+                                  const DoubleArray& points, bool undistort) {
+  if (points.ndim() != 2 || points.shape(1) != 2) throw std::invalid_argument("points: expected shape (N, 2)");
+  const ingest::CameraModel camera = CameraFromArrays(K, dist, std::nullopt, "lens");
+  const detect::LensTables tables(camera.lens, cv::Size(resolution.first, resolution.second));
+  std::vector<cv::Point2d> in;
+  for (py::ssize_t i = 0; i < points.shape(0); ++i) in.emplace_back(points.at(i, 0), points.at(i, 1));
+  const auto out = undistort ? tables.Undistort(in) : tables.Distort(in);
+  py::array_t<double> result({points.shape(0), py::ssize_t{2}});
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    result.mutable_at(i, 0) = out[i].x;
+    result.mutable_at(i, 1) = out[i].y;
+  }
+  return result;
+}
+
 void register_ingest(py::module_& m) {
+  m.def("lens_tables_map", &MapWithTables, py::arg("K"), py::arg("dist"), py::arg("resolution"), py::arg("points"),
+        py::arg("undistort") = true,
+        "Points (N, 2) undistorted (or distorted) through the interpolated lens tables the corner "
+        "refinement uses.");
+  m.def("refine_undistorted_corners", &RefineCorners, py::arg("image"), py::arg("corners"), py::arg("K"),
+        py::arg("dist"), py::arg("cells"), py::arg("outward_fraction") = 0.45, py::arg("passes") = 6,
+        "Undistorted corners (4, 2) of a marker `cells` modules wide detected at `corners` (distorted "
+        "pixels) in a grey image, from straight edge lines fitted in undistorted pixels; None when an "
+        "edge cannot be fitted.");
   m.def("option_defaults", &IngestOptionDefaults, "Every ingest option (sync ones included) with its default.");
   m.def(
       "light_levels",

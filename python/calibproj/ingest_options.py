@@ -56,19 +56,53 @@ class IngestOptions:
         max_clock_drift: largest relative camera clock drift; widens the frames kept
             clear while decoding, before the end code is seen.
         use_roi: detect in predicted regions once the projector-to-image homography is
-            known (false: whole frames, for verification).
+            known (false: whole frames at full resolution, for verification).
+        bootstrap_downscale: whole frames searched before the homography is known are
+            shrunk by this factor (libapriltag takes ~300 ms on a full 1080p frame);
+            markers too small to survive it are found once regions take over.
+        refine_undistorted: corners from straight edge lines fitted in undistorted pixels,
+            starting from the detector's unrefined corners (false: the detector's own
+            refinement, then the four corners undistorted); straight edges of large
+            markers bend under lens distortion.
+        edge_search_fraction: how far each intensity profile across an edge reaches into
+            the marker, as a share of one module.
+        edge_outward_fraction: how far it reaches out of the marker, at most (share of a
+            module).
+        edge_gap_share: ... and at most this share of the gap to the next marker of the
+            pattern (markers may be only half a module apart at the largest scale).
+        edge_spacing_px: one profile every this many pixels along each edge.
+        edge_min_samples: profiles per edge at least.
+        edge_max_samples: profiles per edge at most (large markers gain nothing from more).
+        edge_profile_samples_per_px: samples along a profile per pixel.
+        edge_max_profile_samples: samples along a profile at most.
+        edge_end_margin: share of each edge left out at either end.
+        edge_min_contrast: profiles with less contrast than this share of their edge's
+            median are ignored.
+        edge_passes: edge fits at most, each from the previous result (profiles centre
+            on their edges over the passes).
+        edge_tolerance_px: ... stopping once no corner moves by more than this.
         roi_padding_fraction: padding around a predicted marker, as a share of its side
             (the larger of this and roi_padding_px).
         roi_padding_px: padding around a predicted marker, pixels.
         roi_alignment: regions start on multiples of this many pixels.
         min_module_px: markers whose predicted cell is smaller are not searched.
         border_px: a marker must lie this far inside the image to be searched.
-        max_roi_area_fraction: above this share of the image, one whole-frame detection
-            replaces the regions.
+        max_roi_area_fraction: when the regions' pixels exceed this share of the frame's
+            (both as searched, after shrinking), one whole-frame detection replaces them.
         max_offset_px: a detection must lie within the larger of this and
             max_offset_fraction of its side from its prediction, pixels.
         max_offset_fraction: see max_offset_px.
-        homography_min_points: marker centres needed before the homography is trusted.
+        target_module_px: a marker whose predicted module exceeds this is detected in its
+            region shrunk by an integer factor bringing the module near this size (its
+            corners are refined at full resolution anyway); 0 = never shrink.
+        max_downscale: largest such factor.
+        learn_resolution: stop searching markers of sizes the camera has not been
+            decoding (judged per bin of predicted module size).
+        resolution_bin_px: width of those bins, pixels of module size.
+        resolution_min_trials: markers searched in a bin before it is judged.
+        resolution_min_found_share: a bin (and every smaller size) is given up below this
+            share found.
+        homography_min_points: distinct MSM centres needed before the homography is trusted.
         homography_min_spread: those centres must spread over this share of the image
             diagonal.
         homography_threshold_px: RANSAC inlier threshold of the homography fit.
@@ -109,6 +143,20 @@ class IngestOptions:
     average_frames: int = 1
     max_clock_drift: float = 2e-4
     use_roi: bool = True
+    bootstrap_downscale: int = 1
+    refine_undistorted: bool = True
+    edge_search_fraction: float = 0.45
+    edge_outward_fraction: float = 0.45
+    edge_gap_share: float = 0.4
+    edge_spacing_px: float = 1.0
+    edge_min_samples: int = 6
+    edge_max_samples: int = 32
+    edge_profile_samples_per_px: float = 5.0
+    edge_max_profile_samples: int = 40
+    edge_end_margin: float = 0.15
+    edge_min_contrast: float = 0.5
+    edge_passes: int = 6
+    edge_tolerance_px: float = 0.002
     roi_padding_fraction: float = 0.25
     roi_padding_px: int = 16
     roi_alignment: int = 8
@@ -117,6 +165,12 @@ class IngestOptions:
     max_roi_area_fraction: float = 0.5
     max_offset_px: float = 4.0
     max_offset_fraction: float = 0.25
+    target_module_px: float = 6.0
+    max_downscale: int = 8
+    learn_resolution: bool = True
+    resolution_bin_px: float = 0.25
+    resolution_min_trials: int = 24
+    resolution_min_found_share: float = 0.05
     homography_min_points: int = 8
     homography_min_spread: float = 0.02
     homography_threshold_px: float = 2.0

@@ -51,4 +51,65 @@ std::vector<cv::Point2d> DistortPixels(const LensModel& lens, const std::vector<
   return out;
 }
 
+LensTables::Grid LensTables::Sample(cv::Point2d origin, cv::Point2d end, double step) {
+  Grid grid;
+  grid.origin = origin;
+  grid.step = step;
+  grid.columns = static_cast<int>(std::ceil((end.x - origin.x) / step)) + 1;
+  grid.rows = static_cast<int>(std::ceil((end.y - origin.y) / step)) + 1;
+  grid.values.reserve(static_cast<std::size_t>(grid.columns) * grid.rows);
+  for (int row = 0; row < grid.rows; ++row) {
+    for (int column = 0; column < grid.columns; ++column) {
+      grid.values.emplace_back(origin.x + column * step, origin.y + row * step);
+    }
+  }
+  return grid;
+}
+
+bool LensTables::Grid::Interpolate(const cv::Point2d& p, cv::Point2d* out) const {
+  const double x = (p.x - origin.x) / step, y = (p.y - origin.y) / step;
+  if (!(x >= 0.0 && y >= 0.0 && x < columns - 1 && y < rows - 1)) return false;
+  const int column = static_cast<int>(x), row = static_cast<int>(y);
+  const double fx = x - column, fy = y - row;
+  const cv::Point2d* top = &values[static_cast<std::size_t>(row) * columns + column];
+  const cv::Point2d* bottom = top + columns;
+  *out = (1 - fy) * ((1 - fx) * top[0] + fx * top[1]) + fy * ((1 - fx) * bottom[0] + fx * bottom[1]);
+  return true;
+}
+
+LensTables::LensTables(const LensModel& lens, cv::Size image_size, double step_px, double margin_px)
+    : lens_(lens), identity_(!lens.HasDistortion()) {
+  if (identity_) return;
+  if (!(step_px > 0.0) || !(margin_px >= 0.0)) throw std::invalid_argument("lens tables: bad step or margin");
+  const cv::Point2d low(-margin_px, -margin_px), high(image_size.width + margin_px, image_size.height + margin_px);
+  undistort_ = Sample(low, high, step_px);
+  undistort_.values = UndistortPixels(lens, undistort_.values);
+  // The undistorted footprint of the (margined) image bounds the other grid.
+  cv::Point2d footprint_low = undistort_.values.front(), footprint_high = footprint_low;
+  for (const auto& p : undistort_.values) {
+    footprint_low = {std::min(footprint_low.x, p.x), std::min(footprint_low.y, p.y)};
+    footprint_high = {std::max(footprint_high.x, p.x), std::max(footprint_high.y, p.y)};
+  }
+  distort_ = Sample(footprint_low, footprint_high, step_px);
+  distort_.values = DistortPixels(lens, distort_.values);
+}
+
+std::vector<cv::Point2d> LensTables::Undistort(const std::vector<cv::Point2d>& distorted) const {
+  if (identity_) return distorted;
+  std::vector<cv::Point2d> out(distorted.size());
+  for (std::size_t i = 0; i < distorted.size(); ++i) {
+    if (!undistort_.Interpolate(distorted[i], &out[i])) out[i] = UndistortPixels(lens_, {distorted[i]})[0];
+  }
+  return out;
+}
+
+std::vector<cv::Point2d> LensTables::Distort(const std::vector<cv::Point2d>& undistorted) const {
+  if (identity_) return undistorted;
+  std::vector<cv::Point2d> out(undistorted.size());
+  for (std::size_t i = 0; i < undistorted.size(); ++i) {
+    if (!distort_.Interpolate(undistorted[i], &out[i])) out[i] = DistortPixels(lens_, {undistorted[i]})[0];
+  }
+  return out;
+}
+
 }  // namespace calibproj::detect

@@ -26,4 +26,36 @@ std::vector<cv::Point2d> UndistortPixels(const LensModel& lens, const std::vecto
 // Distorted pixels of undistorted pixels (same K).
 std::vector<cv::Point2d> DistortPixels(const LensModel& lens, const std::vector<cv::Point2d>& undistorted);
 
+// Both mappings, sampled once on grids of nodes `step_px` apart covering the image
+// (distorted side) and its undistorted footprint, and interpolated bilinearly: the
+// corner refinement maps a few hundred points per marker, which OpenCV's per-call
+// iterative undistortion makes costly. The mappings are smooth, so the interpolation
+// error stays far below the detection noise (measured in tests); points off the grids
+// fall back to the exact functions.
+class LensTables {
+ public:
+  LensTables(const LensModel& lens, cv::Size image_size, double step_px = 2.0, double margin_px = 64.0);
+
+  const LensModel& lens() const { return lens_; }
+  std::vector<cv::Point2d> Undistort(const std::vector<cv::Point2d>& distorted) const;
+  std::vector<cv::Point2d> Distort(const std::vector<cv::Point2d>& undistorted) const;
+
+ private:
+  // Values of a mapping at the nodes of a regular grid.
+  struct Grid {
+    cv::Point2d origin;
+    double step = 1.0;
+    int columns = 0, rows = 0;
+    std::vector<cv::Point2d> values;  // row-major
+
+    bool Interpolate(const cv::Point2d& p, cv::Point2d* out) const;
+  };
+
+  static Grid Sample(cv::Point2d origin, cv::Point2d end, double step);
+
+  LensModel lens_;
+  bool identity_;
+  Grid undistort_, distort_;
+};
+
 }  // namespace calibproj::detect

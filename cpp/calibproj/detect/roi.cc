@@ -1,5 +1,7 @@
 #include "calibproj/detect/roi.h"
 
+#include <opencv2/imgproc.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -73,6 +75,8 @@ void RoiOptions::Check() const {
   Require(max_offset_px > 0.0 && max_offset_fraction >= 0.0, "max_offset_px must be positive, "
                                                              "max_offset_fraction non-negative");
   Require(edge_points >= 1, "edge_points must be at least 1");
+  Require(target_module_px >= 0.0, "target_module_px must be non-negative (0: never shrink)");
+  Require(max_downscale >= 1, "max_downscale must be at least 1");
 }
 
 const MarkerPrediction* PatternPlan::Find(int id) const {
@@ -83,14 +87,13 @@ const MarkerPrediction* PatternPlan::Find(int id) const {
 }
 
 PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
-                        const PatternMarkers& markers, const RoiOptions& options) {
+                        const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit) {
   options.Check();
   if (!homography.valid()) throw std::logic_error("PlanPattern needs a valid homography");
   PatternPlan plan;
   const cv::Rect image(0, 0, image_size.width, image_size.height);
   const cv::Rect inner(options.border_px, options.border_px, image_size.width - 2 * options.border_px,
                        image_size.height - 2 * options.border_px);
-  double area = 0.0;
   for (std::size_t i = 0; i < markers.ids.size(); ++i) {
     const auto outline = SquareOutline(homography, lens, markers.centres[i], markers.side_px, options.edge_points);
     const cv::Rect2d box = BoundingBox(outline);
@@ -102,22 +105,54 @@ PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& 
     MarkerPrediction prediction;
     prediction.id = markers.ids[i];
     prediction.side_px = ShortestSide(outline);
-    if (prediction.side_px / markers.grid_cells < options.min_module_px) {
+    prediction.module_px = prediction.side_px / markers.grid_cells;
+    if (prediction.module_px < options.min_module_px) {
       ++plan.too_small;
       continue;
     }
+    if (limit != nullptr && limit->Hopeless(prediction.module_px)) {
+      ++plan.unresolvable;
+      continue;
+    }
     prediction.centre = DistortPixels(lens, {homography.Map(markers.centres[i])})[0];
+    if (options.target_module_px > 0.0) {
+      const int factor = static_cast<int>(std::floor(prediction.module_px / options.target_module_px));
+      prediction.downscale = std::clamp(factor, 1, options.max_downscale);
+    }
     const double pad = std::max<double>(options.padding_px, options.padding_fraction * prediction.side_px);
     const int x0 = AlignDown(static_cast<int>(std::floor(box.x - pad)), options.alignment);
     const int y0 = AlignDown(static_cast<int>(std::floor(box.y - pad)), options.alignment);
     const int x1 = static_cast<int>(std::ceil(box.x + box.width + pad)) + 1;
     const int y1 = static_cast<int>(std::ceil(box.y + box.height + pad)) + 1;
     prediction.region = cv::Rect(x0, y0, x1 - x0, y1 - y0) & image;
-    area += prediction.region.area();
     plan.markers.push_back(prediction);
   }
-  plan.whole_frame = area > options.max_area_fraction * image.area();
+  // Detection costs grow with the pixels searched: the regions (each shrunk by its own
+  // factor) against the whole frame (shrunk by the smallest factor).
+  int smallest = options.max_downscale;
+  for (const auto& marker : plan.markers) smallest = std::min(smallest, marker.downscale);
+  double regions_cost = 0.0;
+  for (const auto& marker : plan.markers) {
+    regions_cost += static_cast<double>(marker.region.area()) / (marker.downscale * marker.downscale);
+  }
+  plan.whole_frame = regions_cost > options.max_area_fraction * image.area() / (smallest * smallest);
   return plan;
+}
+
+Detections DetectDownscaled(const MarkerDetector& detector, const cv::Mat& gray, int factor) {
+  if (factor <= 1) return detector.Detect(gray);
+  // Whole small pixels only: small pixel (i, j) covers pixels [f i, f i + f).
+  const cv::Mat whole = gray(cv::Rect(0, 0, gray.cols - gray.cols % factor, gray.rows - gray.rows % factor));
+  cv::Mat small;
+  cv::resize(whole, small, cv::Size(whole.cols / factor, whole.rows / factor), 0, 0, cv::INTER_AREA);
+  if (small.cols < kMinImageSide || small.rows < kMinImageSide) return detector.Detect(gray);
+  Detections found = detector.Detect(small);
+  // The centre of small pixel i (OpenCV convention) is at f i + (f - 1) / 2.
+  const double offset = 0.5 * (factor - 1);
+  for (Quad& quad : found.corners) {
+    for (cv::Point2d& corner : quad) corner = corner * factor + cv::Point2d(offset, offset);
+  }
+  return found;
 }
 
 Detections DetectInRegions(const MarkerDetector& detector, const PatternPlan& plan,
@@ -126,7 +161,7 @@ Detections DetectInRegions(const MarkerDetector& detector, const PatternPlan& pl
   Detections out;
   for (std::size_t i = 0; i < regions.size(); ++i) {
     const MarkerPrediction& marker = plan.markers[i];
-    const Detections found = detector.Detect(regions[i].gray);
+    const Detections found = DetectDownscaled(detector, regions[i].gray, marker.downscale);
     const cv::Point2d origin(regions[i].origin.x, regions[i].origin.y);
     double best = AllowedOffset(marker.side_px, options);
     int chosen = -1;

@@ -18,6 +18,7 @@
 #include "calibproj/detect/lens.h"
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/detect/projector_homography.h"
+#include "calibproj/detect/resolution_limit.h"
 
 namespace calibproj::detect {
 
@@ -33,7 +34,8 @@ struct RoiOptions {
   // A marker counts as inside the image when its predicted square stays this far
   // from the image edges.
   int border_px = 4;
-  // Above this share of the image, regions are dropped for one whole-frame detection.
+  // Regions are dropped for one whole-frame detection when their pixels exceed this
+  // share of the frame's (both counted as searched, i.e. after shrinking).
   double max_area_fraction = 0.5;
   // A detection counts only within this distance of its predicted centre: the larger
   // of max_offset_px and max_offset_fraction of the predicted side.
@@ -41,6 +43,12 @@ struct RoiOptions {
   double max_offset_fraction = 0.25;
   // Points per edge of the drawn square mapped through the lens to bound it.
   int edge_points = 4;
+  // A marker whose predicted module exceeds target_module_px is detected in its region
+  // shrunk by an integer factor (at most max_downscale) that brings the module near
+  // that size: detection costs grow with the pixels searched, and its corners are
+  // refined at full resolution afterwards anyway. 0 = never shrink.
+  double target_module_px = 6.0;
+  int max_downscale = 8;
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;
@@ -51,13 +59,16 @@ struct MarkerPrediction {
   int id = -1;
   cv::Point2d centre;     // distorted image pixels
   double side_px = 0.0;   // shortest side of its drawn square in the image
+  double module_px = 0.0; // side_px over the marker's cells
   cv::Rect region;        // padded, aligned, inside the image
+  int downscale = 1;      // detected in its region shrunk by this factor
 };
 
 struct PatternPlan {
   std::vector<MarkerPrediction> markers;  // those worth searching
   int too_small = 0;                      // predicted too small to decode
   int outside = 0;                        // not wholly inside the image
+  int unresolvable = 0;                   // of a size this camera has not been decoding
   bool whole_frame = false;               // one whole-frame detection is cheaper
 
   const MarkerPrediction* Find(int id) const;
@@ -72,8 +83,9 @@ struct PatternMarkers {
   int grid_cells = 1;
 };
 
+// `limit` (may be null) leaves out markers of sizes the camera does not resolve.
 PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
-                        const PatternMarkers& markers, const RoiOptions& options);
+                        const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit);
 
 // A grey crop of the frame and where it sits in it.
 struct RegionImage {
@@ -81,9 +93,15 @@ struct RegionImage {
   cv::Point origin;
 };
 
+// The detector's markers in `gray` shrunk by an integer `factor` (cv::INTER_AREA, so
+// each small pixel is the mean of factor x factor pixels), with corners mapped back to
+// the coordinates of `gray`. factor 1 detects on `gray` itself.
+Detections DetectDownscaled(const MarkerDetector& detector, const cv::Mat& gray, int factor);
+
 // Detections of planned markers in their regions (regions[i] holds markers[i] of the
-// plan), in whole-frame coordinates: for each marker the detection of its id closest
-// to the prediction, if within the allowed offset.
+// plan; each shrunk by its marker's downscale factor for detection), in whole-frame
+// coordinates: for each marker the detection of its id closest to the prediction, if
+// within the allowed offset.
 Detections DetectInRegions(const MarkerDetector& detector, const PatternPlan& plan,
                            const std::vector<RegionImage>& regions, const RoiOptions& options);
 

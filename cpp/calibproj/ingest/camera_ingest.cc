@@ -63,7 +63,12 @@ class CameraIngest {
         luma_(options_.luma_gamma, options_.mean_row_step),
         ring_(options_.lookback_frames),
         homography_(cv::Size(reader_.info().width, reader_.info().height), options_.homography),
-        pipeline_(family_, options_.detector, options_.roi, options_.detection_threads, options_.max_pending_jobs),
+        resolution_(options_.resolution),
+        pipeline_(family_, options_.detector, options_.roi,
+                  CornerOptions{std::make_shared<const detect::LensTables>(
+                                    camera.lens, cv::Size(reader_.info().width, reader_.info().height)),
+                                geometry_.quad_cells, options_.refine_undistorted, options_.edges},
+                  options_.detection_threads, options_.max_pending_jobs),
         status_(sequence.patterns.size(), PatternStatus::kNotSeen),
         used_frames_(sequence.patterns.size()) {
     CheckResolution();
@@ -106,6 +111,11 @@ class CameraIngest {
     sequence.Check();
     options.detector.aruco.inverted = sequence.inverted;
     options.detector.apriltag.inverted = sequence.inverted;
+    if (options.refine_undistorted) {
+      // The undistorted edge fit refines the detector's raw corners.
+      options.detector.aruco.refinement.method = detect::CornerRefinement::kNone;
+      options.detector.apriltag.refinement.method = detect::CornerRefinement::kNone;
+    }
     if (options.exposure_s > 0.0) options.sync.fit.fixed_exposure = options.exposure_s * video_fps;
     options.Check();
     return options;
@@ -223,17 +233,22 @@ class CameraIngest {
     DetectionJob& job = pending_.job;
     job.pattern = index;
     job.ids = markers.ids;
+    job.outward_fraction = std::min(options_.edges.outward_fraction,
+                                    options_.edge_gap_share * sequence_.GapModules(index, geometry_.grid_cells));
     const cv::Rect whole(0, 0, reader_.info().width, reader_.info().height);
     if (!homography_.valid()) {
       job.whole_frame = true;
+      job.downscale = options_.bootstrap_downscale;
       stats.searched += static_cast<int>(markers.ids.size());
       pending_.rects = {whole};
       return;
     }
     job.has_plan = true;
-    job.plan = detect::PlanPattern(homography_, camera_.lens, whole.size(), markers, options_.roi);
+    job.plan = detect::PlanPattern(homography_, camera_.lens, whole.size(), markers, options_.roi,
+                                   options_.learn_resolution ? &resolution_ : nullptr);
     stats.too_small += job.plan.too_small;
     stats.outside += job.plan.outside;
+    stats.unresolvable += job.plan.unresolvable;
     if (job.plan.markers.empty()) {
       pending_.skip = true;
       status_[index] = PatternStatus::kSkipped;
@@ -242,6 +257,12 @@ class CameraIngest {
     }
     stats.searched += static_cast<int>(job.plan.markers.size());
     job.whole_frame = !options_.use_roi || job.plan.whole_frame;
+    if (options_.use_roi && job.whole_frame) {
+      // Too many large markers for regions: the whole frame, shrunk for the smallest.
+      int factor = options_.roi.max_downscale;
+      for (const auto& marker : job.plan.markers) factor = std::min(factor, marker.downscale);
+      job.downscale = factor;
+    }
     if (job.whole_frame) {
       pending_.rects = {whole};
     } else {
@@ -294,12 +315,14 @@ class CameraIngest {
     for (const DetectionOutput& output : outputs) {
       result_.seconds_detection += output.seconds;
       result_.detections_rejected += output.rejected;
+      for (const detect::MarkerPrediction& marker : output.searched) {
+        const auto& ids = output.detections.ids;
+        resolution_.Record(marker.module_px, std::find(ids.begin(), ids.end(), marker.id) != ids.end());
+      }
       const PatternSpec& pattern = sequence_.patterns[output.pattern];
       for (std::size_t k = 0; k < output.detections.size(); ++k) {
         const detect::Quad& quad = output.detections.corners[k];
-        const auto undistorted = detect::UndistortPixels(camera_.lens, {quad.begin(), quad.end()});
-        const cv::Point2d centre =
-            detect::DiagonalIntersection({undistorted[0], undistorted[1], undistorted[2], undistorted[3]});
+        const cv::Point2d centre = detect::DiagonalIntersection(output.undistorted[k]);
         if (!std::isfinite(centre.x) || !std::isfinite(centre.y)) continue;
         detect::ScaleRecord record;
         record.pattern = output.pattern;
@@ -369,6 +392,7 @@ class CameraIngest {
   video::LumaMeter luma_;
   video::FrameRing ring_;
   detect::ProjectorHomography homography_;
+  detect::ResolutionLimit resolution_;
   DetectionPipeline pipeline_;
 
   bool started_ = false;
@@ -402,6 +426,9 @@ void IngestOptions::Check() const {
   Require(search_interval >= 1, "search_interval must be at least 1");
   Require(detection_threads >= 1, "detection_threads must be at least 1");
   Require(max_pending_jobs >= 1, "max_pending_jobs must be at least 1");
+  Require(bootstrap_downscale >= 1 && bootstrap_downscale <= 8, "bootstrap_downscale must be in [1, 8]");
+  edges.Check();
+  Require(edge_gap_share > 0.0 && edge_gap_share <= 1.0, "edge_gap_share must be in (0, 1]");
 }
 
 CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,

@@ -18,7 +18,9 @@
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/detect/msm_merge.h"
 #include "calibproj/detect/projector_homography.h"
+#include "calibproj/detect/resolution_limit.h"
 #include "calibproj/detect/roi.h"
+#include "calibproj/detect/undistorted_edges.h"
 #include "calibproj/ingest/sequence_description.h"
 #include "calibproj/sync/synchronise.h"
 #include "calibproj/video/frame_picker.h"
@@ -38,10 +40,25 @@ struct IngestOptions {
   detect::DetectorOptions detector;  // `inverted` is taken from the sequence
   detect::RoiOptions roi;
   detect::HomographyOptions homography;
+  // Stop searching markers of sizes this camera has not been decoding.
+  bool learn_resolution = true;
+  detect::ResolutionOptions resolution;
   detect::MergeOptions merge;
-  // Detect in regions of interest once the homography is known (false: whole frames,
-  // with the same filtering; for verification).
+  // Detect in regions of interest once the homography is known (false: whole frames
+  // at full resolution, with the same filtering; for verification).
   bool use_roi = true;
+  // Whole frames searched before the homography is known are shrunk by this factor
+  // (libapriltag takes ~300 ms on a full 1080p frame); markers too small to survive
+  // the shrinking are then only found once regions of interest take over.
+  int bootstrap_downscale = 1;
+  // Corners from straight edge lines fitted in undistorted pixels (undistorted_edges.h),
+  // starting from the detector's unrefined corners; false: the detector's own corner
+  // refinement, then cv::undistortPoints of the four corners.
+  bool refine_undistorted = true;
+  detect::UndistortedEdgeOptions edges;
+  // Edge profiles reach out of a marker at most this share of the gap to the next
+  // marker of its pattern (and at most edges.outward_fraction of a module).
+  double edge_gap_share = 0.4;
   // Known exposure time of the camera in seconds, or 0 to estimate it from the codes
   // (see CodeFitOptions::fixed_exposure).
   double exposure_s = 0.0;
@@ -68,6 +85,7 @@ struct ScaleStats {
   int searched = 0;          // markers searched (planned, or all on whole frames)
   int too_small = 0;
   int outside = 0;
+  int unresolvable = 0;      // of a size the camera was not decoding
   int detected = 0;          // markers found
   int kept = 0;              // used in merged centres
 };
@@ -91,7 +109,7 @@ struct CameraIngestResult {
   cv::Matx33d homography = cv::Matx33d::eye();  // projector pixels -> undistorted pixels
   double homography_rms_px = 0.0;
   double seconds_total = 0.0;
-  double seconds_detection = 0.0;  // summed over detection threads
+  double seconds_detection = 0.0;  // CPU time of the detection threads
 };
 
 // Called now and then with the frames decoded so far and the declared total.

@@ -1,6 +1,7 @@
 #include "calibproj/ingest/detection_pipeline.h"
 
-#include <chrono>
+#include <time.h>
+
 #include <stdexcept>
 #include <utility>
 
@@ -8,8 +9,9 @@ namespace calibproj::ingest {
 
 DetectionPipeline::DetectionPipeline(const detect::MarkerFamily& family,
                                      const detect::DetectorOptions& detector_options,
-                                     const detect::RoiOptions& roi_options, int threads, int max_pending)
-    : roi_options_(roi_options), max_pending_(max_pending) {
+                                     const detect::RoiOptions& roi_options, CornerOptions corner_options,
+                                     int threads, int max_pending)
+    : roi_options_(roi_options), corner_options_(std::move(corner_options)), max_pending_(max_pending) {
   if (threads < 1) throw std::invalid_argument("detection threads must be at least 1");
   if (max_pending < 1) throw std::invalid_argument("max pending detection jobs must be at least 1");
   for (int i = 0; i < threads; ++i) {
@@ -57,6 +59,20 @@ std::vector<DetectionOutput> DetectionPipeline::Finish() {
   return std::exchange(finished_, {});
 }
 
+detect::Quad DetectionPipeline::Undistorted(const detect::Quad& corners, const detect::RegionImage& region,
+                                            double outward_fraction) const {
+  const CornerOptions& o = corner_options_;
+  if (o.refine_undistorted) {
+    detect::UndistortedEdgeOptions edges = o.edges;
+    edges.outward_fraction = outward_fraction;
+    if (auto refined = detect::RefineUndistortedCorners(region.gray, region.origin, *o.lens, o.cells, corners, edges)) {
+      return *refined;
+    }
+  }
+  const auto points = o.lens->Undistort({corners.begin(), corners.end()});
+  return {points[0], points[1], points[2], points[3]};
+}
+
 void DetectionPipeline::Work(const detect::MarkerDetector& detector) {
   while (true) {
     DetectionJob job;
@@ -87,21 +103,42 @@ void DetectionPipeline::Work(const detect::MarkerDetector& detector) {
   }
 }
 
+namespace {
+
+// CPU time of the calling thread: detection competes with decoding for the cores, so
+// wall time would count the other threads' work too.
+double ThreadSeconds() {
+  timespec now{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
+  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
+}
+
+}  // namespace
+
 DetectionOutput DetectionPipeline::Run(const detect::MarkerDetector& detector, const DetectionJob& job) const {
-  const auto started = std::chrono::steady_clock::now();
+  const double started = ThreadSeconds();
   DetectionOutput output;
   output.pattern = job.pattern;
   output.whole_frame = job.whole_frame;
   output.first_frame = job.first_frame;
   output.frame_count = job.frame_count;
+  if (job.has_plan) output.searched = job.plan.markers;
   if (job.whole_frame) {
-    const detect::Detections found = detector.Detect(job.regions.at(0).gray);
+    const detect::Detections found = detect::DetectDownscaled(detector, job.regions.at(0).gray, job.downscale);
     output.detections = detect::FilterDetections(found, job.ids, job.has_plan ? &job.plan : nullptr, roi_options_,
                                                  &output.rejected);
   } else {
     output.detections = detect::DetectInRegions(detector, job.plan, job.regions, roi_options_);
   }
-  output.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  for (std::size_t k = 0; k < output.detections.size(); ++k) {
+    // The region the marker was found in: the whole frame, or its own region.
+    std::size_t region = 0;
+    if (!job.whole_frame) {
+      while (job.plan.markers[region].id != output.detections.ids[k]) ++region;
+    }
+    output.undistorted.push_back(Undistorted(output.detections.corners[k], job.regions[region], job.outward_fraction));
+  }
+  output.seconds = ThreadSeconds() - started;
   return output;
 }
 

@@ -15,8 +15,10 @@
 #include <thread>
 #include <vector>
 
+#include "calibproj/detect/lens.h"
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/detect/roi.h"
+#include "calibproj/detect/undistorted_edges.h"
 
 namespace calibproj::ingest {
 
@@ -24,11 +26,15 @@ struct DetectionJob {
   int pattern = -1;
   std::vector<int> ids;               // ids the pattern shows
   bool whole_frame = true;            // regions[0] is the whole frame
+  int downscale = 1;                  // the whole frame is detected shrunk by this factor
   bool has_plan = false;              // plan holds predictions (the homography was known)
   detect::PatternPlan plan;
   std::vector<detect::RegionImage> regions;
   int first_frame = -1;
   int frame_count = 0;
+  // How far edge profiles may reach out of a marker (share of a module): a share of
+  // the gap to the next marker of the pattern.
+  double outward_fraction = 0.45;
 };
 
 struct DetectionOutput {
@@ -37,14 +43,28 @@ struct DetectionOutput {
   int first_frame = -1;
   int frame_count = 0;
   detect::Detections detections;  // whole-image distorted pixels, filtered
+  // Per detection, its corners in undistorted pixels (refined, or merely undistorted).
+  std::vector<detect::Quad> undistorted;
   int rejected = 0;               // detections dropped (unexpected id, duplicate, off prediction)
-  double seconds = 0.0;           // detection time
+  std::vector<detect::MarkerPrediction> searched;  // the planned markers, when there was a plan
+  double seconds = 0.0;           // CPU time of the detection
+};
+
+// How detected corners become undistorted corners.
+struct CornerOptions {
+  std::shared_ptr<const detect::LensTables> lens;
+  int cells = 1;  // modules across the detected square
+  // Refine by straight edge lines in undistorted pixels (undistorted_edges.h); false
+  // undistorts the detector's corners.
+  bool refine_undistorted = true;
+  detect::UndistortedEdgeOptions edges;
 };
 
 class DetectionPipeline {
  public:
   DetectionPipeline(const detect::MarkerFamily& family, const detect::DetectorOptions& detector_options,
-                    const detect::RoiOptions& roi_options, int threads, int max_pending);
+                    const detect::RoiOptions& roi_options, CornerOptions corner_options, int threads,
+                    int max_pending);
   ~DetectionPipeline();
   DetectionPipeline(const DetectionPipeline&) = delete;
   DetectionPipeline& operator=(const DetectionPipeline&) = delete;
@@ -62,7 +82,11 @@ class DetectionPipeline {
   void RethrowLocked();
   void Stop();
 
+  detect::Quad Undistorted(const detect::Quad& corners, const detect::RegionImage& region,
+                           double outward_fraction) const;
+
   detect::RoiOptions roi_options_;
+  CornerOptions corner_options_;
   int max_pending_;
   std::vector<std::unique_ptr<detect::MarkerDetector>> detectors_;
   std::vector<std::thread> workers_;

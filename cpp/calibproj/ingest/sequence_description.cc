@@ -82,4 +82,17 @@ detect::PatternMarkers SequenceDescription::Markers(int index, int grid_cells) c
   return out;
 }
 
+double SequenceDescription::GapModules(int index, int grid_cells) const {
+  const detect::PatternMarkers shown = Markers(index, grid_cells);
+  double nearest = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < shown.centres.size(); ++i) {
+    for (std::size_t j = i + 1; j < shown.centres.size(); ++j) {
+      const cv::Point2d d = shown.centres[i] - shown.centres[j];
+      // Axis-aligned squares: the gap is along the axis where they are farthest apart.
+      nearest = std::min(nearest, std::max(std::abs(d.x), std::abs(d.y)));
+    }
+  }
+  return (nearest - shown.side_px) / (shown.side_px / grid_cells);
+}
+
 }  // namespace calibproj::ingest

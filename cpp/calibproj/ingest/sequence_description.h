@@ -60,6 +60,10 @@ struct SequenceDescription {
   // The markers drawn by pattern `index` (ids = marker indices), with their projector
   // centres and drawn side; `grid_cells` is the family's drawn width in cells.
   detect::PatternMarkers Markers(int index, int grid_cells) const;
+
+  // Smallest gap between two drawn markers of pattern `index`, in modules (of a marker
+  // `grid_cells` wide); infinity when it shows one marker.
+  double GapModules(int index, int grid_cells) const;
 };
 
 }  // namespace calibproj::ingest

@@ -35,6 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--detector-option", action="append", default=[], metavar="NAME=VALUE",
                         help="marker detector option as calibproj.detect_markers takes it, e.g. quad_decimate=2 "
                              "(repeatable; default: the detector's defaults)")
+    parser.add_argument("--exposure", action="append", default=[], metavar="CAMERA=SECONDS",
+                        help="known exposure time of one camera (repeatable; default: --exposure-s for all)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.add_argument("--json", action="store_true", help="print the report as JSON instead of a table")
     add_dataclass_arguments(parser, IngestOptions, "ingest options")
@@ -50,12 +52,26 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     result = ingest(args.videos, args.sequence, args.intrinsics, options=dataclass_from_args(IngestOptions, args),
                     detector_options=_detector_options(args.detector_option), workers=args.workers,
-                    progress=not args.no_progress)
+                    progress=not args.no_progress, exposures=_exposures(args.exposure))
     result.tracks.write(out)
     result.write_report(out.parent / REPORT_NAME)
     report = result.report()
     print(json.dumps(report, indent=1) if args.json else format_report(report))
     return 0 if len(result.failed) < len(result.cameras) else 1
+
+
+def _exposures(items: list[str]) -> dict[str, float]:
+    exposures = {}
+    for item in items:
+        name, separator, text = item.partition("=")
+        try:
+            seconds = float(text)
+        except ValueError:
+            seconds = -1.0
+        if not separator or not name or not seconds > 0:
+            raise ValueError(f"--exposure expects CAMERA=SECONDS with SECONDS > 0, got {item!r}")
+        exposures[name.strip()] = seconds
+    return exposures
 
 
 def _detector_options(items: list[str]) -> dict:

@@ -1,0 +1,190 @@
+#include "calibproj/detect/undistorted_edges.h"
+
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace calibproj::detect {
+
+namespace {
+
+void Require(bool condition, const std::string& message) {
+  if (!condition) throw std::invalid_argument("undistorted edge options: " + message);
+}
+
+// Bilinear grey level at a whole-image position; NaN outside the crop.
+double GreyAt(const cv::Mat& gray, const cv::Point2d& origin, const cv::Point2d& p) {
+  const double x = p.x - origin.x, y = p.y - origin.y;
+  if (!(x >= 0.0 && y >= 0.0 && x <= gray.cols - 1.0 && y <= gray.rows - 1.0)) return std::nan("");
+  const int x0 = std::min(static_cast<int>(x), gray.cols - 2), y0 = std::min(static_cast<int>(y), gray.rows - 2);
+  const double fx = x - x0, fy = y - y0;
+  const uchar* row0 = gray.ptr<uchar>(y0);
+  const uchar* row1 = gray.ptr<uchar>(y0 + 1);
+  return (1 - fy) * ((1 - fx) * row0[x0] + fx * row0[x0 + 1]) + fy * ((1 - fx) * row1[x0] + fx * row1[x0 + 1]);
+}
+
+// A profile across an edge: its base point and outward unit normal in the image.
+struct Profile {
+  cv::Point2d base;
+  cv::Point2d normal;
+};
+
+struct EdgePoint {
+  cv::Point2d point;  // distorted pixels
+  double contrast;    // outer minus inner level
+};
+
+// How far a profile reaches inside the marker and outside it, image pixels.
+struct Reach {
+  double inward;
+  double outward;
+};
+
+// Where the edge crosses a profile, from the area under the normalised profile: for a
+// blurred step from level a (inside, at -r_in) to b (outside, at +r_out), the integral
+// of (I - a) / (b - a) over [-r_in, r_out] is r_out - s, s the edge's position.
+std::optional<EdgePoint> LocateEdge(const cv::Mat& gray, const cv::Point2d& origin, const Profile& profile,
+                                    const Reach& reach, const UndistortedEdgeOptions& options) {
+  const double length = reach.inward + reach.outward;
+  const int steps = std::clamp(static_cast<int>(std::ceil(length * options.profile_samples_per_px)), 4,
+                               std::max(4, options.max_profile_samples));
+  const double step = length / steps;
+  std::vector<double> levels(steps + 1);
+  for (int i = 0; i <= steps; ++i) {
+    levels[i] = GreyAt(gray, origin, profile.base + profile.normal * (-reach.inward + i * step));
+    if (std::isnan(levels[i])) return std::nullopt;
+  }
+  const double inner = levels.front(), contrast = levels.back() - inner;
+  if (std::abs(contrast) < 1.0) return std::nullopt;
+  double area = 0.0;
+  for (int i = 0; i < steps; ++i) {
+    const double a = std::clamp((levels[i] - inner) / contrast, 0.0, 1.0);
+    const double b = std::clamp((levels[i + 1] - inner) / contrast, 0.0, 1.0);
+    area += 0.5 * (a + b) * step;
+  }
+  return EdgePoint{profile.base + profile.normal * (reach.outward - area), contrast};
+}
+
+// Profiles along the undistorted segment from `from` to `to`, mapped into the image.
+std::vector<Profile> EdgeProfiles(const LensTables& lens, const cv::Point2d& from, const cv::Point2d& to,
+                                  double outward, const UndistortedEdgeOptions& options) {
+  const double length = cv::norm(to - from);
+  const cv::Point2d along = (to - from) / length;
+  // Image y points down: (y, -x) is outward for corners in clockwise order.
+  const cv::Point2d normal = cv::Point2d(along.y, -along.x) * outward;
+  const double usable = length * (1.0 - 2.0 * options.end_margin);
+  const int count = std::clamp(static_cast<int>(usable / options.spacing_px), options.min_samples,
+                               std::max(options.min_samples, options.max_samples));
+  std::vector<cv::Point2d> undistorted;
+  for (int i = 0; i < count; ++i) {
+    const cv::Point2d base = from + along * (length * options.end_margin + usable * (i + 0.5) / count);
+    undistorted.push_back(base);
+    undistorted.push_back(base + normal);  // fixes the normal's direction in the image
+  }
+  const std::vector<cv::Point2d> image = lens.Distort(undistorted);
+  std::vector<Profile> profiles;
+  for (int i = 0; i < count; ++i) {
+    const cv::Point2d direction = image[2 * i + 1] - image[2 * i];
+    profiles.push_back({image[2 * i], direction / cv::norm(direction)});
+  }
+  return profiles;
+}
+
+// Line a x + b y + c = 0 through the undistorted edge points that cross the border with
+// the edge's polarity and enough contrast.
+std::optional<cv::Vec3d> FitLine(const std::vector<EdgePoint>& found, const LensTables& lens,
+                                 const UndistortedEdgeOptions& options) {
+  if (found.empty()) return std::nullopt;
+  std::vector<double> contrasts;
+  for (const auto& p : found) contrasts.push_back(p.contrast);
+  std::nth_element(contrasts.begin(), contrasts.begin() + contrasts.size() / 2, contrasts.end());
+  const double median = contrasts[contrasts.size() / 2];
+  std::vector<cv::Point2d> distorted;
+  for (const auto& p : found) {
+    if (p.contrast * median > 0 && std::abs(p.contrast) >= options.min_contrast * std::abs(median)) {
+      distorted.push_back(p.point);
+    }
+  }
+  if (static_cast<int>(distorted.size()) < std::max(2, options.min_samples / 2)) return std::nullopt;
+  const std::vector<cv::Point2d> undistorted = lens.Undistort(distorted);
+  cv::Vec4d line;  // direction (vx, vy) and a point (x0, y0)
+  cv::fitLine(undistorted, line, cv::DIST_L2, 0, 1e-4, 1e-4);
+  return cv::Vec3d(-line[1], line[0], line[1] * line[2] - line[0] * line[3]);
+}
+
+double MeanSide(const Quad& quad) {
+  double total = 0.0;
+  for (int k = 0; k < 4; ++k) total += cv::norm(quad[(k + 1) % 4] - quad[k]);
+  return 0.25 * total;
+}
+
+// One pass: lines through the edges near `quad` (undistorted), their intersections.
+std::optional<Quad> RefinePass(const cv::Mat& gray, const cv::Point2d& origin, const LensTables& lens, int cells,
+                               const Quad& quad, double image_module, const UndistortedEdgeOptions& options) {
+  double signed_area = 0.0;
+  for (int k = 0; k < 4; ++k) signed_area += quad[k].cross(quad[(k + 1) % 4]);
+  const double outward = signed_area > 0 ? 1.0 : -1.0;
+  const Reach reach{options.search_fraction * image_module, options.outward_fraction * image_module};
+  cv::Vec3d lines[4];
+  for (int k = 0; k < 4; ++k) {
+    std::vector<EdgePoint> found;
+    for (const Profile& profile : EdgeProfiles(lens, quad[k], quad[(k + 1) % 4], outward, options)) {
+      if (auto point = LocateEdge(gray, origin, profile, reach, options)) {
+        found.push_back(*point);
+      }
+    }
+    const auto line = FitLine(found, lens, options);
+    if (!line) return std::nullopt;
+    lines[k] = *line;
+  }
+  const double module = MeanSide(quad) / cells;
+  Quad refined;
+  for (int k = 0; k < 4; ++k) {
+    // Corner k joins edge k - 1 (into it) and edge k (out of it).
+    const cv::Vec3d point = lines[(k + 3) % 4].cross(lines[k]);
+    if (std::abs(point[2]) < 1e-12) return std::nullopt;
+    refined[k] = cv::Point2d(point[0] / point[2], point[1] / point[2]);
+    if (!(cv::norm(refined[k] - quad[k]) <= 0.5 * module)) return std::nullopt;
+  }
+  return refined;
+}
+
+}  // namespace
+
+void UndistortedEdgeOptions::Check() const {
+  Require(search_fraction > 0.0 && search_fraction <= 1.0, "search_fraction must be in (0, 1]");
+  Require(outward_fraction > 0.0 && outward_fraction <= 1.0, "outward_fraction must be in (0, 1]");
+  Require(spacing_px > 0.0, "spacing_px must be positive");
+  Require(min_samples >= 2, "min_samples must be at least 2");
+  Require(max_samples >= min_samples, "max_samples must be at least min_samples");
+  Require(max_profile_samples >= 4, "max_profile_samples must be at least 4");
+  Require(profile_samples_per_px >= 1.0, "profile_samples_per_px must be at least 1");
+  Require(end_margin >= 0.0 && end_margin < 0.5, "end_margin must be in [0, 0.5)");
+  Require(min_contrast >= 0.0 && min_contrast <= 1.0, "min_contrast must be in [0, 1]");
+  Require(passes >= 1, "passes must be at least 1");
+  Require(tolerance_px >= 0.0, "tolerance_px must be non-negative");
+}
+
+std::optional<Quad> RefineUndistortedCorners(const cv::Mat& gray, const cv::Point& origin, const LensTables& lens,
+                                             int cells, const Quad& distorted, const UndistortedEdgeOptions& options) {
+  const std::vector<cv::Point2d> corners = lens.Undistort({distorted.begin(), distorted.end()});
+  std::optional<Quad> quad = Quad{corners[0], corners[1], corners[2], corners[3]};
+  // Profiles are measured in image pixels: their length follows the detected module.
+  const double image_module = MeanSide(distorted) / cells;
+  for (int pass = 0; pass < options.passes; ++pass) {
+    const std::optional<Quad> next =
+        RefinePass(gray, cv::Point2d(origin.x, origin.y), lens, cells, *quad, image_module, options);
+    if (!next) return std::nullopt;
+    double moved = 0.0;
+    for (int k = 0; k < 4; ++k) moved = std::max(moved, cv::norm((*next)[k] - (*quad)[k]));
+    quad = next;
+    if (moved <= options.tolerance_px) break;
+  }
+  return quad;
+}
+
+}  // namespace calibproj::detect
