@@ -49,8 +49,9 @@ ProjectorHomography::ProjectorHomography(cv::Size image_size, HomographyOptions 
 }
 
 void ProjectorHomography::Add(const cv::Point2d& projector, const cv::Point2d& image) {
-  projector_.push_back(projector);
-  image_.push_back(image);
+  ImageSum& point = points_[{projector.x, projector.y}];
+  point.sum += image;
+  ++point.count;
 }
 
 bool ProjectorHomography::Update() {
@@ -66,18 +67,23 @@ bool ProjectorHomography::Update() {
 }
 
 bool ProjectorHomography::Fit() {
+  std::vector<cv::Point2d> projector, image;
+  for (const auto& [key, point] : points_) {
+    projector.emplace_back(key.first, key.second);
+    image.push_back(point.sum * (1.0 / point.count));
+  }
   const double diagonal = std::hypot(image_size_.width, image_size_.height);
-  if (Spread(image_) < options_.min_spread * diagonal) return false;
+  if (Spread(image) < options_.min_spread * diagonal) return false;
   std::vector<unsigned char> inlier_mask;
-  const cv::Mat H = cv::findHomography(projector_, image_, cv::RANSAC, options_.ransac_threshold_px, inlier_mask);
+  const cv::Mat H = cv::findHomography(projector, image, cv::RANSAC, options_.ransac_threshold_px, inlier_mask);
   if (H.empty()) return false;
   const cv::Matx33d candidate(H);
   int inliers = 0;
   double squares = 0.0;
-  for (std::size_t i = 0; i < projector_.size(); ++i) {
+  for (std::size_t i = 0; i < projector.size(); ++i) {
     if (!inlier_mask[i]) continue;
-    const cv::Vec3d q = candidate * cv::Vec3d(projector_[i].x, projector_[i].y, 1.0);
-    const cv::Point2d d = cv::Point2d(q[0] / q[2], q[1] / q[2]) - image_[i];
+    const cv::Vec3d q = candidate * cv::Vec3d(projector[i].x, projector[i].y, 1.0);
+    const cv::Point2d d = cv::Point2d(q[0] / q[2], q[1] / q[2]) - image[i];
     squares += d.dot(d);
     ++inliers;
   }

@@ -5,12 +5,14 @@
 
 #include <opencv2/core.hpp>
 
+#include <map>
+#include <utility>
 #include <vector>
 
 namespace calibproj::detect {
 
 struct HomographyOptions {
-  // Correspondences (marker centres) needed before the homography is trusted.
+  // Distinct MSM centres needed before the homography is trusted.
   int min_points = 8;
   // The image points must spread over at least this fraction of the image diagonal
   // (square root of the smaller eigenvalue of their covariance), so that the fit
@@ -30,7 +32,8 @@ class ProjectorHomography {
   ProjectorHomography(cv::Size image_size, HomographyOptions options);
 
   // Adds one correspondence: a marker centre in projector pixels and in undistorted
-  // image pixels.
+  // image pixels. The scales of one MSM share their projector centre; they count as
+  // one point (at the mean of their image positions).
   void Add(const cv::Point2d& projector, const cv::Point2d& image);
 
   // Refits from every correspondence when enough new ones arrived since the last fit;
@@ -39,7 +42,8 @@ class ProjectorHomography {
 
   bool valid() const { return valid_; }
   const cv::Matx33d& H() const { return H_; }
-  int point_count() const { return static_cast<int>(projector_.size()); }
+  // Distinct projector points.
+  int point_count() const { return static_cast<int>(points_.size()); }
   double rms_px() const { return rms_px_; }
 
   // Undistorted image position of a projector pixel (needs valid()).
@@ -50,7 +54,11 @@ class ProjectorHomography {
 
   cv::Size image_size_;
   HomographyOptions options_;
-  std::vector<cv::Point2d> projector_, image_;
+  struct ImageSum {
+    cv::Point2d sum;
+    int count = 0;
+  };
+  std::map<std::pair<double, double>, ImageSum> points_;
   int fitted_count_ = 0;
   bool valid_ = false;
   cv::Matx33d H_ = cv::Matx33d::eye();
