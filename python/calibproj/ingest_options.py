@@ -119,6 +119,9 @@ class IngestOptions:
         search_interval: frames between two searches of the start code.
         detection_threads: detection threads per camera.
         max_pending_jobs: patterns waiting for detection at most (bounds memory).
+        planning_lag: a pattern's regions are planned from the detections of the patterns
+            at least this many before it, whatever the threads' timing, so that results
+            do not depend on how fast detection keeps up.
     """
 
     min_correlation: float = 0.8
@@ -184,6 +187,7 @@ class IngestOptions:
     search_interval: int = 4
     detection_threads: int = 1
     max_pending_jobs: int = 4
+    planning_lag: int = 4
 
     def replace(self, **changes: Any) -> IngestOptions:
         """A copy with some fields changed; ValueError naming an unknown field."""

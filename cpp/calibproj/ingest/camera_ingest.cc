@@ -96,7 +96,7 @@ class CameraIngest {
     if (progress_) progress_(result_.frames_decoded, result_.frames_decoded);
     if (!started_) ThrowStartNotFound();
     SubmitPending();
-    Absorb(pipeline_.Finish());
+    AbsorbBefore(static_cast<int>(sequence_.patterns.size()));
     result_.sync = sync::SynchroniseFromStart(result_.signal, timeline_, sequence_.start_code, sequence_.end_code,
                                               start_, nominal_rate_, options_.sync, path_);
     DropUncleanPatterns();
@@ -224,7 +224,7 @@ class CameraIngest {
   void BeginPattern(int index) {
     // Until the homography is known every pattern costs a whole-frame detection:
     // waiting for the ones under way gives it as early as possible.
-    Absorb(homography_.valid() ? pipeline_.Poll() : pipeline_.Finish());
+    AbsorbBefore(homography_.valid() ? index - options_.planning_lag : index);
     homography_.Update();
     pending_ = PendingPattern{};
     pending_.pattern = index;
@@ -308,6 +308,22 @@ class CameraIngest {
     result_.frames_detected += count;
     ++(pending.job.whole_frame ? result_.patterns_whole_frame : result_.patterns_in_regions);
     pipeline_.Submit(std::move(pending.job));
+  }
+
+  // Absorbs, in pattern order, the detections of every pattern before `pattern`
+  // (waiting for them), so that what the ingest knows at any pattern is deterministic.
+  void AbsorbBefore(int pattern) {
+    pipeline_.WaitForPatternsBefore(pattern);
+    for (DetectionOutput& output : pipeline_.Poll()) {
+      const int index = output.pattern;
+      arrived_.emplace(index, std::move(output));
+    }
+    std::vector<DetectionOutput> ready;
+    while (!arrived_.empty() && arrived_.begin()->first < pattern) {
+      ready.push_back(std::move(arrived_.begin()->second));
+      arrived_.erase(arrived_.begin());
+    }
+    Absorb(ready);
   }
 
   // Detections -> undistorted centres (records) and homography correspondences.
@@ -404,6 +420,7 @@ class CameraIngest {
   int end_means_first_ = 0;
   int end_means_last_ = -1;
   PendingPattern pending_;
+  std::map<int, DetectionOutput> arrived_;  // finished, not yet absorbed, by pattern
   std::vector<PatternStatus> status_;
   std::vector<std::vector<int>> used_frames_;
   CameraIngestResult result_;
@@ -426,6 +443,7 @@ void IngestOptions::Check() const {
   Require(search_interval >= 1, "search_interval must be at least 1");
   Require(detection_threads >= 1, "detection_threads must be at least 1");
   Require(max_pending_jobs >= 1, "max_pending_jobs must be at least 1");
+  Require(planning_lag >= 0, "planning_lag must be non-negative");
   Require(bootstrap_downscale >= 1 && bootstrap_downscale <= 8, "bootstrap_downscale must be in [1, 8]");
   edges.Check();
   Require(edge_gap_share > 0.0 && edge_gap_share <= 1.0, "edge_gap_share must be in (0, 1]");

@@ -72,6 +72,10 @@ struct IngestOptions {
   int search_interval = 4;
   int detection_threads = 1;
   int max_pending_jobs = 4;
+  // The homography and the resolution limit used to plan a pattern come from the
+  // detections of the patterns at least this many before it, whatever the threads'
+  // timing: results do not depend on how fast detection keeps up.
+  int planning_lag = 4;
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;

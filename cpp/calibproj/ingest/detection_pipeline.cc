@@ -42,6 +42,7 @@ void DetectionPipeline::Submit(DetectionJob job) {
   std::unique_lock<std::mutex> lock(mutex_);
   space_ready_.wait(lock, [&] { return static_cast<int>(queue_.size()) < max_pending_ || error_ || stopping_; });
   RethrowLocked();
+  in_flight_.insert(job.pattern);
   queue_.push_back(std::move(job));
   work_ready_.notify_one();
 }
@@ -50,6 +51,12 @@ std::vector<DetectionOutput> DetectionPipeline::Poll() {
   std::lock_guard<std::mutex> lock(mutex_);
   RethrowLocked();
   return std::exchange(finished_, {});
+}
+
+void DetectionPipeline::WaitForPatternsBefore(int pattern) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  all_done_.wait(lock, [&] { return in_flight_.empty() || *in_flight_.begin() >= pattern || error_; });
+  RethrowLocked();
 }
 
 std::vector<DetectionOutput> DetectionPipeline::Finish() {
@@ -95,6 +102,7 @@ void DetectionPipeline::Work(const detect::MarkerDetector& detector) {
     {
       std::lock_guard<std::mutex> lock(mutex_);
       --running_;
+      in_flight_.erase(in_flight_.find(job.pattern));
       if (error && !error_) error_ = error;
       if (!error) finished_.push_back(std::move(output));
     }

@@ -12,6 +12,7 @@
 #include <exception>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <thread>
 #include <vector>
 
@@ -73,6 +74,8 @@ class DetectionPipeline {
   void Submit(DetectionJob job);
   // Jobs finished since the last call (in completion order).
   std::vector<DetectionOutput> Poll();
+  // Waits until every job of a pattern before `pattern` has finished.
+  void WaitForPatternsBefore(int pattern);
   // Waits for every queued job and returns the remaining outputs.
   std::vector<DetectionOutput> Finish();
 
@@ -94,6 +97,7 @@ class DetectionPipeline {
   std::condition_variable work_ready_, space_ready_, all_done_;
   std::deque<DetectionJob> queue_;
   std::vector<DetectionOutput> finished_;
+  std::multiset<int> in_flight_;  // patterns of the jobs queued or running
   int running_ = 0;
   bool stopping_ = false;
   std::exception_ptr error_;

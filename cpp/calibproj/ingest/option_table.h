@@ -81,6 +81,7 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("search_interval", o.search_interval, "frames between two searches of the start code");
   visit("detection_threads", o.detection_threads, "detection threads per camera");
   visit("max_pending_jobs", o.max_pending_jobs, "patterns waiting for detection at most");
+  visit("planning_lag", o.planning_lag, "patterns are planned from the detections this many patterns back");
 }
 
 }  // namespace calibproj::ingest
