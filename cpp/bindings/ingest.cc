@@ -160,6 +160,7 @@ py::list ScalesList(const std::vector<ingest::ScaleStats>& scales) {
     d["too_small"] = s.too_small;
     d["outside"] = s.outside;
     d["unresolvable"] = s.unresolvable;
+    d["redundant"] = s.redundant;
     d["detected"] = s.detected;
     d["kept"] = s.kept;
     out.append(d);

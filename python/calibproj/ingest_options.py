@@ -96,6 +96,9 @@ class IngestOptions:
             region shrunk by an integer factor bringing the module near this size (its
             corners are refined at full resolution anyway); 0 = never shrink.
         max_downscale: largest such factor.
+        max_scales_per_msm: scales searched per MSM at most: a marker is left out when
+            this many larger scales of its MSM are worth searching (larger markers give
+            better centres); 0 searches every scale.
         learn_resolution: stop searching markers of sizes the camera has not been
             decoding (judged per bin of predicted module size).
         resolution_bin_px: width of those bins, pixels of module size.
@@ -168,8 +171,9 @@ class IngestOptions:
     max_roi_area_fraction: float = 0.5
     max_offset_px: float = 4.0
     max_offset_fraction: float = 0.25
-    target_module_px: float = 6.0
+    target_module_px: float = 4.0
     max_downscale: int = 8
+    max_scales_per_msm: int = 4
     learn_resolution: bool = True
     resolution_bin_px: float = 0.25
     resolution_min_trials: int = 24

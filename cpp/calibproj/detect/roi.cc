@@ -86,8 +86,57 @@ const MarkerPrediction* PatternPlan::Find(int id) const {
   return nullptr;
 }
 
+namespace {
+
+enum class Verdict { kSearch, kOutside, kTooSmall, kUnresolvable };
+
+struct Assessment {
+  Verdict verdict = Verdict::kSearch;
+  cv::Rect2d box;         // bounding box of the drawn square in the image
+  double side_px = 0.0;   // its shortest side in the image
+};
+
+// Whether a marker drawn with `side` projector pixels around `centre` is worth searching.
+Assessment Assess(const ProjectorHomography& homography, const LensModel& lens, const cv::Rect& inner,
+                  const cv::Point2d& centre, double side, int grid_cells, const RoiOptions& options,
+                  const ResolutionLimit* limit) {
+  Assessment a;
+  const auto outline = SquareOutline(homography, lens, centre, side, options.edge_points);
+  a.box = BoundingBox(outline);
+  a.side_px = ShortestSide(outline);
+  if (!(a.box.x >= inner.x && a.box.y >= inner.y && a.box.x + a.box.width <= inner.x + inner.width &&
+        a.box.y + a.box.height <= inner.y + inner.height)) {
+    a.verdict = Verdict::kOutside;
+  } else if (a.side_px / grid_cells < options.min_module_px) {
+    a.verdict = Verdict::kTooSmall;
+  } else if (limit != nullptr && limit->Hopeless(a.side_px / grid_cells)) {
+    a.verdict = Verdict::kUnresolvable;
+  }
+  return a;
+}
+
+// True when `max_scales` larger scales of the same MSM are worth searching too.
+bool LargerScalesSuffice(const ProjectorHomography& homography, const LensModel& lens, const cv::Rect& inner,
+                         const cv::Point2d& centre, int id, int grid_cells, const ScaleSelection& selection,
+                         const RoiOptions& options, const ResolutionLimit* limit) {
+  if (selection.max_scales <= 0) return false;
+  const double side = selection.sides[selection.current];
+  int larger = 0;
+  for (std::size_t s = 0; s < selection.sides.size(); ++s) {
+    if (!(selection.sides[s] > side)) continue;
+    const auto& omitted = selection.omitted[s];
+    if (std::find(omitted.begin(), omitted.end(), id) != omitted.end()) continue;
+    const Assessment a = Assess(homography, lens, inner, centre, selection.sides[s], grid_cells, options, limit);
+    if (a.verdict == Verdict::kSearch && ++larger >= selection.max_scales) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
 PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
-                        const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit) {
+                        const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit,
+                        const ScaleSelection* selection) {
   options.Check();
   if (!homography.valid()) throw std::logic_error("PlanPattern needs a valid homography");
   PatternPlan plan;
@@ -95,30 +144,27 @@ PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& 
   const cv::Rect inner(options.border_px, options.border_px, image_size.width - 2 * options.border_px,
                        image_size.height - 2 * options.border_px);
   for (std::size_t i = 0; i < markers.ids.size(); ++i) {
-    const auto outline = SquareOutline(homography, lens, markers.centres[i], markers.side_px, options.edge_points);
-    const cv::Rect2d box = BoundingBox(outline);
-    if (!(box.x >= inner.x && box.y >= inner.y && box.x + box.width <= inner.x + inner.width &&
-          box.y + box.height <= inner.y + inner.height)) {
-      ++plan.outside;
+    const Assessment a = Assess(homography, lens, inner, markers.centres[i], markers.side_px, markers.grid_cells,
+                                options, limit);
+    if (a.verdict == Verdict::kOutside) ++plan.outside;
+    if (a.verdict == Verdict::kTooSmall) ++plan.too_small;
+    if (a.verdict == Verdict::kUnresolvable) ++plan.unresolvable;
+    if (a.verdict != Verdict::kSearch) continue;
+    if (selection != nullptr && LargerScalesSuffice(homography, lens, inner, markers.centres[i], markers.ids[i],
+                                                    markers.grid_cells, *selection, options, limit)) {
+      ++plan.redundant;
       continue;
     }
     MarkerPrediction prediction;
     prediction.id = markers.ids[i];
-    prediction.side_px = ShortestSide(outline);
-    prediction.module_px = prediction.side_px / markers.grid_cells;
-    if (prediction.module_px < options.min_module_px) {
-      ++plan.too_small;
-      continue;
-    }
-    if (limit != nullptr && limit->Hopeless(prediction.module_px)) {
-      ++plan.unresolvable;
-      continue;
-    }
+    prediction.side_px = a.side_px;
+    prediction.module_px = a.side_px / markers.grid_cells;
     prediction.centre = DistortPixels(lens, {homography.Map(markers.centres[i])})[0];
     if (options.target_module_px > 0.0) {
       const int factor = static_cast<int>(std::floor(prediction.module_px / options.target_module_px));
       prediction.downscale = std::clamp(factor, 1, options.max_downscale);
     }
+    const cv::Rect2d& box = a.box;
     const double pad = std::max<double>(options.padding_px, options.padding_fraction * prediction.side_px);
     const int x0 = AlignDown(static_cast<int>(std::floor(box.x - pad)), options.alignment);
     const int y0 = AlignDown(static_cast<int>(std::floor(box.y - pad)), options.alignment);

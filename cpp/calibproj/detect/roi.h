@@ -47,7 +47,7 @@ struct RoiOptions {
   // shrunk by an integer factor (at most max_downscale) that brings the module near
   // that size: detection costs grow with the pixels searched, and its corners are
   // refined at full resolution afterwards anyway. 0 = never shrink.
-  double target_module_px = 6.0;
+  double target_module_px = 4.0;
   int max_downscale = 8;
 
   // Throws std::invalid_argument naming the first bad field.
@@ -69,6 +69,7 @@ struct PatternPlan {
   int too_small = 0;                      // predicted too small to decode
   int outside = 0;                        // not wholly inside the image
   int unresolvable = 0;                   // of a size this camera has not been decoding
+  int redundant = 0;                      // left to larger scales of the same MSM
   bool whole_frame = false;               // one whole-frame detection is cheaper
 
   const MarkerPrediction* Find(int id) const;
@@ -83,9 +84,20 @@ struct PatternMarkers {
   int grid_cells = 1;
 };
 
-// `limit` (may be null) leaves out markers of sizes the camera does not resolve.
+// The scales of the MSMs of a pattern's array, for leaving a marker to larger scales.
+struct ScaleSelection {
+  std::vector<double> sides;              // drawn side of each scale, projector pixels
+  std::vector<std::vector<int>> omitted;  // markers left out at each scale
+  int current = 0;                        // the pattern's scale
+  int max_scales = 0;                     // searched scales per MSM at most (0: all)
+};
+
+// `limit` (may be null) leaves out markers of sizes the camera does not resolve;
+// `selection` (may be null) a marker when max_scales larger scales of its MSM are
+// worth searching (larger markers give better centres).
 PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
-                        const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit);
+                        const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit,
+                        const ScaleSelection* selection = nullptr);
 
 // A grey crop of the frame and where it sits in it.
 struct RegionImage {

@@ -244,11 +244,13 @@ class CameraIngest {
       return;
     }
     job.has_plan = true;
+    const detect::ScaleSelection selection = Selection(index);
     job.plan = detect::PlanPattern(homography_, camera_.lens, whole.size(), markers, options_.roi,
-                                   options_.learn_resolution ? &resolution_ : nullptr);
+                                   options_.learn_resolution ? &resolution_ : nullptr, &selection);
     stats.too_small += job.plan.too_small;
     stats.outside += job.plan.outside;
     stats.unresolvable += job.plan.unresolvable;
+    stats.redundant += job.plan.redundant;
     if (job.plan.markers.empty()) {
       pending_.skip = true;
       status_[index] = PatternStatus::kSkipped;
@@ -268,6 +270,22 @@ class CameraIngest {
     } else {
       for (const auto& marker : job.plan.markers) pending_.rects.push_back(marker.region);
     }
+  }
+
+  // The scales of pattern `index`'s array as the sequence shows them.
+  detect::ScaleSelection Selection(int index) const {
+    const PatternSpec& pattern = sequence_.patterns[index];
+    detect::ScaleSelection selection;
+    selection.current = pattern.scale_index;
+    selection.max_scales = options_.max_scales_per_msm;
+    selection.sides.assign(sequence_.scales.size(), 0.0);
+    selection.omitted.assign(sequence_.scales.size(), {});
+    for (const PatternSpec& other : sequence_.patterns) {
+      if (other.array != pattern.array) continue;
+      selection.sides[other.scale_index] = other.marker_side_px;
+      selection.omitted[other.scale_index] = other.omitted;
+    }
+    return selection;
   }
 
   void AddFrame(int frame, const cv::Mat& image) {
@@ -444,6 +462,7 @@ void IngestOptions::Check() const {
   Require(detection_threads >= 1, "detection_threads must be at least 1");
   Require(max_pending_jobs >= 1, "max_pending_jobs must be at least 1");
   Require(planning_lag >= 0, "planning_lag must be non-negative");
+  Require(max_scales_per_msm >= 0, "max_scales_per_msm must be non-negative (0: every scale)");
   Require(bootstrap_downscale >= 1 && bootstrap_downscale <= 8, "bootstrap_downscale must be in [1, 8]");
   edges.Check();
   Require(edge_gap_share > 0.0 && edge_gap_share <= 1.0, "edge_gap_share must be in (0, 1]");

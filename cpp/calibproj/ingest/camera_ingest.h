@@ -40,6 +40,9 @@ struct IngestOptions {
   detect::DetectorOptions detector;  // `inverted` is taken from the sequence
   detect::RoiOptions roi;
   detect::HomographyOptions homography;
+  // Scales searched per MSM at most: a marker is left out when this many larger scales
+  // of its MSM are worth searching (0: every scale).
+  int max_scales_per_msm = 4;
   // Stop searching markers of sizes this camera has not been decoding.
   bool learn_resolution = true;
   detect::ResolutionOptions resolution;
@@ -90,6 +93,7 @@ struct ScaleStats {
   int too_small = 0;
   int outside = 0;
   int unresolvable = 0;      // of a size the camera was not decoding
+  int redundant = 0;         // left to larger scales of their MSM
   int detected = 0;          // markers found
   int kept = 0;              // used in merged centres
 };
