@@ -12,11 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calibproj import _core
 from calibproj.cli import main
 from calibproj.generate.builder import build_sequence
 from calibproj.ingest import ingest
 from calibproj.ingest_options import IngestOptions
-from calibproj.io.intrinsics import read_intrinsics, write_intrinsics
+from calibproj.io.intrinsics import Intrinsics, read_intrinsics, write_intrinsics
+from calibproj.markers import MarkerDetector, marker_centres, render_marker
 from calibproj.simulate.render import simulate_videos
 from calibproj.tracks import Tracks
 
@@ -189,6 +191,57 @@ def test_detect_command_writes_tracks_and_report(aruco, tmp_path, capsys):
         assert camera["frames"]["detected"] > 0
     printed = capsys.readouterr().out
     assert "cam2: offset" in printed and "markers found/searched per scale" in printed
+
+
+# ------------------------------------------------------- corners under distortion
+
+# A GoPro-like wide-angle lens on a 960 x 540 image.
+WIDE = Intrinsics("wide", (960, 540), np.array([[460.0, 0, 479.5], [0, 460.3, 269.5], [0, 0, 1]]),
+                  np.array([-0.26, 0.09, 0.0003, -0.0002, -0.012]))
+
+
+def distorted_marker(centre: np.ndarray, module_px: float) -> np.ndarray:
+    """A white-on-black marker whose undistorted centre is `centre`, seen through WIDE."""
+    import cv2
+
+    offset = np.array([720.0, 430.0])  # the undistorted plane of the image, shifted to fit a canvas
+    canvas = np.zeros((1400, 2400), np.float32)
+    marker = render_marker("aruco:4X4_50", 3, module_px=module_px, inverted=True).astype(np.float32)
+    top_left = centre + offset - (np.array(marker.shape[::-1]) - 1) / 2
+    x0, y0 = np.floor(top_left).astype(int)
+    fraction = top_left - (x0, y0)
+    marker = cv2.warpAffine(marker, np.float32([[1, 0, fraction[0]], [0, 1, fraction[1]]]),
+                            (marker.shape[1] + 2, marker.shape[0] + 2))
+    canvas[y0:y0 + marker.shape[0], x0:x0 + marker.shape[1]] = marker
+    pixels = np.stack(np.meshgrid(np.arange(960.0), np.arange(540.0)), -1).reshape(-1, 2)
+    source = (WIDE.undistort_points(pixels) + offset).reshape(540, 960, 2).astype(np.float32)
+    image = cv2.GaussianBlur(cv2.remap(canvas, source[..., 0], source[..., 1], cv2.INTER_LINEAR), (0, 0), 0.7)
+    return np.clip(0.8 * image + 30, 0, 255).astype(np.uint8)
+
+
+def test_edges_fitted_in_undistorted_pixels_keep_large_markers_exact():
+    """Near the corners of a wide-angle image the edges of a large marker bend: corners
+    refined in the image and then undistorted put its centre off by most of a pixel;
+    straight edges fitted in undistorted pixels do not."""
+    raw_detector = MarkerDetector("aruco:4X4_50", inverted=True, corner_refinement="none")
+    image_detector = MarkerDetector("aruco:4X4_50", inverted=True)
+    for centre, module in ((np.array([150.0, 120.0]), 22.0), (np.array([800.0, 420.0]), 16.0)):
+        image = distorted_marker(centre, module)
+        _, raw = raw_detector.detect(image)
+        _, refined_in_image = image_detector.detect(image)
+        ours = _core.ingest.refine_undistorted_corners(image, raw[0], WIDE.K, WIDE.dist, 6)
+        error = np.linalg.norm(marker_centres(ours[None])[0] - centre)
+        naive = np.linalg.norm(marker_centres(WIDE.undistort_points(refined_in_image[0])[None])[0] - centre)
+        assert error < 0.03 and naive > 0.3, (centre, error, naive)
+
+
+def test_lens_tables_match_the_exact_mapping():
+    rng = np.random.default_rng(0)
+    pixels = rng.uniform([0, 0], [959, 539], (2000, 2))
+    undistorted = _core.ingest.lens_tables_map(WIDE.K, WIDE.dist, (960, 540), pixels, True)
+    assert np.abs(undistorted - WIDE.undistort_points(pixels)).max() < 0.005
+    distorted = _core.ingest.lens_tables_map(WIDE.K, WIDE.dist, (960, 540), undistorted, False)
+    assert np.abs(distorted - WIDE.distort_points(undistorted)).max() < 0.005
 
 
 # -------------------------------------------------------------------- failures
