@@ -7,8 +7,10 @@
 #include <map>
 #include <mutex>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
+#include "calibproj/ingest/option_table.h"
 #include "detect_report.h"
 #include "files.h"
 #include "intrinsics_file.h"
@@ -24,55 +26,6 @@ namespace {
 const std::vector<std::string> kVideoSuffixes = {".mp4", ".mov", ".mkv", ".avi", ".m4v", ".mts", ".webm"};
 const std::vector<std::string> kIntrinsicsSuffixes = {".json", ".yaml", ".yml", ".xml"};
 const char kReportName[] = "detect_report.json";
-
-// One flag per field of the Python IngestOptions, in its order, so that both commands
-// take the same command lines; the defaults are those of the C++ structs.
-template <typename Visitor>
-void VisitIngestFlags(ingest::IngestOptions& o, Visitor&& visit) {
-  sync::SyncOptions& s = o.sync;
-  visit("min-correlation", s.min_correlation, "normalised cross-correlation a light code must reach");
-  visit("max-rate-deviation", s.max_rate_deviation, "largest relative rate difference between codes and video");
-  visit("context-before", s.context_before, "projector frames of known light used before each code");
-  visit("context-after", s.context_after, "projector frames of known light used after each code");
-  visit("guard-samples", s.guard_samples, "camera frames searched past the best start-code match");
-  visit("rate-search", s.search.rate_search, "candidate rates span the nominal rate x (1 +- rate-search)");
-  visit("rate-step", s.search.rate_step, "relative step between candidate rates");
-  visit("phases", s.search.phases, "sub-frame phases per candidate rate in the coarse search");
-  visit("coarse-exposure", s.search.exposure, "exposure assumed by the coarse search, camera frames");
-  visit("offset-range", s.fit.offset_range, "sub-frame fit range around the coarse offset, camera frames");
-  visit("offset-step", s.fit.offset_step, "grid step of the sub-frame fit, camera frames");
-  visit("min-exposure", s.fit.min_exposure, "shortest exposure the fit tries, camera frames");
-  visit("max-exposure", s.fit.max_exposure, "longest exposure the fit tries, camera frames");
-  visit("exposure-steps", s.fit.exposure_steps, "exposures the fit tries between the two");
-  visit("feasible-chi2", s.fit.feasible_chi2, "cost excess (residual variances per frame) that fits as well");
-  visit("plateau-tolerance", s.fit.plateau_tolerance, "cost excess (share of signal variance) that fits as well");
-  visit("fit-iterations", s.fit.max_iterations, "Levenberg-Marquardt iterations of the fit");
-  visit("exposure-s", o.exposure_s, "known exposure time of the cameras, seconds (0: estimate it)");
-  visit("margin", o.pick.margin, "projector frames kept clear of each pattern change");
-  visit("average-frames", o.pick.average_frames, "clean frames averaged per pattern before detection");
-  visit("max-clock-drift", o.pick.max_clock_drift, "largest relative camera clock drift");
-  visit("roi-padding-fraction", o.roi.padding_fraction, "padding around a predicted marker, share of its side");
-  visit("roi-padding-px", o.roi.padding_px, "padding around a predicted marker, pixels");
-  visit("roi-alignment", o.roi.alignment, "regions start on multiples of this many pixels");
-  visit("min-module-px", o.roi.min_module_px, "markers whose predicted cell is smaller are not searched");
-  visit("border-px", o.roi.border_px, "a marker must lie this far inside the image to be searched");
-  visit("max-roi-area-fraction", o.roi.max_area_fraction, "above this image share, one whole-frame detection");
-  visit("max-offset-px", o.roi.max_offset_px, "largest distance of a detection from its prediction, pixels");
-  visit("max-offset-fraction", o.roi.max_offset_fraction, "the same as a share of the marker side");
-  visit("homography-min-points", o.homography.min_points, "marker centres needed before the homography");
-  visit("homography-min-spread", o.homography.min_spread, "their spread, share of the image diagonal");
-  visit("homography-threshold-px", o.homography.ransac_threshold_px, "RANSAC threshold of the homography fit");
-  visit("homography-min-inlier-share", o.homography.min_inlier_share, "share of inliers the fit needs");
-  visit("homography-max-rms-px", o.homography.max_rms_px, "inlier RMS the fit must stay under");
-  visit("max-deviation-px", o.merge.max_deviation_px, "scales farther than this from their median are rejected");
-  visit("min-scales", o.merge.min_scales, "scales an MSM needs to give a centre");
-  visit("mean-row-step", o.mean_row_step, "the mean luma is taken over every n-th row");
-  visit("luma-gamma", o.luma_gamma, "the video's display gamma, undone before the mean (1: encoded values)");
-  visit("lookback-frames", o.lookback_frames, "decoded frames kept while the start code is searched");
-  visit("search-interval", o.search_interval, "frames between two searches of the start code");
-  visit("detection-threads", o.detection_threads, "detection threads per camera");
-  visit("max-pending-jobs", o.max_pending_jobs, "patterns waiting for detection at most");
-}
 
 std::string Lower(std::string text) {
   std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::tolower(c); });
@@ -230,12 +183,18 @@ std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** comm
   cmd->add_flag("--no-progress", args->no_progress, "no progress lines");
   cmd->add_flag("--json", args->json, "print the report as JSON instead of a table");
   const std::string group = "ingest options";
-  cmd->add_flag("--use-roi,!--no-use-roi", args->options.use_roi,
-                "detect in predicted regions once the homography is known (--no-use-roi: whole frames)")
-      ->capture_default_str()
-      ->group(group);
-  VisitIngestFlags(args->options, [cmd, &group](const std::string& name, auto& field, const std::string& help) {
-    cmd->add_option("--" + name, field, help)->capture_default_str()->group(group);
+  // One flag per field of the Python IngestOptions, from the table the binding walks
+  // too, so that both commands take the same command lines; the defaults are those of
+  // the C++ structs.
+  ingest::VisitIngestOptions(args->options, [cmd, &group](const std::string& name, auto& field,
+                                                          const std::string& help) {
+    std::string flag = name;
+    std::replace(flag.begin(), flag.end(), '_', '-');
+    if constexpr (std::is_same_v<std::decay_t<decltype(field)>, bool>) {
+      cmd->add_flag("--" + flag + ",!--no-" + flag, field, help)->capture_default_str()->group(group);
+    } else {
+      cmd->add_option("--" + flag, field, help)->capture_default_str()->group(group);
+    }
   });
   *command = cmd;
   return args;

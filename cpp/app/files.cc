@@ -1,10 +1,40 @@
 #include "files.h"
 
+#include <charconv>
+#include <cstdlib>
+
 #include <fstream>
 #include <random>
 #include <sstream>
 
 namespace calibproj::app {
+
+std::string PythonFloat(double value) {
+  char buffer[64];
+  const auto [end, error] = std::to_chars(buffer, buffer + sizeof(buffer), value, std::chars_format::scientific);
+  if (error != std::errc()) throw std::runtime_error("cannot format a number");
+  const std::string text(buffer, end);  // [-]d[.ddd]e(+|-)XX
+  const size_t e = text.find('e');
+  const bool negative = text[0] == '-';
+  std::string digits;
+  for (size_t i = negative ? 1 : 0; i < e; ++i) {
+    if (text[i] != '.') digits += text[i];
+  }
+  const int exponent = std::stoi(text.substr(e + 1));
+  std::string out = negative ? "-" : "";
+  if (exponent < -4 || exponent >= 16) {
+    out += digits.substr(0, 1);
+    if (digits.size() > 1) out += "." + digits.substr(1);
+    const std::string magnitude = std::to_string(std::abs(exponent));
+    return out + "e" + (exponent < 0 ? "-" : "+") + (magnitude.size() < 2 ? "0" : "") + magnitude;
+  }
+  if (exponent < 0) return out + "0." + std::string(-exponent - 1, '0') + digits;
+  if (digits.size() <= static_cast<size_t>(exponent) + 1) {
+    return out + digits + std::string(exponent + 1 - digits.size(), '0') + ".0";
+  }
+  return out + digits.substr(0, exponent + 1) + "." + digits.substr(exponent + 1);
+}
+
 
 namespace fs = std::filesystem;
 

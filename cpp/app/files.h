@@ -25,6 +25,11 @@ nlohmann::json ReadJson(const std::filesystem::path& path);
 // Writes text to a temporary file in the same folder, then renames it over `path`.
 void AtomicWrite(const std::filesystem::path& path, const std::string& text);
 
+// A finite double as Python's repr() writes it (shortest digits that read back to the
+// same value; fixed notation for exponents -4..15, with ".0" when integral), so that a
+// file written here is byte for byte the one the Python package writes.
+std::string PythonFloat(double value);
+
 // The document with its schema tag first, indented like the Python writer.
 std::string DumpSchemaJson(const std::string& kind, int major, const nlohmann::ordered_json& body);
 

@@ -117,14 +117,17 @@ namespace {
 std::string CompactJson(const nlohmann::json& value) { return value.dump(-1, ' ', true); }
 
 std::string CameraBlock(const Tracks& tracks, int camera) {
-  nlohmann::json ids = nlohmann::json::array(), xy = nlohmann::json::array();
+  // The numbers as Python writes them: nlohmann's dtoa does not always give the
+  // shortest digits, and both commands must write the same bytes.
+  nlohmann::json ids = nlohmann::json::array();
+  std::string xy;
   for (int i = 0; i < tracks.camera_index.size(); ++i) {
     if (tracks.camera_index(i) != camera) continue;
     ids.push_back(tracks.point_ids[tracks.point_index(i)]);
-    xy.push_back({tracks.xy(i, 0), tracks.xy(i, 1)});
+    xy += (xy.empty() ? "[" : ",[") + PythonFloat(tracks.xy(i, 0)) + "," + PythonFloat(tracks.xy(i, 1)) + "]";
   }
   return "  " + CompactJson(tracks.cameras[camera]) + ": {\n   \"point_ids\": " + CompactJson(ids) +
-         ",\n   \"xy\": " + CompactJson(xy) + "\n  }";
+         ",\n   \"xy\": [" + xy + "]\n  }";
 }
 
 }  // namespace
