@@ -6,9 +6,10 @@ system with the paper's sequence (100 arrays of 4 x 8 markers, 7 scales) into
 --render-dir (default: a temporary folder, removed afterwards; give a folder to keep the
 renderings and reuse them in later runs). Each camera is then ingested on its own (its
 video decoded by FFmpeg's threads while a detection thread works) and decoded by the
-ffmpeg program, alternately, so that both see the same machine load. Per camera it
-prints both times, their ratio, the frames and MSMs, and the MSM centre error against
-the rendering's truth (RMS over MSMs whose detected markers are at least 20 px wide).
+ffmpeg program (before and after, averaged), so that both see the same machine load.
+Per camera it prints both wall times, their ratio and the ratio of CPU times (steadier
+on a shared machine), the frames and MSMs, and the MSM centre error against the
+rendering's truth (RMS over MSMs whose detected markers are at least 20 px wide).
 
 The last line is
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import shutil
 import subprocess
 import sys
@@ -73,10 +75,16 @@ def rendering(folder: Path, scene: str, markers: str, arrays: int, seed: int) ->
     return folder, sequence
 
 
-def ffmpeg_decode_seconds(video: Path) -> float:
-    started = time.perf_counter()
+def cpu_seconds(who: int) -> float:
+    usage = resource.getrusage(who)
+    return usage.ru_utime + usage.ru_stime
+
+
+def ffmpeg_decode(video: Path) -> tuple[float, float]:
+    """Wall and CPU seconds of `ffmpeg -i VIDEO -f null -`."""
+    started, cpu = time.perf_counter(), cpu_seconds(resource.RUSAGE_CHILDREN)
     subprocess.run(["ffmpeg", "-v", "error", "-nostdin", "-i", str(video), "-f", "null", "-"], check=True)
-    return time.perf_counter() - started
+    return time.perf_counter() - started, cpu_seconds(resource.RUSAGE_CHILDREN) - cpu
 
 
 def centre_rms(camera, truth: dict, markers_per_array: int) -> tuple[float, int]:
@@ -99,16 +107,19 @@ def measure(system: str, folder: Path, sequence: Sequence, cameras: list[str] | 
     sim = folder / "sim"
     truth = json.loads((sim / "truth.json").read_text())
     names = cameras or sorted(p.stem for p in (sim / "videos").glob("*.mp4"))
-    totals = {"ingest": 0.0, "ffmpeg": 0.0, "detection": 0.0, "frames": 0}
-    print(f"\n{system}: {'camera':<9}{'ffmpeg s':>9}{'ingest s':>9}{'ratio':>7}{'decoded':>8}{'detect':>7}"
-          f"{'det ms':>7}{'MSMs':>6}{'rms px':>8}{'n':>5}  sync")
+    totals = {"ingest": 0.0, "ffmpeg": 0.0, "ingest_cpu": 0.0, "ffmpeg_cpu": 0.0, "detection": 0.0, "frames": 0}
+    print(f"\n{system}: {'camera':<9}{'ffmpeg s':>9}{'ingest s':>9}{'ratio':>7}{'cpu ratio':>10}{'decoded':>8}"
+          f"{'detect':>7}{'det ms':>7}{'MSMs':>6}{'rms px':>8}{'n':>5}  sync")
     for name in names:
         video = sim / "videos" / f"{name}.mp4"
-        ffmpeg_s = ffmpeg_decode_seconds(video)
-        started = time.perf_counter()
+        # ffmpeg before and after the ingest, averaged: the machine's load drifts.
+        before = ffmpeg_decode(video)
+        started, cpu = time.perf_counter(), cpu_seconds(resource.RUSAGE_SELF)
         result = ingest({name: video}, sequence, sim / "intrinsics", options=IngestOptions(), workers=1,
                         progress=False)
-        ingest_s = time.perf_counter() - started
+        ingest_s, ingest_cpu = time.perf_counter() - started, cpu_seconds(resource.RUSAGE_SELF) - cpu
+        after = ffmpeg_decode(video)
+        ffmpeg_s, ffmpeg_cpu = 0.5 * (before[0] + after[0]), 0.5 * (before[1] + after[1])
         camera = result.cameras[name]
         if not camera.ok:
             print(f"{system}: {name:<9}{ffmpeg_s:9.2f}{ingest_s:9.2f}  FAILED: {camera.error}")
@@ -118,15 +129,19 @@ def measure(system: str, folder: Path, sequence: Sequence, cameras: list[str] | 
         detected = raw["frames_detected"]
         detect_ms = 1e3 * raw["seconds_detection"] / max(detected, 1)
         sync = raw["sync"]
-        print(f"{system}: {name:<9}{ffmpeg_s:9.2f}{ingest_s:9.2f}{ingest_s / ffmpeg_s:7.2f}{raw['frames_decoded']:8d}"
+        print(f"{system}: {name:<9}{ffmpeg_s:9.2f}{ingest_s:9.2f}{ingest_s / ffmpeg_s:7.2f}"
+              f"{ingest_cpu / ffmpeg_cpu:10.2f}{raw['frames_decoded']:8d}"
               f"{detected:7d}{detect_ms:7.1f}{len(raw['centres']['array']):6d}{rms:8.3f}{count:5d}"
               f"  offset {sync['offset']:.3f}+-{sync['offset_uncertainty']:.3f} rate {sync['rate']:.6f}", flush=True)
         totals["ingest"] += ingest_s
         totals["ffmpeg"] += ffmpeg_s
+        totals["ingest_cpu"] += ingest_cpu
+        totals["ffmpeg_cpu"] += ffmpeg_cpu
         totals["detection"] += raw["seconds_detection"]
         totals["frames"] += detected
     print(f"{system}: total ffmpeg {totals['ffmpeg']:.1f} s, ingest {totals['ingest']:.1f} s, "
-          f"ratio {totals['ingest'] / max(totals['ffmpeg'], 1e-9):.2f}, "
+          f"ratio {totals['ingest'] / max(totals['ffmpeg'], 1e-9):.2f} "
+          f"(CPU {totals['ingest_cpu'] / max(totals['ffmpeg_cpu'], 1e-9):.2f}), "
           f"detection {1e3 * totals['detection'] / max(totals['frames'], 1):.1f} ms per pattern frame")
     return totals
 
