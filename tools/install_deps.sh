@@ -9,6 +9,7 @@ packages=(
   libceres-dev libeigen3-dev
   libopencv-dev libopencv-contrib-dev
   libapriltag-dev
+  libavformat-dev libavcodec-dev libavutil-dev libswscale-dev
   nlohmann-json3-dev libcli11-dev
   ffmpeg
 )

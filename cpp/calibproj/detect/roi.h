@@ -49,6 +49,11 @@ struct RoiOptions {
   // refined at full resolution afterwards anyway. 0 = never shrink.
   double target_module_px = 4.0;
   int max_downscale = 8;
+  // ArUco's adaptive threshold window in regions, pixels: one window does, since the
+  // marker's size there is known (between min_module_px and about twice
+  // target_module_px per module), where a whole frame needs several. 0 keeps the
+  // detector's own windows.
+  int threshold_window_px = 13;
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;

@@ -3,6 +3,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -12,19 +13,11 @@ namespace calibproj::detect {
 
 namespace {
 
+// Samples along one profile at most (the bound of UndistortedEdgeOptions).
+constexpr int kMaxProfileSamples = 256;
+
 void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument("undistorted edge options: " + message);
-}
-
-// Bilinear grey level at a whole-image position; NaN outside the crop.
-double GreyAt(const cv::Mat& gray, const cv::Point2d& origin, const cv::Point2d& p) {
-  const double x = p.x - origin.x, y = p.y - origin.y;
-  if (!(x >= 0.0 && y >= 0.0 && x <= gray.cols - 1.0 && y <= gray.rows - 1.0)) return std::nan("");
-  const int x0 = std::min(static_cast<int>(x), gray.cols - 2), y0 = std::min(static_cast<int>(y), gray.rows - 2);
-  const double fx = x - x0, fy = y - y0;
-  const uchar* row0 = gray.ptr<uchar>(y0);
-  const uchar* row1 = gray.ptr<uchar>(y0 + 1);
-  return (1 - fy) * ((1 - fx) * row0[x0] + fx * row0[x0 + 1]) + fy * ((1 - fx) * row1[x0] + fx * row1[x0 + 1]);
 }
 
 // A profile across an edge: its base point and outward unit normal in the image.
@@ -53,18 +46,33 @@ std::optional<EdgePoint> LocateEdge(const cv::Mat& gray, const cv::Point2d& orig
   const int steps = std::clamp(static_cast<int>(std::ceil(length * options.profile_samples_per_px)), 4,
                                std::max(4, options.max_profile_samples));
   const double step = length / steps;
-  std::vector<double> levels(steps + 1);
+  // The profile is a straight segment: inside the crop at both ends, inside throughout.
+  const cv::Point2d first = profile.base - profile.normal * reach.inward - origin;
+  const cv::Point2d last = profile.base + profile.normal * reach.outward - origin;
+  const auto inside = [&gray](const cv::Point2d& p) {
+    return p.x >= 0.0 && p.y >= 0.0 && p.x <= gray.cols - 1.0 && p.y <= gray.rows - 1.0;
+  };
+  if (!inside(first) || !inside(last)) return std::nullopt;
+  // Bilinear samples along it.
+  std::array<double, kMaxProfileSamples + 1> levels;
+  const cv::Point2d delta = profile.normal * step;
   for (int i = 0; i <= steps; ++i) {
-    levels[i] = GreyAt(gray, origin, profile.base + profile.normal * (-reach.inward + i * step));
-    if (std::isnan(levels[i])) return std::nullopt;
+    const double x = first.x + i * delta.x, y = first.y + i * delta.y;
+    const int x0 = std::min(static_cast<int>(x), gray.cols - 2), y0 = std::min(static_cast<int>(y), gray.rows - 2);
+    const double fx = x - x0, fy = y - y0;
+    const uchar* row0 = gray.ptr<uchar>(y0) + x0;
+    const uchar* row1 = row0 + gray.step[0];
+    levels[i] = (1 - fy) * ((1 - fx) * row0[0] + fx * row0[1]) + fy * ((1 - fx) * row1[0] + fx * row1[1]);
   }
-  const double inner = levels.front(), contrast = levels.back() - inner;
+  const double inner = levels[0], contrast = levels[steps] - inner;
   if (std::abs(contrast) < 1.0) return std::nullopt;
   double area = 0.0;
-  for (int i = 0; i < steps; ++i) {
-    const double a = std::clamp((levels[i] - inner) / contrast, 0.0, 1.0);
-    const double b = std::clamp((levels[i + 1] - inner) / contrast, 0.0, 1.0);
-    area += 0.5 * (a + b) * step;
+  const double scale = 1.0 / contrast;
+  double previous = std::clamp((levels[0] - inner) * scale, 0.0, 1.0);
+  for (int i = 1; i <= steps; ++i) {
+    const double current = std::clamp((levels[i] - inner) * scale, 0.0, 1.0);
+    area += 0.5 * (previous + current) * step;
+    previous = current;
   }
   return EdgePoint{profile.base + profile.normal * (reach.outward - area), contrast};
 }
@@ -161,7 +169,8 @@ void UndistortedEdgeOptions::Check() const {
   Require(spacing_px > 0.0, "spacing_px must be positive");
   Require(min_samples >= 2, "min_samples must be at least 2");
   Require(max_samples >= min_samples, "max_samples must be at least min_samples");
-  Require(max_profile_samples >= 4, "max_profile_samples must be at least 4");
+  Require(max_profile_samples >= 4 && max_profile_samples <= kMaxProfileSamples,
+          "max_profile_samples must be in [4, " + std::to_string(kMaxProfileSamples) + "]");
   Require(profile_samples_per_px >= 1.0, "profile_samples_per_px must be at least 1");
   Require(end_margin >= 0.0 && end_margin < 0.5, "end_margin must be in [0, 0.5)");
   Require(min_contrast >= 0.0 && min_contrast <= 1.0, "min_contrast must be in [0, 1]");

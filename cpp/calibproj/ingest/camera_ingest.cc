@@ -134,17 +134,16 @@ class CameraIngest {
 
   // ------------------------------------------------------------------ decoding
 
-  const cv::Mat& Colour() {
+  cv::Mat Gray() {
     if (!converted_) {
       converted_ = true;
       ++result_.frames_converted;
     }
-    return reader_.Colour();
+    return reader_.Gray();
   }
 
   void OnFrameBeforeStart(int frame) {
-    cv::Mat gray;
-    cv::cvtColor(Colour(), gray, cv::COLOR_BGR2GRAY);
+    cv::Mat gray = Gray();
     result_.signal.push_back(luma_.Mean(gray));
     ring_.Push(frame, std::move(gray));
     if (frame % options_.search_interval == 0 && tracker_->Update(result_.signal)) OnStartFound();
@@ -170,9 +169,9 @@ class CameraIngest {
   void OnFrameAfterStart(int frame) {
     const bool measure = frame >= end_means_first_ && frame <= end_means_last_;
     const auto pick = frame_pattern_.find(frame);
-    result_.signal.push_back(measure ? luma_.Mean(Colour()) : kNaN);
+    result_.signal.push_back(measure ? luma_.Mean(Gray()) : kNaN);
     if (pick != frame_pattern_.end()) {
-      HandlePick(frame, pick->second, [&]() -> const cv::Mat& { return Colour(); });
+      HandlePick(frame, pick->second, [&]() { return Gray(); });
     }
   }
 

@@ -102,7 +102,7 @@ struct CameraIngestResult {
   video::VideoInfo video;
   sync::SyncResult sync;
   int frames_decoded = 0;
-  int frames_converted = 0;    // decoded frames converted to colour (for luma or detection)
+  int frames_converted = 0;    // decoded frames whose grey image was made (for luma or detection)
   int frames_detected = 0;     // frames that went into a detection
   int patterns_whole_frame = 0;
   int patterns_in_regions = 0;

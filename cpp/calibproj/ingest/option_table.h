@@ -64,6 +64,7 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("max_offset_fraction", o.roi.max_offset_fraction, "the same as a share of the marker side");
   visit("target_module_px", o.roi.target_module_px, "larger markers are detected shrunk to about this module");
   visit("max_downscale", o.roi.max_downscale, "largest such shrinking factor");
+  visit("roi_threshold_window_px", o.roi.threshold_window_px, "ArUco's threshold window in regions (0: its own)");
   visit("max_scales_per_msm", o.max_scales_per_msm, "scales searched per MSM at most, the largest (0: all)");
   visit("learn_resolution", o.learn_resolution, "stop searching marker sizes the camera does not decode");
   visit("resolution_bin_px", o.resolution.bin_px, "module size bins of that record, pixels");

@@ -9,7 +9,7 @@ std::vector<double> ReadLumaSignal(const std::string& path, double gamma, int ro
   const LumaMeter meter(gamma, row_step);
   VideoReader reader(path);
   std::vector<double> signal;
-  while (reader.Grab()) signal.push_back(meter.Mean(reader.Colour()));
+  while (reader.Grab()) signal.push_back(meter.Mean(reader.Gray()));
   return signal;
 }
 

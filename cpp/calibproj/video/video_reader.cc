@@ -1,49 +1,179 @@
 #include "calibproj/video/video_reader.h"
 
+extern "C" {
+#include <libavcodec/avcodec.h>
+#include <libavformat/avformat.h>
+#include <libavutil/pixdesc.h>
+#include <libswscale/swscale.h>
+}
+
+#include <opencv2/core.hpp>
+
 #include <cmath>
 #include <filesystem>
 #include <stdexcept>
 
 namespace calibproj::video {
 
-VideoReader::VideoReader(const std::string& path) {
+namespace {
+
+double Rate(AVRational r) { return r.num > 0 && r.den > 0 ? av_q2d(r) : 0.0; }
+
+// 8-bit luma in the first plane, one byte per pixel: the plane is the grey image.
+bool LumaPlaneFirst(AVPixelFormat format) {
+  const AVPixFmtDescriptor* d = av_pix_fmt_desc_get(format);
+  if (d == nullptr || (d->flags & (AV_PIX_FMT_FLAG_RGB | AV_PIX_FMT_FLAG_PAL | AV_PIX_FMT_FLAG_BAYER |
+                                   AV_PIX_FMT_FLAG_HWACCEL | AV_PIX_FMT_FLAG_FLOAT))) {
+    return false;
+  }
+  const AVComponentDescriptor& y = d->comp[0];
+  return y.plane == 0 && y.depth == 8 && y.step == 1 && y.offset == 0 && y.shift == 0;
+}
+
+bool FullRange(const AVFrame& frame) {
+  switch (frame.format) {
+    case AV_PIX_FMT_YUVJ420P:
+    case AV_PIX_FMT_YUVJ422P:
+    case AV_PIX_FMT_YUVJ444P:
+    case AV_PIX_FMT_YUVJ440P:
+    case AV_PIX_FMT_YUVJ411P:
+      return true;
+    case AV_PIX_FMT_GRAY8:
+      return frame.color_range != AVCOL_RANGE_MPEG;
+    default:
+      return frame.color_range == AVCOL_RANGE_JPEG;
+  }
+}
+
+// Limited-range luma (16 black, 235 white) to full range, rounded and clipped as
+// FFmpeg's YUV to RGB conversion does.
+cv::Mat LimitedToFullTable() {
+  cv::Mat table(1, 256, CV_8U);
+  for (int v = 0; v < 256; ++v) table.at<uchar>(v) = cv::saturate_cast<uchar>((v - 16) * 255.0 / 219.0);
+  return table;
+}
+
+}  // namespace
+
+struct VideoReader::Decoder {
+  AVFormatContext* format = nullptr;
+  AVCodecContext* codec = nullptr;
+  AVPacket* packet = nullptr;
+  AVFrame* frame = nullptr;
+  SwsContext* scaler = nullptr;
+  int stream = -1;
+  bool draining = false;
+  const cv::Mat limited_to_full = LimitedToFullTable();
+
+  ~Decoder() {
+    sws_freeContext(scaler);
+    av_frame_free(&frame);
+    av_packet_free(&packet);
+    avcodec_free_context(&codec);
+    avformat_close_input(&format);
+  }
+
+  // Feeds the decoder until it gives a frame; false at the end of the stream.
+  bool Next() {
+    while (true) {
+      const int received = avcodec_receive_frame(codec, frame);
+      if (received == 0) return true;
+      if (received != AVERROR(EAGAIN) || draining) return false;
+      if (av_read_frame(format, packet) < 0) {
+        // End of file (or unreadable from here on): flush the frames still inside.
+        draining = true;
+        avcodec_send_packet(codec, nullptr);
+        continue;
+      }
+      if (packet->stream_index == stream) {
+        const int sent = avcodec_send_packet(codec, packet);
+        // A damaged packet is skipped, as ffmpeg does; anything else ends the stream.
+        if (sent < 0 && sent != AVERROR_INVALIDDATA) {
+          av_packet_unref(packet);
+          return false;
+        }
+      }
+      av_packet_unref(packet);
+    }
+  }
+};
+
+VideoReader::VideoReader(const std::string& path) : decoder_(std::make_unique<Decoder>()) {
   info_.path = path;
   if (!std::filesystem::is_regular_file(path)) throw std::runtime_error(path + ": no such video file");
-  if (!capture_.open(path, cv::CAP_FFMPEG) || !capture_.isOpened()) {
-    throw std::runtime_error(path + ": cannot open the video (corrupt, truncated or not a video FFmpeg reads)");
+  const std::string unreadable = path + ": cannot open the video (corrupt, truncated or not a video FFmpeg reads)";
+  Decoder& d = *decoder_;
+  if (avformat_open_input(&d.format, path.c_str(), nullptr, nullptr) < 0) throw std::runtime_error(unreadable);
+  if (avformat_find_stream_info(d.format, nullptr) < 0) throw std::runtime_error(unreadable);
+  const AVCodec* codec = nullptr;
+  d.stream = av_find_best_stream(d.format, AVMEDIA_TYPE_VIDEO, -1, -1, &codec, 0);
+  if (d.stream < 0 || codec == nullptr) throw std::runtime_error(path + ": no video stream FFmpeg can decode");
+  const AVStream* stream = d.format->streams[d.stream];
+  d.codec = avcodec_alloc_context3(codec);
+  d.packet = av_packet_alloc();
+  d.frame = av_frame_alloc();
+  if (d.codec == nullptr || d.packet == nullptr || d.frame == nullptr) throw std::bad_alloc();
+  if (avcodec_parameters_to_context(d.codec, stream->codecpar) < 0) throw std::runtime_error(unreadable);
+  d.codec->thread_count = 0;  // one per core, as the ffmpeg program decodes
+  d.codec->thread_type = FF_THREAD_FRAME | FF_THREAD_SLICE;
+  if (avcodec_open2(d.codec, codec, nullptr) < 0) throw std::runtime_error(unreadable);
+
+  info_.width = stream->codecpar->width;
+  info_.height = stream->codecpar->height;
+  info_.fps = Rate(stream->avg_frame_rate) > 0.0 ? Rate(stream->avg_frame_rate) : Rate(stream->r_frame_rate);
+  if (stream->nb_frames > 0) {
+    info_.frame_count = static_cast<int>(stream->nb_frames);
+  } else if (stream->duration > 0) {
+    info_.frame_count = static_cast<int>(std::lround(stream->duration * av_q2d(stream->time_base) * info_.fps));
   }
-  info_.width = static_cast<int>(capture_.get(cv::CAP_PROP_FRAME_WIDTH));
-  info_.height = static_cast<int>(capture_.get(cv::CAP_PROP_FRAME_HEIGHT));
-  info_.fps = capture_.get(cv::CAP_PROP_FPS);
-  const double count = capture_.get(cv::CAP_PROP_FRAME_COUNT);
-  info_.frame_count = std::isfinite(count) && count > 0 ? static_cast<int>(std::lround(count)) : 0;
   if (info_.width <= 0 || info_.height <= 0) throw std::runtime_error(path + ": the video declares no frame size");
   if (!(info_.fps > 0.0) || !std::isfinite(info_.fps)) {
     throw std::runtime_error(path + ": the video declares no frame rate");
   }
 }
 
+VideoReader::~VideoReader() = default;
+
 bool VideoReader::Grab() {
-  if (!capture_.grab()) return false;
+  if (!decoder_->Next()) return false;
   ++frame_index_;
   return true;
 }
 
-const cv::Mat& VideoReader::Colour() {
-  if (frame_index_ < 0) throw std::logic_error("VideoReader::Colour() before Grab()");
-  if (retrieved_index_ != frame_index_) {
-    if (!capture_.retrieve(colour_) || colour_.empty()) {
-      throw std::runtime_error(info_.path + ": frame " + std::to_string(frame_index_) + " cannot be decoded");
-    }
-    if (colour_.type() != CV_8UC3 || colour_.cols != info_.width || colour_.rows != info_.height) {
-      throw std::runtime_error(info_.path + ": frame " + std::to_string(frame_index_) + " is " +
-                               std::to_string(colour_.cols) + "x" + std::to_string(colour_.rows) + " " +
-                               cv::typeToString(colour_.type()) + ", expected " + std::to_string(info_.width) +
-                               "x" + std::to_string(info_.height) + " CV_8UC3");
-    }
-    retrieved_index_ = frame_index_;
+cv::Mat VideoReader::Gray() {
+  if (frame_index_ < 0) throw std::logic_error("VideoReader::Gray() before Grab()");
+  if (gray_index_ == frame_index_) return gray_;
+  const AVFrame& frame = *decoder_->frame;
+  if (frame.width != info_.width || frame.height != info_.height) {
+    throw std::runtime_error(info_.path + ": frame " + std::to_string(frame_index_) + " is " +
+                             std::to_string(frame.width) + "x" + std::to_string(frame.height) + ", expected " +
+                             std::to_string(info_.width) + "x" + std::to_string(info_.height));
   }
-  return colour_;
+  const auto format = static_cast<AVPixelFormat>(frame.format);
+  gray_ = cv::Mat();  // a new buffer: images handed out before keep theirs
+  if (LumaPlaneFirst(format) && frame.linesize[0] > 0) {
+    const cv::Mat luma(frame.height, frame.width, CV_8UC1, frame.data[0], static_cast<size_t>(frame.linesize[0]));
+    if (FullRange(frame)) {
+      luma.copyTo(gray_);
+    } else {
+      cv::LUT(luma, decoder_->limited_to_full, gray_);
+    }
+  } else {
+    // RGB, paletted or deep formats: FFmpeg's scaler makes the grey image.
+    decoder_->scaler = sws_getCachedContext(decoder_->scaler, frame.width, frame.height, format, frame.width,
+                                            frame.height, AV_PIX_FMT_GRAY8, SWS_POINT, nullptr, nullptr, nullptr);
+    if (decoder_->scaler == nullptr) {
+      throw std::runtime_error(info_.path + ": frame " + std::to_string(frame_index_) + " is in pixel format " +
+                               (av_get_pix_fmt_name(format) ? av_get_pix_fmt_name(format) : "unknown") +
+                               ", which cannot be converted to grey");
+    }
+    gray_.create(frame.height, frame.width, CV_8UC1);
+    uint8_t* planes[4] = {gray_.data, nullptr, nullptr, nullptr};
+    int strides[4] = {static_cast<int>(gray_.step), 0, 0, 0};
+    sws_scale(decoder_->scaler, frame.data, frame.linesize, 0, frame.height, planes, strides);
+  }
+  gray_index_ = frame_index_;
+  return gray_;
 }
 
 VideoInfo ProbeVideo(const std::string& path) { return VideoReader(path).info(); }

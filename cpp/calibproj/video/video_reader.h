@@ -1,15 +1,16 @@
 #pragma once
-// Streaming decode of one video with OpenCV's FFmpeg backend.
+// Streaming decode of one video with FFmpeg's libraries (libavformat, libavcodec).
 //
-// Frames are visited once, in order: Grab() decodes the next frame and Colour()
-// converts it only when asked. OpenCV 4.6's FFmpeg backend ignores
-// CAP_PROP_CONVERT_RGB and always converts to BGR in retrieve() (measured), so the
-// saving comes from not retrieving frames nobody needs: decoding alone is what
-// `ffmpeg -f null` does.
+// Frames are visited once, in order: Grab() decodes the next frame (FFmpeg's frame
+// threads on every core, as `ffmpeg -f null` decodes) and Gray() gives its luma only
+// when asked. Camera videos are YUV: the luma plane is the grey image, so nothing is
+// converted to colour and back (OpenCV's VideoCapture converts every retrieved frame
+// to BGR). Limited-range ("TV", 16-235) luma is stretched to full range, so the grey
+// image equals cv::cvtColor of the colour frame a player shows, up to rounding.
 
 #include <opencv2/core.hpp>
-#include <opencv2/videoio.hpp>
 
+#include <memory>
 #include <string>
 
 namespace calibproj::video {
@@ -25,26 +26,32 @@ struct VideoInfo {
 class VideoReader {
  public:
   // Opens the video; throws std::runtime_error naming the file when it cannot be
-  // opened or declares no frame size or frame rate.
+  // opened, has no video stream FFmpeg decodes, or declares no frame size or rate.
   explicit VideoReader(const std::string& path);
+  ~VideoReader();
+  VideoReader(const VideoReader&) = delete;
+  VideoReader& operator=(const VideoReader&) = delete;
 
   const VideoInfo& info() const { return info_; }
 
-  // Decodes the next frame; false at the end of the stream (or where it is corrupt).
+  // Decodes the next frame; false at the end of the stream (or where it is corrupt
+  // beyond what the decoder skips).
   bool Grab();
   // Index of the last grabbed frame (0 for the first), -1 before the first Grab().
   int frame_index() const { return frame_index_; }
 
-  // The grabbed frame as 8-bit BGR, converted at the first call for this frame.
-  // Throws std::runtime_error naming the file when the frame cannot be converted.
-  const cv::Mat& Colour();
+  // The grabbed frame's full-range 8-bit luma, made at the first call for this frame.
+  // The image owns its pixels: it stays valid after the next Grab(). Throws
+  // std::runtime_error naming the file when the frame is not of the declared size.
+  cv::Mat Gray();
 
  private:
+  struct Decoder;
   VideoInfo info_;
-  cv::VideoCapture capture_;
-  cv::Mat colour_;
+  std::unique_ptr<Decoder> decoder_;
+  cv::Mat gray_;
   int frame_index_ = -1;
-  int retrieved_index_ = -1;
+  int gray_index_ = -1;
 };
 
 // Reads the size, frame rate and declared frame count without decoding.
