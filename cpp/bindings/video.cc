@@ -32,7 +32,7 @@ void register_video(py::module_& m) {
         return d;
       },
       py::arg("path"),
-      "Frame size, frame rate and declared frame count of a video (OpenCV's FFmpeg backend); "
+      "Frame size, frame rate and declared frame count of a video (FFmpeg's libraries); "
       "RuntimeError naming the file when it cannot be opened.");
   m.def(
       "luma_signal",
@@ -47,8 +47,9 @@ void register_video(py::module_& m) {
         return out;
       },
       py::arg("path"), py::arg("gamma") = 2.2, py::arg("row_step") = 2,
-      "Mean luma (BT.601, as cv2.cvtColor) of every frame, each pixel linearised as "
-      "(value / 255)^gamma, over every row_step-th row; one decoding pass.");
+      "Mean luma of every frame (the decoder's luma plane in full range: cv2.cvtColor of the colour "
+      "frame, up to rounding), each pixel linearised as (value / 255)^gamma, over every row_step-th "
+      "row; one decoding pass.");
 }
 
 }  // namespace calibproj::bindings

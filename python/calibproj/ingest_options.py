@@ -60,6 +60,11 @@ class IngestOptions:
         bootstrap_downscale: whole frames searched before the homography is known are
             shrunk by this factor (libapriltag takes ~300 ms on a full 1080p frame);
             markers too small to survive it are found once regions take over.
+        adaptive_bootstrap: with use_roi, those whole frames are shrunk further as far
+            as the markers found so far allow (the next pattern's module, predicted at
+            half the smallest magnification seen, near target_module_px): a zoomed
+            camera that needs many patterns before its homography does not pay full
+            frames for them.
         refine_undistorted: corners from straight edge lines fitted in undistorted pixels,
             starting from the detector's unrefined corners (false: the detector's own
             refinement, then the four corners undistorted); straight edges of large
@@ -99,6 +104,9 @@ class IngestOptions:
         roi_threshold_window_px: ArUco's adaptive threshold window in regions, pixels:
             the marker's size there is known, so one window does where a whole frame
             needs several (about 1.6x faster detection); 0 keeps the detector's own.
+        roi_min_white_black_diff: libapriltag's minimum white-black contrast in regions,
+            grey levels: flat noisy background below it is not segmented (about 1.6x
+            faster detection); 0 keeps the detector's own.
         max_scales_per_msm: scales searched per MSM at most: a marker is left out when
             this many larger scales of its MSM are worth searching (larger markers give
             better centres); 0 searches every scale.
@@ -153,6 +161,7 @@ class IngestOptions:
     max_clock_drift: float = 2e-4
     use_roi: bool = True
     bootstrap_downscale: int = 1
+    adaptive_bootstrap: bool = True
     refine_undistorted: bool = True
     edge_search_fraction: float = 0.45
     edge_outward_fraction: float = 0.45
@@ -177,6 +186,7 @@ class IngestOptions:
     target_module_px: float = 4.0
     max_downscale: int = 8
     roi_threshold_window_px: int = 13
+    roi_min_white_black_diff: int = 20
     max_scales_per_msm: int = 4
     learn_resolution: bool = True
     resolution_bin_px: float = 0.25

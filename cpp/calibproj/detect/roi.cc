@@ -78,6 +78,7 @@ void RoiOptions::Check() const {
   Require(target_module_px >= 0.0, "target_module_px must be non-negative (0: never shrink)");
   Require(max_downscale >= 1, "max_downscale must be at least 1");
   Require(threshold_window_px == 0 || threshold_window_px >= 3, "threshold_window_px must be 0 or at least 3");
+  Require(min_white_black_diff >= 0 && min_white_black_diff <= 255, "min_white_black_diff must be in [0, 255]");
 }
 
 const MarkerPrediction* PatternPlan::Find(int id) const {

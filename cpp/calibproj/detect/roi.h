@@ -54,6 +54,11 @@ struct RoiOptions {
   // target_module_px per module), where a whole frame needs several. 0 keeps the
   // detector's own windows.
   int threshold_window_px = 13;
+  // libapriltag's minimum white-black contrast in regions, grey levels: a region holds
+  // one projected marker of known contrast, and flat noisy background below this is
+  // not segmented at all (1.6x faster, the same centres on the mock OR). 0 keeps the
+  // detector's own.
+  int min_white_black_diff = 20;
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;

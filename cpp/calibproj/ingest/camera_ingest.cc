@@ -237,7 +237,7 @@ class CameraIngest {
     const cv::Rect whole(0, 0, reader_.info().width, reader_.info().height);
     if (!homography_.valid()) {
       job.whole_frame = true;
-      job.downscale = options_.bootstrap_downscale;
+      job.downscale = BootstrapDownscale(sequence_.patterns[index]);
       stats.searched += static_cast<int>(markers.ids.size());
       pending_.rects = {whole};
       return;
@@ -269,6 +269,18 @@ class CameraIngest {
     } else {
       for (const auto& marker : job.plan.markers) pending_.rects.push_back(marker.region);
     }
+  }
+
+  // Shrinking of a whole frame searched before the homography (adaptive_bootstrap).
+  int BootstrapDownscale(const PatternSpec& pattern) const {
+    const int fixed = options_.bootstrap_downscale;
+    const double target = options_.roi.target_module_px;
+    if (!options_.adaptive_bootstrap || !options_.use_roi || target <= 0.0 || !(min_magnification_ > 0.0)) {
+      return fixed;
+    }
+    const double module = 0.5 * min_magnification_ * pattern.marker_side_px / geometry_.grid_cells;
+    const int adaptive = std::min(static_cast<int>(module / target), options_.roi.max_downscale);
+    return std::max(fixed, adaptive);
   }
 
   // The scales of pattern `index`'s array as the sequence shows them.
@@ -365,6 +377,7 @@ class CameraIngest {
         record.corners = quad;
         record.centre = centre;
         record.side_px = MeanSide(quad);
+        min_magnification_ = std::min(min_magnification_, record.side_px / pattern.marker_side_px);
         record.first_frame = output.first_frame;
         record.frame_count = output.frame_count;
         record.in_region = !output.whole_frame;
@@ -426,6 +439,8 @@ class CameraIngest {
   video::FrameRing ring_;
   detect::ProjectorHomography homography_;
   detect::ResolutionLimit resolution_;
+  // Smallest image side over projector side of the markers found so far.
+  double min_magnification_ = std::numeric_limits<double>::infinity();
   DetectionPipeline pipeline_;
 
   bool started_ = false;

@@ -54,6 +54,12 @@ struct IngestOptions {
   // (libapriltag takes ~300 ms on a full 1080p frame); markers too small to survive
   // the shrinking are then only found once regions of interest take over.
   int bootstrap_downscale = 1;
+  // With regions of interest, whole frames before the homography are shrunk further as
+  // far as the markers found so far allow: the next pattern's module, predicted at half
+  // the smallest magnification (image over projector pixels) seen, is brought near
+  // roi.target_module_px (at most roi.max_downscale). A zoomed camera that needs many
+  // patterns before its homography then does not pay full frames for them.
+  bool adaptive_bootstrap = true;
   // Corners from straight edge lines fitted in undistorted pixels (undistorted_edges.h),
   // starting from the detector's unrefined corners; false: the detector's own corner
   // refinement, then cv::undistortPoints of the four corners.

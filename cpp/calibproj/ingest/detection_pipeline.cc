@@ -19,6 +19,9 @@ DetectionPipeline::DetectionPipeline(const detect::MarkerFamily& family,
     region_options.aruco.adaptive_thresh_win_size_min = roi_options.threshold_window_px;
     region_options.aruco.adaptive_thresh_win_size_max = roi_options.threshold_window_px;
   }
+  if (roi_options.min_white_black_diff > 0) {
+    region_options.apriltag.min_white_black_diff = roi_options.min_white_black_diff;
+  }
   detectors_.resize(threads);
   for (Detectors& d : detectors_) {
     d.whole_frame = std::make_unique<detect::MarkerDetector>(family, detector_options);

@@ -41,6 +41,7 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("max_clock_drift", o.pick.max_clock_drift, "largest relative camera clock drift");
   visit("use_roi", o.use_roi, "detect in regions of interest once the homography is known");
   visit("bootstrap_downscale", o.bootstrap_downscale, "whole frames before the homography are shrunk this much");
+  visit("adaptive_bootstrap", o.adaptive_bootstrap, "... and further, as far as the markers found so far allow");
   visit("refine_undistorted", o.refine_undistorted, "corners from straight edge lines in undistorted pixels");
   visit("edge_search_fraction", o.edges.search_fraction, "edge profiles reach this share of a module inwards");
   visit("edge_outward_fraction", o.edges.outward_fraction, "... and at most this share outwards");
@@ -65,6 +66,7 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("target_module_px", o.roi.target_module_px, "larger markers are detected shrunk to about this module");
   visit("max_downscale", o.roi.max_downscale, "largest such shrinking factor");
   visit("roi_threshold_window_px", o.roi.threshold_window_px, "ArUco's threshold window in regions (0: its own)");
+  visit("roi_min_white_black_diff", o.roi.min_white_black_diff, "AprilTag's minimum contrast in regions (0: its own)");
   visit("max_scales_per_msm", o.max_scales_per_msm, "scales searched per MSM at most, the largest (0: all)");
   visit("learn_resolution", o.learn_resolution, "stop searching marker sizes the camera does not decode");
   visit("resolution_bin_px", o.resolution.bin_px, "module size bins of that record, pixels");
