@@ -187,6 +187,40 @@ def test_native_detect_bad_inputs_fail_with_the_same_messages(room: Path, tmp_pa
         assert error_line(native) == error_line(python)
 
 
+def test_native_detect_takes_detector_options_and_exposures(room: Path, tmp_path: Path) -> None:
+    videos = room / "room" / "videos"
+    camera = sorted(videos.iterdir())[0].stem
+    extra = ["--no-use-roi", "--no-refine-undistorted", "--detector-option", "corner_refinement=subpix",
+             "--detector-option", "adaptive_thresh_constant=9", "--exposure", f"{camera}=0.01"]
+    python = run_python(*detect_args(room, videos, tmp_path / "python"), *extra)
+    assert python.returncode == 0, python.stderr
+    native = run_native(*detect_args(room, videos, tmp_path / "native"), *extra)
+    assert native.returncode == 0, native.stderr
+    assert (tmp_path / "native" / "tracks.json").read_text() == (tmp_path / "python" / "tracks.json").read_text()
+    # The options reached the detector: other corners than the defaults give.
+    default = run_native(*detect_args(room, videos, tmp_path / "default"), "--no-use-roi")
+    assert default.returncode == 0, default.stderr
+    assert (tmp_path / "default" / "tracks.json").read_text() != (tmp_path / "native" / "tracks.json").read_text()
+
+
+def test_native_detect_bad_detector_options_and_exposures(room: Path, tmp_path: Path) -> None:
+    videos = room / "room" / "videos"
+    camera = sorted(videos.iterdir())[0].stem
+    cases = [
+        ["--detector-option", "no_such_knob=1"],
+        ["--detector-option", "novalue"],
+        ["--detector-option", "corner_refinement=magic"],
+        ["--detector-option", "adaptive_thresh_win_size_min=1"],
+        ["--exposure", "nocamera=0.01"],
+        ["--exposure", f"{camera}=-1"],
+    ]
+    for case in cases:
+        args = [*detect_args(room, videos, tmp_path / "out"), *case]
+        python, native = run_python(*args), run_native(*args)
+        assert python.returncode == 2 and native.returncode == 2, (case, python.stderr, native.stderr)
+        assert error_line(native) == error_line(python), case
+
+
 def test_native_detect_takes_every_ingest_option() -> None:
     help_text = run_native("detect", "--help").stdout
     for field in dataclasses.fields(IngestOptions):

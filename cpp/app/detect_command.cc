@@ -10,6 +10,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "calibproj/detect/option_table.h"
 #include "calibproj/ingest/option_table.h"
 #include "detect_report.h"
 #include "files.h"
@@ -26,6 +27,144 @@ namespace {
 const std::vector<std::string> kVideoSuffixes = {".mp4", ".mov", ".mkv", ".avi", ".m4v", ".mts", ".webm"};
 const std::vector<std::string> kIntrinsicsSuffixes = {".json", ".yaml", ".yml", ".xml"};
 const char kReportName[] = "detect_report.json";
+
+std::string Trim(const std::string& text) {
+  const auto first = text.find_first_not_of(" \t");
+  if (first == std::string::npos) return "";
+  return text.substr(first, text.find_last_not_of(" \t") - first + 1);
+}
+
+std::string Quoted(const std::string& text) { return "'" + text + "'"; }
+
+std::string Joined(const std::vector<std::string>& items) {
+  std::string out;
+  for (const auto& item : items) out += (out.empty() ? "" : ", ") + item;
+  return out;
+}
+
+// NAME=VALUE split at the first '='; false when there is no '=' or no name.
+bool SplitAssignment(const std::string& item, std::string* name, std::string* value) {
+  const auto equals = item.find('=');
+  if (equals == std::string::npos) return false;
+  *name = Trim(item.substr(0, equals));
+  *value = Trim(item.substr(equals + 1));
+  return !name->empty();
+}
+
+// A detector option's value in the field's type, as Python's literal syntax writes it.
+template <typename Field>
+void ParseOptionValue(const std::string& name, const std::string& text, Field* field) {
+  const auto bad = [&](const char* type) {
+    return InputError("detector option " + name + ": " + Quoted(text) + " is not " + type);
+  };
+  if constexpr (std::is_same_v<Field, bool>) {
+    if (text == "True" || text == "true" || text == "1") {
+      *field = true;
+    } else if (text == "False" || text == "false" || text == "0") {
+      *field = false;
+    } else {
+      throw bad("True or False");
+    }
+  } else {
+    size_t used = 0;
+    try {
+      if constexpr (std::is_integral_v<Field>) {
+        *field = static_cast<Field>(std::stoi(text, &used));
+      } else {
+        *field = static_cast<Field>(std::stod(text, &used));
+      }
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != text.size()) throw bad(std::is_integral_v<Field> ? "an integer" : "a number");
+  }
+}
+
+// Applies --detector-option NAME=VALUE items to the options of the sequence's marker
+// system, with calibproj.detect_markers' names and messages.
+void ApplyDetectorOptions(const std::vector<std::string>& items, const std::string& system,
+                          detect::DetectorOptions* options) {
+  std::map<std::string, std::string> values;  // the last value of a name counts
+  for (const std::string& item : items) {
+    std::string name, value;
+    if (!SplitAssignment(item, &name, &value)) {
+      throw InputError("--detector-option expects NAME=VALUE, got " + Quoted(item));
+    }
+    values[name] = value;
+  }
+  detect::CornerRefinementOptions& refinement =
+      system == "aruco" ? options->aruco.refinement : options->apriltag.refinement;
+  if (const auto method = values.find("corner_refinement"); method != values.end()) {
+    const std::map<std::string, detect::CornerRefinement> methods = {
+        {"none", detect::CornerRefinement::kNone},
+        {"subpix", detect::CornerRefinement::kSubpix},
+        {"edges", detect::CornerRefinement::kEdges}};
+    if (!methods.count(method->second)) {
+      throw InputError("corner_refinement: unknown method " + Quoted(method->second) +
+                       " (choose from none, subpix, edges)");
+    }
+    refinement.method = methods.at(method->second);
+    values.erase(method);
+  }
+  std::vector<std::string> known = {"corner_refinement"};
+  const auto set = [&](const std::string& name, auto& field) {
+    known.push_back(name);
+    if (const auto value = values.find(name); value != values.end()) {
+      ParseOptionValue(name, value->second, &field);
+      values.erase(value);
+    }
+  };
+  if (system == "aruco") {
+    detect::VisitArucoOptions(options->aruco, set);
+  } else {
+    detect::VisitAprilTagOptions(options->apriltag, set);
+  }
+  if (!values.empty()) {
+    std::vector<std::string> unknown;
+    for (const auto& entry : values) unknown.push_back(entry.first);
+    std::sort(known.begin(), known.end());
+    throw InputError("unknown " + system + " detection option(s) " + Joined(unknown) + " (choose from " +
+                     Joined(known) + ")");
+  }
+  try {
+    if (system == "aruco") {
+      options->aruco.Check();
+    } else {
+      options->apriltag.Check();
+    }
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
+  }
+}
+
+// --exposure CAMERA=SECONDS items, for cameras that have a video.
+std::map<std::string, double> ParseExposures(const std::vector<std::string>& items,
+                                             const std::map<std::string, fs::path>& videos) {
+  std::map<std::string, double> exposures;
+  for (const std::string& item : items) {
+    std::string name, text;
+    double seconds = -1.0;
+    if (SplitAssignment(item, &name, &text)) {
+      try {
+        size_t used = 0;
+        seconds = std::stod(text, &used);
+        if (used != text.size()) seconds = -1.0;
+      } catch (const std::exception&) {
+        seconds = -1.0;
+      }
+    }
+    if (!(seconds > 0.0)) {
+      throw InputError("--exposure expects CAMERA=SECONDS with SECONDS > 0, got " + Quoted(item));
+    }
+    exposures[name] = seconds;
+  }
+  std::vector<std::string> unknown;
+  for (const auto& entry : exposures) {
+    if (!videos.count(entry.first)) unknown.push_back(entry.first);
+  }
+  if (!unknown.empty()) throw InputError("exposures given for camera(s) without a video: " + Joined(unknown));
+  return exposures;
+}
 
 std::string Lower(std::string text) {
   std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::tolower(c); });
@@ -108,13 +247,26 @@ class ProgressPrinter {
   std::mutex mutex_;
 };
 
+// What every camera's ingest shares: the options, and the known exposures per camera.
+struct IngestSetup {
+  ingest::IngestOptions options;
+  std::map<std::string, double> exposures;
+
+  ingest::IngestOptions For(const std::string& camera) const {
+    ingest::IngestOptions own = options;
+    if (const auto exposure = exposures.find(camera); exposure != exposures.end()) own.exposure_s = exposure->second;
+    return own;
+  }
+};
+
 CameraOutcome IngestOne(const std::string& name, const fs::path& video, const DetectArguments& arguments,
-                        const ingest::SequenceDescription& sequence, ProgressPrinter& printer) {
+                        const IngestSetup& setup, const ingest::SequenceDescription& sequence,
+                        ProgressPrinter& printer) {
   CameraOutcome outcome{name, video.string(), "", "", {}};
   try {
     const CameraIntrinsics intrinsics = IntrinsicsFor(arguments.intrinsics, name, &outcome.intrinsics);
     const ingest::CameraModel camera = CameraModelFrom(intrinsics, outcome.intrinsics);
-    outcome.result = ingest::IngestCamera(video.string(), sequence, camera, arguments.options, printer.For(name));
+    outcome.result = ingest::IngestCamera(video.string(), sequence, camera, setup.For(name), printer.For(name));
   } catch (const std::exception& error) {
     outcome.error = error.what();
     // Without a readable intrinsics file the message stands where its path would.
@@ -128,6 +280,7 @@ CameraOutcome IngestOne(const std::string& name, const fs::path& video, const De
 
 // Every camera through the ingest, `workers` at a time; results in name order.
 std::vector<CameraOutcome> IngestAll(const std::map<std::string, fs::path>& videos, const DetectArguments& arguments,
+                                     const IngestSetup& setup,
                                      const ingest::SequenceDescription& sequence) {
   const std::vector<std::pair<std::string, fs::path>> jobs(videos.begin(), videos.end());
   std::vector<CameraOutcome> outcomes(jobs.size());
@@ -135,7 +288,7 @@ std::vector<CameraOutcome> IngestAll(const std::map<std::string, fs::path>& vide
   std::atomic<size_t> next{0};
   const auto work = [&] {
     for (size_t k = next++; k < jobs.size(); k = next++) {
-      outcomes[k] = IngestOne(jobs[k].first, jobs[k].second, arguments, sequence, printer);
+      outcomes[k] = IngestOne(jobs[k].first, jobs[k].second, arguments, setup, sequence, printer);
     }
   };
   const size_t threads = std::min(jobs.size(), static_cast<size_t>(std::max(1, arguments.workers)));
@@ -180,6 +333,15 @@ std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** comm
       ->type_name("DIR");
   cmd->add_option("--out", args->out, "tracks file to write (tracks.json)")->required()->type_name("FILE");
   cmd->add_option("--workers", args->workers, "cameras processed at once")->capture_default_str();
+  cmd->add_option("--detector-option", args->detector_options,
+                  "marker detector option as calibproj.detect_markers takes it, e.g. quad_decimate=2 (repeatable; "
+                  "default: the detector's defaults)")
+      ->type_name("NAME=VALUE")
+      ->allow_extra_args(false);
+  cmd->add_option("--exposure", args->exposures,
+                  "known exposure time of one camera (repeatable; default: --exposure-s for all)")
+      ->type_name("CAMERA=SECONDS")
+      ->allow_extra_args(false);
   cmd->add_flag("--no-progress", args->no_progress, "no progress lines");
   cmd->add_flag("--json", args->json, "print the report as JSON instead of a table");
   const std::string group = "ingest options";
@@ -208,7 +370,10 @@ int RunDetect(const DetectArguments& arguments) {
   } catch (const std::invalid_argument& error) {
     throw InputError(error.what());
   }
-  const std::vector<CameraOutcome> outcomes = IngestAll(videos, arguments, sequence);
+  IngestSetup setup{arguments.options, ParseExposures(arguments.exposures, videos)};
+  ApplyDetectorOptions(arguments.detector_options, sequence.markers.substr(0, sequence.markers.find(':')),
+                       &setup.options.detector);
+  const std::vector<CameraOutcome> outcomes = IngestAll(videos, arguments, setup, sequence);
 
   const fs::path out(arguments.out);
   WriteTracks(out, TracksFrom(outcomes, sequence.markers_per_array));

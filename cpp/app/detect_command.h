@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "calibproj/ingest/camera_ingest.h"
 
@@ -20,6 +21,8 @@ struct DetectArguments {
   int workers = kDefaultDetectWorkers;
   bool no_progress = false;
   bool json = false;
+  std::vector<std::string> detector_options;  // NAME=VALUE, as calibproj.detect_markers takes them
+  std::vector<std::string> exposures;         // CAMERA=SECONDS
   ingest::IngestOptions options;
 };
 
