@@ -53,8 +53,8 @@ def write_json(path: str | os.PathLike, kind: str, major: int, body: dict[str, A
     atomic_write_text(path, json.dumps(document, indent=1, allow_nan=False) + "\n")
 
 
-def read_json(path: str | os.PathLike, kind: str, major: int) -> dict[str, Any]:
-    """Read a calibproj JSON file of the given kind, checking its schema tag."""
+def read_json_object(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a JSON file whose top level is an object; FormatError naming the file."""
     path = Path(path)
     if not path.is_file():
         raise FormatError(f"{path}: no such file")
@@ -64,7 +64,13 @@ def read_json(path: str | os.PathLike, kind: str, major: int) -> dict[str, Any]:
         raise FormatError(f"{path}: not valid JSON ({error})") from None
     if not isinstance(document, dict):
         raise FormatError(f"{path}: expected a JSON object at the top level")
-    check_schema(path, document.get("schema"), kind, major)
+    return document
+
+
+def read_json(path: str | os.PathLike, kind: str, major: int) -> dict[str, Any]:
+    """Read a calibproj JSON file of the given kind, checking its schema tag."""
+    document = read_json_object(path)
+    check_schema(Path(path), document.get("schema"), kind, major)
     return document
 
 

@@ -15,7 +15,6 @@ points (see ``calibproj.simulate.truth``); this module reads only the poses.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.io.jsonio import FormatError, check_schema, write_json
+from calibproj.io.jsonio import FormatError, check_schema, read_json_object, write_json
 
 POSES_KIND = "camera_poses"
 TRUTH_KIND = "truth"
@@ -94,14 +93,7 @@ def write_camera_poses(
 def read_poses(path: str | os.PathLike) -> CameraPoses:
     """Camera poses of a ``camera_poses.json`` or a ``truth.json``, and their unit."""
     path = Path(path)
-    if not path.is_file():
-        raise FormatError(f"{path}: no such file")
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise FormatError(f"{path}: not valid JSON ({error})") from None
-    if not isinstance(document, dict):
-        raise FormatError(f"{path}: expected a JSON object at the top level")
+    document = read_json_object(path)
     tag = document.get("schema")
     kind = TRUTH_KIND if isinstance(tag, str) and tag.startswith(f"calibproj.{TRUTH_KIND}/") else POSES_KIND
     check_schema(path, tag, kind, SCHEMA_MAJOR)

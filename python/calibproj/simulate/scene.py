@@ -76,19 +76,11 @@ class Floor:
     size_m: tuple[float, float] = (4.0, 3.0)
 
 
-@dataclass(frozen=True)
-class Projector:
-    """A pinhole projector (no distortion, principal point at the image centre)."""
+class LookAtPose:
+    """World-to-device pose of a device placed at ``position`` looking at ``look_at``."""
 
     position: tuple[float, float, float]
     look_at: tuple[float, float, float]
-    resolution: tuple[int, int]
-    fx: float
-
-    @property
-    def K(self) -> np.ndarray:
-        width, height = self.resolution
-        return np.array([[self.fx, 0.0, (width - 1) / 2.0], [0.0, self.fx, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
 
     @property
     def R(self) -> np.ndarray:
@@ -101,6 +93,21 @@ class Projector:
     @property
     def center(self) -> np.ndarray:
         return np.array(self.position, dtype=float)
+
+
+@dataclass(frozen=True)
+class Projector(LookAtPose):
+    """A pinhole projector (no distortion, principal point at the image centre)."""
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    resolution: tuple[int, int]
+    fx: float
+
+    @property
+    def K(self) -> np.ndarray:
+        width, height = self.resolution
+        return np.array([[self.fx, 0.0, (width - 1) / 2.0], [0.0, self.fx, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
 
     def pixels_to_floor(self, pixels: np.ndarray) -> np.ndarray:
         """Floor points (z = 0), shape ``(N, 3)``, hit by the rays of projector pixels.
@@ -118,7 +125,7 @@ class Projector:
 
 
 @dataclass(frozen=True)
-class Camera:
+class Camera(LookAtPose):
     """One simulated camera: pose by position/look-at, intrinsics, timing."""
 
     name: str
@@ -137,18 +144,6 @@ class Camera:
     @property
     def K(self) -> np.ndarray:
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
-    @property
-    def R(self) -> np.ndarray:
-        return look_at_rotation(np.array(self.position), np.array(self.look_at))
-
-    @property
-    def t(self) -> np.ndarray:
-        return -self.R @ np.array(self.position, dtype=float)
-
-    @property
-    def center(self) -> np.ndarray:
-        return np.array(self.position, dtype=float)
 
     @property
     def intrinsics(self) -> Intrinsics:
