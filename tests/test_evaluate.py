@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from calibproj.cli import main
-from calibproj.evaluate import EvaluationOptions, best_pair, evaluate, triangulate_dlt
+from calibproj import _core
+from calibproj.evaluate import EvaluationOptions, best_pair, evaluate, triangulate_tracks
 from calibproj.registration import calibrate
 from calibproj.simulate import simulate_tracks
 from calibproj.synthetic import matrix_from_rotvec
@@ -69,10 +70,23 @@ def test_linear_triangulation_and_pair_choice() -> None:
     t = np.array([-R_c @ c for R_c, c in zip(R, [[0, 0, -3.0], [3.0, 0, 0.5], [0.1, 0.1, -3.1], [0, 3.0, 0.2]])])
     in_camera = np.einsum("nij,j->ni", R, X) + t
     rays = in_camera[:, :2] / in_camera[:, 2:]
-    np.testing.assert_allclose(triangulate_dlt(R, t, rays), X, atol=1e-9)
-    np.testing.assert_allclose(triangulate_dlt(R[:2], t[:2], rays[:2]), X, atol=1e-9)
+    # Point 0 seen by all four cameras, point 1 by the first two, point 2 by one only.
+    point_index = np.array([0, 0, 0, 0, 1, 1, 2])
+    views = np.array([0, 1, 2, 3, 0, 1, 2])
+    points = _core.geometry.triangulate_linear(R[views], t[views], rays[views], point_index, 3)
+    np.testing.assert_allclose(points[:2], [X, X], atol=1e-9)
+    assert np.all(np.isnan(points[2]))
     # Cameras 0 and 2 look along nearly the same ray; a right-angled pair is preferred.
     assert set(best_pair(R, rays)) != {0, 2}
+    for initialisation in ("pair", "all-views"):
+        np.testing.assert_allclose(triangulate_tracks(R, t, np.arange(4), np.zeros(4, dtype=np.int64), rays, 1,
+                                                      initialisation), [X], atol=1e-9)
+    # Parallel rays meet at infinity: no point.
+    parallel = _core.geometry.triangulate_linear(np.stack([np.eye(3)] * 2), np.array([[0, 0, 1.0], [-1.0, 0, 1]]),
+                                                 np.zeros((2, 2)), np.zeros(2, dtype=np.int64), 1)
+    assert np.all(np.isnan(parallel))
+    with pytest.raises(ValueError, match="out of range"):
+        _core.geometry.triangulate_linear(R[:2], t[:2], rays[:2], np.array([0, 5]), 1)
 
 
 @pytest.fixture(scope="module")

@@ -1,9 +1,16 @@
 #include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <Eigen/Geometry>
+#include <cmath>
+#include <string>
+#include <vector>
+
 #include "calibproj/geometry/homography.h"
 #include "calibproj/geometry/similarity.h"
+#include "calibproj/geometry/triangulation.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -25,6 +32,55 @@ void register_geometry(py::module_& m) {
       py::arg("src"), py::arg("dst"),
       "Least-squares Sim(3) (Umeyama) mapping src (N, 3) onto dst (N, 3).");
 
+  m.def(
+      "triangulate_linear",
+      [](const py::array_t<double, py::array::c_style | py::array::forcecast>& R,
+         const py::array_t<double, py::array::c_style | py::array::forcecast>& t,
+         const py::array_t<double, py::array::c_style | py::array::forcecast>& rays,
+         const py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>& point_index, int num_points) {
+        const py::ssize_t n = point_index.size();
+        if (R.ndim() != 3 || R.shape(0) != n || R.shape(1) != 3 || R.shape(2) != 3 || t.ndim() != 2 ||
+            t.shape(0) != n || t.shape(1) != 3 || rays.ndim() != 2 || rays.shape(0) != n || rays.shape(1) != 2) {
+          throw py::value_error("triangulate_linear: expected R (N, 3, 3), t (N, 3), rays (N, 2) for N = " +
+                                std::to_string(n) + " observations");
+        }
+        if (num_points < 0) throw py::value_error("triangulate_linear: num_points must be non-negative");
+        std::vector<std::vector<geometry::View>> views(num_points);
+        const auto r = R.unchecked<3>();
+        const auto tt = t.unchecked<2>();
+        const auto x = rays.unchecked<2>();
+        const auto p = point_index.unchecked<1>();
+        for (py::ssize_t k = 0; k < n; ++k) {
+          if (p(k) < 0 || p(k) >= num_points) {
+            throw py::value_error("triangulate_linear: point index " + std::to_string(p(k)) + " out of range");
+          }
+          geometry::View view;
+          for (int i = 0; i < 3; ++i) {
+            for (int j = 0; j < 3; ++j) view.R(i, j) = r(k, i, j);
+            view.t(i) = tt(k, i);
+          }
+          view.ray = Eigen::Vector2d(x(k, 0), x(k, 1));
+          views[p(k)].push_back(view);
+        }
+        py::array_t<double> out({static_cast<py::ssize_t>(num_points), static_cast<py::ssize_t>(3)});
+        auto o = out.mutable_unchecked<2>();
+        {
+          py::gil_scoped_release release;
+          for (int q = 0; q < num_points; ++q) {
+            Eigen::Vector3d X = Eigen::Vector3d::Constant(std::nan(""));
+            if (views[q].size() >= 2) {
+              const Eigen::Vector4d h = geometry::TriangulateHomogeneous(views[q]);
+              if (std::abs(h(3)) >= 1e-12) X = h.hnormalized();
+            }
+            for (int i = 0; i < 3; ++i) o(q, i) = X(i);
+          }
+        }
+        return out;
+      },
+      py::arg("R"), py::arg("t"), py::arg("rays"), py::arg("point_index"), py::arg("num_points"),
+      "Linear (DLT) triangulation of every point from its views: per observation the view's pose R (N, 3, 3), "
+      "t (N, 3) and normalised ray (N, 2), and its point index (N,); returns (num_points, 3), NaN for points "
+      "with fewer than two views or at infinity.");
   m.def(
       "estimate_homography",
       [](const geometry::Points2& x1, const geometry::Points2& x2, double threshold_px, double focal1, double focal2,

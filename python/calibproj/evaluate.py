@@ -260,20 +260,21 @@ def normalised_rays(K: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 def triangulate_tracks(R: np.ndarray, t: np.ndarray, camera_index: np.ndarray, point_index: np.ndarray,
                        rays: np.ndarray, num_points: int, initialisation: str = "pair") -> np.ndarray:
-    """First estimate of every point (every point must have two views at least).
+    """First estimate of every point (every point must have two views at least): the
+    C++ linear triangulation, from the point's best pair of views or from all of them."""
+    from calibproj import _core
 
-    calibproj._core has no binding of the C++ ``TriangulateLinear`` yet, so the linear
-    triangulation is done here in numpy.
-    """
-    order = np.argsort(point_index, kind="stable")
-    starts = np.searchsorted(point_index[order], np.arange(num_points + 1))
-    points = np.empty((num_points, 3))
-    for p in range(num_points):
-        views = order[starts[p]:starts[p + 1]]
-        if initialisation == "pair":
-            views = views[list(best_pair(R[camera_index[views]], rays[views]))]
-        points[p] = triangulate_dlt(R[camera_index[views]], t[camera_index[views]], rays[views])
-    return points
+    used = np.arange(len(point_index))
+    if initialisation == "pair":
+        order = np.argsort(point_index, kind="stable")
+        starts = np.searchsorted(point_index[order], np.arange(num_points + 1))
+        pairs = []
+        for p in range(num_points):
+            views = order[starts[p]:starts[p + 1]]
+            pairs.extend(views[list(best_pair(R[camera_index[views]], rays[views]))])
+        used = np.array(pairs, dtype=np.int64)
+    cameras = camera_index[used]
+    return _core.geometry.triangulate_linear(R[cameras], t[cameras], rays[used], point_index[used], num_points)
 
 
 def best_pair(R: np.ndarray, rays: np.ndarray) -> tuple[int, int]:
@@ -287,22 +288,6 @@ def best_pair(R: np.ndarray, rays: np.ndarray) -> tuple[int, int]:
     sines = np.linalg.norm(np.cross(directions[:, None, :], directions[None, :, :]), axis=2)
     a, b = np.unravel_index(int(np.argmax(np.triu(sines, k=1))), sines.shape)
     return int(a), int(b)
-
-
-def triangulate_dlt(R: np.ndarray, t: np.ndarray, rays: np.ndarray) -> np.ndarray:
-    """Linear (DLT) triangulation of one point from ``n >= 2`` views.
-
-    Each view ``x_cam = R X + t`` observed at normalised ``(x, y)`` gives the rows
-    ``x P_3 - P_1`` and ``y P_3 - P_2`` of ``A [X, 1] = 0`` with ``P = [R | t]``;
-    rows are scaled to unit norm so that every view weighs the same.
-    """
-    P = np.concatenate([R, t[:, :, None]], axis=2)  # (n, 3, 4)
-    A = np.concatenate([rays[:, :1] * P[:, 2] - P[:, 0], rays[:, 1:] * P[:, 2] - P[:, 1]])
-    A /= np.linalg.norm(A, axis=1, keepdims=True)
-    homogeneous = np.linalg.svd(A)[2][-1]
-    if abs(homogeneous[3]) < 1e-12:
-        return np.full(3, np.nan)  # a point at infinity: the rays are parallel
-    return homogeneous[:3] / homogeneous[3]
 
 
 # -- reprojection ---------------------------------------------------------------------------

@@ -6,7 +6,7 @@
 
 namespace calibproj::geometry {
 
-Eigen::Vector3d TriangulateLinear(const std::vector<View>& views) {
+Eigen::Vector4d TriangulateHomogeneous(const std::vector<View>& views) {
   Eigen::MatrixXd A(2 * views.size(), 4);
   for (size_t k = 0; k < views.size(); ++k) {
     Eigen::Matrix<double, 3, 4> P;
@@ -15,8 +15,10 @@ Eigen::Vector3d TriangulateLinear(const std::vector<View>& views) {
     A.row(2 * k + 1) = views[k].ray.y() * P.row(2) - P.row(1);
   }
   const Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeFullV);
-  return svd.matrixV().col(3).hnormalized();
+  return svd.matrixV().col(3);
 }
+
+Eigen::Vector3d TriangulateLinear(const std::vector<View>& views) { return TriangulateHomogeneous(views).hnormalized(); }
 
 double MaxTriangulationAngle(const std::vector<View>& views, const Eigen::Vector3d& X) {
   std::vector<Eigen::Vector3d> directions;

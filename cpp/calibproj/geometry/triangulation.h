@@ -15,6 +15,9 @@ struct View {
 
 // Linear (DLT) triangulation from two or more views, in world coordinates.
 Eigen::Vector3d TriangulateLinear(const std::vector<View>& views);
+// The same in homogeneous coordinates (unit norm): w near 0 for a point at infinity,
+// whose rays are parallel.
+Eigen::Vector4d TriangulateHomogeneous(const std::vector<View>& views);
 
 // Largest angle (radians) between the viewing rays of X from the views' centres.
 double MaxTriangulationAngle(const std::vector<View>& views, const Eigen::Vector3d& X);
