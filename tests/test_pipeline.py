@@ -12,6 +12,7 @@ import cv2
 import pytest
 
 from calibproj.compare import compare
+from calibproj.evaluate import evaluate
 from calibproj.generate import generate
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
@@ -51,6 +52,9 @@ def test_videos_to_results_in_both_models(room: Path, tmp_path: Path) -> None:
     assert errors.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
     assert errors.translation_rmse_pct < MAX_TRANSLATION_RMSE_PCT
     assert all(m.mean_px < 0.5 for m in calibration.metrics.values())
+    # The paper's evaluation on the rendering's independent points (0.1 px noise).
+    evaluation = evaluate(results, room / "room" / "eval_tracks.json")
+    assert evaluation.to_json()["success_rate"]["0.5"] == pytest.approx(100.0)
     # The FREE model from the tracks the videos gave.
     free = calibrate(results / "tracks.json", results / "intrinsics", out=tmp_path / "free",
                      options=RegistrationOptions(model="free"), report=False)

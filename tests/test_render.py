@@ -16,6 +16,7 @@ from calibproj.cli import main
 from calibproj.generate.builder import build_sequence
 from calibproj.io.intrinsics import read_intrinsics
 from calibproj.io.poses import read_poses
+from calibproj.tracks import Tracks
 from calibproj.markers import MarkerDetector, marker_centres
 from calibproj.simulate.atlas import AtlasLayout
 from calibproj.simulate.geometric import project_points
@@ -78,6 +79,9 @@ def test_outputs_are_complete(rendered):
     assert sorted(p.stem for p in (out / "videos").glob("*.mp4")) == sorted(names)
     assert sorted(p.stem for p in (out / "intrinsics").glob("*.json")) == sorted(names)
     assert (out / "scene.json").is_file()
+    evaluation = Tracks.read(out / "eval_tracks.json")
+    assert list(evaluation.camera_names) == list(names)
+    assert all(count > 0 for count in evaluation.counts_per_camera().values())
     assert read_poses(out / "truth.json").names == names
     assert truth["timing"]["projector_fps"] == 30.0
     assert set(truth["image_points"]) == set(names) == set(truth["clean_frames"])

@@ -15,8 +15,9 @@ Without --tracks-only the camera videos are rendered from --sequence (made by
 calibproj generate): every camera records the floor while the projector plays the
 sequence, at its own frame rate, start offset and exposure, with the scene's
 photometric effects (--ideal turns them off). OUT receives videos/<camera>.mp4
-(H.264, quality --crf, speed --preset), intrinsics/<camera>.json, scene.json and
-truth.json (poses, plane, projector, MSM centres in every image, timing); a table of
+(H.264, quality --crf, speed --preset), intrinsics/<camera>.json, scene.json,
+eval_tracks.json (evaluation points in the working volume, observed with --eval-noise)
+and truth.json (poses, plane, projector, MSM centres in every image, timing); a table of
 frames, sizes and the render speed is printed.
 """
 
@@ -66,6 +67,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="videos: seconds recorded after the sequence ends (default %(default)s)")
     parser.add_argument("--threads", type=int, default=None, metavar="N",
                         help="videos: worker threads (default one per camera)")
+    parser.add_argument("--eval-noise", type=float, default=render.DEFAULT_EVAL_NOISE_PX, metavar="PX",
+                        help="videos: noise of the eval_tracks.json observations, pixels (default %(default)s)")
     parser.add_argument("--ideal", action="store_true",
                         help="videos: no ambient light, noise, blur, vignetting or gamma")
     parser.add_argument("--no-progress", action="store_true", help="videos: no progress bars")
@@ -90,7 +93,7 @@ def _render_videos(args: argparse.Namespace) -> int:
         raise CommandError("rendering videos needs --sequence SEQ_DIR/sequence.json (from calibproj generate); "
                            "or use --tracks-only")
     options = render.RenderOptions(crf=args.crf, preset=args.preset, supersample=args.supersample,
-                                   tail_s=args.tail, threads=args.threads,
+                                   tail_s=args.tail, threads=args.threads, eval_noise_px=args.eval_noise,
                                    photometric=render.IDEAL_PHOTOMETRIC if args.ideal else None)
     # The scene goes by name or path so that errors name the file.
     simulation = render.simulate_videos(args.scene, Path(args.sequence), Path(args.out), seed=args.seed,

@@ -246,8 +246,8 @@ def simulate_tracks(
     msm_points = msm_floor_points(scene, layout)
     tracks, outliers = _msm_tracks(scene, layout, msm_points, noise_rng, outlier_rng, noise_px,
                                    outlier_fraction, min_marker_px, min_depth_m)
-    candidates = sample_eval_points(scene, eval_rng, eval_points, eval_points_per_camera, eval_height_m, min_depth_m)
-    eval_xyz, eval_tracks = _eval_tracks(scene, candidates, eval_noise_rng, noise_px, min_depth_m)
+    eval_xyz, eval_tracks = evaluation_tracks(scene, eval_rng, eval_noise_rng, noise_px, eval_points,
+                                              eval_points_per_camera, eval_height_m, min_depth_m)
     settings = {"noise_px": noise_px, "seed": seed, "outlier_fraction": outlier_fraction,
                 "min_marker_px": min_marker_px, "eval_height_m": eval_height_m, "min_depth_m": min_depth_m}
     simulation = GeometricSimulation(scene, layout, tracks, eval_tracks, msm_points, eval_xyz, outliers, settings)
@@ -305,6 +305,23 @@ def _replace_by_outliers(scene: Scene, rng: np.random.Generator, camera_index: n
         drawn = rng.uniform([-0.5, -0.5], [width - 0.5, height - 0.5], size=(len(chosen), 2))
         pixels[chosen] = camera.intrinsics.undistort_points(drawn)
     return rows
+
+
+def evaluation_tracks(
+    scene: Scene,
+    point_rng: np.random.Generator,
+    noise_rng: np.random.Generator,
+    noise_px: float,
+    count: int = DEFAULT_EVAL_POINTS,
+    per_camera: int = DEFAULT_EVAL_POINTS_PER_CAMERA,
+    height_m: float = DEFAULT_EVAL_HEIGHT_M,
+    min_depth_m: float = DEFAULT_MIN_DEPTH_M,
+) -> tuple[np.ndarray, Tracks]:
+    """Evaluation points in the working volume (``sample_eval_points``) seen by two
+    cameras at least, and their noisy undistorted observations: ``(points, tracks)``,
+    row ``i`` of points being point id ``i`` of the tracks."""
+    candidates = sample_eval_points(scene, point_rng, count, per_camera, height_m, min_depth_m)
+    return _eval_tracks(scene, candidates, noise_rng, noise_px, min_depth_m)
 
 
 def _eval_tracks(scene: Scene, candidates: np.ndarray, noise_rng: np.random.Generator, noise_px: float,

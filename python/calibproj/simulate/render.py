@@ -21,6 +21,7 @@ Output folder::
     videos/<camera>.mp4      H.264, yuv420p, at the camera's frame rate
     intrinsics/<camera>.json
     scene.json               the realised scene
+    eval_tracks.json         observations of evaluation points in the working volume
     truth.json               poses, plane, projector, MSM centres, timing (written last)
 """
 
@@ -42,6 +43,7 @@ from calibproj.io.intrinsics import write_intrinsics_dir
 from calibproj.io.jsonio import FormatError
 from calibproj.simulate.atlas import AtlasLayout
 from calibproj.simulate.contents import AtlasStore
+from calibproj.simulate.geometric import evaluation_tracks
 from calibproj.simulate.photometric import CameraResponse, SensorNoise
 from calibproj.simulate.scene import Camera, Photometric, Scene, load_scene, save_scene
 from calibproj.simulate.timeline import CameraClock, ContentKey, ProjectionTimeline
@@ -58,6 +60,8 @@ DEFAULT_CRF = 18
 DEFAULT_PRESET = "ultrafast"
 DEFAULT_TAIL_S = 0.5
 DEFAULT_CHUNK_S = 2.0
+# Corners of a ChArUco board are located to about a tenth of a pixel.
+DEFAULT_EVAL_NOISE_PX = 0.1
 # Warped contents kept per camera besides the flat ones (consecutive frames share a few).
 CAMERA_CACHE_SIZE = 6
 
@@ -81,6 +85,10 @@ class RenderOptions:
             pre-drawn fields at random offsets (slower, same statistics).
         photometric: overrides the scene's photometric settings (``IDEAL_PHOTOMETRIC``
             turns every effect off).
+        eval_noise_px: noise (standard deviation per coordinate, pixels) of the
+            observations in ``eval_tracks.json``: points in the working volume that
+            ``calibproj evaluate`` triangulates, as a board recorded after the
+            projection would give them (default 0.1).
     """
 
     crf: int = DEFAULT_CRF
@@ -91,6 +99,7 @@ class RenderOptions:
     threads: int | None = None
     fresh_noise: bool = False
     photometric: Photometric | None = None
+    eval_noise_px: float = DEFAULT_EVAL_NOISE_PX
 
     def check(self) -> None:
         from calibproj.generate.video import PRESETS
@@ -107,6 +116,8 @@ class RenderOptions:
             raise ValueError(f"chunk must be > 0 s, got {self.chunk_s}")
         if self.threads is not None and self.threads < 1:
             raise ValueError(f"threads must be at least 1, got {self.threads}")
+        if not self.eval_noise_px >= 0:
+            raise ValueError(f"eval noise must be >= 0 px, got {self.eval_noise_px}")
 
 
 @dataclass(frozen=True)
@@ -186,6 +197,8 @@ def simulate_videos(
     videos = _render_all(scene, sequence, timeline, clocks, views, out / "videos", seed, options, progress)
     settings = {"seed": seed, "sequence_markers": sequence.markers.spec, **_settings_json(options)}
     write_truth(out / "truth.json", video_truth_document(scene, sequence, timeline, clocks, settings))
+    point_rng, noise_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    evaluation_tracks(scene, point_rng, noise_rng, options.eval_noise_px)[1].write(out / "eval_tracks.json")
     simulation = VideoSimulation(out, scene, videos, time.perf_counter() - started)
     logger.info("rendered %d frames of %d cameras in %.1f s (%.1f frames/s), %.1f MB",
                 simulation.frame_count, len(videos), simulation.elapsed_s, simulation.frames_per_second,
