@@ -103,10 +103,11 @@ class IngestOptions:
         max_downscale: largest such factor.
         roi_threshold_window_px: ArUco's adaptive threshold window in regions, pixels:
             the marker's size there is known, so one window does where a whole frame
-            needs several (about 1.6x faster detection); 0 keeps the detector's own.
+            needs several (about 1.5x faster detection on the mock OR); 0 keeps the
+            detector's own.
         roi_min_white_black_diff: libapriltag's minimum white-black contrast in regions,
             grey levels: flat noisy background below it is not segmented (about 1.6x
-            faster detection); 0 keeps the detector's own.
+            faster detection on the mock OR); 0 keeps the detector's own.
         max_scales_per_msm: scales searched per MSM at most: a marker is left out when
             this many larger scales of its MSM are worth searching (larger markers give
             better centres); 0 searches every scale.
