@@ -4,7 +4,9 @@ It generates a short projection sequence, renders what the six cameras of the ``
 room record (four far-field GoPros, one on a surgical lamp and one zoomed on the table,
 1280x720, unsynchronised, at different frame rates), calibrates them from those videos
 exactly as from real recordings, puts the result in metres with one measurement (the
-side of a projected marker on the floor), and compares it with the ground truth.
+side of a projected marker on the floor), compares it with the ground truth, and
+evaluates it as the paper does (section 3.2) on independent points in the working
+volume that the rendering observed (``eval_tracks.json``).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ class DemoOptions:
 @dataclass
 class DemoResult:
     comparison: object  # calibproj.compare.Comparison
+    evaluation: object  # calibproj.evaluate.Evaluation
     calibration: object  # calibproj.calibration.Calibration
     report: Path
     seconds: dict[str, float]
@@ -53,6 +56,7 @@ class DemoResult:
 def run_demo(out: str | os.PathLike, options: DemoOptions | None = None, progress: bool = True) -> DemoResult:
     """Generate, render, calibrate and compare into ``out`` (see the module docstring)."""
     from calibproj.compare import compare
+    from calibproj.evaluate import evaluate
     from calibproj.generate import generate
     from calibproj.pipeline import check_output_folder
     from calibproj.pipeline import calibrate
@@ -90,7 +94,8 @@ def run_demo(out: str | os.PathLike, options: DemoOptions | None = None, progres
     )
     seconds["calibrate"] = time.perf_counter() - start
     comparison = compare(results / "camera_poses.json", out / "room" / "truth.json")
-    return DemoResult(comparison, calibration, results / "report.html", seconds)
+    evaluation = evaluate(results, out / "room" / "eval_tracks.json")
+    return DemoResult(comparison, evaluation, calibration, results / "report.html", seconds)
 
 
 def marker_side_on_floor(scene_path: Path, sequence) -> float:
