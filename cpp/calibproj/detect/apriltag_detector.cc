@@ -85,7 +85,7 @@ AprilTagDetector::AprilTagDetector(const MarkerFamily& family, const AprilTagOpt
 
 AprilTagDetector::~AprilTagDetector() = default;
 
-Detections AprilTagDetector::Detect(const cv::Mat& gray) const {
+Detections AprilTagDetector::Detect(const cv::Mat& gray, int min_white_black_diff) const {
   CheckGrayImage(gray);
   CheckDecimatedSize(gray, options_.quad_decimate);
   cv::Mat image = options_.inverted ? cv::Mat(255 - gray) : gray;
@@ -93,6 +93,8 @@ Detections AprilTagDetector::Detect(const cv::Mat& gray) const {
   std::unique_ptr<zarray_t, DetectionsDeleter> found;
   {
     const std::lock_guard<std::mutex> lock(mutex_);
+    detector_->qtp.min_white_black_diff =
+        min_white_black_diff > 0 ? min_white_black_diff : options_.min_white_black_diff;
     found.reset(apriltag_detector_detect(detector_.get(), &view));
   }
   if (!found) throw std::runtime_error("libapriltag detection failed");

@@ -48,7 +48,8 @@ class AprilTagDetector {
 
   // Markers in one 8-bit grayscale image; throws std::invalid_argument for other
   // images. Calls are serialised: libapriltag's detector is not re-entrant.
-  Detections Detect(const cv::Mat& gray) const;
+  // min_white_black_diff > 0 replaces the options' value for this call.
+  Detections Detect(const cv::Mat& gray, int min_white_black_diff = 0) const;
 
  private:
   AprilTagOptions options_;

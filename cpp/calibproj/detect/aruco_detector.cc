@@ -1,5 +1,6 @@
 #include "calibproj/detect/aruco_detector.h"
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 
@@ -41,11 +42,17 @@ ArucoDetector::ArucoDetector(const MarkerFamily& family, const ArucoOptions& opt
   parameters_->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;
 }
 
-Detections ArucoDetector::Detect(const cv::Mat& gray) const {
+Detections ArucoDetector::Detect(const cv::Mat& gray, int threshold_window_px) const {
   CheckGrayImage(gray);
+  cv::Ptr<cv::aruco::DetectorParameters> parameters = parameters_;
+  if (threshold_window_px > 0) {
+    parameters = cv::makePtr<cv::aruco::DetectorParameters>(*parameters_);
+    parameters->adaptiveThreshWinSizeMin = std::max(3, threshold_window_px);
+    parameters->adaptiveThreshWinSizeMax = parameters->adaptiveThreshWinSizeMin;
+  }
   std::vector<std::vector<cv::Point2f>> corners;
   std::vector<int> ids;
-  cv::aruco::detectMarkers(gray, dictionary_, corners, ids, parameters_);
+  cv::aruco::detectMarkers(gray, dictionary_, corners, ids, parameters);
   Detections out;
   for (std::size_t i = 0; i < ids.size(); ++i) {
     Quad quad;

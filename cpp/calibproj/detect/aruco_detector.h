@@ -39,7 +39,9 @@ class ArucoDetector {
   ArucoDetector(const MarkerFamily& family, const ArucoOptions& options);
 
   // Markers in one 8-bit grayscale image; throws std::invalid_argument for other images.
-  Detections Detect(const cv::Mat& gray) const;
+  // threshold_window_px > 0: one adaptive-threshold window of that size instead of the
+  // options' range.
+  Detections Detect(const cv::Mat& gray, int threshold_window_px = 0) const;
 
  private:
   ArucoOptions options_;

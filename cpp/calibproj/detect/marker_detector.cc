@@ -10,8 +10,9 @@ MarkerDetector::MarkerDetector(const MarkerFamily& family, const DetectorOptions
   }
 }
 
-Detections MarkerDetector::Detect(const cv::Mat& gray) const {
-  return aruco_ ? aruco_->Detect(gray) : apriltag_->Detect(gray);
+Detections MarkerDetector::Detect(const cv::Mat& gray, const DetectionTuning& tuning) const {
+  return aruco_ ? aruco_->Detect(gray, tuning.aruco_threshold_window_px)
+                : apriltag_->Detect(gray, tuning.apriltag_min_white_black_diff);
 }
 
 }  // namespace calibproj::detect

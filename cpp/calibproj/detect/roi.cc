@@ -187,14 +187,15 @@ PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& 
   return plan;
 }
 
-Detections DetectDownscaled(const MarkerDetector& detector, const cv::Mat& gray, int factor) {
-  if (factor <= 1) return detector.Detect(gray);
+Detections DetectDownscaled(const MarkerDetector& detector, const cv::Mat& gray, int factor,
+                            const DetectionTuning& tuning) {
+  if (factor <= 1) return detector.Detect(gray, tuning);
   // Whole small pixels only: small pixel (i, j) covers pixels [f i, f i + f).
   const cv::Mat whole = gray(cv::Rect(0, 0, gray.cols - gray.cols % factor, gray.rows - gray.rows % factor));
   cv::Mat small;
   cv::resize(whole, small, cv::Size(whole.cols / factor, whole.rows / factor), 0, 0, cv::INTER_AREA);
-  if (small.cols < kMinImageSide || small.rows < kMinImageSide) return detector.Detect(gray);
-  Detections found = detector.Detect(small);
+  if (small.cols < kMinImageSide || small.rows < kMinImageSide) return detector.Detect(gray, tuning);
+  Detections found = detector.Detect(small, tuning);
   // The centre of small pixel i (OpenCV convention) is at f i + (f - 1) / 2.
   const double offset = 0.5 * (factor - 1);
   for (Quad& quad : found.corners) {
@@ -206,10 +207,12 @@ Detections DetectDownscaled(const MarkerDetector& detector, const cv::Mat& gray,
 Detections DetectInRegions(const MarkerDetector& detector, const PatternPlan& plan,
                            const std::vector<RegionImage>& regions, const RoiOptions& options) {
   if (regions.size() != plan.markers.size()) throw std::invalid_argument("one region image per planned marker");
+  // The marker's size in a region is known: the detector is tuned for it.
+  const DetectionTuning tuning{options.threshold_window_px, options.min_white_black_diff};
   Detections out;
   for (std::size_t i = 0; i < regions.size(); ++i) {
     const MarkerPrediction& marker = plan.markers[i];
-    const Detections found = DetectDownscaled(detector, regions[i].gray, marker.downscale);
+    const Detections found = DetectDownscaled(detector, regions[i].gray, marker.downscale, tuning);
     const cv::Point2d origin(regions[i].origin.x, regions[i].origin.y);
     double best = AllowedOffset(marker.side_px, options);
     int chosen = -1;

@@ -118,7 +118,8 @@ struct RegionImage {
 // The detector's markers in `gray` shrunk by an integer `factor` (cv::INTER_AREA, so
 // each small pixel is the mean of factor x factor pixels), with corners mapped back to
 // the coordinates of `gray`. factor 1 detects on `gray` itself.
-Detections DetectDownscaled(const MarkerDetector& detector, const cv::Mat& gray, int factor);
+Detections DetectDownscaled(const MarkerDetector& detector, const cv::Mat& gray, int factor,
+                            const DetectionTuning& tuning = {});
 
 // Detections of planned markers in their regions (regions[i] holds markers[i] of the
 // plan; each shrunk by its marker's downscale factor for detection), in whole-frame

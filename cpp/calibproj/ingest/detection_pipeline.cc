@@ -14,20 +14,10 @@ DetectionPipeline::DetectionPipeline(const detect::MarkerFamily& family,
     : roi_options_(roi_options), corner_options_(std::move(corner_options)), max_pending_(max_pending) {
   if (threads < 1) throw std::invalid_argument("detection threads must be at least 1");
   if (max_pending < 1) throw std::invalid_argument("max pending detection jobs must be at least 1");
-  detect::DetectorOptions region_options = detector_options;
-  if (roi_options.threshold_window_px > 0) {
-    region_options.aruco.adaptive_thresh_win_size_min = roi_options.threshold_window_px;
-    region_options.aruco.adaptive_thresh_win_size_max = roi_options.threshold_window_px;
+  for (int i = 0; i < threads; ++i) {
+    detectors_.push_back(std::make_unique<detect::MarkerDetector>(family, detector_options));
   }
-  if (roi_options.min_white_black_diff > 0) {
-    region_options.apriltag.min_white_black_diff = roi_options.min_white_black_diff;
-  }
-  detectors_.resize(threads);
-  for (Detectors& d : detectors_) {
-    d.whole_frame = std::make_unique<detect::MarkerDetector>(family, detector_options);
-    d.regions = std::make_unique<detect::MarkerDetector>(family, region_options);
-  }
-  for (const Detectors& d : detectors_) workers_.emplace_back([this, &d] { Work(d); });
+  for (const auto& detector : detectors_) workers_.emplace_back([this, d = detector.get()] { Work(*d); });
 }
 
 DetectionPipeline::~DetectionPipeline() { Stop(); }
@@ -90,7 +80,7 @@ detect::Quad DetectionPipeline::Undistorted(const detect::Quad& corners, const d
   return {points[0], points[1], points[2], points[3]};
 }
 
-void DetectionPipeline::Work(const Detectors& detectors) {
+void DetectionPipeline::Work(const detect::MarkerDetector& detector) {
   while (true) {
     DetectionJob job;
     {
@@ -105,7 +95,7 @@ void DetectionPipeline::Work(const Detectors& detectors) {
     DetectionOutput output;
     std::exception_ptr error;
     try {
-      output = Run(detectors, job);
+      output = Run(detector, job);
     } catch (...) {
       error = std::current_exception();
     }
@@ -133,7 +123,7 @@ double ThreadSeconds() {
 
 }  // namespace
 
-DetectionOutput DetectionPipeline::Run(const Detectors& detectors, const DetectionJob& job) const {
+DetectionOutput DetectionPipeline::Run(const detect::MarkerDetector& detector, const DetectionJob& job) const {
   const double started = ThreadSeconds();
   DetectionOutput output;
   output.pattern = job.pattern;
@@ -142,12 +132,11 @@ DetectionOutput DetectionPipeline::Run(const Detectors& detectors, const Detecti
   output.frame_count = job.frame_count;
   if (job.has_plan) output.searched = job.plan.markers;
   if (job.whole_frame) {
-    const detect::Detections found =
-        detect::DetectDownscaled(*detectors.whole_frame, job.regions.at(0).gray, job.downscale);
+    const detect::Detections found = detect::DetectDownscaled(detector, job.regions.at(0).gray, job.downscale);
     output.detections = detect::FilterDetections(found, job.ids, job.has_plan ? &job.plan : nullptr, roi_options_,
                                                  &output.rejected);
   } else {
-    output.detections = detect::DetectInRegions(*detectors.regions, job.plan, job.regions, roi_options_);
+    output.detections = detect::DetectInRegions(detector, job.plan, job.regions, roi_options_);
   }
   for (std::size_t k = 0; k < output.detections.size(); ++k) {
     // The region the marker was found in: the whole frame, or its own region.

@@ -80,14 +80,8 @@ class DetectionPipeline {
   std::vector<DetectionOutput> Finish();
 
  private:
-  // One worker's detectors: for whole frames, and for regions of known marker size.
-  struct Detectors {
-    std::unique_ptr<detect::MarkerDetector> whole_frame;
-    std::unique_ptr<detect::MarkerDetector> regions;
-  };
-
-  void Work(const Detectors& detectors);
-  DetectionOutput Run(const Detectors& detectors, const DetectionJob& job) const;
+  void Work(const detect::MarkerDetector& detector);
+  DetectionOutput Run(const detect::MarkerDetector& detector, const DetectionJob& job) const;
   void RethrowLocked();
   void Stop();
 
@@ -97,7 +91,7 @@ class DetectionPipeline {
   detect::RoiOptions roi_options_;
   CornerOptions corner_options_;
   int max_pending_;
-  std::vector<Detectors> detectors_;
+  std::vector<std::unique_ptr<detect::MarkerDetector>> detectors_;
   std::vector<std::thread> workers_;
   std::mutex mutex_;
   std::condition_variable work_ready_, space_ready_, all_done_;
