@@ -299,7 +299,7 @@ class CameraIngest {
     return selection;
   }
 
-  void AddFrame(int frame, const cv::Mat& image) {
+  void AddFrame(int frame, const cv::Mat& gray_frame) {
     const bool first = pending_.frames.empty();
     const bool averaging = picks_[pending_.pattern].size() > 1;
     if (first) {
@@ -307,7 +307,7 @@ class CameraIngest {
       pending_.sums.resize(pending_.rects.size());
     }
     for (std::size_t i = 0; i < pending_.rects.size(); ++i) {
-      cv::Mat gray = video::GrayRegion(image, pending_.rects[i]);
+      cv::Mat gray = gray_frame(pending_.rects[i]).clone();
       if (averaging) {
         if (first) {
           gray.convertTo(pending_.sums[i], CV_16U);

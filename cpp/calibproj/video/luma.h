@@ -1,6 +1,5 @@
 #pragma once
-// Luma (grey) from decoded BGR frames, with OpenCV's BT.601 weights and rounding, so
-// that a mean taken from a BGR frame equals the mean of its cv::cvtColor grey image.
+// Mean luma of decoded grey frames (VideoReader::Gray) for synchronisation.
 
 #include <opencv2/core.hpp>
 
@@ -18,16 +17,13 @@ class LumaMeter {
   // Throws std::invalid_argument for row_step < 1 or gamma <= 0.
   LumaMeter(double gamma, int row_step);
 
-  // Mean linearised luma over every row_step-th row of an 8-bit BGR or grey image
-  // (full scale 1).
+  // Mean linearised luma over every row_step-th row of an 8-bit grey image (full
+  // scale 1).
   double Mean(const cv::Mat& image) const;
 
  private:
   std::array<float, 256> linear_;
   int row_step_;
 };
-
-// Grey copy of `region` of an 8-bit BGR or grey image (only the region is converted).
-cv::Mat GrayRegion(const cv::Mat& image, const cv::Rect& region);
 
 }  // namespace calibproj::video
