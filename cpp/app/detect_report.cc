@@ -53,10 +53,13 @@ ordered_json CameraSummary(const CameraOutcome& camera, const ingest::SequenceDe
   }
   const ingest::CameraIngestResult& r = camera.result;
   entry["sync"] = SyncSummary(r.sync, r.video.fps, sequence.fps);
-  entry["video_info"] = {{"width", r.video.width}, {"height", r.video.height}, {"fps", r.video.fps},
-                         {"frame_count", r.video.frame_count}};
-  entry["frames"] = {{"decoded", r.frames_decoded}, {"converted", r.frames_converted},
-                     {"detected", r.frames_detected}};
+  entry["video_info"] = {{"width", r.video.width},         {"height", r.video.height},
+                         {"fps", r.video.fps},             {"declared_fps", r.video.declared_fps},
+                         {"timed", r.video.timed},         {"frame_count", r.video.frame_count}};
+  entry["frames"] = {{"decoded", r.frames_decoded},         {"converted", r.frames_converted},
+                     {"detected", r.frames_detected},       {"dropped", r.timing.dropped},
+                     {"duplicated", r.timing.duplicated},   {"untimed", r.timing.untimed},
+                     {"largest_gap", r.timing.largest_gap}, {"jitter_ms", 1e3 * r.timing.jitter_rms_s}};
   entry["patterns"] = {{"whole_frame", r.patterns_whole_frame}, {"in_regions", r.patterns_in_regions},
                        {"dropped", r.patterns_dropped}, {"missing", r.patterns_missing}};
   entry["detections_rejected"] = r.detections_rejected;
@@ -84,7 +87,9 @@ std::string CameraLines(const std::string& name, const ordered_json& camera) {
                      Format("%+.0f", sync.at("drift_ppm").get<double>()) + " ppm), codes " +
                      Format("%.3f/%.3f", sync.at("start_correlation").get<double>(),
                             sync.at("end_correlation").get<double>()) +
-                     "; frames " + std::to_string(frames.at("decoded").get<int>()) + " decoded, " +
+                     "; frames " + std::to_string(frames.at("decoded").get<int>()) + " decoded (" +
+                     std::to_string(frames.at("dropped").get<int>()) + " dropped, " +
+                     std::to_string(frames.at("duplicated").get<int>()) + " duplicated), " +
                      std::to_string(frames.at("detected").get<int>()) + " detected; " +
                      std::to_string(camera.at("msms_kept").get<int>()) + " MSMs kept";
   std::string per_scale;

@@ -172,7 +172,12 @@ py::dict ResultDict(const ingest::CameraIngestResult& r) {
   py::dict d;
   d["video"] = py::dict(py::arg("path") = r.video.path, py::arg("width") = r.video.width,
                         py::arg("height") = r.video.height, py::arg("fps") = r.video.fps,
+                        py::arg("declared_fps") = r.video.declared_fps, py::arg("timed") = r.video.timed,
                         py::arg("frame_count") = r.video.frame_count);
+  d["timing"] = py::dict(py::arg("frames") = r.timing.frames, py::arg("dropped") = r.timing.dropped,
+                         py::arg("duplicated") = r.timing.duplicated, py::arg("untimed") = r.timing.untimed,
+                         py::arg("largest_gap") = r.timing.largest_gap,
+                         py::arg("jitter_rms_s") = r.timing.jitter_rms_s);
   d["sync"] = SyncResultDict(r.sync);
   d["frames_decoded"] = r.frames_decoded;
   d["frames_converted"] = r.frames_converted;

@@ -2,7 +2,9 @@
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
 
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -28,28 +30,55 @@ void register_video(py::module_& m) {
         d["width"] = info.width;
         d["height"] = info.height;
         d["fps"] = info.fps;
+        d["declared_fps"] = info.declared_fps;
+        d["timed"] = info.timed;
         d["frame_count"] = info.frame_count;
         return d;
       },
       py::arg("path"),
-      "Frame size, frame rate and declared frame count of a video (FFmpeg's libraries); "
-      "RuntimeError naming the file when it cannot be opened.");
+      "Frame size, frame rate (of the frame grid the first timestamps lie on; declared_fps: the "
+      "container's average), whether frames carry timestamps, and the declared frame count of a video "
+      "(FFmpeg's libraries); RuntimeError naming the file when it cannot be opened.");
+  m.def(
+      "frame_timestamps",
+      [](const std::string& path) {
+        std::vector<double> times;
+        {
+          py::gil_scoped_release release;
+          times = video::ReadFrameTimestamps(path);
+        }
+        py::array_t<double> out(static_cast<py::ssize_t>(times.size()));
+        std::copy(times.begin(), times.end(), out.mutable_data());
+        return out;
+      },
+      py::arg("path"),
+      "Container timestamp in seconds (NaN where none) of every decoded frame, in decoding order.");
+  m.def(
+      "frame_period",
+      [](const std::vector<double>& times) { return video::EstimateFramePeriod(times); },
+      py::arg("times"),
+      "Period (seconds) of the frame grid that timestamps lie on, allowing for missing frames and "
+      "jitter under half a period; 0 with fewer than three distinct timestamps.");
   m.def(
       "luma_signal",
-      [](const std::string& path, double gamma, int row_step) {
+      [](const std::string& path, double gamma, int row_step, bool use_timestamps, double max_frame_gap_s) {
+        if (!(gamma > 0.0)) throw std::invalid_argument("gamma must be positive");
+        if (row_step < 1) throw std::invalid_argument("row_step must be at least 1");
         std::vector<double> signal;
         {
           py::gil_scoped_release release;
-          signal = video::ReadLumaSignal(path, gamma, row_step);
+          signal = video::ReadLumaSignal(path, gamma, row_step, use_timestamps, max_frame_gap_s);
         }
         py::array_t<double> out(static_cast<py::ssize_t>(signal.size()));
         std::copy(signal.begin(), signal.end(), out.mutable_data());
         return out;
       },
-      py::arg("path"), py::arg("gamma") = 2.2, py::arg("row_step") = 2,
-      "Mean luma of every frame (the decoder's luma plane in full range: cv2.cvtColor of the colour "
-      "frame, up to rounding), each pixel linearised as (value / 255)^gamma, over every row_step-th "
-      "row; one decoding pass.");
+      py::arg("path"), py::arg("gamma") = 2.2, py::arg("row_step") = 2, py::arg("use_timestamps") = true,
+      py::arg("max_frame_gap_s") = 2.0,
+      "Mean luma per slot of the frame grid (NaN where the camera dropped a frame; use_timestamps "
+      "false: one slot per decoded frame): the decoder's luma plane in full range (cv2.cvtColor of the "
+      "colour frame, up to rounding), each pixel linearised as (value / 255)^gamma, over every "
+      "row_step-th row; one decoding pass.");
 }
 
 }  // namespace calibproj::bindings

@@ -73,9 +73,13 @@ class CameraIngest:
             return entry
         raw = self.raw
         entry["sync"] = _sync_summary(raw["sync"], raw["video"]["fps"], projector_fps)
-        entry["video_info"] = {key: raw["video"][key] for key in ("width", "height", "fps", "frame_count")}
+        entry["video_info"] = {key: raw["video"][key] for key in ("width", "height", "fps", "declared_fps",
+                                                                  "timed", "frame_count")}
+        timing = raw["timing"]
         entry["frames"] = {"decoded": raw["frames_decoded"], "converted": raw["frames_converted"],
-                           "detected": raw["frames_detected"]}
+                           "detected": raw["frames_detected"], "dropped": timing["dropped"],
+                           "duplicated": timing["duplicated"], "untimed": timing["untimed"],
+                           "largest_gap": timing["largest_gap"], "jitter_ms": 1e3 * timing["jitter_rms_s"]}
         entry["patterns"] = {key: raw[f"patterns_{key}"] for key in ("whole_frame", "in_regions", "dropped",
                                                                        "missing")}
         entry["detections_rejected"] = raw["detections_rejected"]

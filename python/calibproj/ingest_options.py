@@ -33,6 +33,9 @@ class IngestOptions:
         rate_step: relative step between candidate rates.
         phases: sub-frame phases per candidate rate in the coarse search.
         coarse_exposure: exposure assumed by the coarse search, camera frames.
+        max_missing_share: share of a light code's camera frames that may be missing
+            (dropped by the camera) where the code is searched; the correlation is
+            taken over the frames present.
         offset_range: the sub-frame fit searches +- this many camera frames around the
             coarse offset.
         offset_step: grid step of the sub-frame fit, camera frames.
@@ -53,6 +56,8 @@ class IngestOptions:
             only with the exposure.
         margin: projector frames kept clear of each pattern change, on either side.
         average_frames: clean frames averaged per pattern before detection.
+        spare_frames: further clean frames per pattern, after the first picked one, that
+            stand in for picked frames the camera dropped.
         max_clock_drift: largest relative camera clock drift; widens the frames kept
             clear while decoding, before the end code is seen.
         use_roi: detect in predicted regions once the projector-to-image homography is
@@ -126,6 +131,12 @@ class IngestOptions:
         max_deviation_px: scales of an MSM farther than this from their median are
             rejected.
         min_scales: scales an MSM needs (after rejection) to give a centre.
+        use_timestamps: time comes from the container's frame timestamps: each frame
+            is placed on the camera's frame grid, so dropped frames leave gaps instead
+            of shifting every later frame (false: time from the decoding order, for
+            containers whose timestamps are wrong).
+        max_frame_gap_s: a gap longer than this between consecutive frames' timestamps
+            (a paused recording, a corrupt timestamp) fails the camera.
         mean_row_step: the mean luma is taken over every n-th row.
         luma_gamma: the video's display gamma, undone per pixel before the mean, so that
             a frame across a light change measures the exposure-weighted mean (1 keeps
@@ -148,6 +159,7 @@ class IngestOptions:
     rate_step: float = 0.002
     phases: int = 4
     coarse_exposure: float = 0.5
+    max_missing_share: float = 0.25
     offset_range: float = 1.0
     offset_step: float = 0.02
     min_exposure: float = 0.02
@@ -159,6 +171,7 @@ class IngestOptions:
     exposure_s: float = 0.0
     margin: float = 0.1
     average_frames: int = 1
+    spare_frames: int = 2
     max_clock_drift: float = 2e-4
     use_roi: bool = True
     bootstrap_downscale: int = 1
@@ -200,6 +213,8 @@ class IngestOptions:
     homography_max_rms_px: float = 1.0
     max_deviation_px: float = 0.5
     min_scales: int = 1
+    use_timestamps: bool = True
+    max_frame_gap_s: float = 2.0
     mean_row_step: int = 2
     luma_gamma: float = 2.2
     lookback_frames: int = 16

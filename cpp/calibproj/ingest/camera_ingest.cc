@@ -62,6 +62,7 @@ class CameraIngest {
         nominal_rate_(reader_.info().fps / sequence.fps),
         luma_(options_.luma_gamma, options_.mean_row_step),
         ring_(options_.lookback_frames),
+        clock_(1.0 / reader_.info().fps, options_.max_frame_gap_s, options_.use_timestamps, path),
         homography_(cv::Size(reader_.info().width, reader_.info().height), options_.homography),
         resolution_(options_.resolution),
         pipeline_(family_, options_.detector, options_.roi,
@@ -83,16 +84,21 @@ class CameraIngest {
   CameraIngestResult Run() {
     const auto started = std::chrono::steady_clock::now();
     while (reader_.Grab()) {
-      const int frame = reader_.frame_index();
+      const int decoded = reader_.frame_index() + 1;
+      if (progress_ && decoded % kProgressInterval == 1) progress_(decoded, reader_.info().frame_count);
+      const int frame = clock_.Place(reader_.timestamp());
+      if (frame < 0) continue;  // a second frame in one slot: the first one counts
+      // Slots the camera dropped are unmeasured.
+      result_.signal.resize(frame, kNaN);
       converted_ = false;
       if (started_) {
         OnFrameAfterStart(frame);
       } else {
         OnFrameBeforeStart(frame);
       }
-      if (progress_ && frame % kProgressInterval == 0) progress_(frame + 1, reader_.info().frame_count);
     }
     result_.frames_decoded = reader_.frame_index() + 1;
+    result_.timing = clock_.Stats();
     if (progress_) progress_(result_.frames_decoded, result_.frames_decoded);
     if (!started_) ThrowStartNotFound();
     SubmitPending();
@@ -146,7 +152,11 @@ class CameraIngest {
     cv::Mat gray = Gray();
     result_.signal.push_back(luma_.Mean(gray));
     ring_.Push(frame, std::move(gray));
-    if (frame % options_.search_interval == 0 && tracker_->Update(result_.signal)) OnStartFound();
+    // Every search_interval slots (slot 0, search_interval, ... when no frame is dropped).
+    if (frame >= last_search_ + options_.search_interval) {
+      last_search_ = frame - frame % options_.search_interval;
+      if (tracker_->Update(result_.signal)) OnStartFound();
+    }
   }
 
   void OnStartFound() {
@@ -177,15 +187,28 @@ class CameraIngest {
 
   // Frames to detect on, per pattern, from the start code's conservative exposure
   // window and the nominal rate; the slack covers the clock drift since the code.
+  // The most central clean frames are wanted; the clean frames after the first of
+  // them stand in for any that the camera dropped.
   void PlanPicks() {
     const video::PickOptions& pick = options_.pick;
     picks_.assign(sequence_.patterns.size(), {});
+    wanted_.assign(sequence_.patterns.size(), 0);
     for (std::size_t p = 0; p < sequence_.patterns.size(); ++p) {
       const PatternSpec& pattern = sequence_.patterns[p];
       const double begin = pattern.first_frame, end = pattern.last_frame + 1.0;
-      const double slack = pick.max_clock_drift * std::abs(begin - sequence_.start_code.first_frame);
-      picks_[p] = video::PickFrames(provisional_, begin, end, pick.margin, slack, pick.average_frames);
-      if (picks_[p].empty()) picks_[p] = video::PickFrames(provisional_, begin, end, pick.margin, 0.0, 1);
+      double slack = pick.max_clock_drift * std::abs(begin - sequence_.start_code.first_frame);
+      std::vector<int> central = video::PickFrames(provisional_, begin, end, pick.margin, slack, pick.average_frames);
+      if (central.empty()) {
+        slack = 0.0;
+        central = video::PickFrames(provisional_, begin, end, pick.margin, slack, 1);
+      }
+      if (central.empty()) continue;
+      const int candidates = pick.average_frames + 2 * pick.spare_frames;
+      for (int frame : video::PickFrames(provisional_, begin, end, pick.margin, slack, candidates)) {
+        const int limit = static_cast<int>(central.size()) + pick.spare_frames;
+        if (frame >= central.front() && static_cast<int>(picks_[p].size()) < limit) picks_[p].push_back(frame);
+      }
+      wanted_[p] = static_cast<int>(central.size());
       for (int frame : picks_[p]) frame_pattern_.emplace(frame, static_cast<int>(p));
     }
   }
@@ -211,13 +234,16 @@ class CameraIngest {
 
   template <typename ImageFn>
   void HandlePick(int frame, int pattern, ImageFn image) {
+    if (status_[pattern] == PatternStatus::kSubmitted) return;  // enough frames already
     if (pending_.pattern != pattern) {
       SubmitPending();
       BeginPattern(pattern);
     }
     if (pending_.skip) return;
     AddFrame(frame, image());
-    if (frame == picks_[pattern].back()) SubmitPending();
+    if (static_cast<int>(pending_.frames.size()) == wanted_[pattern] || frame == picks_[pattern].back()) {
+      SubmitPending();
+    }
   }
 
   void BeginPattern(int index) {
@@ -301,7 +327,7 @@ class CameraIngest {
 
   void AddFrame(int frame, const cv::Mat& gray_frame) {
     const bool first = pending_.frames.empty();
-    const bool averaging = picks_[pending_.pattern].size() > 1;
+    const bool averaging = wanted_[pending_.pattern] > 1;
     if (first) {
       pending_.job.regions.resize(pending_.rects.size());
       pending_.sums.resize(pending_.rects.size());
@@ -437,6 +463,8 @@ class CameraIngest {
   std::unique_ptr<sync::CodeTracker> tracker_;
   video::LumaMeter luma_;
   video::FrameRing ring_;
+  video::FrameClock clock_;
+  int last_search_ = std::numeric_limits<int>::min() / 2;
   detect::ProjectorHomography homography_;
   detect::ResolutionLimit resolution_;
   // Smallest image side over projector side of the markers found so far.
@@ -447,7 +475,8 @@ class CameraIngest {
   bool converted_ = false;
   sync::CodeLocation start_;
   sync::FrameMap provisional_;
-  std::vector<std::vector<int>> picks_;
+  std::vector<std::vector<int>> picks_;  // candidate frames per pattern, increasing
+  std::vector<int> wanted_;              // frames averaged per pattern
   std::map<int, int> frame_pattern_;
   int end_means_first_ = 0;
   int end_means_last_ = -1;
@@ -471,6 +500,7 @@ void IngestOptions::Check() const {
   Require(mean_row_step >= 1, "mean_row_step must be at least 1");
   Require(luma_gamma > 0.0, "luma_gamma must be positive");
   Require(exposure_s >= 0.0, "exposure_s must be non-negative (0: estimate it)");
+  Require(max_frame_gap_s > 0.0 && std::isfinite(max_frame_gap_s), "max_frame_gap_s must be positive");
   Require(lookback_frames >= 0, "lookback_frames must be non-negative");
   Require(search_interval >= 1, "search_interval must be at least 1");
   Require(detection_threads >= 1, "detection_threads must be at least 1");

@@ -23,6 +23,7 @@
 #include "calibproj/detect/undistorted_edges.h"
 #include "calibproj/ingest/sequence_description.h"
 #include "calibproj/sync/synchronise.h"
+#include "calibproj/video/frame_clock.h"
 #include "calibproj/video/frame_picker.h"
 #include "calibproj/video/video_reader.h"
 
@@ -75,6 +76,13 @@ struct IngestOptions {
   // display gamma; 1 = use the encoded values).
   int mean_row_step = 2;
   double luma_gamma = 2.2;
+  // Time from the container's frame timestamps (frames placed on the frame grid, so
+  // dropped frames leave gaps instead of shifting every later frame); false: from the
+  // decoding order, for containers whose timestamps are wrong.
+  bool use_timestamps = true;
+  // Largest gap between consecutive frames' timestamps, seconds, before the video is
+  // rejected (a paused recording or a corrupt timestamp).
+  double max_frame_gap_s = 2.0;
   // Decoded grey frames kept while the start code is being looked for.
   int lookback_frames = 16;
   // Frames decoded between two incremental searches of the start code.
@@ -107,6 +115,9 @@ struct ScaleStats {
 struct CameraIngestResult {
   video::VideoInfo video;
   sync::SyncResult sync;
+  // Frames on the frame grid: dropped and duplicated frames, timing jitter. Frame
+  // numbers everywhere (signal, sync, records) are grid slots.
+  video::FrameClockStats timing;
   int frames_decoded = 0;
   int frames_converted = 0;    // decoded frames whose grey image was made (for luma or detection)
   int frames_detected = 0;     // frames that went into a detection
@@ -118,7 +129,7 @@ struct CameraIngestResult {
   std::vector<ScaleStats> scales;
   std::vector<detect::ScaleRecord> records;
   std::vector<detect::MergedCentre> centres;
-  std::vector<double> signal;  // mean luma per decoded frame, NaN where not measured
+  std::vector<double> signal;  // mean luma per grid slot, NaN where not measured or dropped
   bool homography_valid = false;
   cv::Matx33d homography = cv::Matx33d::eye();  // projector pixels -> undistorted pixels
   double homography_rms_px = 0.0;

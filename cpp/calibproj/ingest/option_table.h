@@ -22,6 +22,7 @@ void VisitSyncOptions(SyncOptionsT& s, Visitor&& visit) {
   visit("rate_step", s.search.rate_step, "relative step between candidate rates");
   visit("phases", s.search.phases, "sub-frame phases per candidate rate in the coarse search");
   visit("coarse_exposure", s.search.exposure, "exposure assumed by the coarse search, camera frames");
+  visit("max_missing_share", s.search.max_missing_share, "share of a code's frames that may be dropped");
   visit("offset_range", s.fit.offset_range, "sub-frame fit range around the coarse offset, camera frames");
   visit("offset_step", s.fit.offset_step, "grid step of the sub-frame fit, camera frames");
   visit("min_exposure", s.fit.min_exposure, "shortest exposure the fit tries, camera frames");
@@ -38,6 +39,7 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("exposure_s", o.exposure_s, "known exposure time of the cameras, seconds (0: estimate it)");
   visit("margin", o.pick.margin, "projector frames kept clear of each pattern change");
   visit("average_frames", o.pick.average_frames, "clean frames averaged per pattern before detection");
+  visit("spare_frames", o.pick.spare_frames, "later clean frames standing in for dropped ones");
   visit("max_clock_drift", o.pick.max_clock_drift, "largest relative camera clock drift");
   visit("use_roi", o.use_roi, "detect in regions of interest once the homography is known");
   visit("bootstrap_downscale", o.bootstrap_downscale, "whole frames before the homography are shrunk this much");
@@ -79,6 +81,8 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("homography_max_rms_px", o.homography.max_rms_px, "inlier RMS the fit must stay under");
   visit("max_deviation_px", o.merge.max_deviation_px, "scales farther than this from their median are rejected");
   visit("min_scales", o.merge.min_scales, "scales an MSM needs to give a centre");
+  visit("use_timestamps", o.use_timestamps, "time from container timestamps (false: decoding order)");
+  visit("max_frame_gap_s", o.max_frame_gap_s, "largest gap between frame timestamps, seconds");
   visit("mean_row_step", o.mean_row_step, "the mean luma is taken over every n-th row");
   visit("luma_gamma", o.luma_gamma, "the video's display gamma, undone before the mean (1: encoded values)");
   visit("lookback_frames", o.lookback_frames, "decoded frames kept while the start code is searched");

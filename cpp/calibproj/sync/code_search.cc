@@ -80,6 +80,27 @@ double Correlation(const std::vector<double>& signal, const SignalSums& sums, co
   return dot / (std::sqrt(variance) * t.norm);
 }
 
+// The same over the measured samples only (the template centred on those).
+double CorrelationWithGaps(const std::vector<double>& signal, const CodeTemplate& t, int shift) {
+  double n = 0, st = 0, stt = 0, ss = 0, sss = 0, sst = 0;
+  for (std::size_t i = 0; i < t.values.size(); ++i) {
+    const double v = signal[shift + i];
+    if (std::isnan(v)) continue;
+    const double u = t.values[i];
+    n += 1;
+    st += u;
+    stt += u * u;
+    ss += v;
+    sss += v * v;
+    sst += v * u;
+  }
+  if (n < 2) return 0.0;
+  const double template_variance = stt - st * st / n;
+  const double signal_variance = sss - ss * ss / n;
+  if (!(signal_variance > 1e-12) || !(template_variance > 1e-12)) return 0.0;
+  return (sst - st * ss / n) / std::sqrt(signal_variance * template_variance);
+}
+
 }  // namespace
 
 void CodeSearchOptions::Check() const {
@@ -87,6 +108,7 @@ void CodeSearchOptions::Check() const {
   Require(rate_step > 0.0, "rate_step must be positive");
   Require(phases >= 1, "phases must be at least 1");
   Require(exposure > 0.0 && exposure <= 1.0, "exposure must be in (0, 1] camera frames");
+  Require(max_missing_share >= 0.0 && max_missing_share < 0.9, "max_missing_share must be in [0, 0.9)");
 }
 
 std::vector<CodeTemplate> MakeCodeTemplates(const LightTimeline& timeline, const FrameWindow& window,
@@ -104,7 +126,8 @@ std::vector<CodeTemplate> MakeCodeTemplates(const LightTimeline& timeline, const
 }
 
 CodeMatch SearchCode(const std::vector<double>& signal, const std::vector<CodeTemplate>& templates,
-                     const FrameWindow& window, double exposure, int first_shift, int end_shift) {
+                     const FrameWindow& window, double exposure, double max_missing_share, int first_shift,
+                     int end_shift) {
   const int end = static_cast<int>(signal.size());
   const int shift_limit = end_shift < 0 ? end : end_shift;
   const SignalSums sums(signal, end);
@@ -112,8 +135,10 @@ CodeMatch SearchCode(const std::vector<double>& signal, const std::vector<CodeTe
   for (const CodeTemplate& t : templates) {
     const int n = static_cast<int>(t.values.size());
     for (int shift = std::max(first_shift, 0); shift < shift_limit && shift + n <= end; ++shift) {
-      if (sums.missing[shift + n] != sums.missing[shift]) continue;
-      const double correlation = Correlation(signal, sums, t, shift);
+      const int missing = sums.missing[shift + n] - sums.missing[shift];
+      if (missing > max_missing_share * n) continue;
+      const double correlation =
+          missing == 0 ? Correlation(signal, sums, t, shift) : CorrelationWithGaps(signal, t, shift);
       if (correlation > best.correlation + kCorrelationTie) {
         best.correlation = correlation;
         // Sample i = camera frame shift + i starts at window.begin + (i + phase) / rate.
@@ -129,7 +154,7 @@ CodeMatch SearchCode(const std::vector<double>& signal, const std::vector<CodeTe
 CodeMatch SearchCode(const std::vector<double>& signal, const LightTimeline& timeline, const FrameWindow& window,
                      double nominal_rate, const CodeSearchOptions& options, int first_shift, int end_shift) {
   return SearchCode(signal, MakeCodeTemplates(timeline, window, nominal_rate, options), window, options.exposure,
-                    first_shift, end_shift);
+                    options.max_missing_share, first_shift, end_shift);
 }
 
 CodeTracker::CodeTracker(const LightTimeline& timeline, FrameWindow window, double nominal_rate,
@@ -137,6 +162,7 @@ CodeTracker::CodeTracker(const LightTimeline& timeline, FrameWindow window, doub
     : window_(window),
       templates_(MakeCodeTemplates(timeline, window, nominal_rate, options)),
       exposure_(options.exposure),
+      max_missing_share_(options.max_missing_share),
       min_correlation_(min_correlation),
       guard_samples_(guard_samples) {
   for (const CodeTemplate& t : templates_) {
@@ -149,7 +175,7 @@ bool CodeTracker::Update(const std::vector<double>& signal) {
   // Shifts where every candidate template fits; the next call starts where these end.
   const int complete_shifts = static_cast<int>(signal.size()) - longest_template_ + 1;
   if (complete_shifts <= next_shift_) return false;
-  const CodeMatch match = SearchCode(signal, templates_, window_, exposure_, next_shift_, complete_shifts);
+  const CodeMatch match = SearchCode(signal, templates_, window_, exposure_, max_missing_share_, next_shift_, complete_shifts);
   if (match.valid() && match.correlation > best_.correlation + kCorrelationTie) best_ = match;
   next_shift_ = complete_shifts;
   found_ = best_.valid() && best_.correlation >= min_correlation_ &&

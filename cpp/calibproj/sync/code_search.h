@@ -25,6 +25,9 @@ struct CodeSearchOptions {
   int phases = 4;
   // Exposure assumed by the coarse model, in camera frames.
   double exposure = 0.5;
+  // Share of a code window's camera frames that may be missing (dropped by the camera)
+  // at a shift that is searched; the correlation is taken over the frames present.
+  double max_missing_share = 0.25;
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;
@@ -53,12 +56,14 @@ struct CodeMatch {
 // Searches `window` of `timeline` in `signal` over the candidate rates around
 // `nominal_rate`, at shifts (first camera frame of the match) in [first_shift,
 // end_shift) (end_shift < 0: every shift); only shifts whose samples all lie in the
-// signal and are measured (not NaN) count. Returns an invalid match when none fits.
+// signal, at most max_missing_share of them unmeasured (NaN), count. Returns an
+// invalid match when none fits.
 CodeMatch SearchCode(const std::vector<double>& signal, const LightTimeline& timeline, const FrameWindow& window,
                      double nominal_rate, const CodeSearchOptions& options, int first_shift = 0,
                      int end_shift = -1);
 CodeMatch SearchCode(const std::vector<double>& signal, const std::vector<CodeTemplate>& templates,
-                     const FrameWindow& window, double exposure, int first_shift = 0, int end_shift = -1);
+                     const FrameWindow& window, double exposure, double max_missing_share, int first_shift = 0,
+                     int end_shift = -1);
 
 // Incremental search for one code while a video is being decoded: Update() looks at
 // the shifts that became complete since its last call and keeps the best match. The
@@ -79,6 +84,7 @@ class CodeTracker {
   FrameWindow window_;
   std::vector<CodeTemplate> templates_;
   double exposure_;
+  double max_missing_share_;
   int longest_template_ = 0;
   double min_correlation_;
   int guard_samples_;

@@ -18,6 +18,7 @@ void Require(bool condition, const std::string& message) {
 void PickOptions::Check() const {
   Require(margin >= 0.0, "margin must be non-negative");
   Require(average_frames >= 1 && average_frames <= 8, "average_frames must be in [1, 8]");
+  Require(spare_frames >= 0 && spare_frames <= 8, "spare_frames must be in [0, 8]");
   Require(max_clock_drift >= 0.0 && max_clock_drift < 0.1, "max_clock_drift must be in [0, 0.1)");
 }
 

@@ -14,6 +14,9 @@ struct PickOptions {
   double margin = 0.1;
   // Frames averaged per pattern before detection (the most central clean ones).
   int average_frames = 1;
+  // Further clean frames per pattern that stand in for picked frames the camera
+  // dropped (later ones only: frames are decoded once, in order).
+  int spare_frames = 2;
   // Largest relative clock drift between a camera and the projector; bounds the error
   // of the map used while decoding (from the start code and the nominal frame rate).
   double max_clock_drift = 2e-4;

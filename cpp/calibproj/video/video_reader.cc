@@ -9,8 +9,11 @@ extern "C" {
 
 #include <opencv2/core.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <deque>
 #include <filesystem>
+#include <limits>
 #include <stdexcept>
 
 namespace calibproj::video {
@@ -18,6 +21,18 @@ namespace calibproj::video {
 namespace {
 
 double Rate(AVRational r) { return r.num > 0 && r.den > 0 ? av_q2d(r) : 0.0; }
+
+// Packets read ahead at opening for their timestamps (about 4 s at 30 fps).
+constexpr int kPeekPackets = 120;
+// A declared rate within this relative distance of the timestamps' rate is taken as
+// exact (timestamps quantised by the time base or jittered give a nearby estimate).
+constexpr double kRateSnap = 2e-3;
+
+double Median(std::vector<double> values) {
+  const auto middle = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), middle, values.end());
+  return *middle;
+}
 
 // 8-bit luma in the first plane, one byte per pixel: the plane is the grey image.
 bool LumaPlaneFirst(AVPixelFormat format) {
@@ -63,9 +78,11 @@ struct VideoReader::Decoder {
   SwsContext* scaler = nullptr;
   int stream = -1;
   bool draining = false;
+  std::deque<AVPacket*> peeked;  // read ahead at opening, decoded first
   const cv::Mat limited_to_full = LimitedToFullTable();
 
   ~Decoder() {
+    for (AVPacket* p : peeked) av_packet_free(&p);
     sws_freeContext(scaler);
     av_frame_free(&frame);
     av_packet_free(&packet);
@@ -79,7 +96,11 @@ struct VideoReader::Decoder {
       const int received = avcodec_receive_frame(codec, frame);
       if (received == 0) return true;
       if (received != AVERROR(EAGAIN) || draining) return false;
-      if (av_read_frame(format, packet) < 0) {
+      if (!peeked.empty()) {
+        av_packet_move_ref(packet, peeked.front());
+        av_packet_free(&peeked.front());
+        peeked.pop_front();
+      } else if (av_read_frame(format, packet) < 0) {
         // End of file (or unreadable from here on): flush the frames still inside.
         draining = true;
         avcodec_send_packet(codec, nullptr);
@@ -95,6 +116,28 @@ struct VideoReader::Decoder {
       }
       av_packet_unref(packet);
     }
+  }
+
+  // Reads the first packets of the video stream ahead; their timestamps in seconds.
+  std::vector<double> PeekTimes() {
+    std::vector<double> times;
+    const double time_base = av_q2d(format->streams[stream]->time_base);
+    while (static_cast<int>(peeked.size()) < kPeekPackets) {
+      AVPacket* p = av_packet_alloc();
+      if (p == nullptr) throw std::bad_alloc();
+      if (av_read_frame(format, p) < 0) {
+        av_packet_free(&p);
+        break;
+      }
+      if (p->stream_index != stream) {
+        av_packet_free(&p);
+        continue;
+      }
+      const int64_t stamp = p->pts != AV_NOPTS_VALUE ? p->pts : p->dts;
+      if (stamp != AV_NOPTS_VALUE) times.push_back(static_cast<double>(stamp) * time_base);
+      peeked.push_back(p);
+    }
+    return times;
   }
 };
 
@@ -120,7 +163,11 @@ VideoReader::VideoReader(const std::string& path) : decoder_(std::make_unique<De
 
   info_.width = stream->codecpar->width;
   info_.height = stream->codecpar->height;
-  info_.fps = Rate(stream->avg_frame_rate) > 0.0 ? Rate(stream->avg_frame_rate) : Rate(stream->r_frame_rate);
+  info_.declared_fps =
+      Rate(stream->avg_frame_rate) > 0.0 ? Rate(stream->avg_frame_rate) : Rate(stream->r_frame_rate);
+  info_.fps = GridRate(d.PeekTimes(), {Rate(stream->r_frame_rate), Rate(stream->avg_frame_rate)});
+  info_.timed = info_.fps > 0.0;
+  if (!info_.timed) info_.fps = info_.declared_fps;
   if (stream->nb_frames > 0) {
     info_.frame_count = static_cast<int>(stream->nb_frames);
   } else if (stream->duration > 0) {
@@ -137,6 +184,11 @@ VideoReader::~VideoReader() = default;
 bool VideoReader::Grab() {
   if (!decoder_->Next()) return false;
   ++frame_index_;
+  const AVFrame& frame = *decoder_->frame;
+  timestamp_ = frame.best_effort_timestamp == AV_NOPTS_VALUE
+                   ? std::numeric_limits<double>::quiet_NaN()
+                   : static_cast<double>(frame.best_effort_timestamp) *
+                         av_q2d(decoder_->format->streams[decoder_->stream]->time_base);
   return true;
 }
 
@@ -177,5 +229,40 @@ cv::Mat VideoReader::Gray() {
 }
 
 VideoInfo ProbeVideo(const std::string& path) { return VideoReader(path).info(); }
+
+double EstimateFramePeriod(std::vector<double> times) {
+  times.erase(std::remove_if(times.begin(), times.end(), [](double t) { return !std::isfinite(t); }), times.end());
+  std::sort(times.begin(), times.end());
+  times.erase(std::unique(times.begin(), times.end()), times.end());
+  if (times.size() < 3) return 0.0;
+  std::vector<double> intervals(times.size() - 1);
+  for (std::size_t i = 1; i < times.size(); ++i) intervals[i - 1] = times[i] - times[i - 1];
+  // Most intervals are one period: the median is one (dropped frames make a few longer).
+  const double median = Median(intervals);
+  if (!(median > 0.0)) return 0.0;
+  // Least-squares slope of time against grid slot; each slot is counted from the
+  // previous frame's, so that the median's error does not accumulate over the frames.
+  double ss = 0, st = 0, sss = 0, sst = 0, slot = 0;
+  const double n = static_cast<double>(times.size());
+  for (std::size_t i = 0; i < times.size(); ++i) {
+    if (i > 0) slot += std::max(1.0, std::round(intervals[i - 1] / median));
+    const double t = times[i] - times.front();
+    ss += slot;
+    st += t;
+    sss += slot * slot;
+    sst += slot * t;
+  }
+  const double denominator = n * sss - ss * ss;
+  return denominator > 0.0 ? (n * sst - ss * st) / denominator : median;
+}
+
+double GridRate(const std::vector<double>& times, const std::vector<double>& declared) {
+  const double period = EstimateFramePeriod(times);
+  if (!(period > 0.0)) return 0.0;
+  for (double rate : declared) {
+    if (rate > 0.0 && std::abs(rate * period - 1.0) < kRateSnap) return rate;
+  }
+  return 1.0 / period;
+}
 
 }  // namespace calibproj::video

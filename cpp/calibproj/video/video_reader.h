@@ -12,6 +12,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace calibproj::video {
 
@@ -19,8 +20,12 @@ struct VideoInfo {
   std::string path;
   int width = 0;
   int height = 0;
+  // Rate of the frame grid: estimated from the container timestamps of the first
+  // frames (snapped to a rate the container declares when they agree), else declared.
   double fps = 0.0;
-  int frame_count = 0;  // as the container declares it (may be approximate)
+  double declared_fps = 0.0;  // the container's average frame rate
+  bool timed = false;         // the container gives frame timestamps
+  int frame_count = 0;        // as the container declares it (may be approximate)
 };
 
 class VideoReader {
@@ -39,6 +44,9 @@ class VideoReader {
   bool Grab();
   // Index of the last grabbed frame (0 for the first), -1 before the first Grab().
   int frame_index() const { return frame_index_; }
+  // Container timestamp of the last grabbed frame in seconds (NaN when the container
+  // gives none): the time base, unlike the decoding index, survives dropped frames.
+  double timestamp() const { return timestamp_; }
 
   // The grabbed frame's full-range 8-bit luma, made at the first call for this frame.
   // The image owns its pixels: it stays valid after the next Grab(). Throws
@@ -52,7 +60,18 @@ class VideoReader {
   cv::Mat gray_;
   int frame_index_ = -1;
   int gray_index_ = -1;
+  double timestamp_ = 0.0;
 };
+
+// Frame period (seconds) of a frame grid that the timestamps lie on, allowing for
+// missing frames and jitter well under half a period: the median interval, refined by
+// a line fit of the timestamps against their grid slots. Returns 0 when fewer than
+// three distinct timestamps are given. `times` need not be sorted.
+double EstimateFramePeriod(std::vector<double> times);
+
+// Frame rate of that grid: the first of `declared` (rates the container states; 0 =
+// none) within 0.2 % of 1 / period, else 1 / period; 0 when the times give no period.
+double GridRate(const std::vector<double>& times, const std::vector<double>& declared);
 
 // Reads the size, frame rate and declared frame count without decoding.
 VideoInfo ProbeVideo(const std::string& path);

@@ -101,7 +101,8 @@ def format_report(report: dict) -> str:
             f"{name}: offset {sync['offset_s']:.4f} s ({sync['offset_frames']:.3f} +- "
             f"{sync['offset_uncertainty_frames']:.3f} frames), {sync['camera_fps']:.4f} fps "
             f"({sync['drift_ppm']:+.0f} ppm), codes {sync['start_correlation']:.3f}/{sync['end_correlation']:.3f}; "
-            f"frames {frames['decoded']} decoded, {frames['detected']} detected; {camera['msms_kept']} MSMs kept")
+            f"frames {frames['decoded']} decoded ({frames['dropped']} dropped, {frames['duplicated']} duplicated), "
+            f"{frames['detected']} detected; {camera['msms_kept']} MSMs kept")
         per_scale = ", ".join(f"{s['scale']:g}: {s['detected']}/{s['searched']}" for s in camera["scales"])
         lines.append(f"    markers found/searched per scale: {per_scale}")
     return "\n".join(lines)

@@ -1,7 +1,10 @@
 """H.264 video through the ffmpeg command line, fed with raw grey frames on a pipe.
 
 The file appears under its final name only once ffmpeg has finished it, so a failed
-or interrupted run never leaves a half-written video behind.
+or interrupted run never leaves a half-written video behind. Frames are encoded at a
+constant rate; given per-frame timestamps (a camera that drops frames or has timing
+jitter), the finished stream is remuxed with them (PyAV, no re-encoding), as a
+camera's recorder writes its capture times.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import subprocess
 import tempfile
 from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -43,7 +47,7 @@ class GreyVideoWriter:
     """
 
     def __init__(self, path: str | os.PathLike, size: tuple[int, int], fps: float,
-                 crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET) -> None:
+                 crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET, timestamps_s: Any = None) -> None:
         if not 0 <= crf <= 51:
             raise ValueError(f"crf must be in [0, 51], got {crf}")
         if preset not in PRESETS:
@@ -53,6 +57,10 @@ class GreyVideoWriter:
         self.path = Path(path)
         self.size = (int(size[0]), int(size[1]))
         self.frames_written = 0
+        self.timestamps_s = None if timestamps_s is None else np.asarray(timestamps_s, dtype=float)
+        if self.timestamps_s is not None and not (np.all(np.isfinite(self.timestamps_s))
+                                                  and np.all(np.diff(self.timestamps_s) > 0)):
+            raise ValueError("timestamps must be finite and increasing")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         handle, self._partial = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".partial",
                                                  dir=self.path.parent)
@@ -66,6 +74,8 @@ class GreyVideoWriter:
             "-c:v", "libx264", "-preset", preset, "-crf", str(crf),
             # Flat synthetic images with sharp edges: less ringing than the film tuning.
             "-tune", "stillimage", "-pix_fmt", "yuv420p",
+            # Without B-frames decoding order is display order: remuxed packets keep dts = pts.
+            *(["-bf", "0"] if self.timestamps_s is not None else []),
             "-movflags", "+faststart", "-f", "mp4", self._partial,
         ]
         log.debug("running %s", " ".join(command))
@@ -90,6 +100,16 @@ class GreyVideoWriter:
         if self._process.wait() != 0:
             self._fail(f"ffmpeg exited with status {self._process.returncode}")
         self._stderr.close()
+        if self.timestamps_s is not None:
+            if self.frames_written != len(self.timestamps_s):
+                self.abort()
+                raise RuntimeError(f"{self.path}: {self.frames_written} frames written for "
+                                   f"{len(self.timestamps_s)} timestamps")
+            try:
+                retime_video(self._partial, self.timestamps_s)
+            except BaseException:
+                self.abort()
+                raise
         # mkstemp creates 0600; give the video the permissions a plain open() would.
         umask = os.umask(0)
         os.umask(umask)
@@ -118,3 +138,38 @@ class GreyVideoWriter:
             self.close()
         else:
             self.abort()
+
+
+# Time base of retimed videos: 1/90000 s, MPEG's system clock (timestamps to 11 us).
+RETIME_TIME_BASE = Fraction(1, 90000)
+
+
+def retime_video(path: str | os.PathLike, timestamps_s: np.ndarray) -> None:
+    """Give the frames of a video without B-frames the timestamps ``timestamps_s``
+    (seconds, one per frame in order) by remuxing it in place (no re-encoding)."""
+    import av
+
+    path = Path(path)
+    retimed = path.with_name(path.name + ".retimed")
+    try:
+        with av.open(str(path)) as source, av.open(str(retimed), "w", format="mp4") as target:
+            stream_in = source.streams.video[0]
+            stream_out = target.add_stream_from_template(stream_in)
+            stream_out.time_base = RETIME_TIME_BASE
+            frame = 0
+            for packet in source.demux(stream_in):
+                if packet.size == 0:
+                    continue  # the demuxer's end-of-stream marker
+                if frame >= len(timestamps_s):
+                    raise RuntimeError(f"{path}: more frames than timestamps ({len(timestamps_s)})")
+                stamp = int(round(float(timestamps_s[frame]) / RETIME_TIME_BASE))
+                packet.pts = packet.dts = stamp
+                packet.time_base = RETIME_TIME_BASE
+                packet.stream = stream_out
+                target.mux(packet)
+                frame += 1
+            if frame != len(timestamps_s):
+                raise RuntimeError(f"{path}: {frame} frames for {len(timestamps_s)} timestamps")
+        os.replace(retimed, path)
+    finally:
+        retimed.unlink(missing_ok=True)

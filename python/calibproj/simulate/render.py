@@ -64,6 +64,8 @@ DEFAULT_CHUNK_S = 2.0
 DEFAULT_EVAL_NOISE_PX = 0.1
 # Warped contents kept per camera besides the flat ones (consecutive frames share a few).
 CAMERA_CACHE_SIZE = 6
+# Spawn key of the random streams of frame timing (apart from the noise streams).
+TIMING_STREAM = 1000
 
 # Every effect off: frames show the projector's light exactly (for accuracy tests).
 IDEAL_PHOTOMETRIC = Photometric(ambient=0.0, contrast=1.0, noise_std=0.0, blur_px=0.0, vignetting=0.0, gamma=1.0)
@@ -188,7 +190,8 @@ def simulate_videos(
     sequence = _load_sequence(sequence)
     _check_projector(scene, scene_source, sequence)
     timeline = ProjectionTimeline.from_sequence(sequence)
-    clocks = {camera.name: _clock(camera, timeline, options.tail_s, scene_source) for camera in scene.cameras}
+    clocks = {camera.name: _clock(camera, index, timeline, options.tail_s, scene_source, seed)
+              for index, camera in enumerate(scene.cameras)}
     views = _floor_views(scene, scene_source, options)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -284,11 +287,16 @@ def _check_projector(scene: Scene, scene_source: str, sequence: Any) -> None:
                          f"--projector {scene_width}x{scene_height}")
 
 
-def _clock(camera: Camera, timeline: ProjectionTimeline, tail_s: float, scene_source: str) -> CameraClock:
+def _clock(camera: Camera, index: int, timeline: ProjectionTimeline, tail_s: float, scene_source: str,
+           seed: int) -> CameraClock:
     clock = CameraClock.covering(camera.fps, camera.start_offset_s, camera.exposure_s, timeline.duration_s, tail_s)
     if clock.frame_count < 1:
         raise ValueError(f"{scene_source}: camera {camera.name!r} starts {-camera.start_offset_s:.3f} s after a "
                          f"sequence of {timeline.duration_s:.3f} s has ended and records nothing")
+    if camera.frame_jitter_s > 0 or camera.drop_rate > 0:
+        # A stream of its own per camera: timing effects leave every other draw as it was.
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(TIMING_STREAM, index)))
+        clock = clock.with_timing(camera.frame_jitter_s, camera.drop_rate, rng)
     return clock
 
 
@@ -330,6 +338,7 @@ class _CameraRenderer:
         self.progress = progress
         self.weights = [timeline.weights(*clock.window(frame)) for frame in range(clock.frame_count)]
         self.starts = clock.exposure_start(np.arange(clock.frame_count))
+        self.dropped = frozenset(clock.dropped)
         self.cache: OrderedDict[ContentKey, list] = OrderedDict()
 
     def keys(self, frames: range) -> set[ContentKey]:
@@ -337,7 +346,8 @@ class _CameraRenderer:
 
     def render(self, frames: range) -> None:
         for frame in frames:
-            self.writer.write(self.noise.quantise(self._encoded(self.weights[frame])))
+            if frame not in self.dropped:
+                self.writer.write(self.noise.quantise(self._encoded(self.weights[frame])))
             self.progress.update(1)
 
     def _encoded(self, weights: dict[ContentKey, float]) -> np.ndarray:
@@ -411,8 +421,11 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
             for index, camera in enumerate(scene.cameras):
                 model = _camera_model(camera, views.pop(camera.name), layout, scene.photometric, options,
                                       generators[index])
+                clock = clocks[camera.name]
+                timed = bool(clock.jitter_s or clock.dropped)
                 writer = GreyVideoWriter(folder / f"{camera.name}.mp4", camera.resolution, camera.fps,
-                                         crf=options.crf, preset=options.preset)
+                                         crf=options.crf, preset=options.preset,
+                                         timestamps_s=clock.timestamps() if timed else None)
                 bar = tqdm(total=clocks[camera.name].frame_count, desc=camera.name, unit="frame", position=index,
                            disable=not progress, leave=True)
                 renderers.append(_CameraRenderer(camera, clocks[camera.name], *model, writer, atlases, timeline, bar))
@@ -428,7 +441,7 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
         renderer.progress.close()
         camera = renderer.camera
         path = renderer.writer.path
-        videos[camera.name] = CameraVideo(path, camera.resolution, camera.fps, renderer.clock.frame_count,
+        videos[camera.name] = CameraVideo(path, camera.resolution, camera.fps, len(renderer.clock.recorded),
                                           path.stat().st_size)
     return videos
 

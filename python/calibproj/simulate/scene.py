@@ -20,6 +20,12 @@ File format (``calibproj.scene/1``, see DESIGN.md)::
 ``fy`` defaults to ``fx``; ``cx``, ``cy`` to the image centre ``((w - 1) / 2, (h - 1) / 2)``;
 ``dist`` to no distortion; ``fps`` to 30, ``start_offset_s`` to 0, ``exposure_s`` to
 0.01 s (at most one frame); ``photometric`` to the defaults of ``Photometric``.
+
+Frame timing of real cameras (optional, per camera): ``frame_jitter_s`` is the
+standard deviation of each frame's exposure start around the frame grid (Gaussian,
+clipped to 3 sigma; default 0), ``drop_rate`` the share of frames the camera drops
+at random (default 0). Rendered videos carry the true exposure starts as their
+container timestamps, so a dropped frame is a gap in the timestamps.
 """
 
 from __future__ import annotations
@@ -140,6 +146,8 @@ class Camera(LookAtPose):
     fps: float = 30.0
     start_offset_s: float = 0.0
     exposure_s: float = 0.01
+    frame_jitter_s: float = 0.0
+    drop_rate: float = 0.0
 
     @property
     def K(self) -> np.ndarray:
@@ -265,7 +273,7 @@ def _read_projector(reader: _FieldReader, entry: Any) -> Projector:
 
 def _read_camera(reader: _FieldReader, entry: Any, where: str) -> Camera:
     known = {"name", "position", "look_at", "resolution", "fx", "fy", "cx", "cy", "dist", "fps",
-             "start_offset_s", "exposure_s"}
+             "start_offset_s", "exposure_s", "frame_jitter_s", "drop_rate"}
     reader.no_unknown_keys(entry, known, where)
     name = reader.required(entry, "name", where)
     if not isinstance(name, str) or not CAMERA_NAME_PATTERN.match(name):
@@ -286,7 +294,16 @@ def _read_camera(reader: _FieldReader, entry: Any, where: str) -> Camera:
     exposure_s = reader.number(entry, "exposure_s", where, positive=True, default=min(0.01, 1.0 / fps))
     if exposure_s > 1.0 / fps:
         reader.fail(f"{where}.exposure_s", f"{exposure_s} s is longer than one frame at {fps} fps")
-    return Camera(name, position, look_at, resolution, fx, fy, cx, cy, dist, fps, start_offset_s, exposure_s)
+    jitter = reader.number(entry, "frame_jitter_s", where, default=0.0)
+    # Jitter is clipped at 3 sigma: consecutive exposures must not overlap.
+    if not 0.0 <= 6.0 * jitter <= 1.0 / fps - exposure_s:
+        reader.fail(f"{where}.frame_jitter_s", f"expected a number in [0, {(1.0 / fps - exposure_s) / 6.0:.6g}] "
+                    f"(6 sigma within the frame period minus the exposure), got {jitter}")
+    drop_rate = reader.number(entry, "drop_rate", where, default=0.0)
+    if not 0.0 <= drop_rate <= 0.5:
+        reader.fail(f"{where}.drop_rate", f"expected a number in [0, 0.5], got {drop_rate}")
+    return Camera(name, position, look_at, resolution, fx, fy, cx, cy, dist, fps, start_offset_s, exposure_s,
+                  jitter, drop_rate)
 
 
 def _read_placement(reader: _FieldReader, entry: Any, where: str) -> tuple[tuple, tuple]:

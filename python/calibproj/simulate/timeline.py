@@ -125,17 +125,27 @@ class ProjectionTimeline:
 class CameraClock:
     """When a camera's frames expose, on the sequence clock.
 
+    Frame ``j`` is slot ``j`` of the camera's frame grid: its exposure starts at
+    ``j / fps - start_offset_s + jitter_s[j]``. Frames in ``dropped`` were never
+    recorded (the video has a gap in its timestamps there); the first frame is always
+    recorded, so the video's first timestamp is slot 0.
+
     Attributes:
         fps: camera frame rate.
         start_offset_s: the camera starts recording this long before the sequence.
         exposure_s: exposure time of every frame.
-        frame_count: frames recorded.
+        frame_count: frame slots from the first recorded frame to the last.
+        jitter_s: per-slot deviation of the exposure start from the grid, seconds
+            (empty: none).
+        dropped: slots the camera dropped, increasing.
     """
 
     fps: float
     start_offset_s: float
     exposure_s: float
     frame_count: int
+    jitter_s: tuple[float, ...] = ()
+    dropped: tuple[int, ...] = ()
 
     @classmethod
     def covering(cls, fps: float, start_offset_s: float, exposure_s: float, duration_s: float,
@@ -144,16 +154,45 @@ class CameraClock:
         frame_count = math.ceil((start_offset_s + duration_s + tail_s) * fps - 1e-9)
         return cls(fps, start_offset_s, exposure_s, frame_count)
 
+    def with_timing(self, jitter_std_s: float, drop_rate: float, rng: np.random.Generator) -> CameraClock:
+        """The same clock with frame timing jitter (Gaussian, clipped to 3 sigma) and
+        frames dropped at random (never the first or the last)."""
+        jitter = ()
+        if jitter_std_s > 0:
+            draws = np.clip(rng.standard_normal(self.frame_count), -3.0, 3.0) * jitter_std_s
+            jitter = tuple(float(value) for value in draws)
+        dropped = ()
+        if drop_rate > 0 and self.frame_count > 2:
+            lost = np.flatnonzero(rng.random(self.frame_count - 2) < drop_rate) + 1
+            dropped = tuple(int(frame) for frame in lost)
+        return CameraClock(self.fps, self.start_offset_s, self.exposure_s, self.frame_count, jitter, dropped)
+
+    @property
+    def recorded(self) -> np.ndarray:
+        """Slots of the frames in the video, increasing."""
+        return np.setdiff1d(np.arange(self.frame_count), np.asarray(self.dropped, dtype=int))
+
     def exposure_start(self, frame: int | np.ndarray) -> float | np.ndarray:
-        return frame / self.fps - self.start_offset_s
+        start = frame / self.fps - self.start_offset_s
+        if not self.jitter_s:
+            return start
+        if isinstance(frame, np.ndarray):
+            return start + np.asarray(self.jitter_s)[frame]
+        return start + self.jitter_s[frame]
+
+    def timestamps(self) -> np.ndarray:
+        """Container timestamps of the recorded frames: their exposure starts, seconds
+        after the first frame's."""
+        recorded = self.recorded
+        return self.exposure_start(recorded) - self.exposure_start(0)
 
     def window(self, frame: int) -> tuple[float, float]:
         start = self.exposure_start(frame)
         return start, start + self.exposure_s
 
     def frames_inside(self, start_s: float, end_s: float) -> np.ndarray:
-        """Frames whose whole exposure lies inside ``[start_s, end_s]``."""
-        frames = np.arange(self.frame_count)
+        """Recorded frames whose whole exposure lies inside ``[start_s, end_s]``."""
+        frames = self.recorded
         starts = self.exposure_start(frames)
         # A little slack so that a window touching the interval's edge counts as inside.
         slack = 1e-9

@@ -5,7 +5,8 @@ Extra fields of ``truth.json`` written here::
 
     "timing": {"clock": "...", "projector_fps": 30.0, "sequence_frames": 2376,
                "cameras": {name: {"fps", "start_offset_s", "exposure_s", "frame_count",
-                                  "first_exposure_start_s", "fps_ratio"}}},
+                                  "first_exposure_start_s", "fps_ratio", "recorded_frames",
+                                  "dropped_frames": [slots], "jitter_s": [per slot, or empty]}}},
     "image_points": {name: {"ids": [...], "distorted": [[u, v], ...], "undistorted": [...]}},
     "clean_frames": {name: [[frames exposed wholly inside pattern 0], [... pattern 1], ...]}
 """
@@ -23,8 +24,9 @@ from calibproj.simulate.truth import truth_document
 
 CLOCK_DESCRIPTION = (
     "sequence clock: t = 0 when projector frame 0 comes on, frame k shows during "
-    "[k / projector_fps, (k + 1) / projector_fps); camera frame j exposes during "
-    "[first_exposure_start_s + j / fps, ... + exposure_s)"
+    "[k / projector_fps, (k + 1) / projector_fps); camera frame j (slot j of its frame grid) exposes "
+    "during [first_exposure_start_s + j / fps + jitter_s[j], ... + exposure_s); dropped frames are "
+    "not in the video"
 )
 
 
@@ -42,8 +44,11 @@ def timing_json(timeline: ProjectionTimeline, clocks: dict[str, CameraClock]) ->
             "start_offset_s": clock.start_offset_s,
             "exposure_s": clock.exposure_s,
             "frame_count": clock.frame_count,
-            "first_exposure_start_s": float(clock.exposure_start(0)),
+            "first_exposure_start_s": float(clock.exposure_start(0) - (clock.jitter_s[0] if clock.jitter_s else 0.0)),
             "fps_ratio": clock.fps / timeline.fps,
+            "recorded_frames": int(len(clock.recorded)),
+            "dropped_frames": list(clock.dropped),
+            "jitter_s": list(clock.jitter_s),
         }
         for name, clock in clocks.items()
     }
