@@ -119,6 +119,8 @@ def test_scene_file_defaults():
         (lambda d: d["cameras"][0].update(name="a/b"), r"cameras\[0\]\.name"),
         (lambda d: d["cameras"][0].update(fps=60, exposure_s=0.02), r"exposure_s: 0.02 s is longer than one frame"),
         (lambda d: d["cameras"][0].update(look_at=[2.8, 0, 2.8]), r"look_at: equals position"),
+        (lambda d: d["cameras"][0].update(frame_jitter_s=0.01), r"frame_jitter_s: expected a number in \[0, "),
+        (lambda d: d["cameras"][0].update(drop_rate=0.7), r"drop_rate: expected a number in \[0, 0.5\]"),
         (lambda d: d["cameras"].append(dict(d["cameras"][0])), r"cameras: duplicate names \['far1'\]"),
         (lambda d: d.update(cameras=[]), r"cameras: expected a non-empty list"),
         (lambda d: d["projector"].update(look_at=[0, 0, 5]), r"projector: its whole image must fall on the floor"),

@@ -95,6 +95,20 @@ def test_clock_drift_is_measured():
         assert (result["rate"] / nominal - 1.0) == pytest.approx(drift, abs=6e-5)
 
 
+@pytest.mark.parametrize("missing", [0.02, 0.1])
+def test_codes_are_found_over_frames_the_camera_dropped(missing):
+    """Dropped frames are NaN on the frame grid: codes are searched and fitted over the
+    frames present; more missing than max_missing_share and the code is not found."""
+    sequence = short_sequence()
+    rng = np.random.default_rng(11)
+    signal, _ = record(sequence, 25.0, 23.6, 0.5, rng)
+    signal[1:][rng.random(len(signal) - 1) < missing] = np.nan
+    result = synchronise(signal, sequence, 25.0)
+    assert abs(result["offset"] - 23.6) < MAX_SYNC_ERROR_FRAMES
+    with pytest.raises(RuntimeError, match="start light code"):
+        synchronise(signal, sequence, 25.0, IngestOptions(max_missing_share=missing / 20))
+
+
 def test_short_exposure_truth_lies_within_the_reported_uncertainty():
     """At the projector's rate with a short exposure no frame may span a light change:
     the offset is then known only to an interval, which must hold the truth, and the

@@ -1,0 +1,132 @@
+"""Real cameras: frame timing. Dropped frames and timestamp jitter against the
+renderer's truth: the frame grid from container timestamps, light-code search over
+the frames present, and an ingest that keeps sync and picks clean frames."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from calibproj import _core
+from calibproj.generate.builder import build_sequence
+from calibproj.generate.video import GreyVideoWriter
+from calibproj.ingest import ingest
+from calibproj.simulate.render import simulate_videos
+from calibproj.simulate.scene import load_scene
+
+MAX_SYNC_ERROR_FRAMES = 0.1
+DROP_RATE = 0.04
+JITTER_S = 0.0015
+
+
+def grid_times(rng, slots: int, fps: float, drop_rate: float, jitter_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Slots kept (the first always) and their jittered times, relative to the first."""
+    kept = np.flatnonzero(np.r_[True, rng.random(slots - 1) >= drop_rate])
+    times = kept / fps + rng.normal(0.0, jitter_s, len(kept))
+    return kept, times - times[0]
+
+
+@pytest.mark.parametrize("fps", [25.0, 29.97, 30.0, 59.94])
+def test_frame_period_from_timestamps_with_gaps_and_jitter(fps):
+    rng = np.random.default_rng(int(fps))
+    _, times = grid_times(rng, 120, fps, drop_rate=0.1, jitter_s=0.04 / fps)
+    period = _core.video.frame_period(list(rng.permutation(times)))
+    assert abs(period * fps - 1.0) < 2e-3
+    assert _core.video.frame_period([0.0, 1.0]) == 0.0
+
+
+def test_a_retimed_video_has_gaps_where_frames_were_dropped(tmp_path):
+    rng = np.random.default_rng(5)
+    kept, times = grid_times(rng, 90, 30.0, DROP_RATE * 4, JITTER_S)
+    path = tmp_path / "dropping.mp4"
+    with GreyVideoWriter(path, (64, 48), 30.0, crf=0, preset="ultrafast", timestamps_s=times) as writer:
+        for slot in kept:
+            writer.write(np.full((48, 64), 40 + 2 * int(slot), np.uint8))
+    decoded = _core.video.frame_timestamps(str(path))
+    assert np.max(np.abs(decoded - times)) < 2e-5  # the 1/90000 s time base
+    info = _core.video.probe(str(path))
+    assert info["timed"] and info["fps"] == pytest.approx(30.0)
+    signal = _core.video.luma_signal(str(path), 1.0, 1)
+    assert len(signal) == kept[-1] + 1
+    np.testing.assert_array_equal(np.flatnonzero(~np.isnan(signal)), kept)
+    np.testing.assert_allclose(signal[kept] * 255.0, 40 + 2 * kept, atol=1.5)  # limited-range rounding
+    # Decoding order as time: every frame after the first gap is misplaced.
+    assert not np.isnan(_core.video.luma_signal(str(path), 1.0, 1, use_timestamps=False)).any()
+
+
+def test_writer_rejects_timestamps_that_go_back(tmp_path):
+    with pytest.raises(ValueError, match="increasing"):
+        GreyVideoWriter(tmp_path / "x.mp4", (64, 48), 30.0, timestamps_s=[0.0, 0.1, 0.05])
+
+
+def test_a_timestamp_jump_fails_the_camera_with_a_clear_message(tmp_path):
+    path = tmp_path / "paused.mp4"
+    times = np.r_[np.arange(20) / 30.0, 60.0 + np.arange(20) / 30.0]
+    with GreyVideoWriter(path, (64, 48), 30.0, crf=0, preset="ultrafast", timestamps_s=times) as writer:
+        for _ in times:
+            writer.write(np.zeros((48, 64), np.uint8))
+    with pytest.raises(RuntimeError, match=r"paused\.mp4: the timestamps jump by 59\.3.* s after frame 19"):
+        _core.video.luma_signal(str(path))
+
+
+@pytest.fixture(scope="module")
+def dropping(tmp_path_factory):
+    """The small room whose cameras drop frames and jitter, with true timestamps."""
+    out = tmp_path_factory.mktemp("dropping")
+    sequence = build_sequence(markers="aruco:4X4_50", arrays=4, scales=(1.0, 2.0, 3.0), marker_px=48.0,
+                              code_degree=4, reference_frames=8)
+    small = load_scene("small", seed=7)
+    cameras = tuple(replace(camera, drop_rate=DROP_RATE, frame_jitter_s=JITTER_S) for camera in small.cameras)
+    simulate_videos(replace(small, cameras=cameras), sequence, out, seed=7)
+    truth = json.loads((out / "truth.json").read_text())
+    result = ingest(out / "videos", sequence, out / "intrinsics", progress=False)
+    return sequence, truth, result
+
+
+def test_dropped_frames_keep_sync_to_a_tenth_of_a_frame(dropping):
+    _, truth, result = dropping
+    assert not result.failed
+    for name, camera in result.cameras.items():
+        timing = truth["timing"]["cameras"][name]
+        assert timing["dropped_frames"], name  # the seed drops some frames in every camera
+        sync = camera.raw["sync"]
+        offset = -timing["first_exposure_start_s"] * timing["fps"]
+        assert abs(sync["offset"] - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync["offset_uncertainty"]), name
+        # The rate error, as the drift it makes over the whole sequence, camera frames.
+        drift = abs(sync["rate"] - timing["fps_ratio"]) * truth["timing"]["sequence_frames"]
+        assert drift < MAX_SYNC_ERROR_FRAMES, name
+
+
+def test_dropped_frames_and_jitter_are_reported(dropping):
+    _, truth, result = dropping
+    report = result.report()["cameras"]
+    for name, camera in result.cameras.items():
+        timing = truth["timing"]["cameras"][name]
+        frames = report[name]["frames"]
+        assert frames["decoded"] == timing["recorded_frames"]
+        assert frames["dropped"] == len(timing["dropped_frames"])
+        assert frames["duplicated"] == 0
+        assert frames["jitter_ms"] == pytest.approx(1e3 * np.std(timing["jitter_s"]), rel=0.25)
+        assert report[name]["video_info"]["fps"] == pytest.approx(timing["fps"], rel=1e-4)
+
+
+def test_detections_come_from_recorded_clean_frames_and_only_drops_lose_patterns(dropping):
+    """Picked frames the camera dropped are replaced by later clean ones: a pattern is
+    lost only where a drop hit its few clean frames, and every frame detected on shows
+    one pattern only."""
+    _, truth, result = dropping
+    for name, camera in result.cameras.items():
+        raw = camera.raw
+        records = raw["records"]
+        clean = truth["clean_frames"][name]
+        for pattern, first, count in zip(records["pattern"], records["first_frame"], records["frame_count"]):
+            assert set(range(first, first + count)) <= set(clean[pattern]), name
+        dropped = set(truth["timing"]["cameras"][name]["dropped_frames"])
+        # Patterns with a dropped frame among their clean frames or next to them.
+        hit = sum(1 for frames in clean if frames and dropped & set(range(frames[0] - 1, frames[-1] + 2)))
+        assert raw["patterns_missing"] + raw["patterns_dropped"] <= hit, name
+        handled = sum(s["detected_patterns"] + s["skipped_patterns"] for s in raw["scales"])
+        assert handled >= sum(1 for frames in clean if frames) - hit, name
