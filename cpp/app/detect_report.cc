@@ -22,6 +22,9 @@ ordered_json SyncSummary(const sync::SyncResult& sync, double video_fps, double 
   entry["start_correlation"] = sync.start.correlation;
   entry["end_correlation"] = sync.end.correlation;
   entry["fit_rms"] = sync.rms;
+  const bool readout = sync.readout.valid;
+  entry["readout_s"] = readout ? ordered_json(sync.readout.readout / video_fps) : ordered_json(nullptr);
+  entry["readout_sigma_s"] = readout ? ordered_json(sync.readout.readout_sigma / video_fps) : ordered_json(nullptr);
   return entry;
 }
 

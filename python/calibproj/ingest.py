@@ -397,4 +397,6 @@ def _sync_summary(sync: dict[str, Any], video_fps: float, projector_fps: float) 
         "start_correlation": sync["start"]["correlation"],
         "end_correlation": sync["end"]["correlation"],
         "fit_rms": sync["rms"],
+        "readout_s": None if sync["readout"] is None else sync["readout"]["readout"] / video_fps,
+        "readout_sigma_s": None if sync["readout"] is None else sync["readout"]["sigma"] / video_fps,
     }

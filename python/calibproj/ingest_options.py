@@ -131,6 +131,13 @@ class IngestOptions:
         max_deviation_px: scales of an MSM farther than this from their median are
             rejected.
         min_scales: scales an MSM needs (after rejection) to give a centre.
+        readout_bands: horizontal bands of the image whose light codes are fitted
+            separately: their offsets give a rolling shutter's readout time (0: not
+            measured).
+        readout_sigmas: a readout beyond this many standard deviations moves the frame
+            map to the first row (the frame's timestamp) and widens each frame's window
+            to every row's exposure, so that a picked frame shows one pattern in all
+            its rows.
         use_timestamps: time comes from the container's frame timestamps: each frame
             is placed on the camera's frame grid, so dropped frames leave gaps instead
             of shifting every later frame (false: time from the decoding order, for
@@ -213,6 +220,8 @@ class IngestOptions:
     homography_max_rms_px: float = 1.0
     max_deviation_px: float = 0.5
     min_scales: int = 1
+    readout_bands: int = 16
+    readout_sigmas: float = 3.0
     use_timestamps: bool = True
     max_frame_gap_s: float = 2.0
     mean_row_step: int = 2

@@ -77,6 +77,8 @@ class CameraIngest {
         timeline_, sync::CodeWindow(timeline_, sequence.start_code, options_.sync), nominal_rate_,
         options_.sync.search, options_.sync.min_correlation, options_.sync.guard_samples);
     result_.video = reader_.info();
+    band_means_.assign(options_.readout_bands, 0.0);
+    band_signals_.assign(options_.readout_bands, {});
     result_.scales.resize(sequence.scales.size());
     for (const PatternSpec& p : sequence.patterns) ++result_.scales[p.scale_index].patterns;
   }
@@ -90,6 +92,7 @@ class CameraIngest {
       if (frame < 0) continue;  // a second frame in one slot: the first one counts
       // Slots the camera dropped are unmeasured.
       result_.signal.resize(frame, kNaN);
+      for (auto& band : band_signals_) band.resize(frame, kNaN);
       converted_ = false;
       if (started_) {
         OnFrameAfterStart(frame);
@@ -105,6 +108,7 @@ class CameraIngest {
     AbsorbBefore(static_cast<int>(sequence_.patterns.size()));
     result_.sync = sync::SynchroniseFromStart(result_.signal, timeline_, sequence_.start_code, sequence_.end_code,
                                               start_, nominal_rate_, options_.sync, path_);
+    ApplyReadout(&result_.sync);
     DropUncleanPatterns();
     Summarise();
     result_.seconds_total = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
@@ -150,7 +154,7 @@ class CameraIngest {
 
   void OnFrameBeforeStart(int frame) {
     cv::Mat gray = Gray();
-    result_.signal.push_back(luma_.Mean(gray));
+    Measure(gray);
     ring_.Push(frame, std::move(gray));
     // Every search_interval slots (slot 0, search_interval, ... when no frame is dropped).
     if (frame >= last_search_ + options_.search_interval) {
@@ -159,13 +163,25 @@ class CameraIngest {
     }
   }
 
+  // Mean luma of the frame (and of its bands) appended to the signals.
+  void Measure(const cv::Mat& gray) {
+    result_.signal.push_back(luma_.Mean(gray, &band_means_));
+    for (std::size_t b = 0; b < band_means_.size(); ++b) band_signals_[b].push_back(band_means_[b]);
+  }
+
   void OnStartFound() {
     start_ = sync::FitCode(result_.signal, timeline_, sequence_.start_code, tracker_->best(), nominal_rate_,
                            options_.sync);
-    // The start code's conservative window, carried on at the nominal rate.
+    // The start code's conservative window (covering every row of a rolling shutter),
+    // carried on at the nominal rate.
+    const sync::ReadoutEstimate readout = EstimateReadout({sync::CodeWindow(timeline_, sequence_.start_code,
+                                                                            options_.sync)}, start_.map);
+    const sync::FrameMap window =
+        sync::Significant(readout, options_.readout_sigmas) ? sync::CoverRows(start_.window_map, readout,
+                                                                              options_.readout_sigmas)
+                                                            : start_.window_map;
     const double first = sequence_.start_code.first_frame;
-    provisional_ = sync::FrameMap{start_.window_map.CameraFrame(first) - nominal_rate_ * first, nominal_rate_,
-                                  start_.window_map.exposure};
+    provisional_ = sync::FrameMap{window.CameraFrame(first) - nominal_rate_ * first, nominal_rate_, window.exposure};
     PlanPicks();
     PlanEndCodeMeans();
     started_ = true;
@@ -179,7 +195,12 @@ class CameraIngest {
   void OnFrameAfterStart(int frame) {
     const bool measure = frame >= end_means_first_ && frame <= end_means_last_;
     const auto pick = frame_pattern_.find(frame);
-    result_.signal.push_back(measure ? luma_.Mean(Gray()) : kNaN);
+    if (measure) {
+      Measure(Gray());
+    } else {
+      result_.signal.push_back(kNaN);
+      for (auto& band : band_signals_) band.push_back(kNaN);
+    }
     if (pick != frame_pattern_.end()) {
       HandlePick(frame, pick->second, [&]() { return Gray(); });
     }
@@ -228,6 +249,23 @@ class CameraIngest {
     sync::Synchronise(result_.signal, timeline_, sequence_.start_code, sequence_.end_code, nominal_rate_,
                       options_.sync, path_);
     throw std::runtime_error(path_ + ": the start light code ends too close to the end of the video");
+  }
+
+  sync::ReadoutEstimate EstimateReadout(const std::vector<sync::FrameWindow>& windows, const sync::FrameMap& map) {
+    if (band_signals_.empty()) return {};
+    return sync::EstimateReadout(band_signals_, timeline_, windows, map, options_.sync.fit);
+  }
+
+  // The readout from both codes; a rolling shutter's frame map is its first row's.
+  void ApplyReadout(sync::SyncResult* sync) {
+    sync->readout = EstimateReadout({sync::CodeWindow(timeline_, sequence_.start_code, options_.sync),
+                                     sync::CodeWindow(timeline_, sequence_.end_code, options_.sync)},
+                                    sync->map);
+    if (!sync::Significant(sync->readout, options_.readout_sigmas)) return;
+    sync->map.offset = sync->readout.first_row_offset;
+    sync->map.exposure = sync->readout.exposure;
+    sync->offset_uncertainty = std::max(sync->offset_uncertainty, sync->readout.offset_sigma);
+    sync->window_map = sync::CoverRows(sync->window_map, sync->readout, options_.readout_sigmas);
   }
 
   // ----------------------------------------------------------------- patterns
@@ -464,6 +502,8 @@ class CameraIngest {
   video::LumaMeter luma_;
   video::FrameRing ring_;
   video::FrameClock clock_;
+  std::vector<double> band_means_;                // scratch: band means of one frame
+  std::vector<std::vector<double>> band_signals_; // mean luma per band and grid slot
   int last_search_ = std::numeric_limits<int>::min() / 2;
   detect::ProjectorHomography homography_;
   detect::ResolutionLimit resolution_;
@@ -500,6 +540,9 @@ void IngestOptions::Check() const {
   Require(mean_row_step >= 1, "mean_row_step must be at least 1");
   Require(luma_gamma > 0.0, "luma_gamma must be positive");
   Require(exposure_s >= 0.0, "exposure_s must be non-negative (0: estimate it)");
+  Require(readout_bands == 0 || (readout_bands >= 3 && readout_bands <= 64),
+          "readout_bands must be 0 or in [3, 64]");
+  Require(readout_sigmas > 0.0, "readout_sigmas must be positive");
   Require(max_frame_gap_s > 0.0 && std::isfinite(max_frame_gap_s), "max_frame_gap_s must be positive");
   Require(lookback_frames >= 0, "lookback_frames must be non-negative");
   Require(search_interval >= 1, "search_interval must be at least 1");

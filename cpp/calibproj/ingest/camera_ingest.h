@@ -83,6 +83,11 @@ struct IngestOptions {
   // Largest gap between consecutive frames' timestamps, seconds, before the video is
   // rejected (a paused recording or a corrupt timestamp).
   double max_frame_gap_s = 2.0;
+  // Horizontal bands of the image whose light codes give the rolling-shutter readout
+  // (0: not measured); a readout beyond readout_sigmas standard deviations moves the
+  // frame map to the first row and widens the frames' windows to every row.
+  int readout_bands = 16;
+  double readout_sigmas = 3.0;
   // Decoded grey frames kept while the start code is being looked for.
   int lookback_frames = 16;
   // Frames decoded between two incremental searches of the start code.

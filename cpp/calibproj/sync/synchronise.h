@@ -15,6 +15,7 @@
 #include "calibproj/sync/code_search.h"
 #include "calibproj/sync/frame_map.h"
 #include "calibproj/sync/light_timeline.h"
+#include "calibproj/sync/readout.h"
 
 namespace calibproj::sync {
 
@@ -57,6 +58,9 @@ struct SyncResult {
   double rate_uncertainty = 0.0;    // camera frames per projector frame
   bool sharp = false;
   double rms = 0.0;  // joint fit residual as a fraction of the contrast
+  // Rolling-shutter readout from bands of the image (readout.h), when measured; `map`
+  // is then the first row's (the frame timestamp's) and `window_map` covers every row.
+  ReadoutEstimate readout;
 };
 
 // The code's window of known light in the sequence.

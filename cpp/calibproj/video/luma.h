@@ -4,6 +4,7 @@
 #include <opencv2/core.hpp>
 
 #include <array>
+#include <vector>
 
 namespace calibproj::video {
 
@@ -20,6 +21,11 @@ class LumaMeter {
   // Mean linearised luma over every row_step-th row of an 8-bit grey image (full
   // scale 1).
   double Mean(const cv::Mat& image) const;
+
+  // The same, and in one pass the mean of each of bands->size() horizontal bands of
+  // equal height (band b: rows [b h / B, (b + 1) h / B)), for the rolling-shutter
+  // readout. An empty `bands` measures the mean only.
+  double Mean(const cv::Mat& image, std::vector<double>* bands) const;
 
  private:
   std::array<float, 256> linear_;

@@ -6,10 +6,12 @@ The model, per camera pixel (``Photometric`` holds the numbers):
    (the warped projector image; its grey levels are taken as linear light);
 2. optics: a Gaussian blur of ``blur_px`` pixels, applied with the pixel's own
    integration while sampling the projector image (``calibproj.simulate.warp``);
-3. irradiance ``E = vignetting_gain * (ambient + contrast * light)``: the lights-off
-   floor lit by the projector's finite contrast plus ambient light, darkened towards
-   the image corners by ``1 - vignetting * (r / r_corner)**2``;
-4. encoded value ``E**(1 / gamma)`` (the video's display gamma), full scale 1;
+3. irradiance ``E = vignetting_gain * albedo * (ambient + contrast * light)``: the
+   lights-off floor lit by the projector's finite contrast plus ambient light,
+   reflected by the floor (``albedo``, 1 unless the floor has a texture), darkened
+   towards the image corners by ``1 - vignetting * (r / r_corner)**2``;
+4. encoded value ``(gain * E)**(1 / gamma)`` (the video's display gamma), full scale 1;
+   ``gain`` is 1 unless the camera adjusts its exposure (``AutoExposure``);
 5. grey level ``255 * encoded`` plus sensor noise of ``noise_std`` grey levels,
    rounded to 8 bits.
 
@@ -19,7 +21,9 @@ blended in irradiance, before the gamma.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -45,8 +49,10 @@ class CameraResponse:
     contrast_gain: np.ndarray
 
     @classmethod
-    def for_camera(cls, camera: Camera, photometric: Photometric) -> CameraResponse:
+    def for_camera(cls, camera: Camera, photometric: Photometric, albedo: np.ndarray | None = None) -> CameraResponse:
         gain = vignetting_gain(camera, photometric.vignetting)
+        if albedo is not None:
+            gain = gain * albedo
         return cls(photometric, (gain * photometric.ambient).astype(np.float32),
                    (gain * photometric.contrast).astype(np.float32))
 
@@ -99,14 +105,15 @@ class SensorNoise:
             size = (height + NOISE_OFFSET_RANGE_PX, width + NOISE_OFFSET_RANGE_PX)
             self.fields = [rng.standard_normal(size, dtype=np.float32) for _ in range(2)]
 
-    def quantise(self, encoded: np.ndarray) -> np.ndarray:
-        """``uint8`` frame: ``255 * encoded`` plus noise, rounded and clipped to 0-255."""
+    def quantise(self, encoded: np.ndarray, scale: float = 1.0) -> np.ndarray:
+        """``uint8`` frame: ``255 * scale * encoded`` plus noise, rounded and clipped to
+        0-255 (values beyond full scale saturate)."""
         import cv2
 
         if self.std == 0:
             # Encoded values are never negative, so the absolute value changes nothing.
-            return cv2.convertScaleAbs(encoded, alpha=255.0)
-        return cv2.addWeighted(encoded, 255.0, self._noise(), 1.0, 0.0, dtype=cv2.CV_8U)
+            return cv2.convertScaleAbs(encoded, alpha=255.0 * scale)
+        return cv2.addWeighted(encoded, 255.0 * scale, self._noise(), 1.0, 0.0, dtype=cv2.CV_8U)
 
     def _noise(self) -> np.ndarray:
         import cv2
@@ -119,3 +126,32 @@ class SensorNoise:
         second = self.fields[1][y2:y2 + height, x2:x2 + width]
         weight = self.std / np.sqrt(2.0)
         return cv2.addWeighted(first, weight, second, weight, 0.0)
+
+
+class ExposureControl:
+    """The gain of a camera with automatic exposure (``AutoExposure``), frame by frame.
+
+    After each frame the gain moves towards the one that would bring the frame's mean
+    encoded level to the target, by the share ``1 - exp(-frame_time / time_constant)``
+    (in log gain), within the limits. Without automatic exposure the gain stays 1.
+    """
+
+    def __init__(self, settings: Any, fps: float, gamma: float) -> None:
+        self.settings = settings
+        self.gamma = gamma
+        self.gain = 1.0 if settings is None else settings.initial_gain
+        self.step = 0.0 if settings is None else 1.0 - math.exp(-1.0 / (fps * settings.time_constant_s))
+
+    @property
+    def encoded_scale(self) -> float:
+        """Factor of the encoded values: the gain through the display gamma."""
+        return self.gain ** (1.0 / self.gamma)
+
+    def meter(self, frame: np.ndarray) -> None:
+        """Adjust the gain after ``frame`` (``uint8``), metered on a sparse grid."""
+        if self.settings is None:
+            return
+        mean = max(float(frame[::4, ::4].mean()) / 255.0, 1e-3)
+        wanted = (self.settings.target / mean) ** self.gamma
+        gain = self.gain * wanted**self.step
+        self.gain = min(max(gain, self.settings.min_gain), self.settings.max_gain)

@@ -16,6 +16,9 @@
 - ``demo``: the room of ``calibproj demo``: 4 far-field GoPros, 1 on a lamp and 1
   zoomed on the table (fx 7,400), all 1280x720, so that a whole calibration from
   rendered videos takes a few minutes on 2 cores.
+- ``or-real``: the demo room as real cameras and a real room record it: 2 % dropped
+  frames and 1 ms timing jitter, 15 ms rolling shutters, automatic exposure on two
+  cameras, harder compression on two, a tiled floor with stains, some room light.
 
 The projector of every preset hangs at 3 m looking straight down; with fx 1400 its
 1920x1080 image covers about 4.1 x 2.3 m of floor, so a marker of 24 projector pixels
@@ -150,6 +153,34 @@ def demo(rng: np.random.Generator) -> dict[str, Any]:
     return _room([at_720p(camera) for camera in _pick(["far1", "far2", "far4", "far5", "near1", "ceiling"])])
 
 
+# What real cameras and a real room add, at typical levels (or-real): frame timing of
+# phones and IP cameras, rolling shutters (at most 90 % of a frame), automatic
+# exposure on the cameras that have no manual mode, harder compression on cheap
+# ones, a tiled floor with stains, and some room light.
+REAL_TIMING = {"drop_rate": 0.02, "frame_jitter_s": 0.001}
+REAL_READOUT_S = 0.015
+REAL_AUTO_EXPOSURE = {"target": 0.45, "time_constant_s": 0.5, "min_gain": 0.25, "max_gain": 8.0}
+REAL_AUTO_EXPOSURE_CAMERAS = ("far2", "near1")
+REAL_CRF = {"far4": 26, "far5": 26}
+REAL_FLOOR_TEXTURE = {"tile_m": 0.6, "grout_m": 0.006, "grout_albedo": 0.45, "tile_albedo_std": 0.04,
+                      "stains": 25, "stain_radius_m": 0.12, "stain_albedo": 0.55, "seed": 0}
+REAL_PHOTOMETRIC = {"ambient": 0.15, "contrast": 0.6}
+
+
+def or_real(rng: np.random.Generator) -> dict[str, Any]:
+    document = demo(rng)
+    for camera in document["cameras"]:
+        camera.update(REAL_TIMING)
+        camera["readout_s"] = round(min(REAL_READOUT_S, 0.9 / camera["fps"]), 6)
+        if camera["name"] in REAL_AUTO_EXPOSURE_CAMERAS:
+            camera["auto_exposure"] = dict(REAL_AUTO_EXPOSURE)
+        if camera["name"] in REAL_CRF:
+            camera["crf"] = REAL_CRF[camera["name"]]
+    document["floor"]["texture"] = dict(REAL_FLOOR_TEXTURE, seed=int(rng.integers(0, 2**31)))
+    document["photometric"] = dict(REAL_PHOTOMETRIC)
+    return document
+
+
 PRESETS: dict[str, Callable[[np.random.Generator], dict[str, Any]]] = {
     "paper": paper,
     "or-full": or_full,
@@ -158,6 +189,7 @@ PRESETS: dict[str, Callable[[np.random.Generator], dict[str, Any]]] = {
     "hard": hard,
     "small": small,
     "demo": demo,
+    "or-real": or_real,
 }
 
 

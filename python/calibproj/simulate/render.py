@@ -44,8 +44,9 @@ from calibproj.io.jsonio import FormatError
 from calibproj.simulate.atlas import AtlasLayout
 from calibproj.simulate.contents import AtlasStore
 from calibproj.simulate.geometric import evaluation_tracks
-from calibproj.simulate.photometric import CameraResponse, SensorNoise
-from calibproj.simulate.scene import Camera, Photometric, Scene, load_scene, save_scene
+from calibproj.simulate.floor_texture import floor_albedo
+from calibproj.simulate.photometric import CameraResponse, ExposureControl, SensorNoise
+from calibproj.simulate.scene import Camera, Floor, Photometric, Scene, load_scene, save_scene
 from calibproj.simulate.timeline import CameraClock, ContentKey, ProjectionTimeline
 from calibproj.simulate.truth import write_truth
 from calibproj.simulate.video_truth import video_truth_document
@@ -131,6 +132,7 @@ class CameraVideo:
     fps: float
     frame_count: int
     size_bytes: int
+    gains: tuple[float, ...] = ()  # per recorded frame, with automatic exposure
 
 
 @dataclass(frozen=True)
@@ -199,7 +201,8 @@ def simulate_videos(
     save_scene(out / "scene.json", scene)
     videos = _render_all(scene, sequence, timeline, clocks, views, out / "videos", seed, options, progress)
     settings = {"seed": seed, "sequence_markers": sequence.markers.spec, **_settings_json(options)}
-    write_truth(out / "truth.json", video_truth_document(scene, sequence, timeline, clocks, settings))
+    gains = {name: video.gains for name, video in videos.items()}
+    write_truth(out / "truth.json", video_truth_document(scene, sequence, timeline, clocks, settings, gains))
     point_rng, noise_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     evaluation_tracks(scene, point_rng, noise_rng, options.eval_noise_px)[1].write(out / "eval_tracks.json")
     simulation = VideoSimulation(out, scene, videos, time.perf_counter() - started)
@@ -245,7 +248,7 @@ def render_stills(
     atlas = layout.build(sequence.pattern_image(pattern))
     stills = {}
     for camera, rng in zip(scene.cameras, _noise_generators(seed, len(scene.cameras))):
-        sampler, response, noise = _camera_model(camera, views[camera.name], layout, scene.photometric, options, rng)
+        sampler, response, noise = _camera_model(camera, views[camera.name], layout, scene, options, rng)
         stills[camera.name] = noise.quantise(response.encode(response.irradiance(sampler.sample(atlas))))
     return stills
 
@@ -289,7 +292,8 @@ def _check_projector(scene: Scene, scene_source: str, sequence: Any) -> None:
 
 def _clock(camera: Camera, index: int, timeline: ProjectionTimeline, tail_s: float, scene_source: str,
            seed: int) -> CameraClock:
-    clock = CameraClock.covering(camera.fps, camera.start_offset_s, camera.exposure_s, timeline.duration_s, tail_s)
+    clock = CameraClock.covering(camera.fps, camera.start_offset_s, camera.exposure_s, timeline.duration_s, tail_s,
+                                 camera.readout_s)
     if clock.frame_count < 1:
         raise ValueError(f"{scene_source}: camera {camera.name!r} starts {-camera.start_offset_s:.3f} s after a "
                          f"sequence of {timeline.duration_s:.3f} s has ended and records nothing")
@@ -336,9 +340,13 @@ class _CameraRenderer:
         self.writer = writer
         self.atlases = atlases
         self.progress = progress
-        self.weights = [timeline.weights(*clock.window(frame)) for frame in range(clock.frame_count)]
+        rows = camera.resolution[1]
+        self.weights = [timeline.row_weights(clock.exposure_start(frame), clock.exposure_s, clock.readout_s, rows)
+                        for frame in range(clock.frame_count)]
         self.starts = clock.exposure_start(np.arange(clock.frame_count))
         self.dropped = frozenset(clock.dropped)
+        self.exposure = ExposureControl(camera.auto_exposure, camera.fps, response.photometric.gamma)
+        self.gains: list[float] = []
         self.cache: OrderedDict[ContentKey, list] = OrderedDict()
 
     def keys(self, frames: range) -> set[ContentKey]:
@@ -346,12 +354,17 @@ class _CameraRenderer:
 
     def render(self, frames: range) -> None:
         for frame in frames:
+            image = self.noise.quantise(self._encoded(self.weights[frame]), self.exposure.encoded_scale)
             if frame not in self.dropped:
-                self.writer.write(self.noise.quantise(self._encoded(self.weights[frame])))
+                self.writer.write(image)
+                self.gains.append(self.exposure.gain)
+            # A dropped frame was still exposed: the camera meters on it.
+            self.exposure.meter(image)
             self.progress.update(1)
 
-    def _encoded(self, weights: dict[ContentKey, float]) -> np.ndarray:
-        """Display-encoded frame: one content's cached values, or a blend in irradiance."""
+    def _encoded(self, weights: dict[ContentKey, float | np.ndarray]) -> np.ndarray:
+        """Display-encoded frame: one content's cached values, or a blend in irradiance
+        (per row where a rolling shutter's rows saw different contents)."""
         import cv2
 
         if len(weights) == 1:
@@ -362,8 +375,12 @@ class _CameraRenderer:
         irradiance = None
         for key, weight in weights.items():
             part = self._entry(key)[0]
-            irradiance = part * np.float32(weight) if irradiance is None else cv2.scaleAdd(
-                part, weight, irradiance)
+            if isinstance(weight, np.ndarray):
+                weighted = part * weight
+                irradiance = weighted if irradiance is None else cv2.add(irradiance, weighted)
+            else:
+                irradiance = part * np.float32(weight) if irradiance is None else cv2.scaleAdd(
+                    part, weight, irradiance)
         return self.response.encode(irradiance)
 
     def _entry(self, key: ContentKey) -> list:
@@ -394,14 +411,27 @@ def _noise_generators(seed: int, count: int) -> list[np.random.Generator]:
 
 
 def _camera_model(
-    camera: Camera, view: FloorView, layout: AtlasLayout, photometric: Photometric, options: RenderOptions,
+    camera: Camera, view: FloorView, layout: AtlasLayout, scene: Scene, options: RenderOptions,
     rng: np.random.Generator,
 ) -> tuple[CameraSampler, CameraResponse, SensorNoise]:
-    """Sampler, photometric response and sensor noise of one camera."""
+    """Sampler, photometric response (the floor's albedo included) and sensor noise of one camera."""
     width, height = camera.resolution
+    photometric = scene.photometric
     sampler = CameraSampler.from_view(view, layout, camera.resolution, options.supersample, photometric.blur_px)
     noise = SensorNoise(photometric.noise_std, (height, width), rng, fresh=options.fresh_noise)
-    return sampler, CameraResponse.for_camera(camera, photometric), noise
+    return sampler, CameraResponse.for_camera(camera, photometric, _albedo(scene.floor, view, camera)), noise
+
+
+def _albedo(floor: Floor, view: FloorView, camera: Camera) -> np.ndarray | None:
+    """The floor's albedo per camera pixel (samples averaged), or None for a plain floor."""
+    import cv2
+
+    if floor.texture is None:
+        return None
+    albedo = floor_albedo(floor.texture, view.floor_x, view.floor_y, view.floor_footprint)
+    if albedo.shape[::-1] != tuple(camera.resolution):
+        albedo = cv2.resize(albedo, camera.resolution, interpolation=cv2.INTER_AREA)
+    return albedo
 
 
 def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clocks: dict[str, CameraClock],
@@ -419,12 +449,12 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
                                thread_name_prefix="camera") as camera_pool:
         try:
             for index, camera in enumerate(scene.cameras):
-                model = _camera_model(camera, views.pop(camera.name), layout, scene.photometric, options,
-                                      generators[index])
+                model = _camera_model(camera, views.pop(camera.name), layout, scene, options, generators[index])
                 clock = clocks[camera.name]
                 timed = bool(clock.jitter_s or clock.dropped)
                 writer = GreyVideoWriter(folder / f"{camera.name}.mp4", camera.resolution, camera.fps,
-                                         crf=options.crf, preset=options.preset,
+                                         crf=options.crf if camera.crf is None else camera.crf,
+                                         preset=options.preset,
                                          timestamps_s=clock.timestamps() if timed else None)
                 bar = tqdm(total=clocks[camera.name].frame_count, desc=camera.name, unit="frame", position=index,
                            disable=not progress, leave=True)
@@ -441,8 +471,9 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
         renderer.progress.close()
         camera = renderer.camera
         path = renderer.writer.path
+        gains = tuple(renderer.gains) if camera.auto_exposure is not None else ()
         videos[camera.name] = CameraVideo(path, camera.resolution, camera.fps, len(renderer.clock.recorded),
-                                          path.stat().st_size)
+                                          path.stat().st_size, gains)
     return videos
 
 

@@ -25,7 +25,13 @@ Frame timing of real cameras (optional, per camera): ``frame_jitter_s`` is the
 standard deviation of each frame's exposure start around the frame grid (Gaussian,
 clipped to 3 sigma; default 0), ``drop_rate`` the share of frames the camera drops
 at random (default 0). Rendered videos carry the true exposure starts as their
-container timestamps, so a dropped frame is a gap in the timestamps.
+container timestamps, so a dropped frame is a gap in the timestamps. ``readout_s``
+is a rolling shutter's readout time (row ``y`` of ``h`` starts exposing
+``readout_s * y / h`` after the first; default 0, a global shutter), and
+``auto_exposure`` (``AutoExposure``'s fields) makes the camera adjust its gain, and
+``crf`` is the camera's own x264 quality (cheap cameras compress harder; default:
+the renderer's).
+``floor.texture`` (``FloorTexture``'s fields) gives the floor tiles, grout and stains.
 """
 
 from __future__ import annotations
@@ -76,10 +82,60 @@ def look_at_rotation(position: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class FloorTexture:
+    """What a real floor adds to the projected light: tiles of slightly different
+    albedo, darker grout lines between them and stains (the floor's reflectance
+    multiplies the projector's light and the room light alike).
+
+    Attributes:
+        tile_m: side of the square tiles (metres; tile edges on multiples of it).
+        grout_m: width of the grout lines.
+        grout_albedo: reflectance of the grout (the tiles' is about 1).
+        tile_albedo_std: spread of the tiles' reflectance from tile to tile.
+        stains: stains on the floor (round, soft-edged), at random places.
+        stain_radius_m: largest stain radius (radii drawn up to it).
+        stain_albedo: reflectance at the centre of the darkest stain.
+        seed: draws of the tiles and stains.
+    """
+
+    tile_m: float = 0.6
+    grout_m: float = 0.006
+    grout_albedo: float = 0.45
+    tile_albedo_std: float = 0.04
+    stains: int = 25
+    stain_radius_m: float = 0.12
+    stain_albedo: float = 0.55
+    seed: int = 0
+
+
+@dataclass(frozen=True)
 class Floor:
-    """The floor z = 0, a rectangle centred on the origin."""
+    """The floor z = 0, a rectangle centred on the origin; plain (albedo 1) unless it
+    has a texture."""
 
     size_m: tuple[float, float] = (4.0, 3.0)
+    texture: FloorTexture | None = None
+
+
+@dataclass(frozen=True)
+class AutoExposure:
+    """A camera that adjusts its gain to the scene (phones, webcams, IP cameras): after
+    every frame the gain moves towards the one bringing the frame's mean grey level to
+    ``target``, with a first-order lag, within limits (bright markers then saturate
+    while the floor is mostly dark).
+
+    Attributes:
+        target: mean encoded grey level aimed at (full scale 1).
+        time_constant_s: time constant of the adjustment.
+        min_gain, max_gain: limits of the gain (irradiance factor).
+        initial_gain: the gain of the first frame.
+    """
+
+    target: float = 0.45
+    time_constant_s: float = 0.5
+    min_gain: float = 0.25
+    max_gain: float = 8.0
+    initial_gain: float = 1.0
 
 
 class LookAtPose:
@@ -148,6 +204,9 @@ class Camera(LookAtPose):
     exposure_s: float = 0.01
     frame_jitter_s: float = 0.0
     drop_rate: float = 0.0
+    readout_s: float = 0.0
+    auto_exposure: AutoExposure | None = None
+    crf: int | None = None
 
     @property
     def K(self) -> np.ndarray:
@@ -205,15 +264,21 @@ class Scene:
     def to_json(self) -> dict[str, Any]:
         """Body of ``scene.json`` (without the schema tag)."""
         return {
-            "floor": {"size_m": list(self.floor.size_m)},
+            "floor": _without_none({"size_m": list(self.floor.size_m),
+                                    "texture": None if self.floor.texture is None else asdict(self.floor.texture)}),
             "projector": _plain(asdict(self.projector)),
-            "cameras": [_plain(asdict(camera)) for camera in self.cameras],
+            "cameras": [_without_none(_plain(asdict(camera))) for camera in self.cameras],
             "photometric": asdict(self.photometric),
         }
 
 
 def _plain(record: dict[str, Any]) -> dict[str, Any]:
     return {key: list(value) if isinstance(value, tuple) else value for key, value in record.items()}
+
+
+def _without_none(record: dict[str, Any]) -> dict[str, Any]:
+    """Optional parts left out when absent, as a scene file may leave them out."""
+    return {key: value for key, value in record.items() if value is not None}
 
 
 def save_scene(path: str | os.PathLike, scene: Scene) -> None:
@@ -246,7 +311,7 @@ def scene_from_json(document: dict[str, Any], source: str = "scene") -> Scene:
     reader = _FieldReader(source)
     known = {"schema", "floor", "projector", "cameras", "photometric"}
     reader.no_unknown_keys(document, known, "")
-    floor = Floor(tuple(reader.numbers(reader.required(document, "floor", ""), "size_m", "floor", 2, positive=True)))
+    floor = _read_floor(reader, reader.required(document, "floor", ""))
     projector = _read_projector(reader, reader.required(document, "projector", ""))
     cameras_json = reader.required(document, "cameras", "")
     if not isinstance(cameras_json, list) or not cameras_json:
@@ -262,6 +327,54 @@ def scene_from_json(document: dict[str, Any], source: str = "scene") -> Scene:
     return scene
 
 
+def _read_floor(reader: _FieldReader, entry: Any) -> Floor:
+    reader.no_unknown_keys(entry, {"size_m", "texture"}, "floor")
+    size = tuple(reader.numbers(entry, "size_m", "floor", 2, positive=True))
+    if "texture" not in entry:
+        return Floor(size)
+    where = "floor.texture"
+    values = _read_record(reader, entry["texture"], FloorTexture(), where)
+    for key in ("grout_albedo", "stain_albedo"):
+        if not 0.0 <= values[key] <= 1.0:
+            reader.fail(f"{where}.{key}", f"expected a number in [0, 1], got {values[key]}")
+    for key in ("tile_m", "grout_m"):
+        if values[key] <= 0.0:
+            reader.fail(f"{where}.{key}", f"expected a positive number, got {values[key]}")
+    if values["grout_m"] >= values["tile_m"]:
+        reader.fail(f"{where}.grout_m", "must be narrower than the tiles")
+    if not 0.0 <= values["tile_albedo_std"] <= 0.3:
+        reader.fail(f"{where}.tile_albedo_std", f"expected a number in [0, 0.3], got {values['tile_albedo_std']}")
+    if values["stains"] != int(values["stains"]) or not 0 <= values["stains"] <= 10000:
+        reader.fail(f"{where}.stains", f"expected an integer in [0, 10000], got {values['stains']}")
+    if values["seed"] != int(values["seed"]) or values["seed"] < 0:
+        reader.fail(f"{where}.seed", f"expected a non-negative integer, got {values['seed']}")
+    values.update(stains=int(values["stains"]), seed=int(values["seed"]))
+    return Floor(size, FloorTexture(**values))
+
+
+def _read_record(reader: _FieldReader, entry: Any, defaults: Any, where: str) -> dict[str, float]:
+    """The numeric fields of a dataclass record, defaults filled in, >= 0."""
+    reader.no_unknown_keys(entry, set(asdict(defaults)), where)
+    values = {}
+    for key, default in asdict(defaults).items():
+        value = reader.number(entry, key, where, default=default)
+        if value < 0.0:
+            reader.fail(f"{where}.{key}", f"expected >= 0, got {value}")
+        values[key] = value
+    return values
+
+
+def _read_auto_exposure(reader: _FieldReader, entry: Any, where: str) -> AutoExposure:
+    values = _read_record(reader, entry, AutoExposure(), where)
+    if not 0.0 < values["target"] < 1.0:
+        reader.fail(f"{where}.target", f"expected a number in (0, 1), got {values['target']}")
+    if not 0.0 < values["min_gain"] <= values["initial_gain"] <= values["max_gain"]:
+        reader.fail(where, "expected 0 < min_gain <= initial_gain <= max_gain")
+    if not values["time_constant_s"] > 0.0:
+        reader.fail(f"{where}.time_constant_s", "expected a positive number")
+    return AutoExposure(**values)
+
+
 def _read_projector(reader: _FieldReader, entry: Any) -> Projector:
     where = "projector"
     reader.no_unknown_keys(entry, {"position", "look_at", "resolution", "fx"}, where)
@@ -273,7 +386,7 @@ def _read_projector(reader: _FieldReader, entry: Any) -> Projector:
 
 def _read_camera(reader: _FieldReader, entry: Any, where: str) -> Camera:
     known = {"name", "position", "look_at", "resolution", "fx", "fy", "cx", "cy", "dist", "fps",
-             "start_offset_s", "exposure_s", "frame_jitter_s", "drop_rate"}
+             "start_offset_s", "exposure_s", "frame_jitter_s", "drop_rate", "readout_s", "auto_exposure", "crf"}
     reader.no_unknown_keys(entry, known, where)
     name = reader.required(entry, "name", where)
     if not isinstance(name, str) or not CAMERA_NAME_PATTERN.match(name):
@@ -302,8 +415,18 @@ def _read_camera(reader: _FieldReader, entry: Any, where: str) -> Camera:
     drop_rate = reader.number(entry, "drop_rate", where, default=0.0)
     if not 0.0 <= drop_rate <= 0.5:
         reader.fail(f"{where}.drop_rate", f"expected a number in [0, 0.5], got {drop_rate}")
+    readout_s = reader.number(entry, "readout_s", where, default=0.0)
+    if not 0.0 <= readout_s <= 1.0 / fps:
+        reader.fail(f"{where}.readout_s", f"expected a number in [0, {1.0 / fps:.6g}] (the rows are read "
+                    f"within one frame at {fps} fps), got {readout_s}")
+    crf = entry.get("crf")
+    if crf is not None and (isinstance(crf, bool) or not isinstance(crf, int) or not 0 <= crf <= 51):
+        reader.fail(f"{where}.crf", f"expected an integer in [0, 51], got {crf!r}")
+    auto_exposure = None
+    if "auto_exposure" in entry:
+        auto_exposure = _read_auto_exposure(reader, entry["auto_exposure"], f"{where}.auto_exposure")
     return Camera(name, position, look_at, resolution, fx, fy, cx, cy, dist, fps, start_offset_s, exposure_s,
-                  jitter, drop_rate)
+                  jitter, drop_rate, readout_s, auto_exposure, crf)
 
 
 def _read_placement(reader: _FieldReader, entry: Any, where: str) -> tuple[tuple, tuple]:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -115,6 +115,41 @@ class ProjectionTimeline:
         total = sum(kept.values())
         return {key: share / total for key, share in kept.items()}
 
+    def row_weights(self, start_s: float, exposure_s: float, readout_s: float,
+                    rows: int) -> dict[ContentKey, float | np.ndarray]:
+        """``weights`` for a rolling shutter: row ``y`` exposes during
+        ``[start_s + readout_s * y / rows, ... + exposure_s)``. A content's share is a
+        ``(rows, 1)`` array where it differs between rows, else a number."""
+        if readout_s <= 0:
+            return self.weights(start_s, start_s + exposure_s)
+        starts = start_s + readout_s * np.arange(rows) / rows
+        ends = starts + exposure_s
+        shares: dict[ContentKey, np.ndarray] = {}
+
+        def add(key: ContentKey, begin: float, end: float) -> None:
+            overlap = np.clip(np.minimum(end, ends) - np.maximum(begin, starts), 0.0, None)
+            if overlap.max() > 0:
+                shares[key] = shares.get(key, 0.0) + overlap / exposure_s
+
+        add(BLACK, -math.inf, 0.0)
+        add(BLACK, self.duration_s, math.inf)
+        first_frame = max(0, math.floor(start_s * self.fps))
+        run = max(0, bisect.bisect_right(self.run_starts, first_frame) - 1)
+        while run < len(self.run_starts):
+            begin, end = self.run_interval(run)
+            if begin >= ends[-1]:
+                break
+            add(self.run_keys[run], begin, end)
+            run += 1
+        kept = {key: share for key, share in shares.items() if share.max() >= MIN_SHARE}
+        total = sum(kept.values())
+        out: dict[ContentKey, float | np.ndarray] = {}
+        for key, share in kept.items():
+            share = share / total
+            uniform = np.ptp(share) < MIN_SHARE
+            out[key] = float(share[0]) if uniform else share.astype(np.float32)[:, None]
+        return out
+
     def key_interval(self, key: ContentKey) -> tuple[float, float]:
         """Start and end time of the (first) run showing ``key``."""
         run = self.run_keys.index(key)
@@ -138,6 +173,8 @@ class CameraClock:
         jitter_s: per-slot deviation of the exposure start from the grid, seconds
             (empty: none).
         dropped: slots the camera dropped, increasing.
+        readout_s: rolling shutter readout (the last row starts this much after the
+            first; 0: global shutter). Exposure starts are those of the first row.
     """
 
     fps: float
@@ -146,13 +183,14 @@ class CameraClock:
     frame_count: int
     jitter_s: tuple[float, ...] = ()
     dropped: tuple[int, ...] = ()
+    readout_s: float = 0.0
 
     @classmethod
     def covering(cls, fps: float, start_offset_s: float, exposure_s: float, duration_s: float,
-                 tail_s: float) -> CameraClock:
+                 tail_s: float, readout_s: float = 0.0) -> CameraClock:
         """A clock recording from its start until ``tail_s`` after a sequence of ``duration_s``."""
         frame_count = math.ceil((start_offset_s + duration_s + tail_s) * fps - 1e-9)
-        return cls(fps, start_offset_s, exposure_s, frame_count)
+        return cls(fps, start_offset_s, exposure_s, frame_count, readout_s=readout_s)
 
     def with_timing(self, jitter_std_s: float, drop_rate: float, rng: np.random.Generator) -> CameraClock:
         """The same clock with frame timing jitter (Gaussian, clipped to 3 sigma) and
@@ -165,7 +203,7 @@ class CameraClock:
         if drop_rate > 0 and self.frame_count > 2:
             lost = np.flatnonzero(rng.random(self.frame_count - 2) < drop_rate) + 1
             dropped = tuple(int(frame) for frame in lost)
-        return CameraClock(self.fps, self.start_offset_s, self.exposure_s, self.frame_count, jitter, dropped)
+        return replace(self, jitter_s=jitter, dropped=dropped)
 
     @property
     def recorded(self) -> np.ndarray:
@@ -191,9 +229,10 @@ class CameraClock:
         return start, start + self.exposure_s
 
     def frames_inside(self, start_s: float, end_s: float) -> np.ndarray:
-        """Recorded frames whose whole exposure lies inside ``[start_s, end_s]``."""
+        """Recorded frames whose whole exposure (every row's) lies inside ``[start_s, end_s]``."""
         frames = self.recorded
         starts = self.exposure_start(frames)
         # A little slack so that a window touching the interval's edge counts as inside.
         slack = 1e-9
-        return frames[(starts >= start_s - slack) & (starts + self.exposure_s <= end_s + slack)]
+        last_end = starts + self.readout_s + self.exposure_s
+        return frames[(starts >= start_s - slack) & (last_end <= end_s + slack)]

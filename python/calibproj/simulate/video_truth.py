@@ -6,7 +6,8 @@ Extra fields of ``truth.json`` written here::
     "timing": {"clock": "...", "projector_fps": 30.0, "sequence_frames": 2376,
                "cameras": {name: {"fps", "start_offset_s", "exposure_s", "frame_count",
                                   "first_exposure_start_s", "fps_ratio", "recorded_frames",
-                                  "dropped_frames": [slots], "jitter_s": [per slot, or empty]}}},
+                                  "dropped_frames": [slots], "jitter_s": [per slot, or empty],
+                                  "readout_s", "gains": [per recorded frame, or empty]}}},
     "image_points": {name: {"ids": [...], "distorted": [[u, v], ...], "undistorted": [...]}},
     "clean_frames": {name: [[frames exposed wholly inside pattern 0], [... pattern 1], ...]}
 """
@@ -37,7 +38,8 @@ def msm_floor_points(scene: Scene, sequence: Any) -> tuple[np.ndarray, np.ndarra
     return np.arange(len(centres)), scene.projector.pixels_to_floor(centres)
 
 
-def timing_json(timeline: ProjectionTimeline, clocks: dict[str, CameraClock]) -> dict[str, Any]:
+def timing_json(timeline: ProjectionTimeline, clocks: dict[str, CameraClock],
+                gains: dict[str, tuple[float, ...]] | None = None) -> dict[str, Any]:
     cameras = {
         name: {
             "fps": clock.fps,
@@ -49,6 +51,8 @@ def timing_json(timeline: ProjectionTimeline, clocks: dict[str, CameraClock]) ->
             "recorded_frames": int(len(clock.recorded)),
             "dropped_frames": list(clock.dropped),
             "jitter_s": list(clock.jitter_s),
+            "readout_s": clock.readout_s,
+            "gains": list((gains or {}).get(name, ())),
         }
         for name, clock in clocks.items()
     }
@@ -83,13 +87,14 @@ def clean_frames_json(sequence: Any, clocks: dict[str, CameraClock]) -> dict[str
 
 
 def video_truth_document(scene: Scene, sequence: Any, timeline: ProjectionTimeline,
-                         clocks: dict[str, CameraClock], settings: dict[str, Any]) -> dict[str, Any]:
+                         clocks: dict[str, CameraClock], settings: dict[str, Any],
+                         gains: dict[str, tuple[float, ...]] | None = None) -> dict[str, Any]:
     """Body of ``truth.json`` for a rendered simulation."""
     ids, xyz = msm_floor_points(scene, sequence)
     markers_per_array = int(np.asarray(sequence.centres).shape[1])
     extra = {
         "simulation": {"kind": "video", **settings},
-        "timing": timing_json(timeline, clocks),
+        "timing": timing_json(timeline, clocks, gains),
         "image_points": image_points_json(scene, ids, xyz),
         "clean_frames": clean_frames_json(sequence, clocks),
     }

@@ -61,6 +61,8 @@ class FloorView:
         area: ``|det J|``, projector pixels squared covered by one sample; NaN off the floor.
         stretch: largest squared singular value of ``J``: projector pixels squared
             per sample along the most compressed direction; NaN off the floor.
+        floor_x, floor_y: the floor point each sample sees (metres), NaN off the floor.
+        floor_footprint: side of the floor square (metres) one sample covers, NaN off it.
     """
 
     projector_x: np.ndarray
@@ -69,6 +71,9 @@ class FloorView:
     in_image: np.ndarray
     area: np.ndarray
     stretch: np.ndarray
+    floor_x: np.ndarray
+    floor_y: np.ndarray
+    floor_footprint: np.ndarray
 
     def prefilter_variance(self, blur_samples: float) -> np.ndarray:
         """Per-axis variance (projector pixels squared) of the blur each sample needs:
@@ -107,9 +112,13 @@ def floor_view(camera: Camera, projector: Projector, floor: Floor, supersample: 
         on_floor = (modelled & (on_floor_h[:, 2] > 0) & (projected[:, 2] > 0)
                     & np.all(np.abs(floor_xy) <= half_size, axis=1))
     projector_xy[~on_floor] = np.nan
+    floor_xy[~on_floor] = np.nan
     shape = grid_x.shape
     x, y = projector_xy[:, 0].reshape(shape), projector_xy[:, 1].reshape(shape)
-    return FloorView(x, y, on_floor.reshape(shape), _inside(x, y, projector), *_area_and_stretch(x, y))
+    floor_x, floor_y = floor_xy[:, 0].reshape(shape), floor_xy[:, 1].reshape(shape)
+    footprint = np.sqrt(_area_and_stretch(floor_x, floor_y)[0])
+    return FloorView(x, y, on_floor.reshape(shape), _inside(x, y, projector), *_area_and_stretch(x, y),
+                     floor_x, floor_y, footprint)
 
 
 def _inside(x: np.ndarray, y: np.ndarray, projector: Projector) -> np.ndarray:

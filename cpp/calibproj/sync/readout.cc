@@ -1,0 +1,96 @@
+#include "calibproj/sync/readout.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace calibproj::sync {
+
+namespace {
+
+// Sharp bands needed, and the share of the image height their centres must span.
+constexpr int kMinBands = 3;
+constexpr double kMinSpread = 0.3;
+// Bands whose offsets that fit span more than this (camera frames, half-width) saw no
+// light change sharply enough to place them.
+constexpr double kMaxBandUncertainty = 0.25;
+
+double Median(std::vector<double> values) {
+  const auto middle = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), middle, values.end());
+  return *middle;
+}
+
+}  // namespace
+
+ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_signals, const LightTimeline& timeline,
+                                const std::vector<FrameWindow>& windows, const FrameMap& map,
+                                const CodeFitOptions& options) {
+  ReadoutEstimate estimate;
+  const int bands = static_cast<int>(band_signals.size());
+  std::vector<double> rows, offsets, weights, exposures;
+  for (int b = 0; b < bands; ++b) {
+    try {
+      const CodeFit fit = FitCodeWindows(band_signals[b], timeline, windows, map, false, options);
+      if (!(fit.offset_uncertainty <= kMaxBandUncertainty)) continue;
+      // The half-width of the offsets that fit as a uniform interval's sigma, and
+      // never below the fit's grid.
+      const double sigma = std::max(fit.offset_uncertainty / std::sqrt(3.0), options.offset_step / std::sqrt(12.0));
+      rows.push_back((b + 0.5) / bands);
+      offsets.push_back(fit.map.offset);
+      weights.push_back(1.0 / (sigma * sigma));
+      exposures.push_back(fit.map.exposure);
+    } catch (const std::runtime_error&) {
+      // Too few measured frames in this band's windows: it gives nothing.
+    }
+  }
+  const int n = static_cast<int>(rows.size());
+  if (n < kMinBands || rows.back() - rows.front() < kMinSpread) return estimate;
+  // Weighted least-squares line offset = intercept + slope * row.
+  double sw = 0, mean_row = 0, mean_offset = 0;
+  for (int i = 0; i < n; ++i) {
+    sw += weights[i];
+    mean_row += weights[i] * rows[i];
+    mean_offset += weights[i] * offsets[i];
+  }
+  mean_row /= sw;
+  mean_offset /= sw;
+  double srr = 0, sro = 0;
+  for (int i = 0; i < n; ++i) {
+    srr += weights[i] * (rows[i] - mean_row) * (rows[i] - mean_row);
+    sro += weights[i] * (rows[i] - mean_row) * (offsets[i] - mean_offset);
+  }
+  const double slope = sro / srr;
+  const double intercept = mean_offset - slope * mean_row;
+  double chi2 = 0;
+  for (int i = 0; i < n; ++i) {
+    const double r = offsets[i] - intercept - slope * rows[i];
+    chi2 += weights[i] * r * r;
+  }
+  // Bands scattered beyond their own uncertainty widen the result accordingly.
+  const double dispersion = std::max(1.0, chi2 / std::max(n - 2, 1));
+  estimate.valid = true;
+  estimate.readout = -slope;
+  estimate.readout_sigma = std::sqrt(dispersion / srr);
+  estimate.first_row_offset = intercept;
+  estimate.offset_sigma = std::sqrt(dispersion * (1.0 / sw + mean_row * mean_row / srr));
+  estimate.exposure = Median(exposures);
+  estimate.bands_used = n;
+  return estimate;
+}
+
+bool Significant(const ReadoutEstimate& readout, double sigmas) {
+  return readout.valid && readout.readout > sigmas * readout.readout_sigma && readout.readout > 0.02;
+}
+
+FrameMap CoverRows(const FrameMap& window_map, const ReadoutEstimate& readout, double sigmas) {
+  if (!readout.valid) return window_map;
+  // Exposure windows of frame j, relative to j (camera frames): [-offset, -offset + exposure].
+  const double margin = sigmas * (readout.offset_sigma + readout.readout_sigma);
+  const double start = std::min(-window_map.offset, -readout.first_row_offset - margin);
+  const double end = std::max(-window_map.offset + window_map.exposure,
+                              -readout.first_row_offset + std::max(readout.readout, 0.0) + readout.exposure + margin);
+  return FrameMap{-start, window_map.rate, end - start};
+}
+
+}  // namespace calibproj::sync

@@ -1,0 +1,43 @@
+#pragma once
+// Rolling-shutter readout from the light codes as horizontal bands of the image see them.
+//
+// Row y of h starts its exposure readout * y / h camera frames after the first row.
+// Each band of rows is fitted as a camera of its own (code_fit.h) at the frame map's
+// rate: the band's offset falls linearly with its centre row, offset_b = offset_0 -
+// readout * (y_b / h). A line through the bands whose fit is sharp gives the readout,
+// the first row's offset (the frame map of the frame's timestamp) and their
+// uncertainties. A global shutter gives a readout near 0.
+
+#include <vector>
+
+#include "calibproj/sync/code_fit.h"
+#include "calibproj/sync/frame_map.h"
+#include "calibproj/sync/light_timeline.h"
+
+namespace calibproj::sync {
+
+struct ReadoutEstimate {
+  bool valid = false;            // enough sharp bands, spread over the image
+  double readout = 0.0;          // camera frames from the first row's start to the last's
+  double readout_sigma = 0.0;    // 1 sigma, camera frames
+  double first_row_offset = 0.0; // offset of the frame map of the first row
+  double offset_sigma = 0.0;
+  double exposure = 0.0;         // median fitted exposure of the bands, camera frames
+  int bands_used = 0;
+};
+
+// `band_signals[b][j]`: mean luma of band b (rows [b h / B, (b + 1) h / B)) in camera
+// frame j, NaN where not measured. `map` is the whole frame's fit (its rate is kept).
+ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_signals, const LightTimeline& timeline,
+                                const std::vector<FrameWindow>& windows, const FrameMap& map,
+                                const CodeFitOptions& options);
+
+// The readout is told apart from 0 (more than `sigmas` standard deviations and a
+// fiftieth of a frame): the first row's offset then replaces the whole frame's.
+bool Significant(const ReadoutEstimate& readout, double sigmas);
+
+// A map whose exposure window covers both `window_map`'s and every row's exposure under
+// `readout` (widened by `sigmas` standard deviations), for picking clean frames.
+FrameMap CoverRows(const FrameMap& window_map, const ReadoutEstimate& readout, double sigmas);
+
+}  // namespace calibproj::sync

@@ -1,0 +1,229 @@
+"""Real cameras and real rooms: the demo room calibrated from its rendered videos under
+each effect alone (two levels) and all combined, over several seeds.
+
+Per condition it prints cameras registered / total (and the failed ones with their
+reason), rotation and translation RMSE against the truth after Sim(3) alignment,
+evaluation on the rendering's independent points (mean px, success at 0.5 px), the
+largest sync error against the truth (camera frames), the largest readout error
+(ms, where a readout is estimated), and observations assigned to a wrong point
+(farther than --wrong-px from that point's true image position). The last line:
+``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B``.
+
+    python tools/bench/realism.py                       # every condition, 3 seeds
+    python tools/bench/realism.py --conditions clean,drops-2 --seeds 1 --arrays 12
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from calibproj.compare import compare
+from calibproj.demo import marker_side_on_floor
+from calibproj.evaluate import evaluate
+from calibproj.generate import generate
+from calibproj.pipeline import calibrate
+from calibproj.registration import RegistrationOptions
+from calibproj.simulate.render import RenderOptions, simulate_videos
+from calibproj.simulate.scene import AutoExposure, FloorTexture, Scene, load_scene
+
+Effect = Callable[[Scene], Scene]
+
+
+def cameras(scene: Scene, **changes) -> Scene:
+    return replace(scene, cameras=tuple(replace(camera, **changes) for camera in scene.cameras))
+
+
+def timing(drop_rate: float, jitter_s: float) -> Effect:
+    """Dropped frames and jitter (capped where a camera's frame leaves less room)."""
+    def apply(scene: Scene) -> Scene:
+        return replace(scene, cameras=tuple(
+            replace(c, drop_rate=drop_rate, frame_jitter_s=min(jitter_s, (1.0 / c.fps - c.exposure_s) / 6.0))
+            for c in scene.cameras))
+    return apply
+
+
+def readout(seconds: float) -> Effect:
+    def apply(scene: Scene) -> Scene:
+        return replace(scene, cameras=tuple(replace(c, readout_s=min(seconds, 0.9 / c.fps)) for c in scene.cameras))
+    return apply
+
+
+def photometric(**changes) -> Effect:
+    return lambda scene: replace(scene, photometric=replace(scene.photometric, **changes))
+
+
+def texture(**changes) -> Effect:
+    return lambda scene: replace(scene, floor=replace(scene.floor, texture=FloorTexture(**changes)))
+
+
+# name -> (scene effect, render option changes)
+CONDITIONS: dict[str, tuple[Effect, dict]] = {
+    "clean": (lambda scene: scene, {}),
+    "drops-2": (timing(0.02, 0.001), {}),
+    "drops-5": (timing(0.05, 0.002), {}),
+    "auto-exposure": (lambda s: cameras(s, auto_exposure=AutoExposure()), {}),
+    "auto-exposure-fast": (lambda s: cameras(s, auto_exposure=AutoExposure(target=0.6, time_constant_s=0.15)), {}),
+    "room-light": (photometric(ambient=0.2, contrast=0.5), {}),
+    "room-light-strong": (photometric(ambient=0.4, contrast=0.3), {}),
+    "floor": (texture(), {}),
+    "floor-strong": (texture(grout_albedo=0.25, stains=60, stain_albedo=0.35, tile_albedo_std=0.08), {}),
+    "crf-24": (lambda scene: scene, {"crf": 24}),
+    "crf-30": (lambda scene: scene, {"crf": 30}),
+    "rolling-15ms": (readout(0.015), {}),
+    "rolling-30ms": (readout(0.030), {}),
+}
+COMBINED = "all"
+
+
+def combined(scene: Scene) -> Scene:
+    for name in ("drops-2", "auto-exposure", "room-light", "floor", "rolling-15ms"):
+        scene = CONDITIONS[name][0](scene)
+    return scene
+
+
+CONDITIONS[COMBINED] = (combined, {"crf": 24})
+
+
+def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, args) -> dict:
+    effect, render_changes = CONDITIONS[condition]
+    scene = effect(load_scene(args.scene, seed=seed))
+    room = work / f"{condition}-{seed}"
+    simulate_videos(scene, sequence, room, seed=seed, options=replace(RenderOptions(), **render_changes))
+    marker_side_m = marker_side_on_floor(room / "scene.json", sequence)
+    results = room / "results"
+    try:
+        calibration = calibrate(room / "videos", room / "intrinsics", sequence=sequence_path, out=results,
+                                options=RegistrationOptions(model=args.model),
+                                scale=f"marker-size:{marker_side_m:.9f}", force=True, progress=False)
+    except ValueError as error:  # the scale could not be measured: results in arbitrary units
+        logging.warning("%s seed %d: %s", condition, seed, error)
+        from calibproj.calibration import Calibration
+
+        calibration = Calibration.load(results)
+    truth = json.loads((room / "truth.json").read_text())
+    report = json.loads((results / "detect_report.json").read_text())
+    row = {"condition": condition, "seed": seed, "total": len(scene.cameras),
+           "failed": {name: reason for name, reason in calibration.failed.items()}}
+    registered = [name for name in scene.camera_names if name in calibration.poses]
+    row["registered"] = len(registered)
+    if len(registered) >= 3:
+        comparison = compare(results / "camera_poses.json", room / "truth.json")
+        evaluation = evaluate(results, room / "eval_tracks.json")
+        row.update(rot=comparison.rotation_rmse_deg, mm=comparison.translation_rmse_mm,
+                   eval_px=evaluation.mean_px, success=evaluation.success_rate(0.5) / 100.0)
+    row["sync_frames"] = max_sync_error(report, truth)
+    row["readout_ms"] = max_readout_error(report, truth)
+    row["wrong"] = wrong_assignments(room / "results" / "tracks.json", truth, args.wrong_px)
+    return row
+
+
+def max_sync_error(report: dict, truth: dict) -> tuple[float, float]:
+    """Largest sync error (camera frames) and largest excess over the reported
+    uncertainty (0 when every truth lies within its interval)."""
+    worst, beyond = 0.0, 0.0
+    for name, camera in report["cameras"].items():
+        if camera["status"] != "ok":
+            continue
+        timing = truth["timing"]["cameras"][name]
+        true_offset = -timing["first_exposure_start_s"] * timing["fps"]
+        error = abs(camera["sync"]["offset_frames"] - true_offset)
+        worst = max(worst, error)
+        beyond = max(beyond, error - camera["sync"]["offset_uncertainty_frames"])
+    return worst, beyond
+
+
+def max_readout_error(report: dict, truth: dict) -> float | None:
+    errors = [abs(camera["sync"]["readout_s"] - truth["timing"]["cameras"][name]["readout_s"]) * 1e3
+              for name, camera in report["cameras"].items()
+              if camera["status"] == "ok" and camera["sync"].get("readout_s") is not None]
+    return max(errors) if errors else None
+
+
+def wrong_assignments(tracks_path: Path, truth: dict, threshold_px: float) -> int:
+    """Observations farther than threshold_px from their point's true (distorted) image position."""
+    from calibproj.tracks import Tracks
+
+    tracks = Tracks.read(tracks_path)
+    wrong = 0
+    for name in tracks.camera_names:
+        points = truth["image_points"][name]
+        true_xy = dict(zip(points["ids"], points["undistorted"]))
+        ids, xy = tracks.observations(name)
+        for point, observed in zip(ids, xy):
+            expected = true_xy.get(int(point))
+            if expected is None or np.hypot(*(np.asarray(observed) - expected)) > threshold_px:
+                wrong += 1
+    return wrong
+
+
+def format_row(row: dict) -> str:
+    failed = "; ".join(f"{name}: {reason[:80]}" for name, reason in row["failed"].items())
+    readout = "-" if row["readout_ms"] is None else f"{row['readout_ms']:.2f}"
+    if "rot" not in row:
+        return (f"{row['condition']:<20} seed {row['seed']}  registered {row['registered']}/{row['total']}  "
+                f"sync {row['sync_frames'][0]:.3f} fr (beyond +-: {row['sync_frames'][1]:.3f})  {failed}")
+    mm = "-" if row["mm"] is None else f"{row['mm']:.2f}"
+    return (f"{row['condition']:<20} seed {row['seed']}  registered {row['registered']}/{row['total']}  "
+            f"rot {row['rot']:.4f} deg  {mm} mm  eval {row['eval_px']:.3f} px  @0.5 {100 * row['success']:.0f} %  "
+            f"sync {row['sync_frames'][0]:.3f} fr (beyond +-: {max(row['sync_frames'][1], 0.0):.3f})  "
+            f"readout {readout} ms  wrong {row['wrong']}"
+            + (f"  failed: {failed}" if failed else ""))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scene", default="demo", help="scene preset (default demo)")
+    parser.add_argument("--conditions", default=",".join(CONDITIONS),
+                        help=f"comma-separated conditions (default all: {', '.join(CONDITIONS)})")
+    parser.add_argument("--seeds", type=int, default=3, help="seeds per condition (default 3)")
+    parser.add_argument("--arrays", type=int, default=48, help="MSM arrays projected (default 48, as the demo)")
+    parser.add_argument("--markers", default="aruco:4X4_50", help="marker family (default aruco:4X4_50)")
+    parser.add_argument("--model", default="coplanar", choices=("coplanar", "free"))
+    parser.add_argument("--wrong-px", type=float, default=3.0,
+                        help="an observation this far from its point's true position counts as wrong (default 3)")
+    parser.add_argument("--work", type=Path, default=None, help="keep renderings here (default: a temporary folder)")
+    parser.add_argument("--json", type=Path, default=None, help="also write every row to this JSON file")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    names = [name.strip() for name in args.conditions.split(",") if name.strip()]
+    unknown = sorted(set(names) - set(CONDITIONS))
+    if unknown:
+        parser.error(f"unknown condition(s) {', '.join(unknown)} (choose from {', '.join(CONDITIONS)})")
+    with tempfile.TemporaryDirectory(prefix="realism-") as scratch:
+        work = args.work or Path(scratch)
+        work.mkdir(parents=True, exist_ok=True)
+        sequence = generate(work / "sequence", markers=args.markers, arrays=args.arrays, scales=(1.0, 3.0, 6.0),
+                            progress=False)
+        rows = []
+        for name in names:
+            for seed in range(args.seeds):
+                started = time.perf_counter()
+                row = run(name, seed, sequence, work / "sequence" / "sequence.json", work, args)
+                row["seconds"] = time.perf_counter() - started
+                rows.append(row)
+                print(format_row(row), flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+    evaluated = [row for row in rows if "rot" in row]
+    worst_rot = max((row["rot"] for row in evaluated), default=math.nan)
+    worst_success = min((row["success"] for row in evaluated), default=math.nan)
+    registered = sum(row["registered"] for row in rows)
+    total = sum(row["total"] for row in rows)
+    print(f"realism: worst_rot_deg={worst_rot:.4f} worst_eval_success={worst_success:.3f} "
+          f"registered={registered}/{total}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
