@@ -1,6 +1,8 @@
-"""Real cameras: frame timing. Dropped frames and timestamp jitter against the
-renderer's truth: the frame grid from container timestamps, light-code search over
-the frames present, and an ingest that keeps sync and picks clean frames."""
+"""Real cameras against the renderer's truth. Frame timing: dropped frames and
+timestamp jitter (the frame grid from container timestamps, light-code search over
+the frames present, an ingest that keeps sync and picks clean frames). Rolling
+shutters: the readout measured from image bands, the first row's frame map, picks
+clean in every row."""
 
 from __future__ import annotations
 
@@ -20,6 +22,8 @@ from calibproj.simulate.scene import load_scene
 MAX_SYNC_ERROR_FRAMES = 0.1
 DROP_RATE = 0.04
 JITTER_S = 0.0015
+READOUT_S = 0.02
+MAX_READOUT_ERROR_S = 0.002
 
 
 def grid_times(rng, slots: int, fps: float, drop_rate: float, jitter_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -72,18 +76,36 @@ def test_a_timestamp_jump_fails_the_camera_with_a_clear_message(tmp_path):
         _core.video.luma_signal(str(path))
 
 
-@pytest.fixture(scope="module")
-def dropping(tmp_path_factory):
-    """The small room whose cameras drop frames and jitter, with true timestamps."""
-    out = tmp_path_factory.mktemp("dropping")
+def small_room_with(out, **camera_changes):
+    """The small room, every camera changed alike, rendered and ingested."""
     sequence = build_sequence(markers="aruco:4X4_50", arrays=4, scales=(1.0, 2.0, 3.0), marker_px=48.0,
                               code_degree=4, reference_frames=8)
     small = load_scene("small", seed=7)
-    cameras = tuple(replace(camera, drop_rate=DROP_RATE, frame_jitter_s=JITTER_S) for camera in small.cameras)
+    cameras = tuple(replace(camera, **camera_changes) for camera in small.cameras)
     simulate_videos(replace(small, cameras=cameras), sequence, out, seed=7)
     truth = json.loads((out / "truth.json").read_text())
     result = ingest(out / "videos", sequence, out / "intrinsics", progress=False)
     return sequence, truth, result
+
+
+def assert_records_from_clean_frames(result, truth) -> None:
+    for name, camera in result.cameras.items():
+        records = camera.raw["records"]
+        clean = truth["clean_frames"][name]
+        for pattern, first, count in zip(records["pattern"], records["first_frame"], records["frame_count"]):
+            assert set(range(first, first + count)) <= set(clean[pattern]), name
+
+
+@pytest.fixture(scope="module")
+def dropping(tmp_path_factory):
+    """The small room whose cameras drop frames and jitter, with true timestamps."""
+    return small_room_with(tmp_path_factory.mktemp("dropping"), drop_rate=DROP_RATE, frame_jitter_s=JITTER_S)
+
+
+@pytest.fixture(scope="module")
+def rolling(tmp_path_factory):
+    """The small room with rolling shutters (20 ms readout)."""
+    return small_room_with(tmp_path_factory.mktemp("rolling"), readout_s=READOUT_S)
 
 
 def test_dropped_frames_keep_sync_to_a_tenth_of_a_frame(dropping):
@@ -118,15 +140,47 @@ def test_detections_come_from_recorded_clean_frames_and_only_drops_lose_patterns
     lost only where a drop hit its few clean frames, and every frame detected on shows
     one pattern only."""
     _, truth, result = dropping
+    assert_records_from_clean_frames(result, truth)
     for name, camera in result.cameras.items():
         raw = camera.raw
-        records = raw["records"]
         clean = truth["clean_frames"][name]
-        for pattern, first, count in zip(records["pattern"], records["first_frame"], records["frame_count"]):
-            assert set(range(first, first + count)) <= set(clean[pattern]), name
         dropped = set(truth["timing"]["cameras"][name]["dropped_frames"])
         # Patterns with a dropped frame among their clean frames or next to them.
         hit = sum(1 for frames in clean if frames and dropped & set(range(frames[0] - 1, frames[-1] + 2)))
         assert raw["patterns_missing"] + raw["patterns_dropped"] <= hit, name
         handled = sum(s["detected_patterns"] + s["skipped_patterns"] for s in raw["scales"])
         assert handled >= sum(1 for frames in clean if frames) - hit, name
+
+
+def test_rolling_shutter_readout_is_measured_and_sync_is_the_first_rows(rolling):
+    """cam2 (25 fps) and cam3 (29.97 fps) see light changes at many phases: their
+    readout is measured; cam1 (30 fps, starting on a projector frame change) sees
+    none in any row and keeps an interval that holds the truth."""
+    _, truth, result = rolling
+    assert not result.failed
+    report = result.report()["cameras"]
+    for name, camera in result.cameras.items():
+        timing = truth["timing"]["cameras"][name]
+        sync = camera.raw["sync"]
+        offset = -timing["first_exposure_start_s"] * timing["fps"]
+        assert abs(sync["offset"] - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync["offset_uncertainty"]), name
+        if name == "cam1":
+            continue
+        readout = report[name]["sync"]["readout_s"]
+        assert readout is not None, name
+        assert abs(readout - READOUT_S) < MAX_READOUT_ERROR_S, name
+        assert report[name]["sync"]["readout_sigma_s"] < MAX_READOUT_ERROR_S, name
+
+
+def test_rolling_shutter_picks_frames_clean_in_every_row(rolling):
+    _, truth, result = rolling
+    assert_records_from_clean_frames(result, truth)
+    for camera in result.cameras.values():
+        assert len(camera.raw["centres"]["array"]) > 40
+
+
+def test_a_global_shutter_reads_out_in_no_time(dropping):
+    _, _, result = dropping
+    readout = result.report()["cameras"]["cam2"]["sync"]
+    assert readout["readout_s"] is not None
+    assert abs(readout["readout_s"]) < max(MAX_READOUT_ERROR_S, 3 * readout["readout_sigma_s"])
