@@ -184,3 +184,49 @@ def test_a_global_shutter_reads_out_in_no_time(dropping):
     readout = result.report()["cameras"]["cam2"]["sync"]
     assert readout["readout_s"] is not None
     assert abs(readout["readout_s"]) < max(MAX_READOUT_ERROR_S, 3 * readout["readout_sigma_s"])
+
+
+# ---------------------------------------------------------------- renderer effects
+
+def test_floor_texture_multiplies_the_light_by_the_floor_albedo():
+    """With every other effect off, a textured floor's frame is the plain floor's frame
+    times the albedo the texture gives at each pixel's floor point: darker along the
+    grout lines (every tile_m metres) and under stains."""
+    from calibproj.simulate.floor_texture import floor_albedo
+    from calibproj.simulate.render import IDEAL_PHOTOMETRIC, RenderOptions, render_stills
+    from calibproj.simulate.scene import FloorTexture
+    from calibproj.simulate.warp import floor_view
+
+    sequence = build_sequence(arrays=1, scales=(10.0,), grid=(2, 4), code_degree=3, reference_frames=3)
+    plain = replace(load_scene("small"), photometric=IDEAL_PHOTOMETRIC)
+    texture = FloorTexture(tile_m=0.5, grout_m=0.01, grout_albedo=0.3, stains=40, stain_radius_m=0.2)
+    textured = replace(plain, floor=replace(plain.floor, texture=texture))
+    options = RenderOptions(photometric=IDEAL_PHOTOMETRIC)
+    base = render_stills(plain, sequence, 0, cameras=["cam1"], options=options)["cam1"].astype(float)
+    seen = render_stills(textured, sequence, 0, cameras=["cam1"], options=options)["cam1"].astype(float)
+    view = floor_view(plain.camera("cam1"), plain.projector, plain.floor)
+    albedo = floor_albedo(texture, view.floor_x, view.floor_y, view.floor_footprint)
+    lit = base > 200
+    assert lit.sum() > 1000
+    np.testing.assert_allclose(seen[lit], np.minimum(base[lit] * albedo[lit], 255.0), atol=1.0)
+    assert albedo[lit].min() < 0.8 and np.median(albedo[lit]) > 0.9
+
+
+def test_automatic_exposure_brings_the_mean_to_its_target(tmp_path):
+    """The gain follows the frames' brightness within its limits; the truth lists it."""
+    from calibproj.simulate.scene import AutoExposure
+
+    sequence = build_sequence(arrays=2, scales=(6.0, 10.0), grid=(2, 4), code_degree=3, reference_frames=3)
+    small = load_scene("small")
+    control = AutoExposure(target=0.5, time_constant_s=0.1, min_gain=0.5, max_gain=4.0)
+    scene = replace(small, cameras=(replace(small.cameras[0], auto_exposure=control),))
+    simulate_videos(scene, sequence, tmp_path, seed=3)
+    gains = np.array(json.loads((tmp_path / "truth.json").read_text())["timing"]["cameras"]["cam1"]["gains"])
+    signal = _core.video.luma_signal(str(tmp_path / "videos" / "cam1.mp4"), 1.0, 1)
+    assert len(gains) == len(signal)
+    assert gains.min() >= 0.5 and gains.max() <= 4.0 and np.ptp(gains) > 0.5
+    # Where the gain is within its limits, frames settle near the target brightness.
+    settled = (gains > 0.55) & (gains < 3.9)
+    settled[:10] = False
+    assert settled.sum() > 10
+    assert abs(np.median(signal[settled]) - 0.5) < 0.1
