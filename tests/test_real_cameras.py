@@ -230,3 +230,25 @@ def test_automatic_exposure_brings_the_mean_to_its_target(tmp_path):
     settled[:10] = False
     assert settled.sum() > 10
     assert abs(np.median(signal[settled]) - 0.5) < 0.1
+
+
+# ------------------------------------------------------- detections against the floor
+
+def test_detections_off_the_floor_homography_are_dropped():
+    """A marker read with a wrong id (or from a frame of another pattern) lands far from
+    where the homography of the others puts it; with too few agreeing, none is kept."""
+    rng = np.random.default_rng(2)
+    H = np.array([[0.6, 0.05, 120.0], [-0.02, 0.55, 80.0], [2e-5, 1e-5, 1.0]])
+    projector = rng.uniform([0, 0], [1920, 1080], (40, 2))
+    mapped = np.c_[projector, np.ones(40)] @ H.T
+    image = mapped[:, :2] / mapped[:, 2:] + rng.normal(0.0, 0.1, (40, 2))
+    wrong = [3, 11, 27]
+    image[wrong] += [230.0, -45.0]
+    keep, checked, problem = _core.detect.check_floor_consistency(projector, image)
+    assert checked and not problem
+    np.testing.assert_array_equal(np.flatnonzero(~keep), wrong)
+    keep, checked, _ = _core.detect.check_floor_consistency(projector[:5], image[:5])
+    assert not checked and keep.all()  # too few to check
+    scrambled = image[rng.permutation(40)]
+    keep, checked, problem = _core.detect.check_floor_consistency(projector, scrambled)
+    assert checked and not keep.any() and "agree with one homography of the floor" in problem

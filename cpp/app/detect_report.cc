@@ -66,6 +66,9 @@ ordered_json CameraSummary(const CameraOutcome& camera, const ingest::SequenceDe
   entry["patterns"] = {{"whole_frame", r.patterns_whole_frame}, {"in_regions", r.patterns_in_regions},
                        {"dropped", r.patterns_dropped}, {"missing", r.patterns_missing}};
   entry["detections_rejected"] = r.detections_rejected;
+  entry["detections_inconsistent"] = r.detections_inconsistent;
+  entry["consistency_problem"] =
+      r.consistency_problem.empty() ? ordered_json(nullptr) : ordered_json(r.consistency_problem);
   entry["scales"] = ScalesSummary(r.scales, sequence.scales);
   entry["msms_kept"] = r.centres.size();
   entry["homography_rms_px"] = r.homography_valid ? ordered_json(r.homography_rms_px) : ordered_json(nullptr);

@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "calibproj/detect/floor_consistency.h"
 #include "calibproj/detect/marker_centre.h"
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/detect/marker_family.h"
@@ -168,6 +169,33 @@ void RegisterFamilies(py::module_& m) {
       py::arg("corners"),
       "Marker centres (N, 2): intersections of the diagonals of corners (N, 4, 2). "
       "NaN for a degenerate quad.");
+  m.def(
+      "check_floor_consistency",
+      [](const py::array_t<double, py::array::c_style | py::array::forcecast>& projector,
+         const py::array_t<double, py::array::c_style | py::array::forcecast>& image, double threshold_px,
+         int min_points, double min_share) {
+        const auto points = [](const py::array_t<double, py::array::c_style | py::array::forcecast>& a,
+                               const char* name) {
+          if (a.ndim() != 2 || a.shape(1) != 2) throw std::invalid_argument(std::string(name) + ": expected (N, 2)");
+          std::vector<cv::Point2d> out(static_cast<std::size_t>(a.shape(0)));
+          for (std::size_t i = 0; i < out.size(); ++i) out[i] = cv::Point2d(a.at(i, 0), a.at(i, 1));
+          return out;
+        };
+        detect::ConsistencyOptions options;
+        options.threshold_px = threshold_px;
+        options.min_points = min_points;
+        options.min_share = min_share;
+        const detect::ConsistencyResult result =
+            detect::CheckFloorConsistency(points(projector, "projector"), points(image, "image"), options);
+        py::array_t<bool> keep(static_cast<py::ssize_t>(result.keep.size()));
+        std::copy(result.keep.begin(), result.keep.end(), keep.mutable_data());
+        return py::make_tuple(keep, result.checked, result.problem);
+      },
+      py::arg("projector"), py::arg("image"), py::arg("threshold_px") = 3.0, py::arg("min_points") = 8,
+      py::arg("min_share") = 0.3,
+      "(keep (N,) bool, checked, problem): detections (projector centre -> undistorted image centre) "
+      "that agree with one RANSAC homography of the floor; all dropped, with the problem, when too "
+      "few agree; all kept unchecked below min_points.");
 }
 
 }  // namespace

@@ -187,6 +187,8 @@ py::dict ResultDict(const ingest::CameraIngestResult& r) {
   d["patterns_dropped"] = r.patterns_dropped;
   d["patterns_missing"] = r.patterns_missing;
   d["detections_rejected"] = r.detections_rejected;
+  d["detections_inconsistent"] = r.detections_inconsistent;
+  d["consistency_problem"] = r.consistency_problem.empty() ? py::object(py::none()) : py::cast(r.consistency_problem);
   d["scales"] = ScalesList(r.scales);
   d["records"] = RecordsDict(r.records);
   d["centres"] = CentresDict(r.centres);

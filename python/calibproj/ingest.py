@@ -83,6 +83,8 @@ class CameraIngest:
         entry["patterns"] = {key: raw[f"patterns_{key}"] for key in ("whole_frame", "in_regions", "dropped",
                                                                        "missing")}
         entry["detections_rejected"] = raw["detections_rejected"]
+        entry["detections_inconsistent"] = raw["detections_inconsistent"]
+        entry["consistency_problem"] = raw["consistency_problem"]
         entry["scales"] = [{"scale": scale, **stats} for scale, stats in zip(scales, raw["scales"])]
         entry["msms_kept"] = int(len(raw["centres"]["array"]))
         entry["homography_rms_px"] = raw["homography_rms_px"] if raw["homography_valid"] else None

@@ -128,6 +128,11 @@ class IngestOptions:
         homography_threshold_px: RANSAC inlier threshold of the homography fit.
         homography_min_inlier_share: share of inliers the fit needs.
         homography_max_rms_px: inlier RMS the fit must stay under.
+        consistency_px: every detection is checked against one homography of the floor
+            (RANSAC over all of the camera's detections); those farther than this from
+            its prediction (a wrong id, a frame of another pattern) are dropped.
+        consistency_min_share: when fewer than this share of the detections agree on
+            one homography, none of them is kept.
         max_deviation_px: scales of an MSM farther than this from their median are
             rejected.
         min_scales: scales an MSM needs (after rejection) to give a centre.
@@ -218,6 +223,8 @@ class IngestOptions:
     homography_threshold_px: float = 2.0
     homography_min_inlier_share: float = 0.8
     homography_max_rms_px: float = 1.0
+    consistency_px: float = 3.0
+    consistency_min_share: float = 0.3
     max_deviation_px: float = 0.5
     min_scales: int = 1
     readout_bands: int = 16

@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "calibproj/detect/floor_consistency.h"
 #include "calibproj/detect/marker_centre.h"
 #include "calibproj/ingest/detection_pipeline.h"
 #include "calibproj/sync/code_search.h"
@@ -473,7 +474,26 @@ class CameraIngest {
                   records.end());
   }
 
+  // Drops detections that disagree with the floor homography of all the others.
+  void RejectInconsistentRecords() {
+    auto& records = result_.records;
+    std::vector<cv::Point2d> projector, image;
+    for (const detect::ScaleRecord& r : records) {
+      projector.push_back(sequence_.centres[r.array * sequence_.markers_per_array + r.marker]);
+      image.push_back(r.centre);
+    }
+    const detect::ConsistencyResult check = detect::CheckFloorConsistency(projector, image, options_.consistency);
+    result_.detections_inconsistent = check.rejected;
+    result_.consistency_problem = check.problem;
+    std::size_t next = 0;
+    for (std::size_t i = 0; i < records.size(); ++i) {
+      if (check.keep[i]) records[next++] = records[i];
+    }
+    records.resize(next);
+  }
+
   void Summarise() {
+    RejectInconsistentRecords();
     std::sort(result_.records.begin(), result_.records.end(), [](const auto& a, const auto& b) {
       return std::tie(a.array, a.marker, a.scale_index) < std::tie(b.array, b.marker, b.scale_index);
     });
@@ -552,6 +572,7 @@ void IngestOptions::Check() const {
   Require(max_scales_per_msm >= 0, "max_scales_per_msm must be non-negative (0: every scale)");
   Require(bootstrap_downscale >= 1 && bootstrap_downscale <= 8, "bootstrap_downscale must be in [1, 8]");
   edges.Check();
+  consistency.Check();
   Require(edge_gap_share > 0.0 && edge_gap_share <= 1.0, "edge_gap_share must be in (0, 1]");
 }
 

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "calibproj/detect/floor_consistency.h"
 #include "calibproj/detect/lens.h"
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/detect/msm_merge.h"
@@ -48,6 +49,9 @@ struct IngestOptions {
   bool learn_resolution = true;
   detect::ResolutionOptions resolution;
   detect::MergeOptions merge;
+  // Every detection checked against one homography of the floor (wrong ids, frames of
+  // another pattern).
+  detect::ConsistencyOptions consistency;
   // Detect in regions of interest once the homography is known (false: whole frames
   // at full resolution, with the same filtering; for verification).
   bool use_roi = true;
@@ -131,6 +135,8 @@ struct CameraIngestResult {
   int patterns_dropped = 0;    // frames not clean under the final frame map
   int patterns_missing = 0;    // not recorded (before the video starts or after it ends)
   int detections_rejected = 0; // unexpected id, duplicate, or off the prediction
+  int detections_inconsistent = 0;  // off the floor homography of the others
+  std::string consistency_problem;  // set when no detection could be trusted
   std::vector<ScaleStats> scales;
   std::vector<detect::ScaleRecord> records;
   std::vector<detect::MergedCentre> centres;

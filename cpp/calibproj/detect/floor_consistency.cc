@@ -1,0 +1,48 @@
+#include "calibproj/detect/floor_consistency.h"
+
+#include <opencv2/calib3d.hpp>
+
+#include <stdexcept>
+
+namespace calibproj::detect {
+
+void ConsistencyOptions::Check() const {
+  if (!(threshold_px > 0.0)) throw std::invalid_argument("consistency: threshold_px must be positive");
+  if (min_points < 4) throw std::invalid_argument("consistency: min_points must be at least 4");
+  if (!(min_share > 0.0 && min_share <= 1.0)) throw std::invalid_argument("consistency: min_share must be in (0, 1]");
+}
+
+ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projector,
+                                        const std::vector<cv::Point2d>& image, const ConsistencyOptions& options) {
+  options.Check();
+  if (projector.size() != image.size()) throw std::invalid_argument("consistency: point counts differ");
+  const int n = static_cast<int>(projector.size());
+  ConsistencyResult result;
+  result.keep.assign(n, true);
+  if (n < options.min_points) return result;
+  result.checked = true;
+  cv::setRNGSeed(static_cast<int>(options.seed));
+  cv::Mat inliers;
+  const cv::Mat H = cv::findHomography(projector, image, cv::RANSAC, options.threshold_px, inliers, 5000, 0.9999);
+  int agreeing = 0;
+  if (!H.empty()) {
+    const cv::Matx33d h(H);
+    for (int i = 0; i < n; ++i) {
+      const cv::Vec3d p = h * cv::Vec3d(projector[i].x, projector[i].y, 1.0);
+      const bool close = p[2] != 0.0 && cv::norm(cv::Point2d(p[0] / p[2], p[1] / p[2]) - image[i]) <= options.threshold_px;
+      result.keep[i] = close;
+      agreeing += close ? 1 : 0;
+    }
+  }
+  if (H.empty() || agreeing < options.min_points || agreeing < options.min_share * n) {
+    result.keep.assign(n, false);
+    result.rejected = n;
+    result.problem = "only " + std::to_string(agreeing) + " of " + std::to_string(n) +
+                     " detections agree with one homography of the floor";
+    return result;
+  }
+  result.rejected = n - agreeing;
+  return result;
+}
+
+}  // namespace calibproj::detect

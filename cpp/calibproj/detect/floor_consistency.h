@@ -1,0 +1,41 @@
+#pragma once
+// The detections of one camera checked against one homography of the floor.
+//
+// Every MSM centre lies on the floor, so the projector-to-image homography maps each
+// marker's projector centre to its undistorted image centre. A marker decoded with a
+// wrong id (bits lost to saturation, a stain or compression) or taken from a frame of
+// another pattern lands far from where the homography of all the others puts it. A
+// RANSAC homography over every detection keeps those within threshold_px; when too few
+// agree, none of the camera's detections can be trusted.
+
+#include <opencv2/core.hpp>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace calibproj::detect {
+
+struct ConsistencyOptions {
+  double threshold_px = 3.0;  // largest distance from the homography's prediction
+  int min_points = 8;         // detections needed for a check (fewer: kept unchecked)
+  double min_share = 0.3;     // share that must agree, else every detection is dropped
+  std::uint64_t seed = 0;
+
+  // Throws std::invalid_argument naming the first bad field.
+  void Check() const;
+};
+
+struct ConsistencyResult {
+  std::vector<bool> keep;  // per detection
+  bool checked = false;    // enough detections for a check
+  int rejected = 0;
+  std::string problem;     // set when every detection was dropped
+};
+
+// `projector[i]` and `image[i]`: projector centre and undistorted image centre of
+// detection i.
+ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projector,
+                                        const std::vector<cv::Point2d>& image, const ConsistencyOptions& options);
+
+}  // namespace calibproj::detect
