@@ -195,6 +195,13 @@ py::dict ResultDict(const ingest::CameraIngestResult& r) {
   py::array_t<double> signal(static_cast<py::ssize_t>(r.signal.size()));
   std::copy(r.signal.begin(), r.signal.end(), signal.mutable_data());
   d["signal"] = signal;
+  const py::ssize_t bands = static_cast<py::ssize_t>(r.band_signals.size());
+  py::array_t<double> band_signals({bands, static_cast<py::ssize_t>(r.signal.size())});
+  for (py::ssize_t b = 0; b < bands; ++b) {
+    const auto& band = r.band_signals[b];
+    std::copy(band.begin(), band.end(), band_signals.mutable_data(b, 0));
+  }
+  d["band_signals"] = band_signals;
   d["homography_valid"] = r.homography_valid;
   py::array_t<double> H({py::ssize_t{3}, py::ssize_t{3}});
   for (int i = 0; i < 9; ++i) H.mutable_data()[i] = r.homography(i / 3, i % 3);

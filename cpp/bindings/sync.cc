@@ -79,6 +79,44 @@ void register_sync(py::module_& m) {
       },
       py::arg("signal"), py::arg("levels"), py::arg("code"), py::arg("nominal_rate"), py::arg("source") = "signal",
       "Where one light code lies in a brightness signal (see synchronise).");
+  m.def(
+      "estimate_readout",
+      [](const py::array_t<double, py::array::c_style | py::array::forcecast>& band_signals,
+         const DoubleArray& levels, const py::dict& start, const py::dict& end, const py::dict& map,
+         const py::kwargs& kwargs) {
+        if (band_signals.ndim() != 2) throw std::invalid_argument("band_signals: expected (bands, frames)");
+        const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
+        std::vector<std::vector<double>> bands(static_cast<std::size_t>(band_signals.shape(0)));
+        for (std::size_t b = 0; b < bands.size(); ++b) {
+          const double* row = band_signals.data(static_cast<py::ssize_t>(b), 0);
+          bands[b].assign(row, row + band_signals.shape(1));
+        }
+        const sync::LightTimeline timeline(ToVector(levels));
+        const std::vector<sync::FrameWindow> windows{
+            sync::CodeWindow(timeline, LightCodeFromDict(start), options),
+            sync::CodeWindow(timeline, LightCodeFromDict(end), options)};
+        const sync::FrameMap frame_map{map["offset"].cast<double>(), map["rate"].cast<double>(),
+                                       map["exposure"].cast<double>()};
+        if (!(frame_map.rate > 0.0) || !(frame_map.exposure > 0.0)) throw std::invalid_argument("map: bad rate or exposure");
+        sync::ReadoutEstimate estimate;
+        {
+          py::gil_scoped_release release;
+          estimate = sync::EstimateReadout(bands, timeline, windows, frame_map, options.fit);
+        }
+        py::list fits;
+        for (const sync::BandFit& band : estimate.bands) {
+          fits.append(py::dict(py::arg("row") = band.row, py::arg("offset") = band.offset,
+                               py::arg("sigma") = band.sigma, py::arg("rms") = band.rms, py::arg("used") = band.used));
+        }
+        return py::dict(py::arg("valid") = estimate.valid, py::arg("readout") = estimate.readout,
+                        py::arg("sigma") = estimate.readout_sigma,
+                        py::arg("first_row_offset") = estimate.first_row_offset,
+                        py::arg("offset_sigma") = estimate.offset_sigma, py::arg("bands") = fits);
+      },
+      py::arg("band_signals"), py::arg("levels"), py::arg("start_code"), py::arg("end_code"), py::arg("map"),
+      "Rolling-shutter readout (camera frames) from the brightness of horizontal bands of the image "
+      "(bands, frames), fitted around both light codes starting from the whole frame's map "
+      "({offset, rate, exposure}); per band its row, offset, sigma, fit rms and whether it was used.");
 }
 
 }  // namespace calibproj::bindings

@@ -143,6 +143,8 @@ class IngestOptions:
             map to the first row (the frame's timestamp) and widens each frame's window
             to every row's exposure, so that a picked frame shows one pattern in all
             its rows.
+        max_readout_sigma: ... provided it is known to this many camera frames (1 sigma);
+            a readout known less well is reported, not used.
         use_timestamps: time comes from the container's frame timestamps: each frame
             is placed on the camera's frame grid, so dropped frames leave gaps instead
             of shifting every later frame (false: time from the decoding order, for
@@ -229,6 +231,7 @@ class IngestOptions:
     min_scales: int = 1
     readout_bands: int = 16
     readout_sigmas: float = 3.0
+    max_readout_sigma: float = 0.1
     use_timestamps: bool = True
     max_frame_gap_s: float = 2.0
     mean_row_step: int = 2

@@ -112,6 +112,7 @@ class CameraIngest {
     ApplyReadout(&result_.sync);
     DropUncleanPatterns();
     Summarise();
+    result_.band_signals = std::move(band_signals_);
     result_.seconds_total = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
     return std::move(result_);
   }
@@ -178,9 +179,7 @@ class CameraIngest {
     const sync::ReadoutEstimate readout = EstimateReadout({sync::CodeWindow(timeline_, sequence_.start_code,
                                                                             options_.sync)}, start_.map);
     const sync::FrameMap window =
-        sync::Significant(readout, options_.readout_sigmas) ? sync::CoverRows(start_.window_map, readout,
-                                                                              options_.readout_sigmas)
-                                                            : start_.window_map;
+        ReadoutApplies(readout) ? sync::CoverRows(start_.window_map, readout, 1.0) : start_.window_map;
     const double first = sequence_.start_code.first_frame;
     provisional_ = sync::FrameMap{window.CameraFrame(first) - nominal_rate_ * first, nominal_rate_, window.exposure};
     PlanPicks();
@@ -262,11 +261,18 @@ class CameraIngest {
     sync->readout = EstimateReadout({sync::CodeWindow(timeline_, sequence_.start_code, options_.sync),
                                      sync::CodeWindow(timeline_, sequence_.end_code, options_.sync)},
                                     sync->map);
-    if (!sync::Significant(sync->readout, options_.readout_sigmas)) return;
+    if (!ReadoutApplies(sync->readout)) return;
     sync->map.offset = sync->readout.first_row_offset;
+    if (sync->readout.rate > 0.0) sync->map.rate = sync->window_map.rate = sync->readout.rate;
     sync->map.exposure = sync->readout.exposure;
     sync->offset_uncertainty = std::max(sync->offset_uncertainty, sync->readout.offset_sigma);
-    sync->window_map = sync::CoverRows(sync->window_map, sync->readout, options_.readout_sigmas);
+    // One sigma of margin: the picks were made from the same kind of estimate, and the
+    // floor-consistency check catches a frame whose last rows saw the next pattern.
+    sync->window_map = sync::CoverRows(sync->window_map, sync->readout, 1.0);
+  }
+
+  bool ReadoutApplies(const sync::ReadoutEstimate& readout) const {
+    return sync::Applicable(readout, options_.readout_sigmas, options_.max_readout_sigma);
   }
 
   // ----------------------------------------------------------------- patterns
@@ -563,6 +569,7 @@ void IngestOptions::Check() const {
   Require(readout_bands == 0 || (readout_bands >= 3 && readout_bands <= 64),
           "readout_bands must be 0 or in [3, 64]");
   Require(readout_sigmas > 0.0, "readout_sigmas must be positive");
+  Require(max_readout_sigma > 0.0, "max_readout_sigma must be positive");
   Require(max_frame_gap_s > 0.0 && std::isfinite(max_frame_gap_s), "max_frame_gap_s must be positive");
   Require(lookback_frames >= 0, "lookback_frames must be non-negative");
   Require(search_interval >= 1, "search_interval must be at least 1");

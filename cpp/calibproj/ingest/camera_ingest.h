@@ -88,10 +88,12 @@ struct IngestOptions {
   // rejected (a paused recording or a corrupt timestamp).
   double max_frame_gap_s = 2.0;
   // Horizontal bands of the image whose light codes give the rolling-shutter readout
-  // (0: not measured); a readout beyond readout_sigmas standard deviations moves the
-  // frame map to the first row and widens the frames' windows to every row.
+  // (0: not measured); a readout beyond readout_sigmas standard deviations and known
+  // to max_readout_sigma camera frames moves the frame map to the first row and widens
+  // the frames' windows to every row.
   int readout_bands = 16;
   double readout_sigmas = 3.0;
+  double max_readout_sigma = 0.1;
   // Decoded grey frames kept while the start code is being looked for.
   int lookback_frames = 16;
   // Frames decoded between two incremental searches of the start code.
@@ -141,6 +143,7 @@ struct CameraIngestResult {
   std::vector<detect::ScaleRecord> records;
   std::vector<detect::MergedCentre> centres;
   std::vector<double> signal;  // mean luma per grid slot, NaN where not measured or dropped
+  std::vector<std::vector<double>> band_signals;  // the same per band of rows (readout)
   bool homography_valid = false;
   cv::Matx33d homography = cv::Matx33d::eye();  // projector pixels -> undistorted pixels
   double homography_rms_px = 0.0;

@@ -14,6 +14,9 @@ constexpr double kMinSpread = 0.3;
 // Bands whose offsets that fit span more than this (camera frames, half-width) saw no
 // light change sharply enough to place them.
 constexpr double kMaxBandUncertainty = 0.25;
+// ... and bands whose light codes fit worse than this (residual RMS over contrast) do
+// not show them (a code seen cleanly fits to about 0.002).
+constexpr double kMaxBandRms = 0.05;
 
 double Median(std::vector<double> values) {
   const auto middle = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
@@ -23,19 +26,28 @@ double Median(std::vector<double> values) {
 
 }  // namespace
 
-ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_signals, const LightTimeline& timeline,
-                                const std::vector<FrameWindow>& windows, const FrameMap& map,
-                                const CodeFitOptions& options) {
+// The estimate from one code window at the map's rate.
+ReadoutEstimate EstimateInWindow(const std::vector<std::vector<double>>& band_signals, const LightTimeline& timeline,
+                                 const FrameWindow& window, const FrameMap& map, const CodeFitOptions& options) {
+  const std::vector<FrameWindow> windows{window};
   ReadoutEstimate estimate;
   const int bands = static_cast<int>(band_signals.size());
+  // The whole frame's offset lies near its middle row's: bands reach up to a readout
+  // (at most a frame) to either side of it.
+  CodeFitOptions band_options = options;
+  band_options.offset_range = options.offset_range + 1.0;
   std::vector<double> rows, offsets, weights, exposures;
   for (int b = 0; b < bands; ++b) {
     try {
-      const CodeFit fit = FitCodeWindows(band_signals[b], timeline, windows, map, false, options);
-      if (!(fit.offset_uncertainty <= kMaxBandUncertainty)) continue;
+      const CodeFit fit = FitCodeWindows(band_signals[b], timeline, windows, map, false, band_options);
       // The half-width of the offsets that fit as a uniform interval's sigma, and
       // never below the fit's grid.
       const double sigma = std::max(fit.offset_uncertainty / std::sqrt(3.0), options.offset_step / std::sqrt(12.0));
+      BandFit band{(b + 0.5) / bands, fit.map.offset, sigma, fit.rms, false};
+      // A band that sees little of the projection (walls, the image's edge) fits noise.
+      band.used = fit.offset_uncertainty <= kMaxBandUncertainty && fit.contrast > 0.0 && fit.rms <= kMaxBandRms;
+      estimate.bands.push_back(band);
+      if (!band.used) continue;
       rows.push_back((b + 0.5) / bands);
       offsets.push_back(fit.map.offset);
       weights.push_back(1.0 / (sigma * sigma));
@@ -79,8 +91,42 @@ ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_sig
   return estimate;
 }
 
-bool Significant(const ReadoutEstimate& readout, double sigmas) {
-  return readout.valid && readout.readout > sigmas * readout.readout_sigma && readout.readout > 0.02;
+ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_signals, const LightTimeline& timeline,
+                                const std::vector<FrameWindow>& windows, const FrameMap& map,
+                                const CodeFitOptions& options) {
+  // Each code window on its own, at the whole frame's rate; that rate is biased by the
+  // rolling shutter (its box model fits codes seen at different phases differently),
+  // so two windows give the first row's rate from where each puts its code.
+  std::vector<ReadoutEstimate> estimates;
+  std::vector<double> anchors;  // projector time of each window's centre
+  for (const FrameWindow& window : windows) {
+    ReadoutEstimate e = EstimateInWindow(band_signals, timeline, window, map, options);
+    if (!e.valid) continue;
+    estimates.push_back(std::move(e));
+    anchors.push_back(0.5 * (window.begin + window.end));
+  }
+  if (estimates.empty()) return EstimateInWindow(band_signals, timeline, windows.front(), map, options);
+  ReadoutEstimate combined = estimates.front();
+  if (estimates.size() == 1) return combined;
+  double weights = 0.0, readout = 0.0;
+  for (const ReadoutEstimate& e : estimates) {
+    const double w = 1.0 / (e.readout_sigma * e.readout_sigma);
+    weights += w;
+    readout += w * e.readout;
+  }
+  combined.readout = readout / weights;
+  combined.readout_sigma = std::sqrt(1.0 / weights);
+  const ReadoutEstimate& last = estimates.back();
+  const double first_position = combined.first_row_offset + map.rate * anchors.front();
+  const double last_position = last.first_row_offset + map.rate * anchors.back();
+  combined.rate = (last_position - first_position) / (anchors.back() - anchors.front());
+  combined.first_row_offset = first_position - combined.rate * anchors.front();
+  return combined;
+}
+
+bool Applicable(const ReadoutEstimate& readout, double sigmas, double max_sigma) {
+  return readout.valid && readout.readout > sigmas * readout.readout_sigma && readout.readout > 0.02 &&
+         readout.readout_sigma <= max_sigma;
 }
 
 FrameMap CoverRows(const FrameMap& window_map, const ReadoutEstimate& readout, double sigmas) {

@@ -16,25 +16,40 @@
 
 namespace calibproj::sync {
 
+// One band's fit.
+struct BandFit {
+  double row = 0.0;      // centre row of the band, share of the image height
+  double offset = 0.0;   // camera frames
+  double sigma = 0.0;    // camera frames
+  double rms = 0.0;      // fit residual over contrast
+  bool used = false;     // sharp and showing the codes
+};
+
 struct ReadoutEstimate {
+  std::vector<BandFit> bands;    // every band that could be fitted
   bool valid = false;            // enough sharp bands, spread over the image
   double readout = 0.0;          // camera frames from the first row's start to the last's
   double readout_sigma = 0.0;    // 1 sigma, camera frames
   double first_row_offset = 0.0; // offset of the frame map of the first row
   double offset_sigma = 0.0;
   double exposure = 0.0;         // median fitted exposure of the bands, camera frames
+  double rate = 0.0;             // the first row's rate, from two code windows (0: not measured)
   int bands_used = 0;
 };
 
 // `band_signals[b][j]`: mean luma of band b (rows [b h / B, (b + 1) h / B)) in camera
-// frame j, NaN where not measured. `map` is the whole frame's fit (its rate is kept).
+// frame j, NaN where not measured. `map` is the whole frame's fit. Each window is fitted
+// on its own at the map's rate (a rolling shutter biases the whole frame's rate); two
+// windows give the first row's rate from where each puts its code, and the readout as
+// their weighted mean.
 ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_signals, const LightTimeline& timeline,
                                 const std::vector<FrameWindow>& windows, const FrameMap& map,
                                 const CodeFitOptions& options);
 
 // The readout is told apart from 0 (more than `sigmas` standard deviations and a
-// fiftieth of a frame): the first row's offset then replaces the whole frame's.
-bool Significant(const ReadoutEstimate& readout, double sigmas);
+// fiftieth of a frame) and known to `max_sigma` camera frames: the first row's offset
+// then replaces the whole frame's. A readout known less well is reported, not used.
+bool Applicable(const ReadoutEstimate& readout, double sigmas, double max_sigma);
 
 // A map whose exposure window covers both `window_map`'s and every row's exposure under
 // `readout` (widened by `sigmas` standard deviations), for picking clean frames.
