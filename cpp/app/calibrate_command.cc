@@ -51,6 +51,8 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   option("--num-threads", o.num_threads, "threads of the bundle adjustment");
   option("--intermediate-ba-iterations", o.intermediate_ba_iterations, "BA iterations after each camera");
   option("--final-ba-iterations", o.final_ba_iterations, "iterations of the final bundle adjustments");
+  option("--weak-rotation-sigma-deg", o.weak_rotation_sigma_deg,
+         "cameras whose rotation is known worse than this (1 sigma) are reported as weak");
   *command = cmd;
   return args;
 }

@@ -1,5 +1,6 @@
 #include "results_file.h"
 
+#include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -62,11 +63,20 @@ std::string MetricsJson(const registration::RegistrationResult& result, const Re
     entry["track2_observations"] = camera.track2_observations;
     entry["view_score"] = camera.view_score;
     entry["failure"] = failed.contains(name) ? failed[name] : ordered_json(nullptr);
+    const auto finite = [&](double value) {
+      return camera.registered && std::isfinite(value) ? ordered_json(value) : ordered_json(nullptr);
+    };
+    entry["rotation_sigma_deg"] = finite(camera.rotation_sigma_deg);
+    entry["centre_sigma"] = finite(camera.centre_sigma);
+    entry["weak"] = camera.registered && camera.weak;
     cameras[name] = entry;
   }
   for (const auto& [name, reason] : names.left_out) {
-    cameras[name] = {{"mean_px", nullptr}, {"std_px", nullptr}, {"observations", 0}, {"inliers", 0},
-                     {"track2_observations", 0}, {"view_score", 0}, {"failure", reason}};
+    cameras[name] = {{"mean_px", nullptr},    {"std_px", nullptr},
+                     {"observations", 0},     {"inliers", 0},
+                     {"track2_observations", 0}, {"view_score", 0},
+                     {"failure", reason},     {"rotation_sigma_deg", nullptr},
+                     {"centre_sigma", nullptr}, {"weak", false}};
   }
   ordered_json order = ordered_json::array();
   for (int c : result.registration_order) order.push_back(names.cameras[c]);

@@ -48,6 +48,7 @@ registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
     else if (key == "num_threads") o.num_threads = value.cast<int>();
     else if (key == "intermediate_ba_iterations") o.intermediate_ba_iterations = value.cast<int>();
     else if (key == "final_ba_iterations") o.final_ba_iterations = value.cast<int>();
+    else if (key == "weak_rotation_sigma_deg") o.weak_rotation_sigma_deg = value.cast<double>();
     else throw std::invalid_argument("registration: unknown option '" + key + "'");
   }
   o.Check();
@@ -128,7 +129,8 @@ py::dict ToDict(const registration::RegistrationResult& r) {
   py::array_t<double> R({n, py::ssize_t{3}, py::ssize_t{3}}), t({n, py::ssize_t{3}});
   py::array_t<double> mean({n}), std_dev({n});
   py::array_t<int> observations({n}), inliers({n}), track2({n}), score({n});
-  std::vector<bool> registered(n);
+  py::array_t<double> rotation_sigma({n}), centre_sigma({n});
+  std::vector<bool> registered(n), weak(n);
   std::vector<std::string> failures(n);
   auto R_view = R.mutable_unchecked<3>();
   auto t_view = t.mutable_unchecked<2>();
@@ -144,6 +146,9 @@ py::dict ToDict(const registration::RegistrationResult& r) {
     inliers.mutable_at(c) = camera.inliers;
     track2.mutable_at(c) = camera.track2_observations;
     score.mutable_at(c) = camera.view_score;
+    rotation_sigma.mutable_at(c) = camera.rotation_sigma_deg;
+    centre_sigma.mutable_at(c) = camera.centre_sigma;
+    weak[c] = camera.weak;
     registered[c] = camera.registered;
     failures[c] = camera.failure;
   }
@@ -152,6 +157,7 @@ py::dict ToDict(const registration::RegistrationResult& r) {
   d["R"] = R; d["t"] = t; d["failure"] = failures;
   d["mean_px"] = mean; d["std_px"] = std_dev; d["observations"] = observations; d["inliers"] = inliers;
   d["track2_observations"] = track2; d["view_score"] = score;
+  d["rotation_sigma_deg"] = rotation_sigma; d["centre_sigma"] = centre_sigma; d["weak"] = BoolArray(weak);
   d["points"] = r.points; d["point_index"] = r.point_index; d["registration_order"] = r.registration_order;
   d["floor_rms"] = r.floor_rms;
   d["frame_M"] = r.frame.M; d["frame_origin"] = r.frame.origin; d["frame_scale"] = r.frame.scale;

@@ -37,6 +37,11 @@ class CameraMetrics:
     track2_observations: int  # inliers whose point is seen by at least two registered cameras
     view_score: int  # view score (visibility pyramid) of all its observations
     failure: str | None = None
+    # 1 sigma along the worst direction, from the final bundle adjustment's covariance,
+    # relative to the first camera of the registration (0 for it); None when unknown.
+    rotation_sigma_deg: float | None = None
+    centre_sigma: float | None = None  # in the calibration's unit
+    weak: bool = False  # rotation known worse than RegistrationOptions.weak_rotation_sigma_deg
 
 
 @dataclass
@@ -90,6 +95,9 @@ class Calibration:
                 track2_observations=int(summary["track2_observations"][c]),
                 view_score=int(summary["view_score"][c]),
                 failure=failed.get(name),
+                rotation_sigma_deg=_finite_or_none(summary["rotation_sigma_deg"][c]) if registered else None,
+                centre_sigma=_finite_or_none(summary["centre_sigma"][c]) if registered else None,
+                weak=bool(summary["weak"][c]) and registered,
             )
         for name, reason in failed.items():
             if name not in metrics:
@@ -159,6 +167,11 @@ class Calibration:
         )
 
 
+def _finite_or_none(value: float) -> float | None:
+    value = float(value)
+    return value if np.isfinite(value) else None
+
+
 def write_ply(path: str | os.PathLike, points: np.ndarray, point_ids: np.ndarray) -> None:
     """ASCII PLY of the points with their ids, written atomically."""
     header = [
@@ -208,6 +221,9 @@ def calibration_summary(calibration: Calibration) -> list[dict[str, Any]]:
                 "observations": m.observations,
                 "track2": m.track2_observations,
                 "view_score": m.view_score,
+                "rotation_sigma_deg": m.rotation_sigma_deg,
+                "centre_sigma": m.centre_sigma,
+                "weak": m.weak,
                 "failure": m.failure,
             }
         )

@@ -62,6 +62,9 @@ class RegistrationOptions:
         num_threads: threads of the bundle adjustment.
         intermediate_ba_iterations: iterations of the bundle adjustment after each camera.
         final_ba_iterations: iterations of the final bundle adjustments.
+        weak_rotation_sigma_deg: a camera whose rotation is known worse than this (1
+            sigma along the worst axis, from the final bundle adjustment's covariance)
+            is reported as weak: few points, a small or near-affine view.
     """
 
     model: str = "coplanar"
@@ -83,6 +86,7 @@ class RegistrationOptions:
     num_threads: int = 1
     intermediate_ba_iterations: int = 25
     final_ba_iterations: int = 100
+    weak_rotation_sigma_deg: float = 0.05
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -188,8 +192,18 @@ class RegistrationDriver:
         refined = rec.refine()
         logger.info("refined: %d rounds, %d observations left out as outliers, cost %.6g",
                     refined["rounds"], refined["removed"], refined["last"]["final_cost"])
+        self._warn_weak_cameras()
         yield Step("refine", None, refined)
         yield Step("done", None, {})
+
+    def _warn_weak_cameras(self) -> None:
+        summary = self.reconstruction.summarize()
+        for c, name in enumerate(self.tracks.camera_names):
+            if summary["registered"][c] and summary["weak"][c]:
+                logger.warning("camera %s is weakly determined: rotation known to %.3f deg (1 sigma, limit %g), "
+                               "centre to %.3g units; more points in its view (a denser grid, more arrays) help",
+                               name, summary["rotation_sigma_deg"][c], self.options.weak_rotation_sigma_deg,
+                               summary["centre_sigma"][c])
 
     def run(self, callback: Callable[[Step], bool | None] | None = None) -> Calibration:
         """All steps; ``callback(step)`` returning False stops after that step."""

@@ -275,8 +275,10 @@ def scaled(calibration: Calibration, factor: float) -> Calibration:
     if calibration.unit == "m":
         logger.warning("the calibration is already in metres; scaling it again by %.6g", factor)
     poses = {name: (R.copy(), factor * np.asarray(t, dtype=float)) for name, (R, t) in calibration.poses.items()}
+    metrics = {name: dataclasses.replace(m, centre_sigma=None if m.centre_sigma is None else factor * m.centre_sigma)
+               for name, m in calibration.metrics.items()}
     return dataclasses.replace(
-        calibration, poses=poses, points=factor * np.asarray(calibration.points, dtype=float),
+        calibration, poses=poses, metrics=metrics, points=factor * np.asarray(calibration.points, dtype=float),
         point_ids=calibration.point_ids.copy(), unit="m", floor_rms=factor * calibration.floor_rms,
     )
 

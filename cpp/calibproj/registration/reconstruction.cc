@@ -84,6 +84,7 @@ void Options::Check() const {
   Require(view_score_levels >= 1 && view_score_levels <= 12, "registration: view_score_levels must be in [1, 12]");
   Require(num_threads >= 1, "registration: num_threads must be >= 1");
   Require(intermediate_ba_iterations >= 0 && final_ba_iterations >= 0, "registration: BA iterations must be >= 0");
+  Require(weak_rotation_sigma_deg > 0, "registration: weak_rotation_sigma_deg must be positive");
 }
 
 Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eigen::VectorXi camera_index,
@@ -515,7 +516,7 @@ int Reconstruction::AddPoints(int camera) {
   return added;
 }
 
-AdjustResult Reconstruction::Adjust(bool final) {
+AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   AdjustResult result;
   const bool coplanar = options_.model == ba::Model::kCoplanar;
   // Observations that take part: active, registered camera, reconstructed point in front.
@@ -587,8 +588,18 @@ AdjustResult Reconstruction::Adjust(bool final) {
   ba_options.gauge_camera = camera_map[gauge_camera_];
   ba_options.max_iterations = final ? options_.final_ba_iterations : options_.intermediate_ba_iterations;
   if (!final) ba_options.function_tolerance = 1e-6;
+  ba_options.compute_covariance = covariance;
   if (cameras.size() < 2 && options_.model == ba::Model::kFree) return result;
-  const ba::Result solved = ba::BundleAdjust(data, ba_options);
+  ba::Result solved;
+  try {
+    solved = ba::BundleAdjust(data, ba_options);
+  } catch (const std::runtime_error&) {
+    if (!covariance) throw;
+    // The poses are not all determined: solve again without the covariance.
+    ba_options.compute_covariance = false;
+    solved = ba::BundleAdjust(data, ba_options);
+  }
+  if (covariance) StoreCovariances(solved, cameras, static_cast<int>(kept.size()), static_cast<int>(points.size()));
   for (size_t k = 0; k < cameras.size(); ++k) poses_.row(cameras[k]) = solved.poses.row(k);
   for (size_t k = 0; k < points.size(); ++k) points_.row(points[k]) = solved.points.row(k);
   if (coplanar) plane_ = solved.plane;
@@ -661,15 +672,34 @@ int Reconstruction::FilterOutliers(const std::vector<double>& threshold) {
   return changed;
 }
 
+void Reconstruction::StoreCovariances(const ba::Result& solved, const std::vector<int>& cameras, int observations,
+                                      int points) {
+  pose_covariances_.clear();
+  if (solved.pose_covariances.size() != cameras.size()) return;
+  // Ceres gives the covariance for residuals of unit variance; scale it by the
+  // variance the residuals show (per image coordinate).
+  const int parameters = 6 * static_cast<int>(cameras.size()) + (options_.model == ba::Model::kCoplanar ? 2 : 3) * points;
+  const int dof = 2 * observations - parameters;
+  if (dof <= 0) return;
+  const double variance = 2.0 * solved.final_cost / dof;
+  pose_covariances_.assign(cameras_.size(), ba::Matrix6d::Constant(std::numeric_limits<double>::quiet_NaN()));
+  for (size_t k = 0; k < cameras.size(); ++k) pose_covariances_[cameras[k]] = variance * solved.pose_covariances[k];
+}
+
 RefineResult Reconstruction::Refine() {
   RefineResult result;
+  pose_covariances_.clear();
   for (int round = 0; round < options_.max_refine_rounds; ++round) {
-    result.last = Adjust(true);
+    result.last = Adjust(true, round + 1 == options_.max_refine_rounds);
     ++result.rounds;
     result.thresholds = OutlierThresholds();
     const int changed = FilterOutliers(result.thresholds);
     result.changed += changed;
-    if (changed == 0) break;
+    if (changed == 0) {
+      // Converged: once more from the same state, for the covariance.
+      if (pose_covariances_.empty()) Adjust(true, true);
+      break;
+    }
   }
   result.removed = static_cast<int>(std::count(active_.begin(), active_.end(), false));
   return result;

@@ -37,6 +37,9 @@ struct Options {
   int num_threads = 1;
   int intermediate_ba_iterations = 25;  // after each new camera
   int final_ba_iterations = 100;
+  // A camera whose rotation is known worse than this (1 sigma, from the final bundle
+  // adjustment's covariance) is reported as weak.
+  double weak_rotation_sigma_deg = 0.05;
 
   void Check() const;
 };
@@ -108,13 +111,15 @@ class Reconstruction {
   NextCameraCandidate ChooseNextCamera() const;
   RegisterResult RegisterCamera(int camera);
   int AddPoints(int camera);
-  AdjustResult Adjust(bool final);
+  // `covariance`: also the pose covariance of every camera (pose_covariances()).
+  AdjustResult Adjust(bool final, bool covariance = false);
   // Per-camera reprojection thresholds: max(outlier_threshold_px, factor * robust sigma).
   std::vector<double> OutlierThresholds() const;
   // Marks every evaluable observation inlier or outlier by the thresholds; returns how
   // many changed status.
   int FilterOutliers();
   int FilterOutliers(const std::vector<double>& thresholds);
+  // Bundle adjustment and outlier filtering rounds, then the poses' covariance.
   RefineResult Refine();
   void FailUnregistered();
 
@@ -133,6 +138,10 @@ class Reconstruction {
   const Eigen::VectorXi& camera_index() const { return camera_index_; }
   const Eigen::VectorXi& point_index() const { return point_index_; }
   std::vector<int> registration_order() const { return order_; }
+  // Per camera after Refine(): covariance of [dtheta, dt] (cam_from_world, R = Exp(dtheta)
+  // R_hat) relative to the gauge camera, scaled by the residuals' variance; empty when
+  // not computed or not determined.
+  const std::vector<ba::Matrix6d>& pose_covariances() const { return pose_covariances_; }
   // Residuals of the active observations of registered cameras and reconstructed
   // points; NaN elsewhere.
   PixelMatrix Residuals() const;
@@ -153,6 +162,7 @@ class Reconstruction {
   std::vector<Eigen::Matrix3d> Rotations() const;  // per camera, from the poses
   bool InFront(int observation, const std::vector<Eigen::Matrix3d>& rotations) const;
   int ThirdCamera(int camera1, int camera2) const;
+  void StoreCovariances(const ba::Result& solved, const std::vector<int>& cameras, int observations, int points);
 
   std::vector<Camera> cameras_;
   int num_points_;
@@ -170,6 +180,7 @@ class Reconstruction {
   Eigen::Vector4d plane_ = Eigen::Vector4d(0, 0, 1, 1);
   int gauge_camera_ = -1;
   std::vector<int> order_;
+  std::vector<ba::Matrix6d> pose_covariances_;
 };
 
 }  // namespace calibproj::registration

@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
+#include <Eigen/Eigenvalues>
+#include <limits>
+#include <utility>
+
 #include "calibproj/ba/rotation.h"
 
 namespace calibproj::registration {
@@ -36,6 +40,24 @@ void FillMetrics(const Reconstruction& rec, std::vector<CameraResult>* cameras) 
       camera.std_px = std::sqrt(std::max(0.0, sum_sq[c] / camera.inliers - camera.mean_px * camera.mean_px));
     }
   }
+}
+
+// Largest standard deviation of the rotation (degrees) and of the centre (reconstruction
+// units) of a camera from the covariance of its [dtheta, dt].
+std::pair<double, double> PoseSigmas(const ba::Matrix6d& covariance, const Eigen::Matrix3d& R,
+                                     const Eigen::Vector3d& t) {
+  const Eigen::Matrix<double, 6, 6> C = covariance;
+  if (!C.allFinite()) return {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  const Eigen::Matrix3d rotation = C.topLeftCorner<3, 3>();
+  // Centre C = -R^T t: dC = -R^T [t]x^T ... = -R^T (dt - [t]x dtheta) to first order.
+  Eigen::Matrix<double, 3, 6> J;
+  J.leftCols<3>() = -R.transpose() * ba::Skew(t);
+  J.rightCols<3>() = -R.transpose();
+  const Eigen::Matrix3d centre = J * C * J.transpose();
+  const auto largest = [](const Eigen::Matrix3d& m) {
+    return std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(m).eigenvalues().maxCoeff()));
+  };
+  return {largest(rotation) * 180.0 / M_PI, largest(centre)};
 }
 
 }  // namespace
@@ -76,6 +98,12 @@ RegistrationResult Summarize(const Reconstruction& rec) {
     const Eigen::Vector3d t = poses.row(k).tail<3>().transpose();
     camera.R = R * result.frame.M.transpose();
     camera.t = result.frame.scale * (R * result.frame.origin + t);
+    if (!rec.pose_covariances().empty()) {
+      const auto [rotation_sigma, centre_sigma] = PoseSigmas(rec.pose_covariances()[registered[k]], R, t);
+      camera.rotation_sigma_deg = rotation_sigma;
+      camera.centre_sigma = result.frame.scale * centre_sigma;
+      camera.weak = rotation_sigma > rec.options().weak_rotation_sigma_deg;
+    }
   }
   double sum_sq = 0.0;
   for (int p = 0; p < result.points.rows(); ++p) {

@@ -3,6 +3,7 @@
 // Python Calibration and the standalone executable both write out.
 
 #include <Eigen/Core>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -21,6 +22,11 @@ struct CameraResult {
   int inliers = 0;                     // kept by the outlier filter
   int track2_observations = 0;         // inliers whose point at least two registered cameras see
   int view_score = 0;                  // of all its observations
+  // 1 sigma along the worst direction, from the final bundle adjustment's covariance
+  // relative to the gauge camera (0 for it); NaN when not determined.
+  double rotation_sigma_deg = std::numeric_limits<double>::quiet_NaN();
+  double centre_sigma = std::numeric_limits<double>::quiet_NaN();  // floor-frame units
+  bool weak = false;  // rotation_sigma_deg above the options' weak_rotation_sigma_deg
 };
 
 struct RegistrationResult {
