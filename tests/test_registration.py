@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -235,3 +237,31 @@ def test_rotation_helpers_are_inverse() -> None:
         w = rng.normal(size=3)
         w *= rng.uniform(0, np.pi) / np.linalg.norm(w)
         np.testing.assert_allclose(rotvec_from_matrix(matrix_from_rotvec(w)), w, atol=1e-9)
+
+
+def test_pose_uncertainty_flags_the_close_up_camera_as_weak(tmp_path) -> None:
+    """The final bundle adjustment's covariance gives each camera's 1-sigma rotation and
+    centre uncertainty: the zoomed camera's is near its Cramer-Rao bound and above the
+    weak limit, the others' far below; the written poses carry them, and comparing with
+    the truth aligns on the cameras that are not weak."""
+    sim = simulate_tracks("or-full", None, noise_px=0.5, seed=0)
+    calibration = calibrate(sim.tracks, sim.intrinsics, RegistrationOptions(model="coplanar"))
+    metrics = calibration.metrics
+    assert [name for name, m in metrics.items() if m.weak] == ["ceiling"]
+    # The bound's covariance is for residuals of unit variance; the noise is 0.5 px.
+    predicted = 0.5 * predicted_rotation_sigma_deg(sim, "ceiling", gauge=calibration.registration_order[0],
+                                                   model="coplanar")
+    assert predicted / 1.5 < metrics["ceiling"].rotation_sigma_deg < 1.5 * predicted
+    assert metrics[calibration.registration_order[0]].rotation_sigma_deg == 0.0  # the gauge
+    for name, m in metrics.items():
+        assert m.centre_sigma is not None and m.centre_sigma >= 0.0, name
+        if name != "ceiling":
+            assert m.rotation_sigma_deg < RegistrationOptions().weak_rotation_sigma_deg / 5, name
+    calibration.save(tmp_path)
+    written = json.loads((tmp_path / "camera_poses.json").read_text())["cameras"]
+    assert written["ceiling"]["weak"] is True and written["far1"]["weak"] is False
+    assert written["ceiling"]["rotation_sigma_deg"] == pytest.approx(metrics["ceiling"].rotation_sigma_deg)
+    result = compare(tmp_path / "camera_poses.json", truth_poses(sim))
+    strong = [name for name in result.cameras if name != "ceiling"]
+    rmse = float(np.sqrt(np.mean([result.cameras[name].rotation_deg ** 2 for name in strong])))
+    assert rmse < MAX_ROTATION_RMSE_DEG

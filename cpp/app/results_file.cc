@@ -41,8 +41,13 @@ std::string CameraPosesJson(const registration::RegistrationResult& result, cons
   for (size_t c = 0; c < result.cameras.size(); ++c) {
     const auto& camera = result.cameras[c];
     if (!camera.registered) continue;
-    cameras[names.cameras[c]] = {{"R", Matrix(camera.R)}, {"t", Vector(camera.t)},
-                                 {"center", Vector(-camera.R.transpose() * camera.t)}};
+    const auto finite = [](double value) { return std::isfinite(value) ? ordered_json(value) : ordered_json(nullptr); };
+    cameras[names.cameras[c]] = {{"R", Matrix(camera.R)},
+                                 {"t", Vector(camera.t)},
+                                 {"center", Vector(-camera.R.transpose() * camera.t)},
+                                 {"rotation_sigma_deg", finite(camera.rotation_sigma_deg)},
+                                 {"centre_sigma", finite(camera.centre_sigma)},
+                                 {"weak", camera.weak}};
   }
   ordered_json body = {{"unit", "arbitrary"}, {"frame", "floor"}, {"cameras", cameras},
                        {"failed", Failures(result, names)}};

@@ -129,7 +129,9 @@ class Calibration:
         """Write camera_poses.json, metrics.json and points.ply into ``directory``."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
-        write_camera_poses(directory / "camera_poses.json", self.poses, self.unit, self.failed)
+        uncertainty = {name: {"rotation_sigma_deg": m.rotation_sigma_deg, "centre_sigma": m.centre_sigma, "weak": m.weak}
+                       for name, m in self.metrics.items() if name in self.poses}
+        write_camera_poses(directory / "camera_poses.json", self.poses, self.unit, self.failed, uncertainty)
         write_json(
             directory / "metrics.json",
             METRICS_KIND,

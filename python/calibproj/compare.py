@@ -2,7 +2,8 @@
 
 The estimate is first brought into the reference frame by the similarity (Sim(3),
 Umeyama) that best maps its camera centres onto the reference centres, over the
-cameras present in both; then, per camera:
+cameras present in both (but those the estimate reports as weak, while three or more
+others remain); then, per camera:
 
 - rotation error: the angle of ``R_aligned @ R_ref.T``, degrees;
 - centre error: ``|| s R_a C_est + t_a - C_ref ||``, in millimetres when both sides
@@ -96,7 +97,14 @@ def compare(estimate: CameraPoses | str | os.PathLike, truth: CameraPoses | str 
             f"{truth.source or 'the reference'} ({', '.join(registered) or 'none'}); "
             f"aligning needs at least {MIN_ALIGNMENT_CAMERAS}"
         )
-    scale, R_align, t_align = align_centers(estimate.centers(registered), truth.centers(registered))
+    # A camera the estimate reports as weak does not steer the alignment (its own large
+    # error would tilt every other camera); its error is still reported.
+    anchors = [name for name in registered if name not in estimate.weak]
+    if len(anchors) < MIN_ALIGNMENT_CAMERAS:
+        anchors = registered
+    elif len(anchors) < len(registered):
+        logger.info("aligned on the cameras not reported weak: %s", ", ".join(anchors))
+    scale, R_align, t_align = align_centers(estimate.centers(anchors), truth.centers(anchors))
     mean_distance = mean_pairwise_distance(truth.centers(truth.names))
     to_mm = 1000.0 if (estimate.is_metric and truth.is_metric) else None
     cameras = {}

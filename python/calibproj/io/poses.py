@@ -42,12 +42,15 @@ class CameraPoses:
         unit: ``"m"`` (metric) or ``"arbitrary"``.
         failed: name -> reason, for cameras a calibration could not register.
         source: where the poses came from (a file path), for messages.
+        weak: cameras the calibration reports as weakly determined (rotation sigma above
+            its limit).
     """
 
     poses: dict[str, tuple[np.ndarray, np.ndarray]]
     unit: str = "arbitrary"
     failed: dict[str, str] = field(default_factory=dict)
     source: str = ""
+    weak: frozenset[str] = frozenset()
 
     @property
     def names(self) -> list[str]:
@@ -77,14 +80,17 @@ def write_camera_poses(
     poses: dict[str, tuple[np.ndarray, np.ndarray]],
     unit: str,
     failed: dict[str, str] | None = None,
+    uncertainty: dict[str, dict[str, Any]] | None = None,
 ) -> None:
-    """Write ``camera_poses.json`` atomically (floor frame)."""
+    """Write ``camera_poses.json`` atomically (floor frame). ``uncertainty`` adds to a
+    camera's entry its ``rotation_sigma_deg``, ``centre_sigma`` and ``weak``."""
     if unit not in UNITS:
         raise ValueError(f"unit must be one of {UNITS}, got {unit!r}")
+    uncertainty = uncertainty or {}
     body = {
         "unit": unit,
         "frame": "floor",
-        "cameras": {name: pose_json(R, t) for name, (R, t) in poses.items()},
+        "cameras": {name: {**pose_json(R, t), **uncertainty.get(name, {})} for name, (R, t) in poses.items()},
         "failed": dict(failed or {}),
     }
     write_json(path, POSES_KIND, SCHEMA_MAJOR, body)
@@ -114,7 +120,8 @@ def _poses_from_document(path: Path, document: dict[str, Any]) -> CameraPoses:
     failed = document.get("failed", {})
     if not isinstance(failed, dict):
         raise FormatError(f"{path}: failed: expected an object {{name: reason}}")
-    return CameraPoses(poses, unit, {str(k): str(v) for k, v in failed.items()}, str(path))
+    weak = frozenset(name for name, entry in cameras.items() if isinstance(entry, dict) and entry.get("weak") is True)
+    return CameraPoses(poses, unit, {str(k): str(v) for k, v in failed.items()}, str(path), weak)
 
 
 def _read_pose(path: Path, name: str, entry: Any) -> tuple[np.ndarray, np.ndarray]:
