@@ -153,19 +153,24 @@ def _summary(calibration: Calibration, views: list[CameraView]) -> str:
 
 
 def _camera_table(views: list[CameraView], cameras: dict[str, Plot]) -> str:
-    header = ("<tr><th class=\"name\">camera</th><th>mean [px]</th><th>std [px]</th><th>observations</th>"
-              "<th>inliers</th><th>track &ge; 2 observations</th><th>view score</th></tr>")
+    header = ("<tr><th class=\"name\">camera</th><th>fit residual mean [px]</th><th>std [px]</th>"
+              "<th>observations</th><th>inliers</th><th>track &ge; 2 observations</th><th>view score</th>"
+              "<th>rotation &sigma; [deg]</th><th>centre &sigma;</th></tr>")
     rows = [header]
     for view in views:
         name = f'<td class="name"><a href="#{_anchor(cameras[view.name])}">{html.escape(view.name)}</a></td>'
         if not view.registered:
             reason = html.escape(view.failure or "not registered")
-            rows.append(f'<tr>{name}<td class="failed" colspan="6">FAILED: {reason}</td></tr>')
+            rows.append(f'<tr>{name}<td class="failed" colspan="8">FAILED: {reason}</td></tr>')
             continue
         m = view.metrics
         cells = [_number(m.mean_px, 3), _number(m.std_px, 3), str(m.observations), str(m.inliers),
-                 str(m.track2_observations), str(m.view_score)] if m else ["-"] * 6
-        rows.append(f"<tr>{name}" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+                 str(m.track2_observations), str(m.view_score), _number(m.rotation_sigma_deg, 4),
+                 _number(m.centre_sigma, 4)] if m else ["-"] * 8
+        weak = (f'<tr><td></td><td class="failed" colspan="8">WEAK: rotation known to '
+                f'{m.rotation_sigma_deg:.3f} deg (1 sigma); more points in its view help</td></tr>'
+                if m is not None and m.weak and m.rotation_sigma_deg is not None else "")
+        rows.append(f"<tr>{name}" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>" + weak)
     return "<table>" + "".join(rows) + "</table>"
 
 
