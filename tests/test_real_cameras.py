@@ -252,3 +252,21 @@ def test_detections_off_the_floor_homography_are_dropped():
     scrambled = image[rng.permutation(40)]
     keep, checked, problem = _core.detect.check_floor_consistency(projector, scrambled)
     assert checked and not keep.any() and "agree with one homography of the floor" in problem
+
+
+def test_timestamps_that_go_back_fail_the_camera_with_a_clear_message(tmp_path):
+    """Two MPEG-TS recordings joined byte by byte: the second restarts the clock.
+    Counting its frames as duplicates would silently lose them."""
+    import subprocess
+
+    parts = []
+    for index in range(2):
+        part = tmp_path / f"part{index}.ts"
+        subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "lavfi", "-i", "testsrc=size=64x48:rate=30:duration=1",
+                        "-c:v", "libx264", "-bf", "0", "-f", "mpegts", str(part)], check=True)
+        parts.append(part.read_bytes())
+    joined = tmp_path / "joined.ts"
+    joined.write_bytes(b"".join(parts))
+    with pytest.raises(RuntimeError, match=r"joined\.ts: the timestamps go back by 0\.9666\d* s after frame 29"):
+        _core.video.luma_signal(str(joined))
+    assert len(_core.video.luma_signal(str(joined), use_timestamps=False)) == 60

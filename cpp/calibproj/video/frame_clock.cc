@@ -7,6 +7,13 @@
 
 namespace calibproj::video {
 
+namespace {
+
+// Frames a timestamp may lie behind the previous one and still count as a duplicate.
+constexpr double kMaxBackwardFrames = 2.0;
+
+}  // namespace
+
 FrameClock::FrameClock(double period_s, double max_gap_s, bool use_timestamps, std::string source)
     : period_(period_s), max_gap_(max_gap_s), use_timestamps_(use_timestamps), source_(std::move(source)) {
   if (!(period_ > 0.0) || !std::isfinite(period_)) throw std::invalid_argument(source_ + ": no frame period");
@@ -26,6 +33,14 @@ int FrameClock::Place(double seconds) {
   } else {
     const double steps = std::round((seconds - last_time_) / period_);
     if (steps < 1.0) {
+      // A timestamp a frame or two early is a duplicate; one far back is a reset
+      // (concatenated recordings), which would silently drop everything after it.
+      if (last_time_ - seconds > kMaxBackwardFrames * period_) {
+        std::ostringstream message;
+        message << source_ << ": the timestamps go back by " << last_time_ - seconds << " s after frame "
+                << stats_.frames - 1 << " (joined recordings?); set use_timestamps to false to use the decoding order";
+        throw std::runtime_error(message.str());
+      }
       ++stats_.duplicated;
       return -1;
     }
