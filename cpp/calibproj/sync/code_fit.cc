@@ -258,14 +258,21 @@ FrameMap Refine(const LightTimeline& timeline, const std::vector<std::vector<Sam
   solver.max_num_iterations = options.max_iterations;
   solver.num_threads = 1;
   solver.logging_type = ceres::SILENT;
-  ceres::Solver::Summary summary;
-  ceres::Solve(solver, &problem, &summary);
   int samples = 0;
   *contrast = std::numeric_limits<double>::infinity();
-  for (std::size_t w = 0; w < windows.size(); ++w) {
-    samples += static_cast<int>(windows[w].size());
-    *contrast = std::min(*contrast, levels[w][1]);
+  for (std::size_t w = 0; w < windows.size(); ++w) samples += static_cast<int>(windows[w].size());
+  // A start whose exposures reach frames of unknown light cannot be refined (Ceres would
+  // log the failed evaluation): it is returned as it is, with an infinite residual.
+  double cost = 0.0;
+  if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr) ||
+      !std::isfinite(cost)) {
+    *rms = std::numeric_limits<double>::infinity();
+    for (const auto& level : levels) *contrast = std::min(*contrast, level[1]);
+    return start;
   }
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+  for (const auto& level : levels) *contrast = std::min(*contrast, level[1]);
   *rms = std::sqrt(2.0 * summary.final_cost / samples) / std::max(std::abs(*contrast), 1e-12);
   return FrameMap{map[0], map[1], map[2]};
 }
