@@ -49,6 +49,9 @@ class IngestOptions:
         plateau_tolerance: a frame map also fits as well when its cost exceeds the best
             by less than this share of the signal's variance (noise-free plateaus).
         fit_iterations: Levenberg-Marquardt iterations of the fit.
+        gain_drift: the black level and contrast of each code window drift linearly in
+            time (a camera adjusting its exposure or gain during the code); false keeps
+            them constant per window.
         exposure_s: known exposure time of the cameras, seconds, or 0 to estimate it from
             the codes. Where every light change falls at the same phase of a camera's
             frames (camera at the projector's rate or a multiple of it), a frame across a
@@ -182,6 +185,7 @@ class IngestOptions:
     feasible_chi2: float = 9.0
     plateau_tolerance: float = 1e-6
     fit_iterations: int = 50
+    gain_drift: bool = True
     exposure_s: float = 0.0
     margin: float = 0.1
     average_frames: int = 1

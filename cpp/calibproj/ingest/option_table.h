@@ -31,6 +31,7 @@ void VisitSyncOptions(SyncOptionsT& s, Visitor&& visit) {
   visit("feasible_chi2", s.fit.feasible_chi2, "cost excess (residual variances per frame) that fits as well");
   visit("plateau_tolerance", s.fit.plateau_tolerance, "cost excess (share of signal variance) that fits as well");
   visit("fit_iterations", s.fit.max_iterations, "Levenberg-Marquardt iterations of the fit");
+  visit("gain_drift", s.fit.gain_drift, "code levels drift linearly within a window (automatic exposure)");
 }
 
 template <typename IngestOptionsT, typename Visitor>

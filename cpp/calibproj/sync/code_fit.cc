@@ -2,6 +2,9 @@
 
 #include <ceres/ceres.h>
 
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -21,7 +24,11 @@ void Require(bool condition, const std::string& message) {
 struct Sample {
   int frame;
   double value;
+  double tau = 0.0;  // position in its window, -1 (first sample) .. 1 (last)
 };
+
+// Black level and contrast of a window, each a + slope * tau when the gain drifts.
+using Levels = std::array<double, 4>;  // a, a_slope, b, b_slope
 
 // Frames of one window that stay inside it for every offset and exposure searched.
 std::vector<Sample> WindowSamples(const std::vector<double>& signal, const FrameWindow& window, const FrameMap& map,
@@ -32,14 +39,38 @@ std::vector<Sample> WindowSamples(const std::vector<double>& signal, const Frame
   std::vector<Sample> samples;
   const int begin = std::max(0, static_cast<int>(std::ceil(first)));
   const int end = std::min(static_cast<int>(signal.size()) - 1, static_cast<int>(std::floor(last)));
+  const double centre = 0.5 * (begin + end), half = std::max(0.5 * (end - begin), 1.0);
   for (int j = begin; j <= end; ++j) {
-    if (!std::isnan(signal[j])) samples.push_back({j, signal[j]});
+    if (!std::isnan(signal[j])) samples.push_back({j, signal[j], (j - centre) / half});
   }
   return samples;
 }
 
+// Sum of squares of the best (a + a' tau) + (b + b' tau) W fit to the samples of one
+// window: a camera adjusting its gain during the code scales both levels alike.
+double DriftFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const FrameMap& map) {
+  Eigen::Matrix4d normal = Eigen::Matrix4d::Zero();
+  Eigen::Vector4d right = Eigen::Vector4d::Zero();
+  double smm = 0;
+  const double duration = map.ProjectorExposure();
+  for (const Sample& s : samples) {
+    const double w = timeline.Average(map.ProjectorTime(s.frame), duration);
+    const Eigen::Vector4d basis(1.0, s.tau, w, s.tau * w);
+    normal.selfadjointView<Eigen::Lower>().rankUpdate(basis);
+    right += basis * s.value;
+    smm += s.value * s.value;
+  }
+  const Eigen::Matrix4d full = normal.selfadjointView<Eigen::Lower>();
+  const Eigen::LDLT<Eigen::Matrix4d> solver(full);
+  if (solver.info() != Eigen::Success || !(solver.rcond() > 1e-12)) return std::numeric_limits<double>::infinity();
+  const Eigen::Vector4d theta = solver.solve(right);
+  return std::max(0.0, smm - theta.dot(right));
+}
+
 // Sum of squares of the best a + b * W fit to the samples of one window.
-double LinearFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const FrameMap& map) {
+double LinearFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const FrameMap& map,
+                     bool gain_drift) {
+  if (gain_drift) return DriftFitCost(timeline, samples, map);
   double sw = 0, sww = 0, sm = 0, swm = 0, smm = 0;
   const double duration = map.ProjectorExposure();
   for (const Sample& s : samples) {
@@ -68,15 +99,16 @@ double SampleVariance(const std::vector<std::vector<Sample>>& windows) {
   return total;
 }
 
-// Residual a + b * W_j - value_j of one camera frame, with analytic derivatives with
-// respect to (offset, rate, exposure) and (a, b).
-class SampleCost : public ceres::SizedCostFunction<1, 3, 2> {
+// Residual (a + a' tau) + (b + b' tau) * W_j - value_j of one camera frame, with
+// analytic derivatives with respect to (offset, rate, exposure) and the levels.
+class SampleCost : public ceres::SizedCostFunction<1, 3, 4> {
  public:
   SampleCost(const LightTimeline& timeline, Sample sample) : timeline_(timeline), sample_(sample) {}
 
   bool Evaluate(double const* const* parameters, double* residual, double** jacobians) const override {
     const double offset = parameters[0][0], rate = parameters[0][1], exposure = parameters[0][2];
-    const double a = parameters[1][0], b = parameters[1][1];
+    const double a = parameters[1][0] + parameters[1][1] * sample_.tau;
+    const double b = parameters[1][2] + parameters[1][3] * sample_.tau;
     const double t = (sample_.frame - offset) / rate;
     const double duration = exposure / rate;
     const double w = timeline_.Average(t, duration);
@@ -95,7 +127,9 @@ class SampleCost : public ceres::SizedCostFunction<1, 3, 2> {
     }
     if (jacobians[1] != nullptr) {
       jacobians[1][0] = 1.0;
-      jacobians[1][1] = w;
+      jacobians[1][1] = sample_.tau;
+      jacobians[1][2] = w;
+      jacobians[1][3] = sample_.tau * w;
     }
     return true;
   }
@@ -127,13 +161,14 @@ struct FeasibleSet {
 
 class CostSurface {
  public:
-  CostSurface(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows, double rate)
-      : timeline_(timeline), windows_(windows), rate_(rate) {}
+  CostSurface(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows, double rate,
+              bool gain_drift)
+      : timeline_(timeline), windows_(windows), rate_(rate), gain_drift_(gain_drift) {}
 
   double operator()(double offset, double exposure) const {
     const FrameMap map{offset, rate_, exposure};
     double total = 0.0;
-    for (const auto& samples : windows_) total += LinearFitCost(timeline_, samples, map);
+    for (const auto& samples : windows_) total += LinearFitCost(timeline_, samples, map, gain_drift_);
     return total;
   }
 
@@ -168,6 +203,7 @@ class CostSurface {
   const LightTimeline& timeline_;
   const std::vector<std::vector<Sample>>& windows_;
   double rate_;
+  bool gain_drift_;
 };
 
 // Profiles the cost over offsets for every exposure of the grid, then bounds the set
@@ -175,7 +211,7 @@ class CostSurface {
 // are followed outwards on the grid and the edges located by bisection.
 FeasibleSet ExploreCost(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows,
                         const FrameMap& initial, const CodeFitOptions& options) {
-  const CostSurface cost(timeline, windows, initial.rate);
+  const CostSurface cost(timeline, windows, initial.rate, options.gain_drift);
   const int offsets = 2 * static_cast<int>(std::round(options.offset_range / options.offset_step)) + 1;
   const int half = offsets / 2;
   const auto offset_at = [&](int i) { return initial.offset + (i - half) * options.offset_step; };
@@ -201,7 +237,7 @@ FeasibleSet ExploreCost(const LightTimeline& timeline, const std::vector<std::ve
   }
   int samples = 0;
   for (const auto& w : windows) samples += static_cast<int>(w.size());
-  const int parameters = 2 + 2 * static_cast<int>(windows.size());
+  const int parameters = 2 + (options.gain_drift ? 4 : 2) * static_cast<int>(windows.size());
   const double noise_variance = minimum / std::max(1, samples - parameters);
   const double threshold = minimum + std::max(options.feasible_chi2 * noise_variance,
                                               options.plateau_tolerance * std::max(SampleVariance(windows), 1e-300));
@@ -230,7 +266,7 @@ FeasibleSet ExploreCost(const LightTimeline& timeline, const std::vector<std::ve
 FrameMap Refine(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows, const FrameMap& start,
                 bool fit_rate, const CodeFitOptions& options, double* rms, double* contrast) {
   double map[3] = {start.offset, start.rate, start.exposure};
-  std::vector<std::array<double, 2>> levels(windows.size(), {0.0, 1.0});
+  std::vector<Levels> levels(windows.size(), {0.0, 0.0, 1.0, 0.0});
   ceres::Problem problem;
   problem.AddParameterBlock(map, 3);
   for (std::size_t w = 0; w < windows.size(); ++w) {
@@ -240,10 +276,11 @@ FrameMap Refine(const LightTimeline& timeline, const std::vector<std::vector<Sam
       low = std::min(low, s.value);
       high = std::max(high, s.value);
     }
-    levels[w] = {low, high - low};
+    levels[w] = {low, 0.0, high - low, 0.0};
     for (const Sample& s : windows[w]) {
       problem.AddResidualBlock(new SampleCost(timeline, s), nullptr, map, levels[w].data());
     }
+    if (!options.gain_drift) problem.SetManifold(levels[w].data(), new ceres::SubsetManifold(4, {1, 3}));
   }
   std::vector<int> constant;
   if (!fit_rate) constant.push_back(1);
@@ -267,12 +304,12 @@ FrameMap Refine(const LightTimeline& timeline, const std::vector<std::vector<Sam
   if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr) ||
       !std::isfinite(cost)) {
     *rms = std::numeric_limits<double>::infinity();
-    for (const auto& level : levels) *contrast = std::min(*contrast, level[1]);
+    for (const auto& level : levels) *contrast = std::min(*contrast, level[2]);
     return start;
   }
   ceres::Solver::Summary summary;
   ceres::Solve(solver, &problem, &summary);
-  for (const auto& level : levels) *contrast = std::min(*contrast, level[1]);
+  for (const auto& level : levels) *contrast = std::min(*contrast, level[2]);
   *rms = std::sqrt(2.0 * summary.final_cost / samples) / std::max(std::abs(*contrast), 1e-12);
   return FrameMap{map[0], map[1], map[2]};
 }

@@ -4,7 +4,9 @@
 // Model: camera frame j records a_w + b_w * W_j, where W_j is the projector light
 // averaged over the frame's exposure [t_j, t_j + exposure / rate), t_j = (j - offset) /
 // rate, and (a_w, b_w) are the black level and contrast of code window w (fitted
-// separately: brightness may change between the start and the end of a recording).
+// separately: brightness may change between the start and the end of a recording;
+// with gain_drift each drifts linearly across its window, as the gain of a camera with
+// automatic exposure does).
 // Frames whose exposure straddles a light change record a blend, which fixes the
 // offset to a small fraction of a frame.
 //
@@ -42,6 +44,9 @@ struct CodeFitOptions {
   double feasible_chi2 = 9.0;
   double plateau_tolerance = 1e-6;
   int max_iterations = 50;
+  // Black level and contrast of each window drift linearly in time (a camera adjusting
+  // its gain during a code); false: constant per window.
+  bool gain_drift = true;
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;
