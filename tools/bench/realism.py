@@ -205,8 +205,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=3, help="seeds per condition (default 3)")
     parser.add_argument("--arrays", type=int, default=48, help="MSM arrays projected (default 48, as the demo)")
     parser.add_argument("--markers", default="aruco:4X4_50", help="marker family (default aruco:4X4_50)")
-    parser.add_argument("--black-level", type=float, default=0.0,
-                        help="projector level of the patterns' dark parts (default 0; see calibproj generate)")
     parser.add_argument("--model", default="coplanar", choices=("coplanar", "free"))
     parser.add_argument("--wrong-px", type=float, default=3.0,
                         help="an observation this far from its point's true position counts as wrong (default 3)")
@@ -222,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
         work = args.work or Path(scratch)
         work.mkdir(parents=True, exist_ok=True)
         sequence = generate(work / "sequence", markers=args.markers, arrays=args.arrays, scales=(1.0, 3.0, 6.0),
-                            black_level=args.black_level, progress=False)
+                            progress=False)
         rows = []
         for name in names:
             for seed in range(args.seeds):

@@ -36,9 +36,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="slowest camera that must see every pattern in one clean frame (default: %(default)s)")
     parser.add_argument("--inverted", action=argparse.BooleanOptionalAction, default=True,
                         help="white markers on black (default: on)")
-    parser.add_argument("--black-level", type=float, default=0.0,
-                        help="projector level of the patterns' dark parts, share of white (default 0); about 0.25 "
-                             "keeps cameras with automatic exposure from saturating the markers")
     parser.add_argument("--min-gap-modules", type=float, default=0.5,
                         help="smallest gap between markers of one pattern, in modules (default: %(default)s)")
     parser.add_argument("--omit-conflicting", action="store_true",
@@ -66,7 +63,6 @@ def run(args: argparse.Namespace) -> int:
         scales=_scales(args.scales), marker_px=args.marker_px, margin_px=args.margin_px,
         projector=_pair(args.projector, "--projector", "1920x1080"), fps=args.fps,
         frames_per_pattern=args.frames_per_pattern, min_camera_fps=args.min_camera_fps, inverted=args.inverted,
-        black_level=args.black_level,
         min_gap_modules=args.min_gap_modules, omit_conflicting=args.omit_conflicting,
         code_degree=args.code_degree, code_frames_per_bit=args.code_frames_per_bit,
         reference_frames=args.reference_frames,

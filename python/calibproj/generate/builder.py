@@ -66,10 +66,6 @@ class SequenceOptions:
             ``min_camera_fps`` (see :func:`default_frames_per_pattern`).
         min_camera_fps: slowest camera that must see every pattern in one clean frame.
         inverted: white markers on black (as projected in the paper).
-        black_level: projector level of the patterns' dark parts, share of full white
-            (0: black). Cameras with automatic exposure raise their gain over a mostly
-            black floor until the white markers saturate; a black level of about 0.25
-            keeps their gain down at little cost in contrast.
         min_gap_modules: smallest gap between two markers of one pattern, in modules.
         omit_conflicting: leave out (and record) markers that would overlap another or
             leave the image at some scale, instead of raising ValueError.
@@ -90,7 +86,6 @@ class SequenceOptions:
     frames_per_pattern: int | None = None
     min_camera_fps: float = 25.0
     inverted: bool = True
-    black_level: float = 0.0
     min_gap_modules: float = 0.5
     omit_conflicting: bool = False
     code_degree: int = 5
@@ -208,14 +203,7 @@ def _marker_system(options: SequenceOptions) -> MarkerSystem:
 
     info = family_info(options.markers)
     return MarkerSystem(spec=info.spec, system=info.system, family=info.name, grid_cells=info.grid_cells,
-                        quad_cells=info.quad_cells, id_count=info.id_count, inverted=bool(options.inverted),
-                        black_level=_black_level(options.black_level))
-
-
-def _black_level(value: float) -> float:
-    if not 0.0 <= value <= 0.5:
-        raise ValueError(f"black_level must be in [0, 0.5], got {value}")
-    return float(value)
+                        quad_cells=info.quad_cells, id_count=info.id_count, inverted=bool(options.inverted))
 
 
 def _layout(options: SequenceOptions) -> MsmLayout:

@@ -47,7 +47,6 @@ SEQUENCE_SCHEMA = {
                 "grid_cells": {"type": "integer", "minimum": 1},
                 "quad_cells": {"type": "integer", "minimum": 1},
                 "inverted": {"type": "boolean"},
-                "black_level": {"type": "number", "minimum": 0, "maximum": 0.5},
             },
         },
         "projector": {

@@ -68,8 +68,7 @@ class MarkerSystem:
 
     ``grid_cells`` is the drawn marker's side in modules (border included) and
     ``quad_cells`` that of the square whose corners the detector returns; both are
-    centred on the MSM centre. ``inverted``: white markers on black. ``black_level``:
-    the projector level (share of full white) of the patterns' dark parts.
+    centred on the MSM centre. ``inverted``: white markers on black.
     """
 
     spec: str
@@ -79,7 +78,6 @@ class MarkerSystem:
     quad_cells: int
     id_count: int
     inverted: bool
-    black_level: float = 0.0
 
 
 @dataclass
@@ -179,11 +177,9 @@ class Sequence:
         for marker in self.markers_shown(pattern_index):
             draw_cells(canvas, self._marker_cells(int(marker)), self.centres[pattern.array, marker],
                        pattern.marker_side_px)
+        image = np.rint(canvas * 255.0).astype(np.uint8)
         if self.markers.inverted:
-            canvas = 1.0 - canvas
-        # Dark parts at the black level, white at full white.
-        black = self.markers.black_level
-        image = np.rint((black + (1.0 - black) * canvas) * 255.0).astype(np.uint8)
+            np.subtract(255, image, out=image)
         image.flags.writeable = False
         return image
 
@@ -215,7 +211,6 @@ class Sequence:
                 "spec": self.markers.spec, "system": self.markers.system, "family": self.markers.family,
                 "grid_cells": self.markers.grid_cells, "quad_cells": self.markers.quad_cells,
                 "id_count": self.markers.id_count, "inverted": self.markers.inverted,
-                "black_level": self.markers.black_level,
             },
             "projector": {"resolution": list(self.projector), "fps": self.fps},
             "layout": {
@@ -256,7 +251,6 @@ class Sequence:
                 spec=markers["spec"], system=markers["system"], family=markers["family"],
                 grid_cells=int(markers["grid_cells"]), quad_cells=int(markers["quad_cells"]),
                 id_count=int(markers.get("id_count", 0)), inverted=bool(markers["inverted"]),
-                black_level=float(markers.get("black_level", 0.0)),
             ),
             projector=tuple(int(v) for v in data["projector"]["resolution"]),
             fps=float(data["projector"]["fps"]),
