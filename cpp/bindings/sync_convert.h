@@ -50,7 +50,8 @@ inline pybind11::dict SyncResultDict(const sync::SyncResult& result) {
   d["readout"] = r.valid ? pybind11::object(pybind11::dict(
                                pybind11::arg("readout") = r.readout, pybind11::arg("sigma") = r.readout_sigma,
                                pybind11::arg("first_row_offset") = r.first_row_offset,
-                               pybind11::arg("offset_sigma") = r.offset_sigma, pybind11::arg("bands") = r.bands_used))
+                               pybind11::arg("offset_sigma") = r.offset_sigma, pybind11::arg("bands") = r.bands_used,
+                               pybind11::arg("applied") = r.applied))
                          : pybind11::object(pybind11::none());
   return d;
 }

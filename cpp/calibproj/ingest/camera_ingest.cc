@@ -261,7 +261,16 @@ class CameraIngest {
     sync->readout = EstimateReadout({sync::CodeWindow(timeline_, sequence_.start_code, options_.sync),
                                      sync::CodeWindow(timeline_, sequence_.end_code, options_.sync)},
                                     sync->map);
-    if (!ReadoutApplies(sync->readout)) return;
+    if (!ReadoutApplies(sync->readout)) {
+      // A readout known too poorly to move the map: the map is that of rows near the
+      // middle, up to half the readout from the first row's.
+      if (sync->readout.valid) {
+        sync->offset_uncertainty = std::max(sync->offset_uncertainty,
+                                            0.5 * std::abs(sync->readout.readout) + sync->readout.readout_sigma);
+      }
+      return;
+    }
+    sync->readout.applied = true;
     sync->map.offset = sync->readout.first_row_offset;
     if (sync->readout.rate > 0.0) sync->map.rate = sync->window_map.rate = sync->readout.rate;
     sync->map.exposure = sync->readout.exposure;

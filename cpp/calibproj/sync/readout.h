@@ -34,6 +34,7 @@ struct ReadoutEstimate {
   double offset_sigma = 0.0;
   double exposure = 0.0;         // median fitted exposure of the bands, camera frames
   double rate = 0.0;             // the first row's rate, from two code windows (0: not measured)
+  bool applied = false;          // the frame map was moved to the first row
   int bands_used = 0;
 };
 
