@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -101,16 +102,8 @@ class ProjectionTimeline:
             if overlap > 0:
                 shares[key] = shares.get(key, 0.0) + overlap / length
 
-        add(BLACK, -math.inf, 0.0)
-        add(BLACK, self.duration_s, math.inf)
-        first_frame = max(0, math.floor(start_s * self.fps))
-        run = max(0, bisect.bisect_right(self.run_starts, first_frame) - 1)
-        while run < len(self.run_starts):
-            begin, end = self.run_interval(run)
-            if begin >= end_s:
-                break
-            add(self.run_keys[run], begin, end)
-            run += 1
+        for key, begin, end in self._shown(start_s, end_s):
+            add(key, begin, end)
         kept = {key: share for key, share in shares.items() if share >= MIN_SHARE}
         total = sum(kept.values())
         return {key: share / total for key, share in kept.items()}
@@ -131,16 +124,8 @@ class ProjectionTimeline:
             if overlap.max() > 0:
                 shares[key] = shares.get(key, 0.0) + overlap / exposure_s
 
-        add(BLACK, -math.inf, 0.0)
-        add(BLACK, self.duration_s, math.inf)
-        first_frame = max(0, math.floor(start_s * self.fps))
-        run = max(0, bisect.bisect_right(self.run_starts, first_frame) - 1)
-        while run < len(self.run_starts):
-            begin, end = self.run_interval(run)
-            if begin >= ends[-1]:
-                break
-            add(self.run_keys[run], begin, end)
-            run += 1
+        for key, begin, end in self._shown(start_s, float(ends[-1])):
+            add(key, begin, end)
         kept = {key: share for key, share in shares.items() if share.max() >= MIN_SHARE}
         total = sum(kept.values())
         out: dict[ContentKey, float | np.ndarray] = {}
@@ -149,6 +134,20 @@ class ProjectionTimeline:
             uniform = np.ptp(share) < MIN_SHARE
             out[key] = float(share[0]) if uniform else share.astype(np.float32)[:, None]
         return out
+
+    def _shown(self, start_s: float, end_s: float) -> Iterator[tuple[ContentKey, float, float]]:
+        """``(key, begin, end)`` of the runs that may overlap ``[start_s, end_s)``, and of
+        the black before and after the sequence."""
+        yield BLACK, -math.inf, 0.0
+        yield BLACK, self.duration_s, math.inf
+        first_frame = max(0, math.floor(start_s * self.fps))
+        run = max(0, bisect.bisect_right(self.run_starts, first_frame) - 1)
+        while run < len(self.run_starts):
+            begin, end = self.run_interval(run)
+            if begin >= end_s:
+                break
+            yield self.run_keys[run], begin, end
+            run += 1
 
     def key_interval(self, key: ContentKey) -> tuple[float, float]:
         """Start and end time of the (first) run showing ``key``."""
