@@ -131,3 +131,26 @@ def test_cli_bad_invocations_exit_with_one_line(results, capsys, arguments: list
     assert main(["evaluate", *(a.format(root=results) for a in arguments)]) == 2
     error = capsys.readouterr().err.strip()
     assert len(error.splitlines()) == 1 and message in error
+
+
+def test_a_weak_camera_can_be_kept_from_placing_the_points(paper) -> None:
+    """A camera reported weak, and off by a degree: in the paper's protocol it pulls the
+    points the others are judged on; left out of placing them (wherever two others see a
+    point), the others are judged nearly as without it, and it on points it did not place."""
+    sim, calibration = paper
+    poses = dict(calibration.poses)
+    R, t = poses["far3"]
+    poses["far3"] = (matrix_from_rotvec(np.radians([0.0, 1.0, 0.0])) @ R, t)
+    metrics = dict(calibration.metrics)
+    metrics["far3"] = dataclasses.replace(metrics["far3"], weak=True)
+    weak = dataclasses.replace(calibration, poses=poses, metrics=metrics)
+    strict = EvaluationOptions(weak_cameras_place_points=False)
+    exact = evaluate(calibration, sim.eval_tracks, sim.intrinsics, strict)
+    paper_protocol = evaluate(weak, sim.eval_tracks, sim.intrinsics)
+    kept_out = evaluate(weak, sim.eval_tracks, sim.intrinsics, strict)
+    others = [name for name in sim.scene.camera_names if name != "far3"]
+    pulled = max(paper_protocol.cameras[n].mean_px - exact.cameras[n].mean_px for n in others)
+    unmoved = max(abs(kept_out.cameras[n].mean_px - exact.cameras[n].mean_px) for n in others)
+    # Points only one other camera sees are still placed with the weak camera's help.
+    assert pulled > 0.05 and unmoved < pulled / 20
+    assert kept_out.cameras["far3"].mean_px > paper_protocol.cameras["far3"].mean_px

@@ -9,7 +9,10 @@ draws points in the working volume). With the calibrated poses held fixed:
    degrees, the best-conditioned two-view triangulation (``initialisation="pair"``),
    or from all its views at once (``"all-views"``), by the linear (DLT) method;
 2. all points are refined together by bundle adjustment with the poses fixed, which
-   minimises the total reprojection error over all cameras;
+   minimises the total reprojection error over all cameras (optionally without the
+   observations of cameras the calibration reports as weak wherever two other cameras
+   see the point: a weak camera's pose error then does not move the points the others
+   are judged on, ``weak_cameras_place_points=False``);
 3. each camera's reprojection errors (undistorted pixels) give its mean, standard
    deviation and count; the success rate at a threshold is the percentage of cameras
    whose mean error is below it, counting as failures the cameras that were not
@@ -59,6 +62,11 @@ class EvaluationOptions:
         loss_scale_px: scale of the robust loss in pixels.
         max_iterations: iterations of the refinement.
         num_threads: threads of the refinement.
+        weak_cameras_place_points: the observations of cameras the calibration reports
+            as weak take part in placing the points (the paper's protocol); false leaves
+            them out wherever two other cameras see a point, so that a weak camera's pose
+            error does not move the points the others are judged on, and the weak camera
+            is judged on points it did not place (a stricter test of it).
     """
 
     initialisation: str = "pair"
@@ -66,6 +74,7 @@ class EvaluationOptions:
     loss_scale_px: float = 1.0
     max_iterations: int = 100
     num_threads: int = 1
+    weak_cameras_place_points: bool = True
 
     def __post_init__(self) -> None:
         if self.initialisation not in INITIALISATIONS:
@@ -220,13 +229,32 @@ def _triangulate_and_refine(
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), {}, _by_name(usable, behind)
     camera_index, point_index, xy = kept.bundle_arrays()
     points = points[np.searchsorted(tracks.point_ids, kept.point_ids)]
-    points = _refine(R, t, K, camera_index, point_index, xy, points, options)
+    anchor = np.ones(len(xy), dtype=bool)
+    if not options.weak_cameras_place_points:
+        anchor = _anchor_observations(calibration, usable, camera_index, point_index, kept.num_points)
+    cameras = np.unique(camera_index[anchor])  # a weak camera may have no anchor left
+    renumbered = np.searchsorted(cameras, camera_index[anchor])
+    points = _refine(R[cameras], t[cameras], K[cameras], renumbered, point_index[anchor], xy[anchor], points,
+                     options)
     projected, depth = project(K[camera_index], R[camera_index], t[camera_index], points[point_index])
     in_front = depth > 0
     behind = behind + np.bincount(camera_index[~in_front], minlength=len(usable))
     error = np.linalg.norm(projected - xy, axis=1)
     errors = {name: error[(camera_index == c) & in_front] for c, name in enumerate(usable)}
     return kept.point_ids, points, errors, _by_name(usable, behind)
+
+
+def _anchor_observations(calibration: Calibration, usable: list[str], camera_index: np.ndarray,
+                         point_index: np.ndarray, num_points: int) -> np.ndarray:
+    """The observations that place the evaluation points: those of the cameras the
+    calibration reports as weak are left out wherever two others see the point, so that a
+    weak camera's pose error does not move the points every other camera is judged on
+    (it is still judged on them itself)."""
+    weak = np.array([calibration.metrics[name].weak if name in calibration.metrics else False for name in usable],
+                    dtype=bool)
+    strong = ~weak[camera_index]
+    strong_views = np.bincount(point_index[strong], minlength=num_points)
+    return strong | (strong_views[point_index] < MIN_VIEWS)
 
 
 def _by_name(names: list[str], counts: np.ndarray) -> dict[str, int]:
