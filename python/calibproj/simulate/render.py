@@ -11,6 +11,13 @@ projector and a frame across a pattern change is a blend. Frames are rendered at
 the camera's resolution (``supersample`` > 1 integrates several samples per pixel)
 and encoded to H.264 by the ffmpeg program.
 
+What real cameras and rooms add comes from the scene (``calibproj.simulate.scene``): a
+rolling shutter blends per row, automatic exposure scales each frame by the gain its
+predecessors set (``ExposureControl``), a textured floor multiplies the light by its
+albedo, and a camera that drops frames or jitters gets its true exposure starts as
+container timestamps (the video is remuxed, not re-encoded). ``truth.json`` records
+all of it.
+
 All cameras advance together through the sequence in chunks of ``chunk_s`` seconds:
 each projector content is drawn once for all of them, camera frames are rendered
 in threads (OpenCV and numpy release the GIL) and every camera's encoder runs as
