@@ -100,13 +100,15 @@ ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_sig
   // so two windows give the first row's rate from where each puts its code.
   std::vector<ReadoutEstimate> estimates;
   std::vector<double> anchors;  // projector time of each window's centre
-  for (const FrameWindow& window : windows) {
-    ReadoutEstimate e = EstimateInWindow(band_signals, timeline, window, map, options);
+  ReadoutEstimate first;        // the first window's, valid or not (its band fits)
+  for (std::size_t w = 0; w < windows.size(); ++w) {
+    ReadoutEstimate e = EstimateInWindow(band_signals, timeline, windows[w], map, options);
+    if (w == 0) first = e;
     if (!e.valid) continue;
     estimates.push_back(std::move(e));
-    anchors.push_back(0.5 * (window.begin + window.end));
+    anchors.push_back(0.5 * (windows[w].begin + windows[w].end));
   }
-  if (estimates.empty()) return EstimateInWindow(band_signals, timeline, windows.front(), map, options);
+  if (estimates.empty()) return first;
   ReadoutEstimate combined = estimates.front();
   if (estimates.size() == 1) return combined;
   double weights = 0.0, readout = 0.0;
