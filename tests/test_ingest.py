@@ -109,9 +109,14 @@ def check_roi_equals_whole_frame(results):
         roi, whole = (results[flag].cameras[camera].raw["records"] for flag in (True, False))
         assert roi["in_region"].sum() > 0, camera
         assert not whole["in_region"].any()
-        key = lambda r: list(zip(r["pattern"].tolist(), r["marker"].tolist()))  # noqa: E731
-        assert key(roi) == key(whole), camera
-        assert np.abs(roi["centre"] - whole["centre"]).max() < MAX_ROI_DIFFERENCE_PX, camera
+        # The same markers, but for one at the edge of decodability (read from a region
+        # shrunk to its target module size in one case, from the whole frame in the other).
+        keys = [list(zip(r["pattern"].tolist(), r["marker"].tolist())) for r in (roi, whole)]
+        common = set(keys[0]) & set(keys[1])
+        assert len(common) >= max(len(k) for k in keys) - 1, camera
+        first = [keys[0].index(k) for k in sorted(common)]
+        second = [keys[1].index(k) for k in sorted(common)]
+        assert np.abs(roi["centre"][first] - whole["centre"][second]).max() < MAX_ROI_DIFFERENCE_PX, camera
 
 
 def test_roi_detection_equals_whole_frame_detection_aruco(aruco_results):

@@ -105,6 +105,9 @@ void RegisterOptions(py::module_& m) {
       .def_readwrite("adaptive_thresh_win_size_step", &detect::ArucoOptions::adaptive_thresh_win_size_step)
       .def_readwrite("adaptive_thresh_constant", &detect::ArucoOptions::adaptive_thresh_constant)
       .def_readwrite("error_correction_rate", &detect::ArucoOptions::error_correction_rate)
+      .def_readwrite("perspective_remove_pixel_per_cell", &detect::ArucoOptions::perspective_remove_pixel_per_cell)
+      .def_readwrite("perspective_remove_ignored_margin_per_cell",
+                     &detect::ArucoOptions::perspective_remove_ignored_margin_per_cell)
       .def_readwrite("refinement", &detect::ArucoOptions::refinement)
       .def("check", &detect::ArucoOptions::Check, "Raise ValueError naming the first bad field.");
 

@@ -20,7 +20,11 @@ Common
 ArUco
     ``min_marker_perimeter_rate`` (0.01), ``max_marker_perimeter_rate`` (4.0),
     ``adaptive_thresh_win_size_min/max/step`` (3/23/10), ``adaptive_thresh_constant``
-    (7), ``error_correction_rate`` (0.6).
+    (7), ``error_correction_rate`` (0.6), ``perspective_remove_pixel_per_cell`` (8) and
+    ``perspective_remove_ignored_margin_per_cell`` (0.3): bits are read from each
+    module's centre, so markers whose white modules bloom into the black ones
+    (saturation under automatic exposure) keep their ids (OpenCV's 4 and 0.13 lose
+    most of them).
 AprilTag
     ``quad_decimate`` (1.0), ``quad_sigma`` (0.0), ``nthreads`` (1), ``refine_edges``
     (True), ``decode_sharpening`` (0.25), ``max_hamming`` (2),

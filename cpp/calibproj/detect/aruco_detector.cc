@@ -23,6 +23,10 @@ void ArucoOptions::Check() const {
           "adaptive_thresh_win_size_max must be at least adaptive_thresh_win_size_min");
   Require(adaptive_thresh_win_size_step > 0, "adaptive_thresh_win_size_step must be positive");
   Require(error_correction_rate >= 0.0 && error_correction_rate <= 1.0, "error_correction_rate must be in [0, 1]");
+  Require(perspective_remove_pixel_per_cell >= 2 && perspective_remove_pixel_per_cell <= 32,
+          "perspective_remove_pixel_per_cell must be in [2, 32]");
+  Require(perspective_remove_ignored_margin_per_cell >= 0.0 && perspective_remove_ignored_margin_per_cell < 0.5,
+          "perspective_remove_ignored_margin_per_cell must be in [0, 0.5)");
   refinement.Check();
 }
 
@@ -38,6 +42,8 @@ ArucoDetector::ArucoDetector(const MarkerFamily& family, const ArucoOptions& opt
   parameters_->adaptiveThreshWinSizeStep = options_.adaptive_thresh_win_size_step;
   parameters_->adaptiveThreshConstant = options_.adaptive_thresh_constant;
   parameters_->errorCorrectionRate = options_.error_correction_rate;
+  parameters_->perspectiveRemovePixelPerCell = options_.perspective_remove_pixel_per_cell;
+  parameters_->perspectiveRemoveIgnoredMarginPerCell = options_.perspective_remove_ignored_margin_per_cell;
   // Corners are refined by RefineCorners() in Detect().
   parameters_->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;
 }

@@ -26,6 +26,12 @@ struct ArucoOptions {
   double adaptive_thresh_constant = 7.0;
   // Fraction of the Hamming-correctable bits OpenCV may correct.
   double error_correction_rate = 0.6;
+  // Bits are read from the marker warped to this many pixels per module, each module
+  // from its centre only (this share of its side ignored at either end): a marker whose
+  // white modules bloom into the black ones (saturation under automatic exposure, blur)
+  // keeps its bits where OpenCV's defaults (4 px, 0.13) read a wrong code.
+  int perspective_remove_pixel_per_cell = 8;
+  double perspective_remove_ignored_margin_per_cell = 0.3;
   // Sub-pixel corners (see corner_refinement.h); OpenCV's own refinement is off.
   CornerRefinementOptions refinement;
 
