@@ -109,11 +109,12 @@ def check_roi_equals_whole_frame(results):
         roi, whole = (results[flag].cameras[camera].raw["records"] for flag in (True, False))
         assert roi["in_region"].sum() > 0, camera
         assert not whole["in_region"].any()
-        # The same markers, but for one at the edge of decodability (read from a region
-        # shrunk to its target module size in one case, from the whole frame in the other).
+        # The same markers but for a few at the edge of decodability: a region is shrunk
+        # to its target module size, and its contrast (which sets the threshold) is that
+        # of one marker, where the whole frame's is the frame's.
         keys = [list(zip(r["pattern"].tolist(), r["marker"].tolist())) for r in (roi, whole)]
         common = set(keys[0]) & set(keys[1])
-        assert len(common) >= max(len(k) for k in keys) - 1, camera
+        assert len(common) >= 0.97 * max(len(k) for k in keys), (camera, len(keys[0]), len(keys[1]))
         first = [keys[0].index(k) for k in sorted(common)]
         second = [keys[1].index(k) for k in sorted(common)]
         assert np.abs(roi["centre"][first] - whole["centre"][second]).max() < MAX_ROI_DIFFERENCE_PX, camera

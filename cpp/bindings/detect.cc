@@ -104,6 +104,8 @@ void RegisterOptions(py::module_& m) {
       .def_readwrite("adaptive_thresh_win_size_max", &detect::ArucoOptions::adaptive_thresh_win_size_max)
       .def_readwrite("adaptive_thresh_win_size_step", &detect::ArucoOptions::adaptive_thresh_win_size_step)
       .def_readwrite("adaptive_thresh_constant", &detect::ArucoOptions::adaptive_thresh_constant)
+      .def_readwrite("thresh_constant_contrast_share", &detect::ArucoOptions::thresh_constant_contrast_share)
+      .def_readwrite("min_thresh_constant", &detect::ArucoOptions::min_thresh_constant)
       .def_readwrite("error_correction_rate", &detect::ArucoOptions::error_correction_rate)
       .def_readwrite("perspective_remove_pixel_per_cell", &detect::ArucoOptions::perspective_remove_pixel_per_cell)
       .def_readwrite("perspective_remove_ignored_margin_per_cell",

@@ -20,7 +20,10 @@ Common
 ArUco
     ``min_marker_perimeter_rate`` (0.01), ``max_marker_perimeter_rate`` (4.0),
     ``adaptive_thresh_win_size_min/max/step`` (3/23/10), ``adaptive_thresh_constant``
-    (7), ``error_correction_rate`` (0.6), ``perspective_remove_pixel_per_cell`` (8) and
+    (7; the most, see next), ``thresh_constant_contrast_share`` (0.035: the constant is
+    this share of the image's contrast, its brightest 0.5 % above its median, so
+    markers under room light are segmented; 0 keeps the fixed constant),
+    ``min_thresh_constant`` (2), ``error_correction_rate`` (0.6), ``perspective_remove_pixel_per_cell`` (8) and
     ``perspective_remove_ignored_margin_per_cell`` (0.3): bits are read from each
     module's centre, so markers whose white modules bloom into the black ones
     (saturation under automatic exposure) keep their ids (OpenCV's 4 and 0.13 lose

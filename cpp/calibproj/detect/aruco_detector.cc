@@ -1,6 +1,7 @@
 #include "calibproj/detect/aruco_detector.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 
@@ -10,6 +11,25 @@ namespace {
 
 void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument("ArUco options: " + message);
+}
+
+// Grey levels between the image's median and its brightest `share` of pixels.
+double Contrast(const cv::Mat& gray, double share) {
+  int histogram[256] = {0};
+  for (int r = 0; r < gray.rows; ++r) {
+    const std::uint8_t* row = gray.ptr<std::uint8_t>(r);
+    for (int c = 0; c < gray.cols; ++c) ++histogram[row[c]];
+  }
+  const double total = static_cast<double>(gray.total());
+  const auto level_above = [&](double fraction) {
+    double count = 0.0;
+    for (int level = 255; level >= 0; --level) {
+      count += histogram[level];
+      if (count >= fraction * total) return level;
+    }
+    return 0;
+  };
+  return level_above(share) - level_above(0.5);
 }
 
 }  // namespace
@@ -22,6 +42,10 @@ void ArucoOptions::Check() const {
   Require(adaptive_thresh_win_size_max >= adaptive_thresh_win_size_min,
           "adaptive_thresh_win_size_max must be at least adaptive_thresh_win_size_min");
   Require(adaptive_thresh_win_size_step > 0, "adaptive_thresh_win_size_step must be positive");
+  Require(thresh_constant_contrast_share >= 0.0 && thresh_constant_contrast_share <= 1.0,
+          "thresh_constant_contrast_share must be in [0, 1]");
+  Require(min_thresh_constant >= 0.0 && min_thresh_constant <= adaptive_thresh_constant,
+          "min_thresh_constant must be in [0, adaptive_thresh_constant]");
   Require(error_correction_rate >= 0.0 && error_correction_rate <= 1.0, "error_correction_rate must be in [0, 1]");
   Require(perspective_remove_pixel_per_cell >= 2 && perspective_remove_pixel_per_cell <= 32,
           "perspective_remove_pixel_per_cell must be in [2, 32]");
@@ -50,11 +74,15 @@ ArucoDetector::ArucoDetector(const MarkerFamily& family, const ArucoOptions& opt
 
 Detections ArucoDetector::Detect(const cv::Mat& gray, int threshold_window_px) const {
   CheckGrayImage(gray);
-  cv::Ptr<cv::aruco::DetectorParameters> parameters = parameters_;
+  cv::Ptr<cv::aruco::DetectorParameters> parameters = cv::makePtr<cv::aruco::DetectorParameters>(*parameters_);
   if (threshold_window_px > 0) {
-    parameters = cv::makePtr<cv::aruco::DetectorParameters>(*parameters_);
     parameters->adaptiveThreshWinSizeMin = std::max(3, threshold_window_px);
     parameters->adaptiveThreshWinSizeMax = parameters->adaptiveThreshWinSizeMin;
+  }
+  if (options_.thresh_constant_contrast_share > 0.0) {
+    const double constant = options_.thresh_constant_contrast_share * Contrast(gray, 0.005);
+    parameters->adaptiveThreshConstant =
+        std::clamp(constant, options_.min_thresh_constant, options_.adaptive_thresh_constant);
   }
   std::vector<std::vector<cv::Point2f>> corners;
   std::vector<int> ids;

@@ -24,6 +24,12 @@ struct ArucoOptions {
   int adaptive_thresh_win_size_max = 23;
   int adaptive_thresh_win_size_step = 10;
   double adaptive_thresh_constant = 7.0;
+  // The threshold's constant follows the image's contrast (its brightest 0.5 % above
+  // its median: projected white over the floor), times this share, within
+  // [min_thresh_constant, adaptive_thresh_constant]: under room light a marker's white
+  // stands only a few grey levels over its surroundings. 0 keeps the fixed constant.
+  double thresh_constant_contrast_share = 0.035;
+  double min_thresh_constant = 2.0;
   // Fraction of the Hamming-correctable bits OpenCV may correct.
   double error_correction_rate = 0.6;
   // Bits are read from the marker warped to this many pixels per module, each module

@@ -36,6 +36,8 @@ void VisitArucoOptions(ArucoOptionsT& o, Visitor&& visit) {
   visit("adaptive_thresh_win_size_max", o.adaptive_thresh_win_size_max);
   visit("adaptive_thresh_win_size_step", o.adaptive_thresh_win_size_step);
   visit("adaptive_thresh_constant", o.adaptive_thresh_constant);
+  visit("thresh_constant_contrast_share", o.thresh_constant_contrast_share);
+  visit("min_thresh_constant", o.min_thresh_constant);
   visit("error_correction_rate", o.error_correction_rate);
   visit("perspective_remove_pixel_per_cell", o.perspective_remove_pixel_per_cell);
   visit("perspective_remove_ignored_margin_per_cell", o.perspective_remove_ignored_margin_per_cell);
