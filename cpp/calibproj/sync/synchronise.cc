@@ -101,7 +101,9 @@ CodeLocation LocateCode(const std::vector<double>& signal, const LightTimeline& 
     throw std::runtime_error(source + ": " + what + " light code not found: " +
                              Format("best correlation %.3f at camera frame %.0f (needs %.2f)", match.correlation,
                                     match.first_sample, options.min_correlation) +
-                             "; is the projector in view and is this a recording of this sequence?");
+                             "; is the projector in view, is this a recording of this sequence, and was "
+                             "the camera's exposure locked (automatic exposure settling during the code "
+                             "blurs it; start recording a few seconds before the projection)?");
   }
   return FitCode(signal, timeline, code, match, nominal_rate, options);
 }
