@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 
@@ -17,7 +18,9 @@ from calibproj.generate.builder import build_sequence
 from calibproj.generate.video import GreyVideoWriter
 from calibproj.ingest import ingest
 from calibproj.simulate.render import simulate_videos
-from calibproj.simulate.scene import load_scene
+from calibproj.simulate.people import blocked
+from calibproj.simulate.render import RenderOptions
+from calibproj.simulate.scene import Person, load_scene
 
 MAX_SYNC_ERROR_FRAMES = 0.1
 DROP_RATE = 0.04
@@ -274,13 +277,59 @@ def test_timestamps_that_go_back_fail_the_camera_with_a_clear_message(tmp_path):
     assert len(_core.video.luma_signal(str(joined), use_timestamps=False)) == 60
 
 
+# ------------------------------------------------------------------------ people
+
+# Crosses the small room's projection while the patterns play.
+WALKER = Person(start=(-1.2, -0.3), end=(1.2, 0.3), start_s=2.0, speed_mps=0.5)
+
+
+def test_a_person_blocks_the_rays_that_pass_through_them():
+    """A camera 3 m above (0, 0) and a person of 1.7 m at (1, 0): the floor at their feet
+    and just behind them (the ray passes at 1.1 m) is hidden, the floor far behind (the
+    ray passes over their head, 1.75 m at the near side) and beside them is not."""
+    floor_x = np.array([1.0, 2.0, 3.0, 0.0, np.nan])
+    floor_y = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
+    hidden = blocked(np.array([0.0, 0.0, 3.0]), floor_x, floor_y, np.array([1.0, 0.0]), 0.25, 1.7)
+    assert hidden.tolist() == [True, True, False, False, False]
+    assert Person((0.0, 0.0), (2.0, 0.0), start_s=1.0, speed_mps=0.5).centre(3.0).tolist() == [1.0, 0.0]
+    assert Person((0.0, 0.0), (2.0, 0.0), start_s=1.0).centre(0.5) is None
+
+
+def test_a_person_hides_the_floor_and_shades_it(tmp_path):
+    """Rendered with and without the walker: the frames differ only while they are in
+    the room, and there the camera sees their darker body where markers were lit."""
+    sequence = build_sequence(markers="aruco:4X4_50", arrays=2, scales=(1.0,), marker_px=48.0, code_degree=4,
+                              reference_frames=8)
+    small = load_scene("small", seed=7).subset(["cam1"])
+    frames = {}
+    for name, people in (("empty", ()), ("walker", (WALKER,))):
+        simulate_videos(replace(small, people=people), sequence, tmp_path / name, seed=7,
+                        options=RenderOptions(crf=0, fresh_noise=False))
+        capture = cv2.VideoCapture(str(tmp_path / name / "videos" / "cam1.mp4"))
+        frames[name] = []
+        while True:
+            ok, image = capture.read()
+            if not ok:
+                break
+            frames[name].append(image[:, :, 0].astype(float))
+    difference = [np.abs(a - b).mean() for a, b in zip(frames["empty"], frames["walker"])]
+    fps = small.cameras[0].fps
+    walking = [WALKER.centre(i / fps) is not None for i in range(len(difference))]
+    assert max(d for d, w in zip(difference, walking) if not w) < 0.01
+    assert min(d for d, w in zip(difference, walking) if w) > 0.1
+    # Where the walker stands over lit markers, the camera sees their darker body.
+    busiest = int(np.argmax(difference))
+    darker = frames["walker"][busiest] < frames["empty"][busiest] - 20
+    assert darker.mean() > 0.002
+
+
 # ------------------------------------------------------------- everything at once
 
 @pytest.fixture(scope="module")
 def real_room(tmp_path_factory):
     """The small room as real cameras and a real room record it: dropped frames and
     jitter, rolling shutters, automatic exposure, a tiled and stained floor, some room
-    light and harder compression."""
+    light, someone walking through the projection, and harder compression."""
     from calibproj.simulate.render import RenderOptions
     from calibproj.simulate.scene import AutoExposure, FloorTexture
 
@@ -291,7 +340,7 @@ def real_room(tmp_path_factory):
     cameras = tuple(replace(camera, drop_rate=0.02, frame_jitter_s=0.001, readout_s=0.015,
                             auto_exposure=AutoExposure()) for camera in small.cameras)
     scene = replace(small, cameras=cameras, floor=replace(small.floor, texture=FloorTexture()),
-                    photometric=replace(small.photometric, ambient=0.15, contrast=0.6))
+                    photometric=replace(small.photometric, ambient=0.15, contrast=0.6), people=(WALKER,))
     simulate_videos(scene, sequence, out, seed=7, options=RenderOptions(crf=24))
     truth = json.loads((out / "truth.json").read_text())
     return truth, ingest(out / "videos", sequence, out / "intrinsics", progress=False)

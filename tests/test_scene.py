@@ -137,3 +137,22 @@ def test_scene_validation_names_the_file_and_the_field(tmp_path, edit, message):
     with pytest.raises(ValueError, match=message) as error:
         read_scene(path)
     assert str(path) in str(error.value)
+
+
+def test_people_round_trip_and_bad_fields_are_named(tmp_path):
+    from dataclasses import replace
+
+    from calibproj.io.jsonio import FormatError
+    from calibproj.simulate.scene import Person
+
+    scene = replace(load_scene("small"), people=(Person((-1.0, 0.0), (1.0, 0.5), start_s=2.0, height_m=1.8),))
+    save_scene(tmp_path / "scene.json", scene)
+    assert read_scene(tmp_path / "scene.json") == scene
+    document = json.loads((tmp_path / "scene.json").read_text())
+    for field, value, message in (("speed_mps", 0, "people\\[0\\].speed_mps: expected a positive"),
+                                  ("albedo", 2, "people\\[0\\].albedo"), ("start", [1], "people\\[0\\].start"),
+                                  ("legs", 2, "unknown field")):
+        bad = json.loads(json.dumps(document))
+        bad["people"][0][field] = value
+        with pytest.raises(FormatError, match=message):
+            scene_from_json(bad, source="scene.json")

@@ -39,7 +39,8 @@ from calibproj.generate import generate
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
 from calibproj.simulate.render import RenderOptions, simulate_videos
-from calibproj.simulate.scene import AutoExposure, FloorTexture, Scene, load_scene
+from calibproj.simulate.presets import REAL_PEOPLE
+from calibproj.simulate.scene import AutoExposure, FloorTexture, Person, Scene, load_scene
 
 Effect = Callable[[Scene], Scene]
 
@@ -86,12 +87,13 @@ CONDITIONS: dict[str, tuple[Effect, dict]] = {
     "crf-30": (lambda scene: scene, {"crf": 30}),
     "rolling-15ms": (readout(0.015), {}),
     "rolling-30ms": (readout(0.030), {}),
+    "people": (lambda scene: replace(scene, people=tuple(Person(**p) for p in REAL_PEOPLE)), {}),
 }
 COMBINED = "all"
 
 
 def combined(scene: Scene) -> Scene:
-    for name in ("drops-2", "auto-exposure", "room-light", "floor", "rolling-15ms"):
+    for name in ("drops-2", "auto-exposure", "room-light", "floor", "rolling-15ms", "people"):
         scene = CONDITIONS[name][0](scene)
     return scene
 

@@ -156,7 +156,10 @@ def demo(rng: np.random.Generator) -> dict[str, Any]:
 # What real cameras and a real room add, at typical levels (or-real): frame timing of
 # phones and IP cameras, rolling shutters (at most 90 % of a frame), automatic
 # exposure on the cameras that have no manual mode, harder compression on cheap
-# ones, a tiled floor with stains, and some room light.
+# ones, a tiled floor with stains, some room light, and two people crossing the
+# projection while the patterns play.
+REAL_PEOPLE = [{"start": [-2.5, -0.6], "end": [2.5, 0.9], "start_s": 5.0, "speed_mps": 0.8},
+               {"start": [1.8, -2.0], "end": [-1.8, 2.0], "start_s": 9.0, "speed_mps": 0.6}]
 REAL_TIMING = {"drop_rate": 0.02, "frame_jitter_s": 0.001}
 REAL_READOUT_S = 0.015
 REAL_AUTO_EXPOSURE = {"target": 0.45, "time_constant_s": 0.5, "min_gain": 0.25, "max_gain": 8.0}
@@ -178,6 +181,7 @@ def or_real(rng: np.random.Generator) -> dict[str, Any]:
             camera["crf"] = REAL_CRF[camera["name"]]
     document["floor"]["texture"] = dict(REAL_FLOOR_TEXTURE, seed=int(rng.integers(0, 2**31)))
     document["photometric"] = dict(REAL_PHOTOMETRIC)
+    document["people"] = copy.deepcopy(REAL_PEOPLE)
     return document
 
 

@@ -52,7 +52,8 @@ from calibproj.simulate.atlas import AtlasLayout
 from calibproj.simulate.contents import AtlasStore
 from calibproj.simulate.geometric import evaluation_tracks
 from calibproj.simulate.floor_texture import floor_albedo
-from calibproj.simulate.photometric import CameraResponse, ExposureControl, SensorNoise
+from calibproj.simulate.people import PeopleInView
+from calibproj.simulate.photometric import CameraResponse, ExposureControl, SensorNoise, vignetting_gain
 from calibproj.simulate.scene import Camera, Floor, Photometric, Scene, load_scene, save_scene
 from calibproj.simulate.timeline import CameraClock, ContentKey, ProjectionTimeline
 from calibproj.simulate.truth import write_truth
@@ -338,8 +339,9 @@ class _CameraRenderer:
 
     def __init__(self, camera: Camera, clock: CameraClock, sampler: CameraSampler, response: CameraResponse,
                  noise: SensorNoise, writer: Any, atlases: AtlasStore, timeline: ProjectionTimeline,
-                 progress: Any) -> None:
+                 progress: Any, people: PeopleInView | None = None) -> None:
         self.camera = camera
+        self.people = people
         self.clock = clock
         self.sampler = sampler
         self.response = response
@@ -361,7 +363,7 @@ class _CameraRenderer:
 
     def render(self, frames: range) -> None:
         for frame in frames:
-            image = self.noise.quantise(self._encoded(self.weights[frame]), self.exposure.encoded_scale)
+            image = self.noise.quantise(self._frame(frame), self.exposure.encoded_scale)
             if frame not in self.dropped:
                 self.writer.write(image)
                 self.gains.append(self.exposure.gain)
@@ -369,16 +371,33 @@ class _CameraRenderer:
             self.exposure.meter(image)
             self.progress.update(1)
 
+    def _frame(self, frame: int) -> np.ndarray:
+        """Display-encoded frame, with the people in the room at mid-exposure."""
+        weights = self.weights[frame]
+        if self.people is not None:
+            time_s = float(self.starts[frame]) + 0.5 * self.clock.exposure_s
+            occluded = self.people.apply(self._irradiance(weights), self.response.ambient_gain, time_s)
+            if occluded is not None:
+                return self.response.encode(occluded)
+        return self._encoded(weights)
+
     def _encoded(self, weights: dict[ContentKey, float | np.ndarray]) -> np.ndarray:
         """Display-encoded frame: one content's cached values, or a blend in irradiance
         (per row where a rolling shutter's rows saw different contents)."""
-        import cv2
-
         if len(weights) == 1:
             entry = self._entry(next(iter(weights)))
             if entry[1] is None:
                 entry[1] = self.response.encode(entry[0])
             return entry[1]
+        return self.response.encode(self._irradiance(weights))
+
+    def _irradiance(self, weights: dict[ContentKey, float | np.ndarray]) -> np.ndarray:
+        """Irradiance of a frame (a cached array when one content fills it: not to be
+        modified)."""
+        import cv2
+
+        if len(weights) == 1:
+            return self._entry(next(iter(weights)))[0]
         irradiance = None
         for key, weight in weights.items():
             part = self._entry(key)[0]
@@ -388,7 +407,7 @@ class _CameraRenderer:
             else:
                 irradiance = part * np.float32(weight) if irradiance is None else cv2.scaleAdd(
                     part, weight, irradiance)
-        return self.response.encode(irradiance)
+        return irradiance
 
     def _entry(self, key: ContentKey) -> list:
         """``[irradiance, encoded or None]`` of a content, warped on first use."""
@@ -441,6 +460,20 @@ def _albedo(floor: Floor, view: FloorView, camera: Camera) -> np.ndarray | None:
     return albedo
 
 
+def _people_in_view(scene: Scene, view: FloorView, camera: Camera) -> PeopleInView | None:
+    """The scene's people as ``camera`` sees them, or None in an empty room."""
+    import cv2
+
+    if not scene.people:
+        return None
+    floor = [view.floor_x, view.floor_y]
+    if view.floor_x.shape[::-1] != tuple(camera.resolution):
+        floor = [cv2.resize(values, camera.resolution, interpolation=cv2.INTER_AREA) for values in floor]
+    photometric = scene.photometric
+    return PeopleInView(scene.people, camera.position, scene.projector.position, floor[0], floor[1],
+                        vignetting_gain(camera, photometric.vignetting), photometric.ambient, photometric.contrast)
+
+
 def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clocks: dict[str, CameraClock],
                 views: dict[str, FloorView], folder: Path, seed: int, options: RenderOptions,
                 progress: bool) -> dict[str, CameraVideo]:
@@ -456,7 +489,9 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
                                thread_name_prefix="camera") as camera_pool:
         try:
             for index, camera in enumerate(scene.cameras):
-                model = _camera_model(camera, views.pop(camera.name), layout, scene, options, generators[index])
+                view = views.pop(camera.name)
+                model = _camera_model(camera, view, layout, scene, options, generators[index])
+                people = _people_in_view(scene, view, camera)
                 clock = clocks[camera.name]
                 timed = bool(clock.jitter_s or clock.dropped)
                 writer = GreyVideoWriter(folder / f"{camera.name}.mp4", camera.resolution, camera.fps,
@@ -465,7 +500,8 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
                                          timestamps_s=clock.timestamps() if timed else None)
                 bar = tqdm(total=clocks[camera.name].frame_count, desc=camera.name, unit="frame", position=index,
                            disable=not progress, leave=True)
-                renderers.append(_CameraRenderer(camera, clocks[camera.name], *model, writer, atlases, timeline, bar))
+                renderers.append(_CameraRenderer(camera, clocks[camera.name], *model, writer, atlases, timeline, bar,
+                                                 people))
             _run_chunks(renderers, atlases, camera_pool, options.chunk_s)
         except BaseException:
             for renderer in renderers:

@@ -32,6 +32,9 @@ is a rolling shutter's readout time (row ``y`` of ``h`` starts exposing
 ``crf`` is the camera's own x264 quality (cheap cameras compress harder; default:
 the renderer's).
 ``floor.texture`` (``FloorTexture``'s fields) gives the floor tiles, grout and stains.
+``people`` (a list of ``Person``'s fields: ``start`` and ``end`` on the floor, ``start_s``,
+``speed_mps``, ``radius_m``, ``height_m``, ``albedo``) walk through the room during the
+projection, hiding the floor and casting shadows.
 """
 
 from __future__ import annotations
@@ -136,6 +139,31 @@ class AutoExposure:
     min_gain: float = 0.25
     max_gain: float = 8.0
     initial_gain: float = 1.0
+
+
+@dataclass(frozen=True)
+class Person:
+    """Someone walking through the room, a vertical cylinder: from ``start`` to ``end``
+    (floor metres) at ``speed_mps``, setting off ``start_s`` after the projection starts
+    and gone once there. Hides the floor behind from the cameras and casts a shadow in
+    the projector's light (see ``calibproj.simulate.people``)."""
+
+    start: tuple[float, float]
+    end: tuple[float, float]
+    start_s: float = 0.0
+    speed_mps: float = 1.0
+    radius_m: float = 0.25
+    height_m: float = 1.7
+    albedo: float = 0.4
+
+    def centre(self, time_s: float) -> np.ndarray | None:
+        """Where the person stands at ``time_s`` (floor metres), None before or after."""
+        start, end = np.asarray(self.start, dtype=float), np.asarray(self.end, dtype=float)
+        length = float(np.linalg.norm(end - start))
+        walked = (time_s - self.start_s) * self.speed_mps
+        if walked < 0 or walked > length:
+            return None
+        return start if length == 0 else start + (end - start) * (walked / length)
 
 
 class LookAtPose:
@@ -246,6 +274,7 @@ class Scene:
     projector: Projector
     cameras: tuple[Camera, ...]
     photometric: Photometric = field(default_factory=Photometric)
+    people: tuple[Person, ...] = ()
 
     @property
     def camera_names(self) -> list[str]:
@@ -259,7 +288,8 @@ class Scene:
 
     def subset(self, names: list[str]) -> Scene:
         """The same room with only the named cameras, in the given order."""
-        return Scene(self.floor, self.projector, tuple(self.camera(name) for name in names), self.photometric)
+        return Scene(self.floor, self.projector, tuple(self.camera(name) for name in names), self.photometric,
+                     self.people)
 
     def to_json(self) -> dict[str, Any]:
         """Body of ``scene.json`` (without the schema tag)."""
@@ -269,6 +299,7 @@ class Scene:
             "projector": _plain(asdict(self.projector)),
             "cameras": [_without_none(_plain(asdict(camera))) for camera in self.cameras],
             "photometric": asdict(self.photometric),
+            **({"people": [_plain(asdict(person)) for person in self.people]} if self.people else {}),
         }
 
 
@@ -309,7 +340,7 @@ def load_scene(name_or_path: str | os.PathLike, seed: int | None = 0) -> Scene:
 def scene_from_json(document: dict[str, Any], source: str = "scene") -> Scene:
     """Validate a scene document; ``source`` names it in error messages."""
     reader = _FieldReader(source)
-    known = {"schema", "floor", "projector", "cameras", "photometric"}
+    known = {"schema", "floor", "projector", "cameras", "photometric", "people"}
     reader.no_unknown_keys(document, known, "")
     floor = _read_floor(reader, reader.required(document, "floor", ""))
     projector = _read_projector(reader, reader.required(document, "projector", ""))
@@ -322,7 +353,11 @@ def scene_from_json(document: dict[str, Any], source: str = "scene") -> Scene:
     if duplicates:
         raise FormatError(f"{source}: cameras: duplicate names {duplicates}")
     photometric = _read_photometric(reader, document.get("photometric", {}))
-    scene = Scene(floor, projector, cameras, photometric)
+    people_json = document.get("people", [])
+    if not isinstance(people_json, list):
+        raise FormatError(f"{source}: people: expected a list")
+    people = tuple(_read_person(reader, entry, f"people[{i}]") for i, entry in enumerate(people_json))
+    scene = Scene(floor, projector, cameras, photometric, people)
     _check_projector_hits_floor(source, scene.projector)
     return scene
 
@@ -350,6 +385,22 @@ def _read_floor(reader: _FieldReader, entry: Any) -> Floor:
         reader.fail(f"{where}.seed", f"expected a non-negative integer, got {values['seed']}")
     values.update(stains=int(values["stains"]), seed=int(values["seed"]))
     return Floor(size, FloorTexture(**values))
+
+
+def _read_person(reader: _FieldReader, entry: Any, where: str) -> Person:
+    reader.no_unknown_keys(entry, set(Person.__dataclass_fields__), where)
+    start = tuple(reader.numbers(entry, "start", where, 2))
+    end = tuple(reader.numbers(entry, "end", where, 2))
+    defaults = Person(start, end)
+    values = {}
+    for key in ("start_s", "speed_mps", "radius_m", "height_m", "albedo"):
+        values[key] = reader.number(entry, key, where, default=getattr(defaults, key))
+    for key in ("speed_mps", "radius_m", "height_m"):
+        if values[key] <= 0.0:
+            reader.fail(f"{where}.{key}", f"expected a positive number, got {values[key]}")
+    if not 0.0 <= values["albedo"] <= 1.0:
+        reader.fail(f"{where}.albedo", f"expected a number in [0, 1], got {values['albedo']}")
+    return Person(start, end, **values)
 
 
 def _read_record(reader: _FieldReader, entry: Any, defaults: Any, where: str) -> dict[str, float]:
