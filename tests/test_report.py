@@ -87,3 +87,19 @@ def test_calibrate_writes_the_report_by_default(tmp_path, capsys) -> None:
 def test_missing_results_folder_is_one_clear_error(tmp_path) -> None:
     with pytest.raises(FileNotFoundError, match="no such results folder"):
         write_report(tmp_path / "absent", tmp_path / "tracks.json")
+
+
+def test_uncertainty_circles_are_magnified_to_a_visible_size() -> None:
+    """The largest 3-sigma circle becomes 4 % of the scene; the factor is printed on the
+    plot, so circles compare between cameras and read back to sigma."""
+    from types import SimpleNamespace
+
+    from calibproj.report.figures import UNCERTAINTY_SHARE, uncertainty_magnification
+
+    def view(sigma):
+        return SimpleNamespace(metrics=None if sigma is None else SimpleNamespace(centre_sigma=sigma))
+
+    views = [view(0.001), view(0.004), view(None)]
+    assert uncertainty_magnification(views, 10.0) == pytest.approx(UNCERTAINTY_SHARE * 10.0 / 0.012)
+    assert uncertainty_magnification([view(None)], 10.0) == 1.0
+    assert uncertainty_magnification([view(5.0)], 10.0) == 1.0  # already larger: never shrunk

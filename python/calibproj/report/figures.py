@@ -21,6 +21,8 @@ DEFAULT_DPI = 80
 MAX_SCENE_POINTS = 4000
 # Frustum depth as a share of the scene's extent.
 FRUSTUM_SHARE = 0.12
+# The largest camera-centre uncertainty circle is drawn at this share of the scene.
+UNCERTAINTY_SHARE = 0.04
 # Coverage grid: cells along the longer image side.
 COVERAGE_CELLS = 16
 # Mean-residual arrows: cells along the longer image side, and the observations a cell
@@ -114,14 +116,38 @@ def scene_3d(calibration: Calibration, views: Sequence[CameraView], dpi: int = D
     return png_bytes(figure, dpi)
 
 
+def uncertainty_magnification(views: Sequence[CameraView], extent: float) -> float:
+    """Factor that brings the largest centre 3-sigma circle to UNCERTAINTY_SHARE of the
+    scene's extent (1 when they are that large already, or there is no sigma)."""
+    sigmas = [view.metrics.centre_sigma for view in views
+              if view.metrics is not None and view.metrics.centre_sigma is not None and view.metrics.centre_sigma > 0]
+    if not sigmas or not extent > 0:
+        return 1.0
+    return max(1.0, UNCERTAINTY_SHARE * extent / (3.0 * max(sigmas)))
+
+
+def _uncertainty_circle(axes, view: CameraView, centre: np.ndarray, magnification: float, colour) -> None:
+    """The centre's 3-sigma (worst axis) circle, magnified; dashed for a weak camera."""
+    from matplotlib.patches import Circle
+
+    metrics = view.metrics
+    if metrics is None or metrics.centre_sigma is None or not metrics.centre_sigma > 0:
+        return
+    axes.add_patch(Circle(tuple(centre), 3.0 * metrics.centre_sigma * magnification, fill=False, color=colour,
+                          linewidth=1.0, linestyle="--" if metrics.weak else "-"))
+
+
 def scene_views(calibration: Calibration, views: Sequence[CameraView], dpi: int = DEFAULT_DPI) -> bytes:
-    """Top view (x, y) and side view (x, z) of the cameras, their optical axes and the points."""
+    """Top view (x, y) and side view (x, z) of the cameras, their optical axes and the
+    points; around each camera centre its 3-sigma uncertainty (worst axis, magnified as
+    the legend says; dashed for a weak camera)."""
     figure = Figure(figsize=(12.0, 5.0))
     top, side = figure.subplots(1, 2)
     _, extent = _scene_extent(calibration)
     points = _subsampled(calibration.points)
     drawable = _drawable(views)
     unit = _unit_label(calibration)
+    magnification = uncertainty_magnification(drawable, extent)
     for axes, (i, j), title in ((top, (0, 1), "from above"), (side, (0, 2), "from the side (y towards the viewer)")):
         if len(points):
             axes.scatter(points[:, i], points[:, j], s=1, c="#777777", label="points")
@@ -129,6 +155,7 @@ def scene_views(calibration: Calibration, views: Sequence[CameraView], dpi: int 
             corners = frustum(view, FRUSTUM_SHARE * extent)
             axis_end = corners[1:].mean(axis=0)
             axes.plot(*corners[0, [i, j]], "o", color=colour, markersize=6)
+            _uncertainty_circle(axes, view, corners[0, [i, j]], magnification, colour)
             axes.plot([corners[0, i], axis_end[i]], [corners[0, j], axis_end[j]], color=colour, linewidth=1.5)
             axes.annotate(view.name, corners[0, [i, j]], textcoords="offset points", xytext=(4, 4),
                           fontsize=8, color=colour)
@@ -137,6 +164,8 @@ def scene_views(calibration: Calibration, views: Sequence[CameraView], dpi: int 
         axes.set_ylabel(f"{'xyz'[j]} {unit}")
         axes.set_title(title)
         axes.grid(True, linewidth=0.3)
+    top.text(0.01, 0.01, f"circles: camera centre 3 sigma (worst axis) x {magnification:.0f}; dashed: weak",
+             transform=top.transAxes, fontsize=8, color="#444444")
     side.axhline(0.0, color="#999999", linewidth=1)
     figure.subplots_adjust(left=0.06, right=0.98, bottom=0.11, top=0.93, wspace=0.18)
     return png_bytes(figure, dpi)
