@@ -233,3 +233,30 @@ def test_ingest_synchronises_while_decoding(rendered):
         assert abs(sync["rate"] / rate - 1.0) < 1e-4, name
         signal = camera.raw["signal"]
         assert np.isnan(signal).any()  # frames between the codes were not converted
+
+
+def automatic_exposure(signal, target, time_constant_s, fps):
+    """What a camera adjusting its gain after every frame towards ``target`` records."""
+    step = 1.0 - np.exp(-1.0 / (fps * time_constant_s))
+    gain, out = 1.0, []
+    for value in signal:
+        out.append(gain * value)
+        gain = float(np.clip(gain * (target / max(gain * value, 1e-3)) ** step, 0.25, 8.0))
+    return np.array(out)
+
+
+def test_a_camera_adjusting_its_exposure_during_the_code_still_finds_it():
+    """A camera started with the projection whose fast automatic exposure (0.15 s)
+    answers every light change: the code's correlation falls below the threshold unless
+    signal and code are detrended. The fit's linear gain drift then places it within a
+    frame (half a frame here): automatic exposure costs sync accuracy, not the camera."""
+    sequence = short_sequence()
+    rng = np.random.default_rng(9)
+    offset = 2.6
+    signal, _ = record(sequence, 30.0, offset, 1.0, rng)
+    signal = automatic_exposure(signal, 0.45, 0.15, 30.0)
+    options = known_exposure(1.0, 30.0)
+    with pytest.raises(RuntimeError, match="light code not found"):
+        synchronise(signal, sequence, 30.0, options.replace(detrend_frames=0))
+    result = synchronise(signal, sequence, 30.0, options)
+    assert abs(result["offset"] - offset) < 1.0

@@ -36,6 +36,9 @@ class IngestOptions:
         max_missing_share: share of a light code's camera frames that may be missing
             (dropped by the camera) where the code is searched; the correlation is
             taken over the frames present.
+        detrend_frames: the code search compares signal and code after subtracting their
+            mean over +- this many camera frames (0: not at all), so that a camera whose
+            automatic exposure settles while the code plays still finds it.
         offset_range: the sub-frame fit searches +- this many camera frames around the
             coarse offset.
         offset_step: grid step of the sub-frame fit, camera frames.
@@ -177,6 +180,7 @@ class IngestOptions:
     phases: int = 4
     coarse_exposure: float = 0.5
     max_missing_share: float = 0.25
+    detrend_frames: int = 8
     offset_range: float = 1.0
     offset_step: float = 0.02
     min_exposure: float = 0.02

@@ -23,6 +23,7 @@ void VisitSyncOptions(SyncOptionsT& s, Visitor&& visit) {
   visit("phases", s.search.phases, "sub-frame phases per candidate rate in the coarse search");
   visit("coarse_exposure", s.search.exposure, "exposure assumed by the coarse search, camera frames");
   visit("max_missing_share", s.search.max_missing_share, "share of a code's frames that may be dropped");
+  visit("detrend_frames", s.search.detrend_frames, "code search: mean over +- this many frames subtracted");
   visit("offset_range", s.fit.offset_range, "sub-frame fit range around the coarse offset, camera frames");
   visit("offset_step", s.fit.offset_step, "grid step of the sub-frame fit, camera frames");
   visit("min_exposure", s.fit.min_exposure, "shortest exposure the fit tries, camera frames");

@@ -34,6 +34,20 @@ CodeTemplate MakeTemplate(const LightTimeline& timeline, const FrameWindow& wind
   return t;
 }
 
+// Sets the template's values to `values` minus their mean, and its norm.
+void Recentre(const std::vector<double>& values, CodeTemplate* t) {
+  double mean = 0.0;
+  for (double v : values) mean += v;
+  mean /= static_cast<double>(values.size());
+  t->values.resize(values.size());
+  t->norm = 0.0;
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    t->values[i] = values[i] - mean;
+    t->norm += t->values[i] * t->values[i];
+  }
+  t->norm = std::sqrt(t->norm);
+}
+
 // Candidate rates, the nominal one first and then outwards: when several explain the
 // signal equally well (a code seen without a frame across a light change), the search
 // keeps the one closest to the nominal rate.
@@ -109,6 +123,26 @@ void CodeSearchOptions::Check() const {
   Require(phases >= 1, "phases must be at least 1");
   Require(exposure > 0.0 && exposure <= 1.0, "exposure must be in (0, 1] camera frames");
   Require(max_missing_share >= 0.0 && max_missing_share < 0.9, "max_missing_share must be in [0, 0.9)");
+  Require(detrend_frames >= 0 && detrend_frames <= 1000, "detrend_frames must be in [0, 1000]");
+}
+
+std::vector<double> Detrended(const std::vector<double>& values, int half_window) {
+  const int n = static_cast<int>(values.size());
+  if (half_window <= 0) return values;
+  std::vector<double> sum(n + 1, 0.0);
+  std::vector<int> count(n + 1, 0);
+  for (int j = 0; j < n; ++j) {
+    const bool measured = !std::isnan(values[j]);
+    sum[j + 1] = sum[j] + (measured ? values[j] : 0.0);
+    count[j + 1] = count[j] + (measured ? 1 : 0);
+  }
+  std::vector<double> out(n);
+  for (int j = 0; j < n; ++j) {
+    const int lo = std::max(0, j - half_window), hi = std::min(n, j + half_window + 1);
+    const int measured = count[hi] - count[lo];
+    out[j] = measured > 0 ? values[j] - (sum[hi] - sum[lo]) / measured : values[j];
+  }
+  return out;
 }
 
 std::vector<CodeTemplate> MakeCodeTemplates(const LightTimeline& timeline, const FrameWindow& window,
@@ -119,15 +153,18 @@ std::vector<CodeTemplate> MakeCodeTemplates(const LightTimeline& timeline, const
   for (double rate : CandidateRates(nominal_rate, options)) {
     for (int p = 0; p < options.phases; ++p) {
       CodeTemplate t = MakeTemplate(timeline, window, rate, static_cast<double>(p) / options.phases, options.exposure);
-      if (t.values.size() >= 2) templates.push_back(std::move(t));
+      if (t.values.size() < 2) continue;
+      if (options.detrend_frames > 0) Recentre(Detrended(t.values, options.detrend_frames), &t);
+      templates.push_back(std::move(t));
     }
   }
   return templates;
 }
 
-CodeMatch SearchCode(const std::vector<double>& signal, const std::vector<CodeTemplate>& templates,
+CodeMatch SearchCode(const std::vector<double>& raw, const std::vector<CodeTemplate>& templates,
                      const FrameWindow& window, double exposure, double max_missing_share, int first_shift,
-                     int end_shift) {
+                     int end_shift, int detrend_frames) {
+  const std::vector<double> signal = Detrended(raw, detrend_frames);
   const int end = static_cast<int>(signal.size());
   const int shift_limit = end_shift < 0 ? end : end_shift;
   const SignalSums sums(signal, end);
@@ -154,7 +191,7 @@ CodeMatch SearchCode(const std::vector<double>& signal, const std::vector<CodeTe
 CodeMatch SearchCode(const std::vector<double>& signal, const LightTimeline& timeline, const FrameWindow& window,
                      double nominal_rate, const CodeSearchOptions& options, int first_shift, int end_shift) {
   return SearchCode(signal, MakeCodeTemplates(timeline, window, nominal_rate, options), window, options.exposure,
-                    options.max_missing_share, first_shift, end_shift);
+                    options.max_missing_share, first_shift, end_shift, options.detrend_frames);
 }
 
 CodeTracker::CodeTracker(const LightTimeline& timeline, FrameWindow window, double nominal_rate,
@@ -163,6 +200,7 @@ CodeTracker::CodeTracker(const LightTimeline& timeline, FrameWindow window, doub
       templates_(MakeCodeTemplates(timeline, window, nominal_rate, options)),
       exposure_(options.exposure),
       max_missing_share_(options.max_missing_share),
+      detrend_frames_(options.detrend_frames),
       min_correlation_(min_correlation),
       guard_samples_(guard_samples) {
   for (const CodeTemplate& t : templates_) {
@@ -172,10 +210,12 @@ CodeTracker::CodeTracker(const LightTimeline& timeline, FrameWindow window, doub
 
 bool CodeTracker::Update(const std::vector<double>& signal) {
   if (found_) return true;
-  // Shifts where every candidate template fits; the next call starts where these end.
-  const int complete_shifts = static_cast<int>(signal.size()) - longest_template_ + 1;
+  // Shifts where every candidate template fits, each sample's detrending window whole;
+  // the next call starts where these end.
+  const int complete_shifts = static_cast<int>(signal.size()) - longest_template_ + 1 - detrend_frames_;
   if (complete_shifts <= next_shift_) return false;
-  const CodeMatch match = SearchCode(signal, templates_, window_, exposure_, max_missing_share_, next_shift_, complete_shifts);
+  const CodeMatch match = SearchCode(signal, templates_, window_, exposure_, max_missing_share_, next_shift_,
+                                     complete_shifts, detrend_frames_);
   if (match.valid() && match.correlation > best_.correlation + kCorrelationTie) best_ = match;
   next_shift_ = complete_shifts;
   found_ = best_.valid() && best_.correlation >= min_correlation_ &&

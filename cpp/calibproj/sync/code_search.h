@@ -28,6 +28,10 @@ struct CodeSearchOptions {
   // Share of a code window's camera frames that may be missing (dropped by the camera)
   // at a shift that is searched; the correlation is taken over the frames present.
   double max_missing_share = 0.25;
+  // Signal and templates are compared after subtracting their mean over +- this many
+  // camera frames (0: not at all): a camera whose automatic exposure is settling while
+  // the code plays adds a slow drift that the code's fast changes stand out from.
+  int detrend_frames = 8;
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;
@@ -63,7 +67,11 @@ CodeMatch SearchCode(const std::vector<double>& signal, const LightTimeline& tim
                      int end_shift = -1);
 CodeMatch SearchCode(const std::vector<double>& signal, const std::vector<CodeTemplate>& templates,
                      const FrameWindow& window, double exposure, double max_missing_share, int first_shift = 0,
-                     int end_shift = -1);
+                     int end_shift = -1, int detrend_frames = 0);
+
+// `values` minus their mean over +- half_window neighbours (the measured ones; NaN
+// stays NaN). Samples closer than half_window to the end use the neighbours there are.
+std::vector<double> Detrended(const std::vector<double>& values, int half_window);
 
 // Incremental search for one code while a video is being decoded: Update() looks at
 // the shifts that became complete since its last call and keeps the best match. The
@@ -85,6 +93,7 @@ class CodeTracker {
   std::vector<CodeTemplate> templates_;
   double exposure_;
   double max_missing_share_;
+  int detrend_frames_;
   int longest_template_ = 0;
   double min_correlation_;
   int guard_samples_;
