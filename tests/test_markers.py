@@ -296,6 +296,20 @@ def test_marker_centres_is_the_diagonal_intersection():
     assert np.isnan(marker_centres(degenerate)).all()
 
 
+def ids_found(detectors: dict, view, markers: str, rng, trials: int = 12) -> dict[str, int]:
+    """How often each detector finds the marker of ``trials`` views (``view(rng, id)``);
+    a wrong id fails the test."""
+    found = dict.fromkeys(detectors, 0)
+    for trial in range(trials):
+        marker_id = int(rng.integers(0, family_info(markers).id_count))
+        image = view(rng, marker_id)
+        for name, detector in detectors.items():
+            ids, _ = detector.detect(image)
+            assert set(ids.tolist()) <= {marker_id}, (name, trial, ids)
+            found[name] += int(marker_id in ids.tolist())
+    return found
+
+
 def saturated_view(bits: np.ndarray, H: np.ndarray, size: int, gain: float) -> np.ndarray:
     """A projected (inverted) marker seen by a camera whose automatic exposure raised its
     gain for the dark floor: optical blur first, then the sensor clips, so the white
@@ -316,15 +330,10 @@ def test_saturated_markers_keep_their_bits():
     ours = MarkerDetector(markers, inverted=True)
     opencv = MarkerDetector(markers, inverted=True, perspective_remove_pixel_per_cell=4,
                             perspective_remove_ignored_margin_per_cell=0.13)
-    found = {"ours": 0, "opencv": 0}
-    for trial in range(12):
-        marker_id = int(rng.integers(0, 50))
-        H = random_view(rng, 6, 30.0, 72)
-        image = saturated_view(marker_bits(markers, marker_id), H, 72, gain=3.0)
-        for name, detector in (("ours", ours), ("opencv", opencv)):
-            ids, _ = detector.detect(image)
-            assert set(ids.tolist()) <= {marker_id}, (name, trial, ids)
-            found[name] += int(marker_id in ids.tolist())
+    def view(trial_rng, marker_id):
+        return saturated_view(marker_bits(markers, marker_id), random_view(trial_rng, 6, 30.0, 72), 72, gain=3.0)
+
+    found = ids_found({"ours": ours, "opencv": opencv}, view, markers, rng)
     assert found["ours"] >= 10
     assert found["ours"] >= found["opencv"] + 4
 
@@ -337,16 +346,11 @@ def test_markers_under_room_light_are_found():
     markers = "aruco:4X4_50"
     ours = MarkerDetector(markers, inverted=True)
     fixed = MarkerDetector(markers, inverted=True, thresh_constant_contrast_share=0.0)
-    found = {"ours": 0, "fixed": 0}
-    for trial in range(12):
-        marker_id = int(rng.integers(0, 50))
-        H = random_view(rng, 6, 16.0, 64)
-        marker = render_warped(marker_bits(markers, marker_id), H, (64, 64)) / 255.0
-        image = 200.0 - 40.0 * marker + rng.normal(0.0, 1.5, marker.shape)  # floor 160, white 200
-        image = np.clip(np.rint(image), 0, 255).astype(np.uint8)
-        for name, detector in (("ours", ours), ("fixed", fixed)):
-            ids, _ = detector.detect(image)
-            assert set(ids.tolist()) <= {marker_id}, (name, trial, ids)
-            found[name] += int(marker_id in ids.tolist())
+    def view(trial_rng, marker_id):
+        marker = render_warped(marker_bits(markers, marker_id), random_view(trial_rng, 6, 16.0, 64), (64, 64)) / 255.0
+        image = 200.0 - 40.0 * marker + trial_rng.normal(0.0, 1.5, marker.shape)  # floor 160, white 200
+        return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+    found = ids_found({"ours": ours, "fixed": fixed}, view, markers, rng)
     assert found["ours"] >= 10
     assert found["ours"] >= found["fixed"] + 4
