@@ -103,3 +103,22 @@ def test_uncertainty_circles_are_magnified_to_a_visible_size() -> None:
     assert uncertainty_magnification(views, 10.0) == pytest.approx(UNCERTAINTY_SHARE * 10.0 / 0.012)
     assert uncertainty_magnification([view(None)], 10.0) == 1.0
     assert uncertainty_magnification([view(5.0)], 10.0) == 1.0  # already larger: never shrunk
+
+
+def test_sync_table_gives_each_cameras_sync_with_its_uncertainty_and_failures() -> None:
+    from calibproj.report.page import sync_table
+
+    report = {"cameras": {
+        "cam1": {"status": "ok", "sync": {"offset_s": 1.25, "offset_uncertainty_frames": 0.3, "camera_fps": 30.0,
+                                          "drift_ppm": 12.34, "exposure_frames": 0.5, "readout_s": 0.015,
+                                          "readout_sigma_s": 0.0004},
+                 "frames": {"decoded": 700, "dropped": 14, "duplicated": 1},
+                 "patterns": {"whole_frame": 3, "in_regions": 90, "dropped": 2, "missing": 1},
+                 "scales": [{"scale": 1.0, "kept": 40}, {"scale": 3.0, "kept": 80}], "detections_inconsistent": 5},
+        "cam2": {"status": "failed", "error": "cam2.mp4: start light code not found <here>"},
+    }}
+    page = sync_table(report)
+    assert "1.2500 &plusmn; 0.0100" in page  # 0.3 frame at 30 fps
+    assert "15.00 &plusmn; 0.40" in page and "12.3" in page
+    assert "700 / 14 / 1" in page and "93 / 2 / 1" in page and "40 at 1x, 80 at 3x" in page
+    assert "FAILED: cam2.mp4: start light code not found &lt;here&gt;" in page

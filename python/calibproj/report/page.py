@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import html
+import json
 import logging
 import os
 import re
@@ -22,6 +23,7 @@ from calibproj.tracks import Tracks
 logger = logging.getLogger(__name__)
 
 REPORT_FILE = "report.html"
+DETECT_REPORT_FILE = "detect_report.json"
 TRACKS_FILE = "tracks.json"
 FIGURES_DIR = "report"
 
@@ -79,7 +81,7 @@ def write_report(
     for plot in [*scene, *cameras.values()]:
         atomic_write_bytes(folder / plot.file_name, plot.png)
     path = results_dir / REPORT_FILE
-    atomic_write_text(path, render_page(calibration, views, scene, cameras))
+    atomic_write_text(path, render_page(calibration, views, scene, cameras, _detect_report(results_dir)))
     logger.info("report written: %s (%.1f MB)", path, path.stat().st_size / 1e6)
     return path
 
@@ -116,8 +118,21 @@ def unique_file_names(names: list[str]) -> dict[str, str]:
 # -- HTML -----------------------------------------------------------------------------------
 
 
+def _detect_report(results_dir: Path) -> dict | None:
+    """The results' detect_report.json (calibrated from videos), or None (from tracks,
+    or unreadable: the report then has no sync section, and says why in the log)."""
+    path = results_dir / DETECT_REPORT_FILE
+    if not path.exists():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        logger.warning("%s: not read (%s); the report has no sync and detection section", path, error)
+        return None
+
+
 def render_page(calibration: Calibration, views: list[CameraView], scene: list[Plot],
-                cameras: dict[str, Plot]) -> str:
+                cameras: dict[str, Plot], detect_report: dict | None = None) -> str:
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -127,6 +142,7 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         _summary(calibration, views),
         "<h2>Cameras</h2>",
         _camera_table(views, cameras),
+        *(["<h2>Sync and detection</h2>", sync_table(detect_report)] if detect_report else []),
         "<h2>Scene</h2>",
         *(_figure(plot) for plot in scene),
         "<h2>Per camera</h2>",
@@ -172,6 +188,42 @@ def _camera_table(views: list[CameraView], cameras: dict[str, Plot]) -> str:
                 if m is not None and m.weak and m.rotation_sigma_deg is not None else "")
         rows.append(f"<tr>{name}" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>" + weak)
     return "<table>" + "".join(rows) + "</table>"
+
+
+def sync_table(detect_report: dict) -> str:
+    """Per camera: its sync to the projector with uncertainties, its frames and what
+    the markers of each scale gave (``detect_report.json``'s values)."""
+    header = ("<tr><th class=\"name\">camera</th><th>offset [s] &plusmn; 1&sigma;</th><th>drift [ppm]</th>"
+              "<th>exposure [frames]</th><th>readout [ms] &plusmn; 1&sigma;</th>"
+              "<th>frames decoded / dropped / duplicated</th><th>patterns used / dropped / missing</th>"
+              "<th>markers kept per scale</th><th>detections off the floor homography</th></tr>")
+    rows = [header]
+    for name, camera in detect_report.get("cameras", {}).items():
+        cell = f'<td class="name">{html.escape(str(name))}</td>'
+        if camera.get("status") != "ok":
+            reason = html.escape(str(camera.get("error", camera.get("status", "failed"))))
+            rows.append(f'<tr>{cell}<td class="failed" colspan="8">FAILED: {reason}</td></tr>')
+            continue
+        rows.append(f"<tr>{cell}" + "".join(f"<td>{c}</td>" for c in _sync_cells(camera)) + "</tr>")
+    return "<table>" + "".join(rows) + "</table>"
+
+
+def _sync_cells(camera: dict) -> list[str]:
+    sync, frames, patterns = camera.get("sync", {}), camera.get("frames", {}), camera.get("patterns", {})
+    fps = sync.get("camera_fps") or 0.0
+    offset_sigma = sync.get("offset_uncertainty_frames")
+    offset = _number(sync.get("offset_s"), 4)
+    if offset_sigma is not None and fps > 0:
+        offset += f" &plusmn; {offset_sigma / fps:.4f}"
+    readout = "-"
+    if sync.get("readout_s") is not None:
+        readout = f"{1e3 * sync['readout_s']:.2f} &plusmn; {1e3 * (sync.get('readout_sigma_s') or 0.0):.2f}"
+    used = patterns.get("whole_frame", 0) + patterns.get("in_regions", 0)
+    kept = ", ".join(f"{scale.get('kept', 0)} at {scale.get('scale', '?'):g}x" for scale in camera.get("scales", []))
+    return [offset, _number(sync.get("drift_ppm"), 1), _number(sync.get("exposure_frames"), 2), readout,
+            f"{frames.get('decoded', '-')} / {frames.get('dropped', '-')} / {frames.get('duplicated', '-')}",
+            f"{used} / {patterns.get('dropped', '-')} / {patterns.get('missing', '-')}", kept,
+            str(camera.get("detections_inconsistent", "-"))]
 
 
 def _camera_section(view: CameraView, plot: Plot) -> str:
