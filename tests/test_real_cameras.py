@@ -259,6 +259,24 @@ def test_detections_off_the_floor_homography_are_dropped():
     assert checked and not keep.any() and "agree with one homography of the floor" in problem
 
 
+def test_a_static_pattern_read_as_one_marker_in_every_array_is_dropped():
+    """A stain decoded as marker 17 in every frame: one image point for the shifted
+    centres of that marker in 15 arrays. A homography fits one position, so it cannot
+    be checked: none is kept; the same marker beside others is checked and kept."""
+    rng = np.random.default_rng(4)
+    projector = np.array([900.0, 500.0]) + rng.uniform(-30.0, 30.0, (15, 2))
+    image = np.array([226.0, 525.0]) + rng.normal(0.0, 1.0, (15, 2))
+    keep, checked, problem = _core.detect.check_floor_consistency(projector, image, positions=[17] * 15)
+    assert checked and not keep.any() and "1 marker position(s), too few to check" in problem
+    H = np.array([[0.6, 0.05, 120.0], [-0.02, 0.55, 80.0], [2e-5, 1e-5, 1.0]])
+    grid = np.array([[x, y] for x in (300.0, 900.0, 1500.0) for y in (200.0, 800.0)])
+    projector = np.repeat(grid, 5, axis=0) + rng.uniform(-30.0, 30.0, (30, 2))
+    mapped = np.c_[projector, np.ones(30)] @ H.T
+    keep, _, problem = _core.detect.check_floor_consistency(projector, mapped[:, :2] / mapped[:, 2:],
+                                                            positions=np.repeat(np.arange(6), 5).tolist())
+    assert keep.all() and not problem
+
+
 def test_timestamps_that_go_back_fail_the_camera_with_a_clear_message(tmp_path):
     """Two MPEG-TS recordings joined byte by byte: the second restarts the clock.
     Counting its frames as duplicates would silently lose them."""

@@ -1,5 +1,7 @@
 // Bindings of calibproj::detect: numpy images in, (ids, corners) numpy arrays out.
 
+#include <numeric>
+#include <optional>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -178,7 +180,7 @@ void RegisterFamilies(py::module_& m) {
       "check_floor_consistency",
       [](const py::array_t<double, py::array::c_style | py::array::forcecast>& projector,
          const py::array_t<double, py::array::c_style | py::array::forcecast>& image, double threshold_px,
-         int min_points, double min_share) {
+         int min_points, double min_share, const std::optional<std::vector<int>>& positions, int min_positions) {
         const auto points = [](const py::array_t<double, py::array::c_style | py::array::forcecast>& a,
                                const char* name) {
           if (a.ndim() != 2 || a.shape(1) != 2) throw std::invalid_argument(std::string(name) + ": expected (N, 2)");
@@ -190,17 +192,24 @@ void RegisterFamilies(py::module_& m) {
         options.threshold_px = threshold_px;
         options.min_points = min_points;
         options.min_share = min_share;
+        options.min_positions = min_positions;
+        const std::vector<cv::Point2d> image_points = points(image, "image");
+        // Without positions every detection counts as a marker position of its own.
+        std::vector<int> position(image_points.size());
+        std::iota(position.begin(), position.end(), 0);
+        if (positions) position = *positions;
         const detect::ConsistencyResult result =
-            detect::CheckFloorConsistency(points(projector, "projector"), points(image, "image"), options);
+            detect::CheckFloorConsistency(points(projector, "projector"), image_points, position, options);
         py::array_t<bool> keep(static_cast<py::ssize_t>(result.keep.size()));
         std::copy(result.keep.begin(), result.keep.end(), keep.mutable_data());
         return py::make_tuple(keep, result.checked, result.problem);
       },
       py::arg("projector"), py::arg("image"), py::arg("threshold_px") = 3.0, py::arg("min_points") = 8,
-      py::arg("min_share") = 0.3,
+      py::arg("min_share") = 0.3, py::arg("positions") = py::none(), py::arg("min_positions") = 3,
       "(keep (N,) bool, checked, problem): detections (projector centre -> undistorted image centre) "
       "that agree with one RANSAC homography of the floor; all dropped, with the problem, when too "
-      "few agree; all kept unchecked below min_points.");
+      "few agree or they cover fewer than min_positions marker positions (positions: per detection, "
+      "its marker's grid cell; None: all distinct); all kept unchecked below min_points.");
 }
 
 }  // namespace

@@ -139,6 +139,9 @@ class IngestOptions:
             its prediction (a wrong id, a frame of another pattern) are dropped.
         consistency_min_share: when fewer than this share of the detections agree on
             one homography, none of them is kept.
+        consistency_min_positions: the agreeing detections must cover this many marker
+            positions (grid cells), else none is kept: a homography fits any few, so a
+            stain decoded as one marker in every array would pass unchecked.
         max_deviation_px: scales of an MSM farther than this from their median are
             rejected.
         min_scales: scales an MSM needs (after rejection) to give a centre.
@@ -235,6 +238,7 @@ class IngestOptions:
     homography_max_rms_px: float = 1.0
     consistency_px: float = 3.0
     consistency_min_share: float = 0.3
+    consistency_min_positions: int = 3
     max_deviation_px: float = 0.5
     min_scales: int = 1
     readout_bands: int = 16

@@ -23,7 +23,8 @@ ArUco
     (7; the most, see next), ``thresh_constant_contrast_share`` (0.035: the constant is
     this share of the image's contrast, its brightest 0.5 % above its median, so
     markers under room light are segmented; 0 keeps the fixed constant),
-    ``min_thresh_constant`` (2), ``error_correction_rate`` (0.6), ``perspective_remove_pixel_per_cell`` (8) and
+    ``min_thresh_constant`` (3: lower lets grout lines and stains through),
+    ``error_correction_rate`` (0.6), ``perspective_remove_pixel_per_cell`` (8) and
     ``perspective_remove_ignored_margin_per_cell`` (0.3): bits are read from each
     module's centre, so markers whose white modules bloom into the black ones
     (saturation under automatic exposure) keep their ids (OpenCV's 4 and 0.13 lose

@@ -29,7 +29,7 @@ struct ArucoOptions {
   // [min_thresh_constant, adaptive_thresh_constant]: under room light a marker's white
   // stands only a few grey levels over its surroundings. 0 keeps the fixed constant.
   double thresh_constant_contrast_share = 0.035;
-  double min_thresh_constant = 2.0;
+  double min_thresh_constant = 3.0;
   // Fraction of the Hamming-correctable bits OpenCV may correct.
   double error_correction_rate = 0.6;
   // Bits are read from the marker warped to this many pixels per module, each module

@@ -20,6 +20,10 @@ struct ConsistencyOptions {
   double threshold_px = 3.0;  // largest distance from the homography's prediction
   int min_points = 8;         // detections needed for a check (fewer: kept unchecked)
   double min_share = 0.3;     // share that must agree, else every detection is dropped
+  // Distinct marker positions (grid cells) the agreeing detections must cover: a
+  // homography fits any few positions, so a static pattern of the floor decoded as one
+  // marker in every array would pass unchecked.
+  int min_positions = 3;
   std::uint64_t seed = 0;
 
   // Throws std::invalid_argument naming the first bad field.
@@ -34,8 +38,9 @@ struct ConsistencyResult {
 };
 
 // `projector[i]` and `image[i]`: projector centre and undistorted image centre of
-// detection i.
+// detection i; `position[i]`: its marker's position in the array (grid cell).
 ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projector,
-                                        const std::vector<cv::Point2d>& image, const ConsistencyOptions& options);
+                                        const std::vector<cv::Point2d>& image, const std::vector<int>& position,
+                                        const ConsistencyOptions& options);
 
 }  // namespace calibproj::detect

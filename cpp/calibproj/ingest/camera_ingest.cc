@@ -493,11 +493,14 @@ class CameraIngest {
   void RejectInconsistentRecords() {
     auto& records = result_.records;
     std::vector<cv::Point2d> projector, image;
+    std::vector<int> position;
     for (const detect::ScaleRecord& r : records) {
       projector.push_back(sequence_.centres[r.array * sequence_.markers_per_array + r.marker]);
       image.push_back(r.centre);
+      position.push_back(r.marker);
     }
-    const detect::ConsistencyResult check = detect::CheckFloorConsistency(projector, image, options_.consistency);
+    const detect::ConsistencyResult check =
+        detect::CheckFloorConsistency(projector, image, position, options_.consistency);
     result_.detections_inconsistent = check.rejected;
     result_.consistency_problem = check.problem;
     std::size_t next = 0;

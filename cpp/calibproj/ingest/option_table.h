@@ -83,6 +83,8 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("homography_max_rms_px", o.homography.max_rms_px, "inlier RMS the fit must stay under");
   visit("consistency_px", o.consistency.threshold_px, "detections this far off the floor homography are dropped");
   visit("consistency_min_share", o.consistency.min_share, "share that must agree, else all are dropped");
+  visit("consistency_min_positions", o.consistency.min_positions,
+        "marker positions the agreeing detections must cover, else all are dropped");
   visit("max_deviation_px", o.merge.max_deviation_px, "scales farther than this from their median are rejected");
   visit("min_scales", o.merge.min_scales, "scales an MSM needs to give a centre");
   visit("readout_bands", o.readout_bands, "image bands measuring a rolling shutter's readout (0: none)");

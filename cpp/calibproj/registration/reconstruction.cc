@@ -406,8 +406,10 @@ RegisterResult Reconstruction::RegisterCamera(int camera) {
       geometry::EstimatePoseRansac(X, pixels, CameraMatrix(cameras_[camera].K), pnp);
   result.inliers = static_cast<int>(estimate.inliers.size());
   if (!estimate.success) {
-    result.reason = "PnP failed: " + Str(result.inliers) + " inliers of " + Str(result.correspondences) +
-                    " correspondences (need " + Str(options_.min_pnp_points) + ")";
+    result.reason = !estimate.problem.empty()
+                        ? "PnP failed: " + estimate.problem
+                        : "PnP failed: " + Str(result.inliers) + " inliers of " + Str(result.correspondences) +
+                              " correspondences (need " + Str(options_.min_pnp_points) + ")";
     failure_[camera] = result.reason;
     return result;
   }
