@@ -46,8 +46,8 @@ class DemoOptions:
 
 @dataclass
 class DemoResult:
-    comparison: object  # calibproj.compare.Comparison
-    evaluation: object  # calibproj.evaluate.Evaluation
+    comparison: object  # calibproj.comparison.Comparison
+    evaluation: object  # calibproj.evaluation.Evaluation
     calibration: object  # calibproj.calibration.Calibration
     report: Path
     seconds: dict[str, float]
@@ -55,9 +55,9 @@ class DemoResult:
 
 def run_demo(out: str | os.PathLike, options: DemoOptions | None = None, progress: bool = True) -> DemoResult:
     """Generate, render, calibrate and compare into ``out`` (see the module docstring)."""
-    from calibproj.compare import compare
-    from calibproj.evaluate import evaluate
-    from calibproj.generate import generate
+    from calibproj.comparison import compare
+    from calibproj.evaluation import evaluate
+    from calibproj.sequence import generate
     from calibproj.pipeline import check_output_folder
     from calibproj.pipeline import calibrate
     from calibproj.registration import RegistrationOptions

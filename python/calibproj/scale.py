@@ -117,12 +117,12 @@ class ProjectedMarkers:
 
     @classmethod
     def from_sequence(cls, sequence) -> ProjectedMarkers:
-        """From a ``calibproj.generate.Sequence`` (what ``sequence.json`` holds)."""
+        """From a ``calibproj.sequence.Sequence`` (what ``sequence.json`` holds)."""
         return cls(sequence.centres, sequence.layout.marker_side(1.0), tuple(sequence.projector))
 
     @classmethod
     def from_layout(cls, layout) -> ProjectedMarkers:
-        """From a ``calibproj.generate.MsmLayout``."""
+        """From a ``calibproj.sequence.MsmLayout``."""
         return cls(layout.centres(), layout.marker_side(1.0), tuple(layout.projector))
 
     @property
@@ -145,7 +145,7 @@ class ProjectedMarkers:
 def read_projected_markers(path: str | os.PathLike, markers_per_array: int | None = None) -> ProjectedMarkers:
     """The MSM geometry of a ``sequence.json``; with ``markers_per_array`` (the tracks'),
     checks that the sequence is the one the tracks were made from."""
-    from calibproj.generate.sequence import Sequence
+    from calibproj.sequence.sequence import Sequence
 
     markers = ProjectedMarkers.from_sequence(Sequence.load(path))
     if markers_per_array is not None and markers_per_array != markers.markers_per_array:

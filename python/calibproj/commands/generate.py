@@ -55,8 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from calibproj.generate import SequenceOptions, generate
-    from calibproj.generate.video import DEFAULT_CRF, DEFAULT_PRESET
+    from calibproj.sequence import SequenceOptions, generate
+    from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET
 
     options = SequenceOptions(
         markers=args.markers, grid=_pair(args.grid, "--grid", "4x8"), arrays=args.arrays,

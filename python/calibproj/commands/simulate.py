@@ -134,7 +134,7 @@ def _simulate_tracks(scene, args: argparse.Namespace) -> int:
 
 
 def _layout(scene, args: argparse.Namespace):
-    from calibproj.generate.layout import MsmLayout
+    from calibproj.sequence.layout import MsmLayout
 
     try:
         rows, cols = (int(v) for v in args.grid.lower().split("x"))
