@@ -12,6 +12,8 @@ import importlib
 import logging
 import sys
 
+from calibproj.io.output_folder import OutputBusyError
+
 # name -> module; the order is the order of the workflow.
 COMMANDS = {
     "generate": "calibproj.commands.generate",
@@ -59,6 +61,9 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=level, format="%(message)s")
     try:
         return int(args.run(args) or 0)
+    except OutputBusyError as error:
+        print(f"calibproj {args.command}: error: {error}", file=sys.stderr)
+        return 1
     except (CommandError, ValueError, FileNotFoundError, RuntimeError) as error:
         print(f"calibproj {args.command}: error: {error}", file=sys.stderr)
         return 2
