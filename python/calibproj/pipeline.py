@@ -73,6 +73,10 @@ def calibrate(
     measurement = parse_scale(scale) if scale else None
     if measurement is not None and measurement.kind == "marker-size" and sequence is None:
         raise ValueError(f"--scale {scale}: marker-size needs --sequence (the projection's sequence.json)")
+    videos = _videos_folder(source)
+    if measurement is not None and videos is not None:  # before the long ingest
+        check_measurement(measurement, video_camera_names(videos),
+                          _projected_markers(sequence, None) if measurement.kind == "marker-size" else None)
     folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
         if isinstance(intrinsics, (str, os.PathLike)):
@@ -107,13 +111,28 @@ def calibrate(
     return calibration
 
 
+def _videos_folder(source: Tracks | str | os.PathLike) -> Path | None:
+    """The videos folder ``source`` names, or None when it names tracks."""
+    if isinstance(source, Tracks):
+        return None
+    path = Path(source)
+    return None if path.is_file() or path.suffix.lower() == ".json" else path
+
+
+def video_camera_names(folder: Path) -> list[str]:
+    """The cameras of a videos folder as the ingest names them (video file stems)."""
+    from calibproj.ingest import VIDEO_SUFFIXES
+
+    if not folder.is_dir():
+        return []
+    return sorted({p.stem for p in folder.iterdir() if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES})
+
+
 def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, workers, progress):
     """(tracks, cameras that failed before registration, the ingest result or None)."""
-    if isinstance(source, Tracks):
-        return source, {}, None
-    path = Path(source)
-    if path.is_file() or path.suffix.lower() == ".json":
-        return Tracks.read(path), {}, None
+    path = _videos_folder(source)
+    if path is None:
+        return (source, {}, None) if isinstance(source, Tracks) else (Tracks.read(source), {}, None)
     if not path.is_dir():
         raise FileNotFoundError(f"{path}: no such videos folder")
     if sequence is None:
