@@ -34,7 +34,7 @@ class SuggestingArgumentParser(argparse.ArgumentParser):
 
     arguments: Sequence[str] = ()  # the arguments of the last parse
 
-    def parse_known_args(self, args=None, namespace=None):  # noqa: ANN001 (argparse's signature)
+    def parse_known_args(self, args=None, namespace=None):
         self.arguments = list(sys.argv[1:] if args is None else args)
         return super().parse_known_args(args, namespace)
 

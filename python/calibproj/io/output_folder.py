@@ -88,7 +88,8 @@ class _Lock:
             try:
                 fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
             except OSError as error:
-                raise OutputError(f"{self.target}: cannot write in {self.target.parent} ({_described(error)})") from None
+                raise OutputError(f"{self.target}: cannot write in {self.target.parent} "
+                                  f"({_described(error)})") from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as error:
