@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibproj.cli import main
-from calibproj.compare import compare
+from calibproj.comparison import compare
 from calibproj.io.poses import CameraPoses, read_poses, write_camera_poses
 from calibproj.simulate.geometric import simulate_tracks
 from calibproj.simulate.scene import load_scene

@@ -11,7 +11,7 @@ import pytest
 
 from calibproj.cli import main
 from calibproj import _core
-from calibproj.evaluate import EvaluationOptions, best_pair, evaluate, triangulate_tracks
+from calibproj.evaluation import EvaluationOptions, best_pair, evaluate, triangulate_tracks
 from calibproj.registration import calibrate
 from calibproj.simulate import simulate_tracks
 from calibproj.synthetic import matrix_from_rotvec

@@ -10,10 +10,10 @@ import pytest
 
 from calibproj import generate
 from calibproj.cli import main
-from calibproj.generate import SequenceOptions, build_sequence, default_frames_per_pattern
-from calibproj.generate.codes import code_pair
-from calibproj.generate.layout import MsmLayout
-from calibproj.generate.sequence import Sequence
+from calibproj.sequence import SequenceOptions, build_sequence, default_frames_per_pattern
+from calibproj.sequence.codes import code_pair
+from calibproj.sequence.layout import MsmLayout
+from calibproj.sequence.sequence import Sequence
 from calibproj.io.jsonio import FormatError, read_json, write_json
 from calibproj.markers import MarkerDetector, marker_centres
 

@@ -14,7 +14,7 @@ import pytest
 
 from calibproj import _core
 from calibproj.cli import main
-from calibproj.generate.builder import build_sequence
+from calibproj.sequence.builder import build_sequence
 from calibproj.ingest import ingest
 from calibproj.ingest_options import IngestOptions
 from calibproj.io.intrinsics import Intrinsics, read_intrinsics, write_intrinsics

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibproj.generate import generate
+from calibproj.sequence import generate
 from calibproj.ingest_options import IngestOptions
 from calibproj.simulate import simulate_tracks
 from calibproj.simulate.render import simulate_videos

@@ -11,9 +11,9 @@ from pathlib import Path
 import cv2
 import pytest
 
-from calibproj.compare import compare
-from calibproj.evaluate import evaluate
-from calibproj.generate import generate
+from calibproj.comparison import compare
+from calibproj.evaluation import evaluate
+from calibproj.sequence import generate
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
 from calibproj.simulate.render import simulate_videos

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.generate.builder import build_sequence
-from calibproj.generate.video import GreyVideoWriter
+from calibproj.sequence.builder import build_sequence
+from calibproj.sequence.video import GreyVideoWriter
 from calibproj.ingest import ingest
 from calibproj.simulate.render import simulate_videos
 from calibproj.simulate.people import blocked

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.compare import compare
+from calibproj.comparison import compare
 from calibproj.io.poses import CameraPoses
 from calibproj.registration import RegistrationDriver, RegistrationOptions, calibrate
 from calibproj.simulate import simulate_tracks

@@ -13,7 +13,7 @@ import pytest
 from scipy.ndimage import map_coordinates
 
 from calibproj.cli import main
-from calibproj.generate.builder import build_sequence
+from calibproj.sequence.builder import build_sequence
 from calibproj.io.intrinsics import read_intrinsics
 from calibproj.io.poses import read_poses
 from calibproj.tracks import Tracks

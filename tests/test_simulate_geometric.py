@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibproj.cli import main
-from calibproj.generate.layout import MsmLayout
+from calibproj.sequence.layout import MsmLayout
 from calibproj.io.intrinsics import load_intrinsics_dir
 from calibproj.io.poses import read_poses
 from calibproj.simulate.geometric import project_points, simulate_tracks

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.generate.builder import build_sequence
+from calibproj.sequence.builder import build_sequence
 from calibproj.ingest import ingest, luma_signal, synchronise
 from calibproj.ingest_options import IngestOptions
 from calibproj.simulate.render import simulate_videos

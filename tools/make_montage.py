@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_arguments(argv)
     import cv2
 
-    from calibproj.generate.builder import build_sequence
+    from calibproj.sequence.builder import build_sequence
     from calibproj.simulate.render import render_stills
     from calibproj.simulate.scene import load_scene
 

@@ -1,42 +1,46 @@
-"""calibproj: external calibration of camera networks from projected multi-scale markers."""
+"""calibproj: external calibration of camera networks from projected multi-scale markers.
+
+The workflow as functions: ``generate`` (the projection sequence), ``detect`` (camera
+videos to MSM tracks), ``calibrate`` (videos or tracks to a calibration and its results
+folder), ``compare`` (poses against a reference) and ``evaluate`` (on independent
+data); ``detect_markers`` finds markers in one image. Simulated camera networks live
+in the subpackage ``calibproj.simulate`` (``simulate_tracks`` is also exported here).
+
+Every module is importable by its dotted name: no name exported here is also the name
+of a submodule (the projection sequence lives in ``calibproj.sequence``, the pose
+comparison in ``calibproj.comparison``, the evaluation in ``calibproj.evaluation``).
+"""
 
 from __future__ import annotations
 
 import logging
 
-__version__ = "0.1.0"
+from calibproj.calibration import Calibration
+from calibproj.comparison import compare
+from calibproj.evaluation import evaluate
+from calibproj.ingest import detect
+from calibproj.ingest_options import IngestOptions
+from calibproj.markers import detect_markers
+from calibproj.pipeline import calibrate
+from calibproj.registration import RegistrationOptions
+from calibproj.sequence import generate
+from calibproj.simulate import simulate_tracks
+from calibproj.tracks import Tracks
+from calibproj.version import __version__
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 
-# The tracks-only simulation and the pose comparison; these names shadow the
-# subpackage calibproj.simulate and the module calibproj.compare as attributes, so
-# import their contents with "from calibproj.simulate.scene import ...".
-from calibproj.compare import compare  # noqa: E402
-from calibproj.simulate import simulate_tracks as simulate  # noqa: E402
-
-# Marker detection in one image, and the projection sequence generator. The function
-# generate shadows the subpackage calibproj.generate in the same way: import from it
-# with "from calibproj.generate.sequence import Sequence".
-from calibproj.generate import generate  # noqa: E402
-from calibproj.markers import detect_markers  # noqa: E402
-
-# Calibration from videos or tracks (calibproj.pipeline), its options and its result.
-from calibproj.calibration import Calibration  # noqa: E402
-from calibproj.pipeline import calibrate  # noqa: E402
-from calibproj.registration import RegistrationOptions  # noqa: E402
-from calibproj.tracks import Tracks  # noqa: E402
-
-# Evaluation on independent data; like compare, the function shadows its module
-# calibproj.evaluate as an attribute (import from it with "from calibproj.evaluate import ...").
-from calibproj.evaluate import evaluate  # noqa: E402
-
-# From camera videos to MSM tracks (synchronisation, frame picking, detection).
-from calibproj.ingest import detect  # noqa: E402
-from calibproj.ingest_options import IngestOptions  # noqa: E402
-
-__all__ = ["__version__"]
-__all__ += ["Calibration", "RegistrationOptions", "Tracks", "calibrate"]
-__all__ += ["compare", "simulate"]
-__all__ += ["evaluate"]
-__all__ += ["detect_markers", "generate"]
-__all__ += ["IngestOptions", "detect"]
+__all__ = [
+    "Calibration",
+    "IngestOptions",
+    "RegistrationOptions",
+    "Tracks",
+    "__version__",
+    "calibrate",
+    "compare",
+    "detect",
+    "detect_markers",
+    "evaluate",
+    "generate",
+    "simulate_tracks",
+]

@@ -1,5 +1,8 @@
+"""``python -m calibproj``: the ``calibproj`` command line."""
+
 import sys
 
 from calibproj.cli import main
 
-sys.exit(main())
+if __name__ == "__main__":
+    sys.exit(main())

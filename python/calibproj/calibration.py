@@ -119,12 +119,6 @@ class Calibration:
         metrics = {name: CameraMetrics(None, None, 0, 0, 0, 0, reason) for name, reason in failed.items()}
         return cls({}, dict(failed), metrics, np.zeros((0, 3)), np.zeros(0, dtype=np.int64), model=model)
 
-    def export(self, format_name: str, out_dir: str | os.PathLike, intrinsics: Any, tracks: Any = None) -> list[Path]:
-        """Write this calibration in another tool's format (see ``calibproj.export``)."""
-        from calibproj.export import export
-
-        return export(self, format_name, out_dir, intrinsics, tracks)
-
     def save(self, directory: str | os.PathLike) -> None:
         """Write camera_poses.json, metrics.json and points.ply into ``directory``."""
         directory = Path(directory)

@@ -3,6 +3,15 @@
 Each subcommand lives in ``calibproj.commands.<name>`` with ``add_arguments(parser)``
 and ``run(args) -> int``; those modules import heavy libraries only inside ``run``
 so that ``--help`` stays instant.
+
+Exit status (README, "Exit status"): ``EXIT_OK`` 0 when the run did all it was asked;
+``EXIT_USAGE`` 2 for a bad invocation or input (argparse's errors, ``CommandError``,
+``ValueError`` and ``OSError``: a missing or malformed file, an output that cannot be
+written), reported in one line naming the file; ``EXIT_FAILURE`` 1 for any other
+failure: a run that finished without every camera (the commands return it), another
+run writing the same output or an external program that failed (``RuntimeError``, one
+line), or an internal error (any other exception, reported with its traceback);
+``EXIT_INTERRUPTED`` 130 on Ctrl-C.
 """
 
 from __future__ import annotations
@@ -11,6 +20,10 @@ import argparse
 import importlib
 import logging
 import sys
+import traceback
+
+from calibproj.commands.parser import SuggestingArgumentParser
+from calibproj.version import __version__
 
 # name -> module; the order is the order of the workflow.
 COMMANDS = {
@@ -23,16 +36,22 @@ COMMANDS = {
     "demo": "calibproj.commands.demo",
 }
 
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2  # also what argparse exits with on a bad invocation
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report it
+
 
 class CommandError(Exception):
     """A bad invocation or input: reported as one line, exit status 2."""
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+def build_parser() -> SuggestingArgumentParser:
+    parser = SuggestingArgumentParser(
         prog="calibproj",
         description="Calibrate a camera network from projected multi-scale markers.",
     )
+    parser.add_argument("--version", action="version", version=f"calibproj {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, module_name in COMMANDS.items():
@@ -48,23 +67,43 @@ def build_parser() -> argparse.ArgumentParser:
             name, help=summary, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter
         )
         module.add_arguments(sub)
-        sub.set_defaults(run=module.run)
+        sub.set_defaults(run=module.run, command_parser=sub)
     return parser
+
+
+def parse_arguments(parser: SuggestingArgumentParser, argv: list[str] | None) -> argparse.Namespace:
+    """``parser.parse_args``, with arguments unknown to the subcommand reported by the
+    subcommand's parser (its usage, its options suggested)."""
+    args, extras = parser.parse_known_args(argv)
+    if extras:
+        command_parser = args.command_parser
+        own = set(command_parser.arguments)
+        reporter = command_parser if all(extra in own for extra in extras) else parser
+        reporter.error(f"unrecognized arguments: {' '.join(extras)}")
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse_arguments(parser, argv)
     level = logging.WARNING - 10 * min(args.verbose + 1, 2)
     logging.basicConfig(level=level, format="%(message)s")
+    prefix = f"calibproj {args.command}"
     try:
-        return int(args.run(args) or 0)
-    except (CommandError, ValueError, FileNotFoundError, RuntimeError) as error:
-        print(f"calibproj {args.command}: error: {error}", file=sys.stderr)
-        return 2
+        return int(args.run(args) or EXIT_OK)
     except KeyboardInterrupt:
-        print(f"calibproj {args.command}: interrupted", file=sys.stderr)
-        return 130
+        print(f"{prefix}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except (CommandError, ValueError, OSError) as error:
+        print(f"{prefix}: error: {error}", file=sys.stderr)
+        return EXIT_USAGE
+    except RuntimeError as error:
+        print(f"{prefix}: error: {error}", file=sys.stderr)
+        return EXIT_FAILURE
+    except Exception as error:
+        traceback.print_exc()
+        print(f"{prefix}: internal error: {type(error).__name__}: {error}", file=sys.stderr)
+        return EXIT_FAILURE
 
 
 if __name__ == "__main__":

@@ -13,14 +13,17 @@ from __future__ import annotations
 
 import logging
 import os
-import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from calibproj.io.output_folder import OutputFolder
+
 logger = logging.getLogger(__name__)
 
 DEMO_SCENE = "demo"
+# Files that mark a folder the demo wrote (what --force may replace).
+DEMO_SIGNATURE = ("sequence/sequence.json", "room/scene.json", "results/camera_poses.json")
 
 
 @dataclass
@@ -33,7 +36,7 @@ class DemoOptions:
         scales: MSM scales: 1 for the zoomed camera, 3 and 6 for the far-field ones.
         model: registration model, ``coplanar`` or ``free``.
         seed: seed of the simulation (sensor noise).
-        force: replace the results of an earlier demo in the output folder.
+        force: replace the folder of an earlier demo (the whole folder).
     """
 
     markers: str = "aruco:4X4_50"
@@ -46,42 +49,46 @@ class DemoOptions:
 
 @dataclass
 class DemoResult:
-    comparison: object  # calibproj.compare.Comparison
-    evaluation: object  # calibproj.evaluate.Evaluation
+    comparison: object  # calibproj.comparison.Comparison
+    evaluation: object  # calibproj.evaluation.Evaluation
     calibration: object  # calibproj.calibration.Calibration
     report: Path
     seconds: dict[str, float]
 
 
 def run_demo(out: str | os.PathLike, options: DemoOptions | None = None, progress: bool = True) -> DemoResult:
-    """Generate, render, calibrate and compare into ``out`` (see the module docstring)."""
-    from calibproj.compare import compare
-    from calibproj.evaluate import evaluate
-    from calibproj.generate import generate
-    from calibproj.pipeline import check_output_folder
+    """Generate, render, calibrate and compare into ``out`` (see the module docstring).
+
+    ``out`` is written as one transaction (``calibproj.io.output_folder``): an existing
+    demo folder is only replaced, whole, with ``options.force``."""
+    options = options or DemoOptions()
+    folder = OutputFolder(out, force=options.force, signature=DEMO_SIGNATURE).open()
+    with folder, folder.writing() as staging:
+        comparison, evaluation, calibration, seconds = _run(staging, options, progress)
+    logger.info("demo written to %s", folder.path)
+    return DemoResult(comparison, evaluation, calibration, folder.path / "results" / "report.html", seconds)
+
+
+def _run(out: Path, options: DemoOptions, progress: bool) -> tuple[object, object, object, dict[str, float]]:
+    from calibproj.comparison import compare
+    from calibproj.evaluation import evaluate
     from calibproj.pipeline import calibrate
     from calibproj.registration import RegistrationOptions
+    from calibproj.sequence import generate
     from calibproj.simulate.render import simulate_videos
 
-    options = options or DemoOptions()
-    out = Path(out)
     results = out / "results"
-    check_output_folder(results, options.force)
-    if options.force and out.exists():
-        for part in ("sequence", "room", "results"):
-            shutil.rmtree(out / part, ignore_errors=True)
     seconds: dict[str, float] = {}
-
     start = time.perf_counter()
     sequence = generate(out / "sequence", markers=options.markers, arrays=options.arrays,
                         scales=tuple(options.scales), progress=progress)
     seconds["generate"] = time.perf_counter() - start
-    logger.info("sequence: %d patterns in %s (%.1f s)", len(sequence.patterns), out / "sequence", seconds["generate"])
+    logger.info("sequence: %d patterns (%.1f s)", len(sequence.patterns), seconds["generate"])
 
     start = time.perf_counter()
     simulate_videos(DEMO_SCENE, sequence, out / "room", seed=options.seed, progress=progress)
     seconds["render"] = time.perf_counter() - start
-    logger.info("videos of the %s room in %s (%.1f s)", DEMO_SCENE, out / "room", seconds["render"])
+    logger.info("videos of the %s room (%.1f s)", DEMO_SCENE, seconds["render"])
 
     # One measurement puts the result in metres: the side of a scale-1 marker on the
     # floor, which in a real room is measured with a ruler.
@@ -90,12 +97,12 @@ def run_demo(out: str | os.PathLike, options: DemoOptions | None = None, progres
     calibration = calibrate(
         out / "room" / "videos", out / "room" / "intrinsics", sequence=out / "sequence" / "sequence.json",
         out=results, options=RegistrationOptions(model=options.model), scale=f"marker-size:{marker_side_m:.9f}",
-        exports=["yaml", "colmap", "anipose"], force=options.force, progress=progress,
+        exports=["yaml", "colmap", "anipose"], progress=progress,
     )
     seconds["calibrate"] = time.perf_counter() - start
     comparison = compare(results / "camera_poses.json", out / "room" / "truth.json")
     evaluation = evaluate(results, out / "room" / "eval_tracks.json")
-    return DemoResult(comparison, evaluation, calibration, results / "report.html", seconds)
+    return comparison, evaluation, calibration, seconds
 
 
 def marker_side_on_floor(scene_path: Path, sequence) -> float:

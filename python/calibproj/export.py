@@ -47,6 +47,7 @@ import numpy as np
 from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics
 from calibproj.io.jsonio import atomic_write_text
+from calibproj.reprojection import reprojection_errors
 from calibproj.tracks import Tracks
 
 logger = logging.getLogger(__name__)
@@ -192,8 +193,6 @@ def write_colmap(calibration: Calibration, out_dir: Path, intrinsics: Mapping[st
 def _colmap_observations(calibration: Calibration, tracks: Tracks | None,
                          intrinsics: Mapping[str, Intrinsics]) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per camera: point ids, COLMAP pixels (distorted, shifted) and reprojection errors."""
-    from calibproj.evaluate import reprojection_errors
-
     if tracks is None:
         return {}
     out = {}

@@ -157,7 +157,7 @@ def ingest(
     Args:
         videos: a folder of videos (``<camera>.mp4``, ...), a list of video paths or
             a mapping camera name -> path.
-        sequence: a ``calibproj.generate.Sequence`` or the path of ``sequence.json``.
+        sequence: a ``calibproj.sequence.Sequence`` or the path of ``sequence.json``.
         intrinsics: a folder with ``<camera>.json`` (or ``.yaml``/``.yml``/``.xml``), or a
             mapping camera name -> ``Intrinsics`` or file path.
         options: :class:`calibproj.ingest_options.IngestOptions` (defaults documented there).
@@ -299,7 +299,7 @@ def synchronise(signal: np.ndarray, sequence: Any, camera_fps: float, options: I
 
 
 def _load_sequence(sequence: Any) -> tuple[Any, str]:
-    from calibproj.generate.sequence import Sequence
+    from calibproj.sequence.sequence import Sequence
 
     if isinstance(sequence, Sequence):
         return sequence, "sequence"

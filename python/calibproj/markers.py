@@ -118,7 +118,7 @@ def render_marker(
         inverted: white marker on black (as projected) instead of black on white.
         quiet_modules: width of the background margin in cells (>= 0).
     """
-    from calibproj.generate.raster import draw_cells
+    from calibproj.sequence.raster import draw_cells
 
     if not module_px > 0:
         raise ValueError(f"module_px must be positive, got {module_px}")

@@ -5,7 +5,12 @@
 and, given ``out``, writes the results folder: ``camera_poses.json``,
 ``metrics.json``, ``points.ply``, ``tracks.json`` (and ``detect_report.json`` from
 videos), ``intrinsics/`` (the files used), exports, and ``report.html`` with
-``report/*.png``. An existing results folder is only overwritten with ``force``.
+``report/*.png`` (``calibproj.results``).
+
+The folder is written as one transaction (``calibproj.io.output_folder``): checked and
+locked before the ingest starts, written beside it and moved into place at the end; an
+existing folder is only replaced, whole, with ``force``, and a run that fails or is
+interrupted leaves the previous folder as it was.
 """
 
 from __future__ import annotations
@@ -18,22 +23,13 @@ from typing import Any
 
 from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir, write_intrinsics_dir
+from calibproj.io.output_folder import OutputFolder
 from calibproj.registration import RegistrationOptions
 from calibproj.registration import calibrate as register
+from calibproj.results import CALIBRATION_FILES, DETECT_REPORT_FILE, INTRINSICS_DIR, TRACKS_FILE
 from calibproj.tracks import Tracks
 
 logger = logging.getLogger(__name__)
-
-RESULT_FILES = ("camera_poses.json", "metrics.json", "points.ply")
-
-
-def check_output_folder(out: str | os.PathLike, force: bool) -> None:
-    """ValueError if ``out`` already holds results and ``force`` is off."""
-    out = Path(out)
-    existing = [name for name in RESULT_FILES if (out / name).exists()]
-    if existing and not force:
-        raise ValueError(f"{out}: already holds results ({', '.join(existing)}); use --force to overwrite them")
-
 
 def calibrate(
     source: Tracks | str | os.PathLike,
@@ -65,49 +61,78 @@ def calibrate(
             None keeps the arbitrary unit (first registered camera at height 1).
         exports: any of ``yaml``, ``colmap``, ``anipose`` (``calibproj.export``).
         report: write ``report.html`` and ``report/*.png`` (needs ``out``).
-        force: overwrite the results of an earlier run in ``out``.
+        force: replace an existing results folder ``out`` (the whole folder: nothing
+            of the earlier run remains); without it an existing folder is an error.
         ingest_options, detector_options, workers, progress: passed to
             ``calibproj.ingest.ingest`` when ``source`` is videos.
     """
     from calibproj.export import parse_formats
     from calibproj.scale import apply_scale, check_measurement, parse_scale
 
-    if out is not None:
-        check_output_folder(out, force)
     formats = parse_formats(",".join(exports)) if exports else []
     measurement = parse_scale(scale) if scale else None
     if measurement is not None and measurement.kind == "marker-size" and sequence is None:
         raise ValueError(f"--scale {scale}: marker-size needs --sequence (the projection's sequence.json)")
-    intrinsics = load_intrinsics_dir(intrinsics) if isinstance(intrinsics, (str, os.PathLike)) else dict(intrinsics)
-
-    tracks, left_out, ingest_result = _tracks_of(source, sequence, intrinsics, ingest_options, detector_options,
-                                                 workers, progress)
-    markers = None
-    if sequence is not None and measurement is not None:
-        markers = _projected_markers(sequence, tracks.markers_per_array)
-    if measurement is not None:
-        check_measurement(measurement, tracks.camera_names, markers)
-    calibration = register(tracks, intrinsics, options, left_out=left_out)
-    if measurement is not None and calibration.registered:
-        try:
-            calibration = apply_scale(calibration, measurement, markers)
-        except ValueError as error:
-            if out is None:
-                raise
-            _write_results(Path(out), calibration, tracks, intrinsics, formats, report, ingest_result)
-            raise ValueError(f"{error}; results written to {out} in arbitrary units") from None
-    if out is not None:
-        _write_results(Path(out), calibration, tracks, intrinsics, formats, report, ingest_result)
+    videos = _videos_folder(source)
+    if measurement is not None and videos is not None:  # before the long ingest
+        check_measurement(measurement, video_camera_names(videos),
+                          _projected_markers(sequence, None) if measurement.kind == "marker-size" else None)
+    folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
+    try:
+        if isinstance(intrinsics, (str, os.PathLike)):
+            intrinsics = load_intrinsics_dir(intrinsics)
+        intrinsics = dict(intrinsics)
+        tracks, left_out, ingest_result = _tracks_of(source, sequence, intrinsics, ingest_options, detector_options,
+                                                     workers, progress)
+        markers = None
+        if sequence is not None and measurement is not None:
+            markers = _projected_markers(sequence, tracks.markers_per_array)
+        if measurement is not None:
+            check_measurement(measurement, tracks.camera_names, markers)
+        calibration = register(tracks, intrinsics, options, left_out=left_out)
+        scale_error = None
+        if measurement is not None and calibration.registered:
+            try:
+                calibration = apply_scale(calibration, measurement, markers)
+            except ValueError as error:
+                if folder is None:
+                    raise
+                scale_error = error
+        if folder is not None:
+            with folder.writing() as staging:
+                _write_results(staging, calibration, tracks, intrinsics, formats, report, ingest_result)
+            folder.commit()
+            logger.info("results written to %s", folder.path)
+        if scale_error is not None:
+            raise ValueError(f"{scale_error}; results written to {out} in arbitrary units")
+    finally:
+        if folder is not None:
+            folder.abort()  # nothing to do after the commit
     return calibration
+
+
+def _videos_folder(source: Tracks | str | os.PathLike) -> Path | None:
+    """The videos folder ``source`` names, or None when it names tracks."""
+    if isinstance(source, Tracks):
+        return None
+    path = Path(source)
+    return None if path.is_file() or path.suffix.lower() == ".json" else path
+
+
+def video_camera_names(folder: Path) -> list[str]:
+    """The cameras of a videos folder as the ingest names them (video file stems)."""
+    from calibproj.ingest import VIDEO_SUFFIXES
+
+    if not folder.is_dir():
+        return []
+    return sorted({p.stem for p in folder.iterdir() if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES})
 
 
 def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, workers, progress):
     """(tracks, cameras that failed before registration, the ingest result or None)."""
-    if isinstance(source, Tracks):
-        return source, {}, None
-    path = Path(source)
-    if path.is_file() or path.suffix.lower() == ".json":
-        return Tracks.read(path), {}, None
+    path = _videos_folder(source)
+    if path is None:
+        return (source, {}, None) if isinstance(source, Tracks) else (Tracks.read(source), {}, None)
     if not path.is_dir():
         raise FileNotFoundError(f"{path}: no such videos folder")
     if sequence is None:
@@ -134,14 +159,12 @@ def _write_results(out: Path, calibration: Calibration, tracks: Tracks, intrinsi
     from calibproj.export import export_all
     from calibproj.report import write_report
 
-    out.mkdir(parents=True, exist_ok=True)
     used = {name: intrinsics[name] for name in tracks.camera_names if name in intrinsics}
-    write_intrinsics_dir(out / "intrinsics", used)
-    tracks.write(out / "tracks.json")
+    write_intrinsics_dir(out / INTRINSICS_DIR, used)
+    tracks.write(out / TRACKS_FILE)
     if ingest_result is not None:
-        ingest_result.write_report(out / "detect_report.json")
+        ingest_result.write_report(out / DETECT_REPORT_FILE)
     calibration.save(out)
     export_all(calibration, formats, out, used, tracks)
     if report:
-        page = write_report(out, tracks, used)
-        logger.info("report: %s", page)
+        write_report(out, tracks, used)

@@ -38,6 +38,7 @@ pixel errors do not change. The unit becomes ``"m"``.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import logging
 import math
 import os
@@ -117,12 +118,12 @@ class ProjectedMarkers:
 
     @classmethod
     def from_sequence(cls, sequence) -> ProjectedMarkers:
-        """From a ``calibproj.generate.Sequence`` (what ``sequence.json`` holds)."""
+        """From a ``calibproj.sequence.Sequence`` (what ``sequence.json`` holds)."""
         return cls(sequence.centres, sequence.layout.marker_side(1.0), tuple(sequence.projector))
 
     @classmethod
     def from_layout(cls, layout) -> ProjectedMarkers:
-        """From a ``calibproj.generate.MsmLayout``."""
+        """From a ``calibproj.sequence.MsmLayout``."""
         return cls(layout.centres(), layout.marker_side(1.0), tuple(layout.projector))
 
     @property
@@ -145,7 +146,7 @@ class ProjectedMarkers:
 def read_projected_markers(path: str | os.PathLike, markers_per_array: int | None = None) -> ProjectedMarkers:
     """The MSM geometry of a ``sequence.json``; with ``markers_per_array`` (the tracks'),
     checks that the sequence is the one the tracks were made from."""
-    from calibproj.generate.sequence import Sequence
+    from calibproj.sequence.sequence import Sequence
 
     markers = ProjectedMarkers.from_sequence(Sequence.load(path))
     if markers_per_array is not None and markers_per_array != markers.markers_per_array:
@@ -221,13 +222,21 @@ def check_measurement(
     markers: ProjectedMarkers | None = None,
 ) -> None:
     """What can be checked before calibrating: the cameras exist, the marker is in the sequence."""
-    unknown = [name for name in measurement.cameras if name not in camera_names]
-    if unknown:
-        raise ValueError(f"scale measurement {str(measurement)!r}: no camera {unknown[0]!r} "
-                         f"(cameras: {', '.join(camera_names)})")
+    check_cameras(measurement, camera_names)
     if measurement.kind == "marker-size":
         markers = _require_markers(measurement, markers)
         _marker_pixel(measurement, markers)
+
+
+def check_cameras(measurement: ScaleMeasurement, camera_names: list[str] | tuple[str, ...]) -> None:
+    """ValueError naming the first camera of the measurement not in ``camera_names`` (and
+    the closest name there, when one is close: a mistyped name)."""
+    for name in measurement.cameras:
+        if name not in camera_names:
+            close = difflib.get_close_matches(name, list(camera_names), n=1)
+            hint = f"; did you mean {close[0]}?" if close else ""
+            raise ValueError(f"scale measurement {str(measurement)!r}: no camera {name!r} "
+                             f"(cameras: {', '.join(camera_names)}{hint})")
 
 
 def scale_factor(

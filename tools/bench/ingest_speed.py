@@ -34,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.generate.builder import build_sequence
-from calibproj.generate.sequence import Sequence
+from calibproj.sequence.builder import build_sequence
+from calibproj.sequence.sequence import Sequence
 from calibproj.ingest import ingest
 from calibproj.ingest_options import IngestOptions
 

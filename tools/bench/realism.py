@@ -32,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.compare import compare
+from calibproj.comparison import compare
 from calibproj.demo import marker_side_on_floor
-from calibproj.evaluate import EvaluationOptions, evaluate
-from calibproj.generate import generate
+from calibproj.evaluation import EvaluationOptions, evaluate
+from calibproj.sequence import generate
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
 from calibproj.simulate.render import RenderOptions, simulate_videos

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from calibproj.compare import compare
+from calibproj.comparison import compare
 from calibproj.io.poses import CameraPoses
 from calibproj.registration import RegistrationOptions, calibrate
 from calibproj.simulate import simulate_tracks

@@ -7,8 +7,10 @@ From tracks (e.g. of `calibproj simulate --tracks-only` or `calibproj detect`):
 
 Writes camera_poses.json (world-to-camera poses in the floor frame: z up, floor z = 0),
 metrics.json (per camera: mean and std reprojection error, inliers, view score, or why
-it failed), points.ply and tracks.json (and detect_report.json from videos). An
-existing results folder is only overwritten with --force. The intrinsics used are
+it failed), points.ply and tracks.json (and detect_report.json from videos). The
+folder is written beside RESULTS_DIR and moved into place at the end: a run that fails
+or is interrupted leaves an earlier folder as it was, and an existing folder is only
+replaced, whole, with --force. The intrinsics used are
 copied into RESULTS_DIR/intrinsics/ (so that evaluate and the report need nothing
 else), and report.html with report/*.png is written unless --no-report.
 
@@ -38,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tracks", metavar="FILE", help="tracks.json to calibrate from, instead of videos")
     parser.add_argument("--intrinsics", required=True, metavar="DIR", help="folder of per-camera intrinsics files")
     parser.add_argument("--out", required=True, metavar="DIR", help="results folder")
-    parser.add_argument("--force", action="store_true", help="overwrite the results of an earlier run in --out")
+    parser.add_argument("--force", action="store_true", help="replace an existing results folder (the whole folder)")
     parser.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
     parser.add_argument("--scale", metavar="MEASUREMENT",
                         help="metric scale from one measurement (see above; default: arbitrary unit)")

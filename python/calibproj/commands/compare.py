@@ -25,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from calibproj.compare import compare
+    from calibproj.comparison import compare
 
     result = compare(args.estimate, args.truth)
     if args.json:
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def format_table(result) -> str:
-    """A readable table of a ``calibproj.compare.Comparison``."""
+    """A readable table of a ``calibproj.comparison.Comparison``."""
     metric = result.translation_rmse_mm is not None
     header = f"{'camera':<16}{'rotation (deg)':>16}{'centre (mm)' if metric else '':>14}{'centre (%)':>13}"
     lines = [header, "-" * len(header)]

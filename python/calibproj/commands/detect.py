@@ -10,7 +10,8 @@ merged over the scales.
 Writes --out (tracks.json) and, next to it, detect_report.json (per camera: sync offset
 and rate, frames used, markers detected per scale, MSMs kept, or why the camera
 failed), and prints the summary. A camera that fails is reported; the others still
-give tracks. Exit status 1 when every camera failed.
+give tracks. Exit status 1 when every camera failed. --out is checked (and locked
+against a second run writing it) before the videos are read.
 """
 
 from __future__ import annotations
@@ -44,17 +45,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import json
-    from pathlib import Path
 
-    from calibproj.ingest import ingest
+    from calibproj import ingest
     from calibproj.ingest_options import IngestOptions
+    from calibproj.io.output_folder import OutputFile
 
-    out = Path(args.out)
-    result = ingest(args.videos, args.sequence, args.intrinsics, options=dataclass_from_args(IngestOptions, args),
-                    detector_options=_detector_options(args.detector_option), workers=args.workers,
-                    progress=not args.no_progress, exposures=_exposures(args.exposure))
-    result.tracks.write(out)
-    result.write_report(out.parent / REPORT_NAME)
+    options = dataclass_from_args(IngestOptions, args)
+    detector_options, exposures = _detector_options(args.detector_option), _exposures(args.exposure)
+    with OutputFile(args.out) as output:
+        result = ingest.ingest(args.videos, args.sequence, args.intrinsics, options=options,
+                               detector_options=detector_options, workers=args.workers,
+                               progress=not args.no_progress, exposures=exposures)
+        with output.writing() as out:
+            result.tracks.write(out)
+            result.write_report(out.parent / REPORT_NAME)
     report = result.report()
     print(json.dumps(report, indent=1) if args.json else format_report(report))
     return 0 if len(result.failed) < len(result.cameras) else 1

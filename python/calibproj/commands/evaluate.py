@@ -21,7 +21,7 @@ from calibproj.commands.options import add_dataclass_arguments, dataclass_from_a
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from calibproj.evaluate import EvaluationOptions
+    from calibproj.evaluation import EvaluationOptions
 
     parser.add_argument("results", metavar="RESULTS", help="results folder of calibproj calibrate")
     parser.add_argument("--tracks", required=True, metavar="FILE", help="evaluation observations (eval_tracks.json)")
@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     import json
     from pathlib import Path
 
-    from calibproj.evaluate import EvaluationOptions, evaluate
+    from calibproj.evaluation import EvaluationOptions, evaluate
 
     if not Path(args.results).is_dir():
         raise FileNotFoundError(f"{args.results}: no such results folder")
@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def format_table(evaluation) -> str:
-    """A readable table of a ``calibproj.evaluate.Evaluation``."""
+    """A readable table of a ``calibproj.evaluation.Evaluation``."""
     header = f"{'camera':<16}{'mean px':>10}{'std px':>10}{'n':>8}"
     lines = [header, "-" * len(header)]
     for name, camera in evaluation.cameras.items():

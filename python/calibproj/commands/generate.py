@@ -7,6 +7,9 @@ sequence.json holds everything needed to decode a recording of it later.
 Defaults follow the paper: 100 arrays of 4x8 ArUco markers (3200 points), scales
 1,1.4,2,3,4,6,8, white markers on black, 1920x1080 at 30 fps, 3 frames per pattern
 (so that a 25 fps camera sees every pattern in at least one clean frame).
+
+SEQ_DIR is written beside itself and moved into place at the end; an existing folder
+is only replaced, whole, with --force.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from calibproj.cli import CommandError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="SEQ_DIR", help="output folder")
+    parser.add_argument("--force", action="store_true", help="replace an existing output folder (the whole folder)")
     parser.add_argument("--markers", default="aruco:4X4_50",
                         help="marker family: aruco:<DICT> or apriltag:<family> (default: %(default)s)")
     parser.add_argument("--grid", default="4x8", help="markers per array, ROWSxCOLS (default: %(default)s)")
@@ -55,8 +59,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from calibproj.generate import SequenceOptions, generate
-    from calibproj.generate.video import DEFAULT_CRF, DEFAULT_PRESET
+    from calibproj.io.output_folder import OutputFolder
+    from calibproj.sequence import SequenceOptions, generate
+    from calibproj.sequence.builder import SEQUENCE_FILE
+    from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET
 
     options = SequenceOptions(
         markers=args.markers, grid=_pair(args.grid, "--grid", "4x8"), arrays=args.arrays,
@@ -67,9 +73,11 @@ def run(args: argparse.Namespace) -> int:
         code_degree=args.code_degree, code_frames_per_bit=args.code_frames_per_bit,
         reference_frames=args.reference_frames,
     )
-    sequence = generate(args.out, options, video=args.video, png=args.png,
-                        crf=DEFAULT_CRF if args.crf is None else args.crf,
-                        preset=args.preset or DEFAULT_PRESET, progress=args.progress and not args.json)
+    with OutputFolder(args.out, force=args.force, signature=[SEQUENCE_FILE]) as folder, \
+            folder.writing() as staging:
+        sequence = generate(staging, options, video=args.video, png=args.png,
+                            crf=DEFAULT_CRF if args.crf is None else args.crf,
+                            preset=args.preset or DEFAULT_PRESET, progress=args.progress and not args.json)
     summary = {
         "sequence": f"{args.out}/sequence.json",
         "video": f"{args.out}/projection.mp4" if args.video else None,

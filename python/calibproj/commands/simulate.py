@@ -19,6 +19,9 @@ photometric effects (--ideal turns them off). OUT receives videos/<camera>.mp4
 eval_tracks.json (evaluation points in the working volume, observed with --eval-noise)
 and truth.json (poses, plane, projector, MSM centres in every image, timing); a table of
 frames, sizes and the render speed is printed.
+
+OUT is written beside itself and moved into place at the end; an existing folder is
+only replaced, whole, with --force.
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ DEFAULT_GRID = "4x8"
 DEFAULT_ARRAYS = 100
 DEFAULT_SCALES = "1,1.4,2,3,4,6,8"
 DEFAULT_MARKER_PX = 24.0
+# Files that mark a folder this command wrote (what --force may replace).
+SIGNATURE = ("truth.json", "scene.json")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -73,6 +78,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="videos: no ambient light, noise, blur, vignetting or gamma")
     parser.add_argument("--no-progress", action="store_true", help="videos: no progress bars")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    parser.add_argument("--force", action="store_true", help="replace an existing output folder (the whole folder)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -87,6 +93,7 @@ def _render_videos(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from calibproj.cli import CommandError
+    from calibproj.io.output_folder import OutputFolder
     from calibproj.simulate import render
 
     if not args.sequence:
@@ -96,13 +103,14 @@ def _render_videos(args: argparse.Namespace) -> int:
                                    tail_s=args.tail, threads=args.threads, eval_noise_px=args.eval_noise,
                                    photometric=render.IDEAL_PHOTOMETRIC if args.ideal else None)
     # The scene goes by name or path so that errors name the file.
-    simulation = render.simulate_videos(args.scene, Path(args.sequence), Path(args.out), seed=args.seed,
-                                        options=options, progress=not args.no_progress)
-    print(_video_summary(simulation))
+    with OutputFolder(args.out, force=args.force, signature=SIGNATURE) as folder, folder.writing() as staging:
+        simulation = render.simulate_videos(args.scene, Path(args.sequence), staging, seed=args.seed,
+                                            options=options, progress=not args.no_progress)
+    print(_video_summary(simulation, args.out))
     return 0
 
 
-def _video_summary(simulation) -> str:
+def _video_summary(simulation, out: str) -> str:
     lines = [f"{'camera':<16}{'resolution':>12}{'fps':>8}{'frames':>8}{'MB':>9}"]
     for name, video in simulation.videos.items():
         width, height = video.resolution
@@ -110,12 +118,13 @@ def _video_summary(simulation) -> str:
                      f"{video.size_bytes / 1e6:>9.1f}")
     lines.append(f"{simulation.frame_count} frames, {simulation.size_bytes / 1e6:.1f} MB in "
                  f"{simulation.elapsed_s:.1f} s ({simulation.frames_per_second:.1f} frames/s); "
-                 f"written to {simulation.out}")
+                 f"written to {out}")
     return "\n".join(lines)
 
 
 def _simulate_tracks(scene, args: argparse.Namespace) -> int:
     from calibproj.cli import CommandError
+    from calibproj.io.output_folder import OutputFolder
     from calibproj.simulate.geometric import simulate_tracks
 
     if args.sequence:
@@ -123,18 +132,20 @@ def _simulate_tracks(scene, args: argparse.Namespace) -> int:
             "--tracks-only takes the marker layout from --grid, --arrays, --scales and --marker-px, "
             "not from --sequence"
         )
-    simulation = simulate_tracks(
-        scene, args.out,
-        noise_px=args.noise, seed=args.seed, outlier_fraction=args.outliers, min_marker_px=args.min_marker_px,
-        layout=_layout(scene, args), eval_points=args.eval_points,
-        eval_points_per_camera=args.eval_points_per_camera, eval_height_m=args.eval_height,
-    )
+    layout = _layout(scene, args)
+    with OutputFolder(args.out, force=args.force, signature=SIGNATURE) as folder, folder.writing() as staging:
+        simulation = simulate_tracks(
+            scene, staging,
+            noise_px=args.noise, seed=args.seed, outlier_fraction=args.outliers, min_marker_px=args.min_marker_px,
+            layout=layout, eval_points=args.eval_points,
+            eval_points_per_camera=args.eval_points_per_camera, eval_height_m=args.eval_height,
+        )
     print(_summary(simulation, args.out))
     return 0
 
 
 def _layout(scene, args: argparse.Namespace):
-    from calibproj.generate.layout import MsmLayout
+    from calibproj.sequence.layout import MsmLayout
 
     try:
         rows, cols = (int(v) for v in args.grid.lower().split("x"))

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibproj.calibration import Calibration, CameraMetrics
-from calibproj.evaluate import reprojection_errors
 from calibproj.io.intrinsics import Intrinsics
+from calibproj.reprojection import reprojection_errors
 from calibproj.tracks import Tracks
 
 

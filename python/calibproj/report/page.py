@@ -12,19 +12,18 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from calibproj import __version__
 from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics
 from calibproj.io.jsonio import atomic_write_bytes, atomic_write_text
 from calibproj.report import figures
 from calibproj.report.data import CameraView, camera_views
+from calibproj.results import DETECT_REPORT_FILE, TRACKS_FILE, load_results, resolve_intrinsics
 from calibproj.tracks import Tracks
+from calibproj.version import __version__
 
 logger = logging.getLogger(__name__)
 
 REPORT_FILE = "report.html"
-DETECT_REPORT_FILE = "detect_report.json"
-TRACKS_FILE = "tracks.json"
 FIGURES_DIR = "report"
 
 STYLE = """
@@ -67,8 +66,6 @@ def write_report(
             ``<results_dir>/intrinsics``.
         dpi: resolution of the plots.
     """
-    from calibproj.evaluate import load_results, resolve_intrinsics
-
     results_dir = Path(results_dir)
     calibration = load_results(results_dir)
     intrinsics = resolve_intrinsics(results_dir, intrinsics)

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.generate.layout import MsmLayout
+from calibproj.sequence.layout import MsmLayout
 from calibproj.io.intrinsics import Intrinsics, write_intrinsics_dir
 from calibproj.simulate.scene import Camera, Scene, load_scene, save_scene
 from calibproj.simulate.truth import truth_document, write_truth

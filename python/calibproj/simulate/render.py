@@ -113,7 +113,7 @@ class RenderOptions:
     eval_noise_px: float = DEFAULT_EVAL_NOISE_PX
 
     def check(self) -> None:
-        from calibproj.generate.video import PRESETS
+        from calibproj.sequence.video import PRESETS
 
         if not 0 <= self.crf <= 51:
             raise ValueError(f"crf must be in [0, 51], got {self.crf}")
@@ -180,7 +180,7 @@ def simulate_videos(
     Args:
         scene: a ``Scene``, a preset name or a scene file (presets draw their random
             parts from ``seed``).
-        sequence: a ``calibproj.generate.Sequence`` or the path of its ``sequence.json``.
+        sequence: a ``calibproj.sequence.Sequence`` or the path of its ``sequence.json``.
         out: output folder (created if needed).
         seed: seed of every random draw (sensor noise, the preset's random parts).
         options: renderer knobs (``RenderOptions``).
@@ -277,7 +277,7 @@ def _load_scene(scene: Scene | str | os.PathLike, seed: int) -> tuple[Scene, str
 
 
 def _load_sequence(sequence: Any) -> Any:
-    from calibproj.generate.sequence import Sequence
+    from calibproj.sequence.sequence import Sequence
 
     if isinstance(sequence, Sequence):
         return sequence
@@ -479,7 +479,7 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
                 progress: bool) -> dict[str, CameraVideo]:
     from tqdm import tqdm
 
-    from calibproj.generate.video import GreyVideoWriter
+    from calibproj.sequence.video import GreyVideoWriter
 
     layout = _atlas_layout(scene, views, options)
     generators = _noise_generators(seed, len(scene.cameras))

@@ -21,10 +21,10 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.generate.codes import LightCode, code_pair
-from calibproj.generate.layout import MsmLayout
-from calibproj.generate.sequence import MarkerSystem, Pattern, Segment, Sequence
-from calibproj.generate.video import DEFAULT_CRF, DEFAULT_PRESET, GreyVideoWriter
+from calibproj.sequence.codes import LightCode, code_pair
+from calibproj.sequence.layout import MsmLayout
+from calibproj.sequence.sequence import MarkerSystem, Pattern, Segment, Sequence
+from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET, GreyVideoWriter
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,7 @@ Centres are snapped (by at most half a pixel) so that the edges of a marker at s
 1 fall on pixel boundaries: with an even side in pixels, on half-integer coordinates
 (OpenCV's convention puts pixel centres on integers). Every scale with an integer
 module size then has crisp edges too; the others are drawn by exact area coverage
-around the same centre (see ``calibproj.generate.raster``).
+around the same centre (see ``calibproj.sequence.raster``).
 """
 
 from __future__ import annotations

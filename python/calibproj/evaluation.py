@@ -22,8 +22,8 @@ draws points in the working volume). With the calibrated poses held fixed:
 {name: {"mean_px", "std_px", "n"}}}`` (percentages; ``mean_px`` and ``std_px`` are
 null for a camera without an error to report).
 
-The reprojection helpers at the end (``project``, ``reprojection_errors``) are also
-what the report and the COLMAP export use to measure a calibration on its own tracks.
+The reprojection itself (``calibproj.reprojection``) is shared with the report and the
+COLMAP export, which measure a calibration on its own tracks.
 """
 
 from __future__ import annotations
@@ -32,12 +32,13 @@ import logging
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir
+from calibproj.io.intrinsics import Intrinsics
+from calibproj.reprojection import depths, project
+from calibproj.results import load_results, resolve_intrinsics
 from calibproj.tracks import Tracks
 
 logger = logging.getLogger(__name__)
@@ -46,7 +47,6 @@ THRESHOLDS_PX = (0.5, 2.0, 5.0)
 INITIALISATIONS = ("pair", "all-views")
 LOSSES = ("none", "huber", "cauchy")
 MIN_VIEWS = 2
-INTRINSICS_DIR = "intrinsics"
 
 
 @dataclass
@@ -176,33 +176,6 @@ def evaluate(
     return evaluation
 
 
-def load_results(results: Calibration | str | os.PathLike) -> Calibration:
-    """A ``Calibration``, read from a results folder when given a path."""
-    if isinstance(results, Calibration):
-        return results
-    folder = Path(results)
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{folder}: no such results folder")
-    return Calibration.load(folder)
-
-
-def resolve_intrinsics(
-    results: Calibration | str | os.PathLike,
-    intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None,
-) -> Mapping[str, Intrinsics]:
-    """Intrinsics given, read from a folder, or from ``<results>/intrinsics``."""
-    if isinstance(intrinsics, Mapping):
-        return intrinsics
-    if intrinsics is not None:
-        return load_intrinsics_dir(intrinsics)
-    if isinstance(results, Calibration):
-        raise ValueError("intrinsics are needed when the calibration is not read from a results folder")
-    folder = Path(results) / INTRINSICS_DIR
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{folder}: no intrinsics in the results folder; give them with --intrinsics DIR")
-    return load_intrinsics_dir(folder)
-
-
 # -- triangulation and refinement ----------------------------------------------------------
 
 
@@ -316,46 +289,6 @@ def best_pair(R: np.ndarray, rays: np.ndarray) -> tuple[int, int]:
     sines = np.linalg.norm(np.cross(directions[:, None, :], directions[None, :, :]), axis=2)
     a, b = np.unravel_index(int(np.argmax(np.triu(sines, k=1))), sines.shape)
     return int(a), int(b)
-
-
-# -- reprojection ---------------------------------------------------------------------------
-
-
-def project(K: np.ndarray, R: np.ndarray, t: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Undistorted pixels and depths of points ``X`` (N, 3) in cameras ``K, R, t`` (N, 3, 3), (N, 3, 3), (N, 3)."""
-    in_camera = np.einsum("nij,nj->ni", R, X) + t
-    depth = in_camera[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        normalised = in_camera[:, :2] / depth[:, None]
-    pixels = np.einsum("nij,nj->ni", K[:, :2, :2], normalised) + K[:, :2, 2]
-    return pixels, depth
-
-
-def depths(R: np.ndarray, t: np.ndarray, X: np.ndarray) -> np.ndarray:
-    return np.einsum("nj,nj->n", R[:, 2, :], X) + t[:, 2]
-
-
-def reprojection_errors(
-    calibration: Calibration, tracks: Tracks, intrinsics: Mapping[str, Intrinsics],
-) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Residuals of the calibration on tracks, per registered camera with intrinsics:
-    ``(point_ids (M,), observed xy (M, 2), projected - observed (M, 2))`` of its
-    observations of points the calibration reconstructed (in front of the camera)."""
-    lookup = {int(i): row for row, i in enumerate(calibration.point_ids)}
-    out = {}
-    for name in calibration.poses:
-        if name not in tracks.camera_names or name not in intrinsics:
-            continue
-        ids, xy = tracks.observations(name)
-        rows = np.array([lookup.get(int(i), -1) for i in ids], dtype=np.int64)
-        ids, xy, rows = ids[rows >= 0], xy[rows >= 0], rows[rows >= 0]
-        R, t = calibration.poses[name]
-        n = len(rows)
-        projected, depth = project(np.broadcast_to(intrinsics[name].K, (n, 3, 3)), np.broadcast_to(R, (n, 3, 3)),
-                                   np.broadcast_to(t, (n, 3)), calibration.points[rows])
-        front = depth > 0
-        out[name] = (ids[front], xy[front], projected[front] - xy[front])
-    return out
 
 
 # -- per-camera results ---------------------------------------------------------------------

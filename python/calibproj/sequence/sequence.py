@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.generate.codes import LightCode
-from calibproj.generate.layout import MsmLayout
-from calibproj.generate.raster import draw_cells
-from calibproj.generate.schema import KIND, MAJOR, SEQUENCE_SCHEMA
+from calibproj.sequence.codes import LightCode
+from calibproj.sequence.layout import MsmLayout
+from calibproj.sequence.raster import draw_cells
+from calibproj.sequence.schema import KIND, MAJOR, SEQUENCE_SCHEMA
 from calibproj.io.jsonio import FormatError, read_json, write_json
 
 SEGMENT_KINDS = ("white", "black", "start_code", "end_code", "patterns")
@@ -82,7 +82,7 @@ class MarkerSystem:
 
 @dataclass
 class Sequence:
-    """A projection sequence; build one with :func:`calibproj.generate.build_sequence`
+    """A projection sequence; build one with :func:`calibproj.sequence.build_sequence`
     or read one with :meth:`load`."""
 
     markers: MarkerSystem

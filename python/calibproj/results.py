@@ -1,0 +1,54 @@
+"""The results folder of a calibration: what it holds, and reading it back.
+
+``calibproj calibrate`` (``calibproj.pipeline``) writes the folder as one transaction
+(``calibproj.io.output_folder``); the evaluation and the report read it with
+``load_results`` and ``resolve_intrinsics``. File by file:
+
+- ``camera_poses.json``, ``metrics.json``, ``points.ply``: the calibration
+  (``calibproj.calibration``);
+- ``tracks.json`` and, from videos, ``detect_report.json``: the observations;
+- ``intrinsics/``: the intrinsics used, one file per camera;
+- ``report.html`` and ``report/*.png`` (``calibproj.report``);
+- exports (``calibproj.export``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+from calibproj.calibration import Calibration
+from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir
+
+CALIBRATION_FILES = ("camera_poses.json", "metrics.json", "points.ply")
+TRACKS_FILE = "tracks.json"
+DETECT_REPORT_FILE = "detect_report.json"
+INTRINSICS_DIR = "intrinsics"
+
+
+def load_results(results: Calibration | str | os.PathLike) -> Calibration:
+    """A ``Calibration``, read from a results folder when given a path."""
+    if isinstance(results, Calibration):
+        return results
+    folder = Path(results)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{folder}: no such results folder")
+    return Calibration.load(folder)
+
+
+def resolve_intrinsics(
+    results: Calibration | str | os.PathLike,
+    intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None,
+) -> Mapping[str, Intrinsics]:
+    """Intrinsics given, read from a folder, or from ``<results>/intrinsics``."""
+    if isinstance(intrinsics, Mapping):
+        return intrinsics
+    if intrinsics is not None:
+        return load_intrinsics_dir(intrinsics)
+    if isinstance(results, Calibration):
+        raise ValueError("intrinsics are needed when the calibration is not read from a results folder")
+    folder = Path(results) / INTRINSICS_DIR
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{folder}: no intrinsics in the results folder; give them with --intrinsics DIR")
+    return load_intrinsics_dir(folder)

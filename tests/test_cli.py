@@ -1,0 +1,149 @@
+"""The command line itself: --version, did-you-mean hints, the scale's cameras checked
+before the ingest, and one exit-status convention (README, "Exit status")."""
+
+from __future__ import annotations
+
+import re
+from importlib import metadata
+from pathlib import Path
+
+import pytest
+
+import calibproj
+from calibproj import version
+from calibproj.cli import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, main
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def usage_error(capsys: pytest.CaptureFixture, argv: list[str]) -> str:
+    """The error line of an invocation argparse refuses (exit status 2)."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == EXIT_USAGE
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[0].startswith("usage: ")
+    return lines[-1]
+
+
+# -- --version -----------------------------------------------------------------------------------
+
+
+def test_version_comes_from_pyproject(capsys: pytest.CaptureFixture) -> None:
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11
+    expected = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["version"]
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--version"])
+    assert exit_info.value.code == EXIT_OK
+    assert capsys.readouterr().out.strip() == f"calibproj {expected}"
+    assert calibproj.__version__ == expected
+
+
+def test_version_prefers_the_installed_metadata(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(metadata, "version", lambda name: "7.8.9")
+    assert version.package_version() == "7.8.9"
+
+    def not_installed(name):
+        raise metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(metadata, "version", not_installed)
+    pyproject = tmp_path / "pyproject.toml"
+    pyproject.write_text('[build-system]\nversion = "1"\n\n[project]\nname = "x"\nversion = "2.3.4"\n\n'
+                         '[tool.x]\nversion = "5"\n')
+    monkeypatch.setattr(version, "PYPROJECT", pyproject)
+    assert version.package_version() == "2.3.4"
+    monkeypatch.setattr(version, "PYPROJECT", tmp_path / "absent.toml")
+    assert version.package_version() == version.UNKNOWN
+
+
+# -- did you mean ---------------------------------------------------------------------------------
+
+
+def test_a_mistyped_subcommand_gets_a_suggestion(capsys: pytest.CaptureFixture) -> None:
+    line = usage_error(capsys, ["calbrate", "--out", "x"])
+    assert "invalid choice: 'calbrate'" in line and line.endswith("(did you mean 'calibrate'?)")
+    assert "did you mean 'evaluate'?" in usage_error(capsys, ["evalute"])
+    assert "did you mean" not in usage_error(capsys, ["xyzzy"])
+
+
+def test_a_mistyped_option_gets_a_suggestion(capsys: pytest.CaptureFixture) -> None:
+    base = ["calibrate", "--tracks", "t.json", "--intrinsics", "i", "--out", "o"]
+    line = usage_error(capsys, [*base, "--forse"])
+    assert line == "calibproj calibrate: error: unrecognized arguments: --forse (did you mean --force?)"
+    assert usage_error(capsys, [*base, "--scael=camera-height:cam1=2"]).endswith("(did you mean --scale?)")
+    # A mistyped required option: argparse says it is missing; the hint names the typo.
+    line = usage_error(capsys, ["calibrate", "--tracks", "t.json", "--intrinsisc", "i", "--out", "o"])
+    assert "required: --intrinsics" in line and line.endswith("(--intrinsisc: did you mean --intrinsics?)")
+    # Options of the program before the subcommand, and of a subcommand after it.
+    assert usage_error(capsys, ["--vrebose", "compare", "a", "b"]).endswith("(did you mean --verbose?)")
+    assert usage_error(capsys, ["compare", "a", "b", "--jsno"]).endswith("(did you mean --json?)")
+    assert "did you mean" not in usage_error(capsys, [*base, "--zzzzzz"])
+
+
+# -- the scale's cameras, before the ingest ------------------------------------------------------------
+
+
+@pytest.fixture
+def videos(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Two cameras' videos (empty files), and an ingest that fails the test if started."""
+    from calibproj import ingest
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the ingest started before the scale was checked")
+
+    monkeypatch.setattr(ingest, "ingest", forbidden)
+    folder = tmp_path / "videos"
+    folder.mkdir()
+    for name in ("far1", "far2", "notes.txt"):
+        (folder / (name if "." in name else f"{name}.mp4")).write_bytes(b"")
+    (tmp_path / "intrinsics").mkdir()
+    return folder
+
+
+@pytest.mark.parametrize("scale, message", [
+    ("camera-height:fra1=2.5", "no camera 'fra1' (cameras: far1, far2; did you mean far1?)"),
+    ("camera-height:notes=2.5", "no camera 'notes' (cameras: far1, far2)"),
+    ("distance:far1,far22=1.5", "no camera 'far22' (cameras: far1, far2; did you mean far2?)"),
+])
+def test_scale_cameras_are_checked_against_the_videos_before_the_ingest(
+        videos: Path, tmp_path: Path, capsys: pytest.CaptureFixture, scale: str, message: str) -> None:
+    status = main(["calibrate", str(videos), "--sequence", str(tmp_path / "sequence.json"), "--intrinsics",
+                   str(tmp_path / "intrinsics"), "--out", str(tmp_path / "results"), "--scale", scale])
+    assert status == EXIT_USAGE
+    error = capsys.readouterr().err.strip()
+    assert error == f"calibproj calibrate: error: scale measurement {scale!r}: {message}"
+    assert not (tmp_path / "results").exists()
+
+
+# -- exit status --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("raised, status, line", [
+    (ValueError("sequence.json: not a sequence"), EXIT_USAGE, "error: sequence.json: not a sequence"),
+    (FileNotFoundError("a.json: no such file"), EXIT_USAGE, "error: a.json: no such file"),
+    (RuntimeError("ffmpeg not found on PATH"), EXIT_FAILURE, "error: ffmpeg not found on PATH"),
+    (KeyboardInterrupt(), EXIT_INTERRUPTED, "interrupted"),
+    (KeyError("cam9"), EXIT_FAILURE, "internal error: KeyError: 'cam9'"),
+])
+def test_one_exit_status_convention(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture,
+                                    raised: BaseException, status: int, line: str) -> None:
+    from calibproj.commands import compare
+
+    def run(args):
+        raise raised
+
+    monkeypatch.setattr(compare, "run", run)
+    assert main(["compare", "a.json", "b.json"]) == status
+    error = capsys.readouterr().err.strip().splitlines()
+    assert error[-1] == f"calibproj compare: {line}"
+    # Only an internal error (a bug) shows its traceback.
+    assert (error[0] == "Traceback (most recent call last):") == (status == EXIT_FAILURE and "internal" in line)
+    assert len(error) == 1 or "internal" in line
+
+
+def test_readme_documents_the_exit_status() -> None:
+    readme = (REPO / "README.md").read_text()
+    section = re.search(r"^## Exit status\n(.*?)(?=^## )", readme, re.MULTILINE | re.DOTALL)
+    assert section, "README has no Exit status section"
+    for code in (EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED):
+        assert re.search(rf"^- `{code}`", section.group(1), re.MULTILINE), code
