@@ -35,11 +35,11 @@ import numpy as np
 from calibproj.comparison import compare
 from calibproj.demo import marker_side_on_floor
 from calibproj.evaluation import EvaluationOptions, evaluate
-from calibproj.sequence import generate
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
-from calibproj.simulate.render import RenderOptions, simulate_videos
+from calibproj.sequence import generate
 from calibproj.simulate.presets import REAL_PEOPLE
+from calibproj.simulate.render import RenderOptions, simulate_videos
 from calibproj.simulate.scene import AutoExposure, FloorTexture, Person, Scene, load_scene
 
 Effect = Callable[[Scene], Scene]
