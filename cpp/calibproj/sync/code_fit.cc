@@ -299,9 +299,11 @@ FrameMap Refine(const LightTimeline& timeline, const std::vector<std::vector<Sam
   *contrast = std::numeric_limits<double>::infinity();
   for (std::size_t w = 0; w < windows.size(); ++w) samples += static_cast<int>(windows[w].size());
   // A start whose exposures reach frames of unknown light cannot be refined (Ceres would
-  // log the failed evaluation): it is returned as it is, with an infinite residual.
+  // log the failed evaluation): it is returned as it is, with an infinite residual. The
+  // Jacobian is evaluated too: it needs the light at both ends of every exposure.
   double cost = 0.0;
-  if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr) ||
+  ceres::CRSMatrix jacobian;
+  if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, &jacobian) ||
       !std::isfinite(cost)) {
     *rms = std::numeric_limits<double>::infinity();
     for (const auto& level : levels) *contrast = std::min(*contrast, level[2]);
