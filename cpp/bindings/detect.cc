@@ -13,6 +13,7 @@
 #include "calibproj/detect/marker_centre.h"
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/detect/marker_family.h"
+#include "checks.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -183,7 +184,7 @@ void RegisterFamilies(py::module_& m) {
          int min_points, double min_share, const std::optional<std::vector<int>>& positions, int min_positions) {
         const auto points = [](const py::array_t<double, py::array::c_style | py::array::forcecast>& a,
                                const char* name) {
-          if (a.ndim() != 2 || a.shape(1) != 2) throw std::invalid_argument(std::string(name) + ": expected (N, 2)");
+          RequireShape(a, {-1, 2}, name);
           std::vector<cv::Point2d> out(static_cast<std::size_t>(a.shape(0)));
           for (std::size_t i = 0; i < out.size(); ++i) out[i] = cv::Point2d(a.at(i, 0), a.at(i, 1));
           return out;

@@ -11,6 +11,7 @@
 #include "calibproj/geometry/homography.h"
 #include "calibproj/geometry/similarity.h"
 #include "calibproj/geometry/triangulation.h"
+#include "checks.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -44,7 +45,10 @@ void register_geometry(py::module_& m) {
           throw py::value_error("triangulate_linear: expected R (N, 3, 3), t (N, 3), rays (N, 2) for N = " +
                                 std::to_string(n) + " observations");
         }
-        if (num_points < 0) throw py::value_error("triangulate_linear: num_points must be non-negative");
+        RequireCount(num_points, 0, limits::kMaxPoints, "triangulate_linear: num_points");
+        RequireFiniteValues(R, "triangulate_linear: R");
+        RequireFiniteValues(t, "triangulate_linear: t");
+        RequireFiniteValues(rays, "triangulate_linear: rays");
         std::vector<std::vector<geometry::View>> views(num_points);
         const auto r = R.unchecked<3>();
         const auto tt = t.unchecked<2>();

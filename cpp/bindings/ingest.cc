@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "calibproj/ingest/camera_ingest.h"
+#include "checks.h"
 #include "ingest_options.h"
 #include "registry.h"
 #include "sync_convert.h"
@@ -21,32 +22,38 @@ namespace calibproj::bindings {
 
 namespace {
 
-using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
-
-ingest::PatternSpec PatternFromDict(const py::dict& d) {
+ingest::PatternSpec PatternFromDict(const py::handle& d, const std::string& what) {
   ingest::PatternSpec p;
-  p.array = d["array"].cast<int>();
-  p.scale_index = d["scale_index"].cast<int>();
-  p.scale = d["scale"].cast<double>();
-  p.marker_side_px = d["marker_side_px"].cast<double>();
-  p.first_frame = d["first_frame"].cast<int>();
-  p.last_frame = d["last_frame"].cast<int>();
-  p.omitted = d["omitted"].cast<std::vector<int>>();
+  p.array = DictItem<int>(d, "array", what);
+  p.scale_index = DictItem<int>(d, "scale_index", what);
+  p.scale = DictItem<double>(d, "scale", what);
+  p.marker_side_px = DictItem<double>(d, "marker_side_px", what);
+  p.first_frame = DictItem<int>(d, "first_frame", what);
+  p.last_frame = DictItem<int>(d, "last_frame", what);
+  p.omitted = DictItem<std::vector<int>>(d, "omitted", what);
   return p;
+}
+
+// The items of d[key], which must be a list.
+py::list ListItem(const py::handle& d, const char* key, const std::string& what) {
+  return DictItem<py::list>(d, key, what);
 }
 
 ingest::SequenceDescription SequenceFromDict(const py::dict& d) {
   ingest::SequenceDescription s;
-  const py::dict markers = d["markers"], projector = d["projector"], layout = d["layout"], codes = d["codes"];
-  s.markers = markers["spec"].cast<std::string>();
-  s.inverted = markers["inverted"].cast<bool>();
-  const auto resolution = projector["resolution"].cast<std::vector<int>>();
+  const py::dict markers = DictItem<py::dict>(d, "markers", "sequence");
+  const py::dict projector = DictItem<py::dict>(d, "projector", "sequence");
+  const py::dict layout = DictItem<py::dict>(d, "layout", "sequence");
+  const py::dict codes = DictItem<py::dict>(d, "codes", "sequence");
+  s.markers = DictItem<std::string>(markers, "spec", "sequence['markers']");
+  s.inverted = DictItem<bool>(markers, "inverted", "sequence['markers']");
+  const auto resolution = DictItem<std::vector<int>>(projector, "resolution", "sequence['projector']");
   if (resolution.size() != 2) throw std::invalid_argument("sequence: projector resolution must be [width, height]");
   s.projector_width = resolution[0];
   s.projector_height = resolution[1];
-  s.fps = projector["fps"].cast<double>();
-  s.scales = layout["scales"].cast<std::vector<double>>();
-  const auto centres = d["centres"].cast<std::vector<std::vector<std::vector<double>>>>();
+  s.fps = DictItem<double>(projector, "fps", "sequence['projector']");
+  s.scales = DictItem<std::vector<double>>(layout, "scales", "sequence['layout']");
+  const auto centres = DictItem<std::vector<std::vector<std::vector<double>>>>(d, "centres", "sequence");
   s.arrays = static_cast<int>(centres.size());
   s.markers_per_array = centres.empty() ? 0 : static_cast<int>(centres[0].size());
   for (const auto& array : centres) {
@@ -58,25 +65,32 @@ ingest::SequenceDescription SequenceFromDict(const py::dict& d) {
       s.centres.emplace_back(xy[0], xy[1]);
     }
   }
-  for (const auto& p : d["patterns"]) s.patterns.push_back(PatternFromDict(p.cast<py::dict>()));
-  for (const auto& item : d["segments"]) {
-    const py::dict seg = item.cast<py::dict>();
-    s.segments.push_back({seg["kind"].cast<std::string>(), seg["first_frame"].cast<int>(),
-                          seg["last_frame"].cast<int>()});
+  for (const auto& p : ListItem(d, "patterns", "sequence")) {
+    s.patterns.push_back(PatternFromDict(p, "sequence['patterns'][" + std::to_string(s.patterns.size()) + "]"));
   }
-  s.start_code = LightCodeFromDict(codes["start"]);
-  s.end_code = LightCodeFromDict(codes["end"]);
+  for (const auto& seg : ListItem(d, "segments", "sequence")) {
+    const std::string what = "sequence['segments'][" + std::to_string(s.segments.size()) + "]";
+    s.segments.push_back({DictItem<std::string>(seg, "kind", what), DictItem<int>(seg, "first_frame", what),
+                          DictItem<int>(seg, "last_frame", what)});
+  }
+  s.start_code = LightCodeFromDict(DictItem<py::dict>(codes, "start", "sequence['codes']"), "sequence start code");
+  s.end_code = LightCodeFromDict(DictItem<py::dict>(codes, "end", "sequence['codes']"), "sequence end code");
   s.Check();
   return s;
 }
 
 ingest::CameraModel CameraFromArrays(const DoubleArray& K, const DoubleArray& dist,
                                      const std::optional<std::pair<int, int>>& resolution, const std::string& source) {
-  if (K.size() != 9) throw std::invalid_argument("K must have 9 values (3x3)");
+  RequireShape(K, {3, 3}, "K");
+  RequireShape(dist, {-1}, "dist");
   ingest::CameraModel camera;
   for (int i = 0; i < 9; ++i) camera.lens.K(i / 3, i % 3) = K.data()[i];
   camera.lens.dist.assign(dist.data(), dist.data() + dist.size());
-  if (resolution) camera.resolution = cv::Size(resolution->first, resolution->second);
+  if (resolution) {
+    RequireCount(resolution->first, 1, limits::kMaxImageSide, "resolution width");
+    RequireCount(resolution->second, 1, limits::kMaxImageSide, "resolution height");
+    camera.resolution = cv::Size(resolution->first, resolution->second);
+  }
   camera.source = source;
   camera.lens.Check();
   return camera;
@@ -215,8 +229,9 @@ py::dict ResultDict(const ingest::CameraIngestResult& r) {
 py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, const DoubleArray& corners,
                          const DoubleArray& K, const DoubleArray& dist, int cells, double outward_fraction,
                          int passes) {
-  if (image.ndim() != 2) throw std::invalid_argument("expected a 2-D uint8 image");
-  if (corners.size() != 8) throw std::invalid_argument("corners: expected 4 x 2 values");
+  RequireShape(image, {-1, -1}, "image");
+  if (image.size() == 0) throw std::invalid_argument("image is empty");
+  RequireShape(corners, {4, 2}, "corners");
   const cv::Mat gray(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
                      const_cast<uint8_t*>(image.data()));
   const ingest::CameraModel camera = CameraFromArrays(K, dist, std::nullopt, "lens");
@@ -225,6 +240,7 @@ py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, 
   detect::UndistortedEdgeOptions options;
   options.outward_fraction = outward_fraction;
   options.passes = passes;
+  options.Check();
   std::optional<detect::Quad> refined;
   {
     py::gil_scoped_release release;
@@ -244,7 +260,7 @@ py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, 
 
 py::array_t<double> MapWithTables(const DoubleArray& K, const DoubleArray& dist, std::pair<int, int> resolution,
                                   const DoubleArray& points, bool undistort) {
-  if (points.ndim() != 2 || points.shape(1) != 2) throw std::invalid_argument("points: expected shape (N, 2)");
+  RequireShape(points, {-1, 2}, "points");
   const ingest::CameraModel camera = CameraFromArrays(K, dist, std::nullopt, "lens");
   const detect::LensTables tables(camera.lens, cv::Size(resolution.first, resolution.second));
   std::vector<cv::Point2d> in;

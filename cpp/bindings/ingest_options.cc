@@ -3,6 +3,7 @@
 #include "ingest_options.h"
 
 #include "calibproj/ingest/option_table.h"
+#include "checks.h"
 
 #include <stdexcept>
 
@@ -27,7 +28,7 @@ struct Setter {
   template <typename T>
   void operator()(const char* name, T& field, const char* /*help*/) {
     if (key == name) {
-      field = value.cast<T>();
+      field = CastTo<T>(value, "option '" + key + "'");
       found = true;
     }
   }
@@ -54,6 +55,8 @@ bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const py:
   ingest::VisitIngestOptions(*o, setter);
   return setter.found;
 }
+
+void CheckSyncOptionValues(sync::SyncOptions& o) { VisitSync(o, limits::OptionChecker{"sync option "}); }
 
 py::dict SyncOptionDefaults() {
   sync::SyncOptions o;

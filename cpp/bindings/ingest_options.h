@@ -18,6 +18,10 @@ bool SetSyncOption(sync::SyncOptions* o, const std::string& key, const pybind11:
 // Sets one ingest option by name (sync options included); false when unknown.
 bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const pybind11::handle& value);
 
+// Throws ValueError naming the first option that is not a finite number of a sane
+// magnitude (limits::OptionChecker); the ingest's own Check() does this for its options.
+void CheckSyncOptionValues(sync::SyncOptions& o);
+
 // Every option name with its C++ default, for documentation and consistency tests.
 pybind11::dict SyncOptionDefaults();
 pybind11::dict IngestOptionDefaults();

@@ -12,6 +12,7 @@
 #include "calibproj/registration/reconstruction.h"
 #include "calibproj/registration/result.h"
 #include "calibproj/registration/view_score.h"
+#include "checks.h"
 #include "convert.h"
 #include "registry.h"
 
@@ -29,26 +30,26 @@ registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
   for (const auto& item : kwargs) {
     const std::string key = py::str(item.first);
     const py::handle value = item.second;
-    if (key == "model") o.model = ParseModel(value.cast<std::string>());
-    else if (key == "loss") o.loss = ParseLoss(value.cast<std::string>());
-    else if (key == "loss_scale_px") o.loss_scale_px = value.cast<double>();
-    else if (key == "homography_threshold_px") o.homography_threshold_px = value.cast<double>();
-    else if (key == "pnp_threshold_px") o.pnp_threshold_px = value.cast<double>();
-    else if (key == "ransac_max_iterations") o.ransac_max_iterations = value.cast<int>();
-    else if (key == "ransac_confidence") o.ransac_confidence = value.cast<double>();
-    else if (key == "seed") o.seed = value.cast<std::uint64_t>();
-    else if (key == "min_pair_points") o.min_pair_points = value.cast<int>();
-    else if (key == "min_pnp_points") o.min_pnp_points = value.cast<int>();
-    else if (key == "min_triangulation_angle_deg") o.min_triangulation_angle_deg = value.cast<double>();
-    else if (key == "min_pair_parallax_deg") o.min_pair_parallax_deg = value.cast<double>();
-    else if (key == "outlier_threshold_px") o.outlier_threshold_px = value.cast<double>();
-    else if (key == "outlier_sigma_factor") o.outlier_sigma_factor = value.cast<double>();
-    else if (key == "max_refine_rounds") o.max_refine_rounds = value.cast<int>();
-    else if (key == "view_score_levels") o.view_score_levels = value.cast<int>();
-    else if (key == "num_threads") o.num_threads = value.cast<int>();
-    else if (key == "intermediate_ba_iterations") o.intermediate_ba_iterations = value.cast<int>();
-    else if (key == "final_ba_iterations") o.final_ba_iterations = value.cast<int>();
-    else if (key == "weak_rotation_sigma_deg") o.weak_rotation_sigma_deg = value.cast<double>();
+    if (key == "model") o.model = ParseModel(CastTo<std::string>(value, "registration option \'" + key + "\'"));
+    else if (key == "loss") o.loss = ParseLoss(CastTo<std::string>(value, "registration option \'" + key + "\'"));
+    else if (key == "loss_scale_px") o.loss_scale_px = CastTo<double>(value, "registration option \'" + key + "\'");
+    else if (key == "homography_threshold_px") o.homography_threshold_px = CastTo<double>(value, "registration option \'" + key + "\'");
+    else if (key == "pnp_threshold_px") o.pnp_threshold_px = CastTo<double>(value, "registration option \'" + key + "\'");
+    else if (key == "ransac_max_iterations") o.ransac_max_iterations = CastTo<int>(value, "registration option \'" + key + "\'");
+    else if (key == "ransac_confidence") o.ransac_confidence = CastTo<double>(value, "registration option \'" + key + "\'");
+    else if (key == "seed") o.seed = CastTo<std::uint64_t>(value, "registration option \'" + key + "\'");
+    else if (key == "min_pair_points") o.min_pair_points = CastTo<int>(value, "registration option \'" + key + "\'");
+    else if (key == "min_pnp_points") o.min_pnp_points = CastTo<int>(value, "registration option \'" + key + "\'");
+    else if (key == "min_triangulation_angle_deg") o.min_triangulation_angle_deg = CastTo<double>(value, "registration option \'" + key + "\'");
+    else if (key == "min_pair_parallax_deg") o.min_pair_parallax_deg = CastTo<double>(value, "registration option \'" + key + "\'");
+    else if (key == "outlier_threshold_px") o.outlier_threshold_px = CastTo<double>(value, "registration option \'" + key + "\'");
+    else if (key == "outlier_sigma_factor") o.outlier_sigma_factor = CastTo<double>(value, "registration option \'" + key + "\'");
+    else if (key == "max_refine_rounds") o.max_refine_rounds = CastTo<int>(value, "registration option \'" + key + "\'");
+    else if (key == "view_score_levels") o.view_score_levels = CastTo<int>(value, "registration option \'" + key + "\'");
+    else if (key == "num_threads") o.num_threads = CastTo<int>(value, "registration option \'" + key + "\'");
+    else if (key == "intermediate_ba_iterations") o.intermediate_ba_iterations = CastTo<int>(value, "registration option \'" + key + "\'");
+    else if (key == "final_ba_iterations") o.final_ba_iterations = CastTo<int>(value, "registration option \'" + key + "\'");
+    else if (key == "weak_rotation_sigma_deg") o.weak_rotation_sigma_deg = CastTo<double>(value, "registration option \'" + key + "\'");
     else throw std::invalid_argument("registration: unknown option '" + key + "'");
   }
   o.Check();
@@ -63,6 +64,7 @@ std::vector<registration::Camera> CamerasFromArrays(const py::array_t<double, py
   if (image_sizes.rows() != K.shape(0) || image_sizes.cols() != 2) {
     throw std::invalid_argument("registration: image_sizes must have shape (cameras, 2)");
   }
+  RequireFiniteValues(K, "registration: intrinsics");
   const auto k = K.unchecked<3>();
   std::vector<registration::Camera> cameras(K.shape(0));
   for (py::ssize_t c = 0; c < K.shape(0); ++c) {
@@ -264,6 +266,7 @@ of calibproj.registration.RegistrationOptions.)doc")
   m.def(
       "view_score",
       [](const RowMatrix& pixels, double width, double height, int levels) {
+        if (pixels.cols() != 2 && pixels.size() > 0) throw std::invalid_argument("pixels: expected shape (N, 2)");
         registration::VisibilityPyramid pyramid(levels, width, height);
         for (int i = 0; i < pixels.rows(); ++i) pyramid.Add(pixels(i, 0), pixels(i, 1));
         return py::make_tuple(pyramid.Score(), pyramid.MaxScore());

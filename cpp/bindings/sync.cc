@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "calibproj/sync/synchronise.h"
+#include "checks.h"
 #include "ingest_options.h"
 #include "registry.h"
 #include "sync_convert.h"
@@ -19,10 +20,8 @@ namespace calibproj::bindings {
 
 namespace {
 
-using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
-
-std::vector<double> ToVector(const DoubleArray& array) {
-  if (array.ndim() != 1) throw std::invalid_argument("expected a 1-D array");
+std::vector<double> ToVector(const DoubleArray& array, const std::string& what) {
+  RequireShape(array, {-1}, what);
   return std::vector<double>(array.data(), array.data() + array.size());
 }
 
@@ -32,8 +31,19 @@ sync::SyncOptions SyncOptionsFromKwargs(const py::kwargs& kwargs) {
     const std::string key = py::str(item.first);
     if (!SetSyncOption(&options, key, item.second)) ThrowUnknownOption("sync", key, SyncOptionDefaults());
   }
+  CheckSyncOptionValues(options);
   options.Check();
   return options;
+}
+
+// The window of a code, which must lie within the timeline.
+sync::FrameWindow CodeWindow(const sync::LightTimeline& timeline, const sync::LightCode& code,
+                             const sync::SyncOptions& options, const std::string& what) {
+  if (code.EndFrame() > timeline.frame_count()) {
+    throw std::invalid_argument(what + ": the code ends after the " + std::to_string(timeline.frame_count()) +
+                                " frames of levels");
+  }
+  return sync::CodeWindow(timeline, code, options);
 }
 
 }  // namespace
@@ -45,9 +55,10 @@ void register_sync(py::module_& m) {
       [](const DoubleArray& signal, const DoubleArray& levels, const py::dict& start, const py::dict& end,
          double nominal_rate, const std::string& source, const py::kwargs& kwargs) {
         const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
-        const std::vector<double> values = ToVector(signal);
-        const sync::LightTimeline timeline(ToVector(levels));
-        const sync::LightCode start_code = LightCodeFromDict(start), end_code = LightCodeFromDict(end);
+        const std::vector<double> values = ToVector(signal, "signal");
+        const sync::LightTimeline timeline(ToVector(levels, "levels"));
+        const sync::LightCode start_code = LightCodeFromDict(start, "start_code");
+        const sync::LightCode end_code = LightCodeFromDict(end, "end_code");
         sync::SyncResult result;
         {
           py::gil_scoped_release release;
@@ -67,9 +78,9 @@ void register_sync(py::module_& m) {
       [](const DoubleArray& signal, const DoubleArray& levels, const py::dict& code, double nominal_rate,
          const std::string& source, const py::kwargs& kwargs) {
         const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
-        const std::vector<double> values = ToVector(signal);
-        const sync::LightTimeline timeline(ToVector(levels));
-        const sync::LightCode light_code = LightCodeFromDict(code);
+        const std::vector<double> values = ToVector(signal, "signal");
+        const sync::LightTimeline timeline(ToVector(levels, "levels"));
+        const sync::LightCode light_code = LightCodeFromDict(code, "code");
         sync::CodeLocation location;
         {
           py::gil_scoped_release release;
@@ -84,19 +95,19 @@ void register_sync(py::module_& m) {
       [](const py::array_t<double, py::array::c_style | py::array::forcecast>& band_signals,
          const DoubleArray& levels, const py::dict& start, const py::dict& end, const py::dict& map,
          const py::kwargs& kwargs) {
-        if (band_signals.ndim() != 2) throw std::invalid_argument("band_signals: expected (bands, frames)");
+        RequireShape(band_signals, {-1, -1}, "band_signals");
         const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
         std::vector<std::vector<double>> bands(static_cast<std::size_t>(band_signals.shape(0)));
         for (std::size_t b = 0; b < bands.size(); ++b) {
           const double* row = band_signals.data(static_cast<py::ssize_t>(b), 0);
           bands[b].assign(row, row + band_signals.shape(1));
         }
-        const sync::LightTimeline timeline(ToVector(levels));
+        const sync::LightTimeline timeline(ToVector(levels, "levels"));
         const std::vector<sync::FrameWindow> windows{
-            sync::CodeWindow(timeline, LightCodeFromDict(start), options),
-            sync::CodeWindow(timeline, LightCodeFromDict(end), options)};
-        const sync::FrameMap frame_map{map["offset"].cast<double>(), map["rate"].cast<double>(),
-                                       map["exposure"].cast<double>()};
+            CodeWindow(timeline, LightCodeFromDict(start, "start_code"), options, "start_code"),
+            CodeWindow(timeline, LightCodeFromDict(end, "end_code"), options, "end_code")};
+        const sync::FrameMap frame_map{DictItem<double>(map, "offset", "map"), DictItem<double>(map, "rate", "map"),
+                                       DictItem<double>(map, "exposure", "map")};
         if (!(frame_map.rate > 0.0) || !(frame_map.exposure > 0.0)) throw std::invalid_argument("map: bad rate or exposure");
         sync::ReadoutEstimate estimate;
         {

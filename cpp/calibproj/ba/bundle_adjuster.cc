@@ -14,6 +14,7 @@
 #include "calibproj/ba/rotation_cache.h"
 #include "calibproj/ba/rotation.h"
 #include "calibproj/ba/sphere.h"
+#include "calibproj/common/limits.h"
 
 namespace calibproj::ba {
 
@@ -275,10 +276,11 @@ const char* ModelName(Model model) { return model == Model::kFree ? "free" : "co
 void Options::Check() const {
   Require(loss_scale_px > 0.0 && std::isfinite(loss_scale_px),
           "options: loss scale must be a positive number of pixels, got " + Str(loss_scale_px));
-  Require(max_iterations >= 0, "options: max_iterations must be >= 0, got " + Str(max_iterations));
-  Require(function_tolerance >= 0.0 && gradient_tolerance >= 0.0 && parameter_tolerance >= 0.0,
-          "options: tolerances must be >= 0");
-  Require(num_threads >= 1, "options: num_threads must be >= 1, got " + Str(num_threads));
+  limits::RequireInRange(max_iterations, 0, limits::kMaxIterations, "options: max_iterations");
+  Require(function_tolerance >= 0.0 && gradient_tolerance >= 0.0 && parameter_tolerance >= 0.0 &&
+              std::isfinite(function_tolerance + gradient_tolerance + parameter_tolerance),
+          "options: tolerances must be finite and >= 0");
+  limits::RequireInRange(num_threads, 1, limits::kMaxThreads, "options: num_threads");
   Require(refine_poses || refine_points, "options: nothing to refine (refine_poses and refine_points both off)");
   Require(!compute_covariance || refine_poses, "options: covariance needs refine_poses");
 }

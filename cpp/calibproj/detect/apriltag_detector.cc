@@ -8,6 +8,9 @@
 #include <stdexcept>
 #include <string>
 
+#include "calibproj/common/limits.h"
+#include "calibproj/detect/option_table.h"
+
 namespace calibproj::detect {
 
 namespace {
@@ -57,10 +60,13 @@ struct DetectionsDeleter {
 }  // namespace
 
 void AprilTagOptions::Check() const {
-  Require(quad_decimate >= 1.0f, "quad_decimate must be at least 1");
-  Require(quad_sigma >= 0.0f, "quad_sigma must be non-negative");
-  Require(nthreads >= 1, "nthreads must be at least 1");
-  Require(decode_sharpening >= 0.0, "decode_sharpening must be non-negative");
+  VisitAprilTagOptions(*this, limits::OptionChecker{"AprilTag options: "});
+  // libapriltag sizes its blur kernel and decimated image from these, unchecked.
+  Require(quad_decimate >= 1.0f && quad_decimate <= 64.0f, "quad_decimate must be in [1, 64]");
+  Require(quad_sigma >= 0.0f && quad_sigma <= 100.0f, "quad_sigma must be in [0, 100]");
+  Require(nthreads >= 1 && nthreads <= limits::kMaxThreads,
+          "nthreads must be in [1, " + std::to_string(limits::kMaxThreads) + "]");
+  Require(decode_sharpening >= 0.0 && decode_sharpening <= 100.0, "decode_sharpening must be in [0, 100]");
   Require(max_hamming >= 0 && max_hamming <= 3, "max_hamming must be in [0, 3]");
   Require(min_white_black_diff >= 0 && min_white_black_diff <= 255, "min_white_black_diff must be in [0, 255]");
   refinement.Check();

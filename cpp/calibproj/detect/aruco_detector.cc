@@ -5,9 +5,15 @@
 #include <stdexcept>
 #include <string>
 
+#include "calibproj/common/limits.h"
+#include "calibproj/detect/option_table.h"
+
 namespace calibproj::detect {
 
 namespace {
+
+constexpr int kMaxThresholdWindow = 1001;  // pixels
+constexpr int kMaxThresholdWindows = 64;
 
 void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument("ArUco options: " + message);
@@ -35,6 +41,7 @@ double Contrast(const cv::Mat& gray, double share) {
 }  // namespace
 
 void ArucoOptions::Check() const {
+  VisitArucoOptions(*this, limits::OptionChecker{"ArUco options: "});
   Require(min_marker_perimeter_rate > 0.0, "min_marker_perimeter_rate must be positive");
   Require(max_marker_perimeter_rate > min_marker_perimeter_rate,
           "max_marker_perimeter_rate must exceed min_marker_perimeter_rate");
@@ -46,6 +53,13 @@ void ArucoOptions::Check() const {
           "thresh_constant_contrast_share must be in [0, 1]");
   Require(min_thresh_constant >= 0.0 && min_thresh_constant <= adaptive_thresh_constant,
           "min_thresh_constant must be in [0, adaptive_thresh_constant]");
+  // OpenCV thresholds the whole image once per window size.
+  Require(adaptive_thresh_win_size_max <= kMaxThresholdWindow,
+          "adaptive_thresh_win_size_max must be at most " + std::to_string(kMaxThresholdWindow));
+  Require((adaptive_thresh_win_size_max - adaptive_thresh_win_size_min) / adaptive_thresh_win_size_step <
+              kMaxThresholdWindows,
+          "adaptive_thresh_win_size_min, _max and _step give more than " + std::to_string(kMaxThresholdWindows) +
+              " window sizes");
   Require(error_correction_rate >= 0.0 && error_correction_rate <= 1.0, "error_correction_rate must be in [0, 1]");
   Require(perspective_remove_pixel_per_cell >= 2 && perspective_remove_pixel_per_cell <= 32,
           "perspective_remove_pixel_per_cell must be in [2, 32]");

@@ -13,6 +13,13 @@ namespace calibproj::detect {
 
 namespace {
 
+// Far above the defaults; past them a bad option makes refinement loop for ages.
+constexpr int kMaxWindowPx = 1000;
+constexpr int kMaxIterations = 10'000;
+constexpr double kMinEdgeSpacingPx = 0.01;
+constexpr int kMaxEdgeSamples = 10'000;
+constexpr int kMaxEdgePasses = 100;
+
 // Step between samples of one intensity profile, in pixels.
 constexpr double kProfileStepPx = 0.1;
 
@@ -140,17 +147,22 @@ bool RefineWithEdgeLines(const cv::Mat& gray, int cells, const CornerRefinementO
 }  // namespace
 
 void CornerRefinementOptions::Check() const {
-  Require(window_fraction > 0.0, "window_fraction must be positive");
+  Require(window_fraction > 0.0 && std::isfinite(window_fraction), "window_fraction must be positive");
   Require(window_min_px >= 1, "window_min_px must be at least 1");
   Require(window_max_px >= window_min_px, "window_max_px must be at least window_min_px");
-  Require(max_iterations > 0, "max_iterations must be positive");
-  Require(epsilon_px > 0.0, "epsilon_px must be positive");
+  Require(window_max_px <= kMaxWindowPx, "window_max_px must be at most " + std::to_string(kMaxWindowPx));
+  Require(max_iterations > 0 && max_iterations <= kMaxIterations,
+          "max_iterations must be in [1, " + std::to_string(kMaxIterations) + "]");
+  Require(epsilon_px > 0.0 && std::isfinite(epsilon_px), "epsilon_px must be positive");
   Require(edge_search_fraction > 0.0 && edge_search_fraction <= 1.0, "edge_search_fraction must be in (0, 1]");
-  Require(edge_spacing_px > 0.0, "edge_spacing_px must be positive");
-  Require(edge_min_samples >= 2, "edge_min_samples must be at least 2");
+  Require(edge_spacing_px >= kMinEdgeSpacingPx && std::isfinite(edge_spacing_px),
+          "edge_spacing_px must be at least " + std::to_string(kMinEdgeSpacingPx));
+  Require(edge_min_samples >= 2 && edge_min_samples <= kMaxEdgeSamples,
+          "edge_min_samples must be in [2, " + std::to_string(kMaxEdgeSamples) + "]");
   Require(edge_end_margin >= 0.0 && edge_end_margin < 0.5, "edge_end_margin must be in [0, 0.5)");
   Require(edge_min_contrast >= 0.0 && edge_min_contrast <= 1.0, "edge_min_contrast must be in [0, 1]");
-  Require(edge_passes >= 1, "edge_passes must be at least 1");
+  Require(edge_passes >= 1 && edge_passes <= kMaxEdgePasses,
+          "edge_passes must be in [1, " + std::to_string(kMaxEdgePasses) + "]");
 }
 
 void RefineCorners(const cv::Mat& gray, int cells, const CornerRefinementOptions& options, Quad* corners) {

@@ -22,6 +22,11 @@ ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projecto
   if (projector.size() != image.size() || position.size() != image.size()) {
     throw std::invalid_argument("consistency: point counts differ");
   }
+  for (const auto* points : {&projector, &image}) {
+    for (const cv::Point2d& p : *points) {
+      if (!std::isfinite(p.x) || !std::isfinite(p.y)) throw std::invalid_argument("consistency: non-finite point");
+    }
+  }
   const int n = static_cast<int>(projector.size());
   ConsistencyResult result;
   result.keep.assign(n, true);

@@ -5,6 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
+
+#include "calibproj/common/limits.h"
 
 namespace calibproj::detect {
 
@@ -12,6 +15,9 @@ namespace {
 
 constexpr int kUndistortMaxIterations = 200;
 constexpr double kUndistortEpsilonPx = 1e-9;
+// Nodes of a lens table at most (16 bytes each): a distortion model whose undistorted
+// image is larger than this is not one of a real lens.
+constexpr double kMaxTableNodes = 1 << 26;
 
 }  // namespace
 
@@ -23,6 +29,12 @@ void LensModel::Check() const {
   }
   if (!(K(0, 0) > 0.0) || !(K(1, 1) > 0.0) || K(2, 2) != 1.0) {
     throw std::invalid_argument("lens: K must have positive focal lengths and K[2][2] = 1");
+  }
+  if (!cv::checkRange(K) || K(1, 0) != 0.0 || K(2, 0) != 0.0 || K(2, 1) != 0.0) {
+    throw std::invalid_argument("lens: K must be finite and [[fx, s, cx], [0, fy, cy], [0, 0, 1]]");
+  }
+  for (const double c : dist) {
+    if (!std::isfinite(c)) throw std::invalid_argument("lens: distortion coefficients must be finite");
   }
 }
 
@@ -52,6 +64,12 @@ std::vector<cv::Point2d> DistortPixels(const LensModel& lens, const std::vector<
 }
 
 LensTables::Grid LensTables::Sample(cv::Point2d origin, cv::Point2d end, double step) {
+  const double columns = std::ceil((end.x - origin.x) / step) + 1, rows = std::ceil((end.y - origin.y) / step) + 1;
+  if (!(columns >= 1.0 && rows >= 1.0 && columns * rows <= kMaxTableNodes)) {
+    throw std::invalid_argument("lens tables: the image spans (" + std::to_string(origin.x) + ", " +
+                                std::to_string(origin.y) + ")..(" + std::to_string(end.x) + ", " +
+                                std::to_string(end.y) + ") px, too large for a table: is the distortion model right?");
+  }
   Grid grid;
   grid.origin = origin;
   grid.step = step;
@@ -81,6 +99,12 @@ LensTables::LensTables(const LensModel& lens, cv::Size image_size, double step_p
     : lens_(lens), identity_(!lens.HasDistortion()) {
   if (identity_) return;
   if (!(step_px > 0.0) || !(margin_px >= 0.0)) throw std::invalid_argument("lens tables: bad step or margin");
+  if (image_size.width < 1 || image_size.height < 1 || image_size.width > limits::kMaxImageSide ||
+      image_size.height > limits::kMaxImageSide) {
+    throw std::invalid_argument("lens tables: image size must be in [1, " + std::to_string(limits::kMaxImageSide) +
+                                "] pixels per side, got " + std::to_string(image_size.width) + "x" +
+                                std::to_string(image_size.height));
+  }
   const cv::Point2d low(-margin_px, -margin_px), high(image_size.width + margin_px, image_size.height + margin_px);
   undistort_ = Sample(low, high, step_px);
   undistort_.values = UndistortPixels(lens, undistort_.values);

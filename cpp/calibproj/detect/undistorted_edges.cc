@@ -166,20 +166,29 @@ std::optional<Quad> RefinePass(const cv::Mat& gray, const cv::Point2d& origin, c
 void UndistortedEdgeOptions::Check() const {
   Require(search_fraction > 0.0 && search_fraction <= 1.0, "search_fraction must be in (0, 1]");
   Require(outward_fraction > 0.0 && outward_fraction <= 1.0, "outward_fraction must be in (0, 1]");
-  Require(spacing_px > 0.0, "spacing_px must be positive");
+  Require(spacing_px >= 0.01 && std::isfinite(spacing_px), "spacing_px must be at least 0.01");
   Require(min_samples >= 2, "min_samples must be at least 2");
-  Require(max_samples >= min_samples, "max_samples must be at least min_samples");
+  Require(max_samples >= min_samples && max_samples <= 10'000, "max_samples must be in [min_samples, 10000]");
   Require(max_profile_samples >= 4 && max_profile_samples <= kMaxProfileSamples,
           "max_profile_samples must be in [4, " + std::to_string(kMaxProfileSamples) + "]");
-  Require(profile_samples_per_px >= 1.0, "profile_samples_per_px must be at least 1");
+  Require(profile_samples_per_px >= 1.0 && std::isfinite(profile_samples_per_px),
+          "profile_samples_per_px must be at least 1");
   Require(end_margin >= 0.0 && end_margin < 0.5, "end_margin must be in [0, 0.5)");
   Require(min_contrast >= 0.0 && min_contrast <= 1.0, "min_contrast must be in [0, 1]");
-  Require(passes >= 1, "passes must be at least 1");
-  Require(tolerance_px >= 0.0, "tolerance_px must be non-negative");
+  Require(passes >= 1 && passes <= 100, "passes must be in [1, 100]");
+  Require(tolerance_px >= 0.0 && std::isfinite(tolerance_px), "tolerance_px must be non-negative");
 }
 
 std::optional<Quad> RefineUndistortedCorners(const cv::Mat& gray, const cv::Point& origin, const LensTables& lens,
                                              int cells, const Quad& distorted, const UndistortedEdgeOptions& options) {
+  if (options.passes > 100) throw std::invalid_argument("edge refinement: passes must be at most 100");
+  if (cells < 1 || cells > 1000) throw std::invalid_argument("edge refinement: cells must be in [1, 1000]");
+  for (const cv::Point2d& corner : distorted) {
+    if (!std::isfinite(corner.x) || !std::isfinite(corner.y)) {
+      throw std::invalid_argument("edge refinement: non-finite corner");
+    }
+  }
+  if (gray.empty() || gray.type() != CV_8UC1) throw std::invalid_argument("edge refinement: expected a non-empty 8-bit image");
   const std::vector<cv::Point2d> corners = lens.Undistort({distorted.begin(), distorted.end()});
   std::optional<Quad> quad = Quad{corners[0], corners[1], corners[2], corners[3]};
   // Profiles are measured in image pixels: their length follows the detected module.

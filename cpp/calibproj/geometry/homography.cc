@@ -10,6 +10,8 @@
 #include <random>
 #include <stdexcept>
 
+#include "calibproj/common/limits.h"
+
 namespace calibproj::geometry {
 
 namespace {
@@ -86,6 +88,13 @@ int RequiredIterations(int inliers, int total, double confidence, int max_iterat
 HomographyEstimate EstimateHomographyRansac(const Points2& x1, const Points2& x2,
                                             const HomographyRansacOptions& options) {
   if (x1.rows() != x2.rows()) throw std::invalid_argument("homography: point counts differ");
+  if (!x1.allFinite() || !x2.allFinite()) throw std::invalid_argument("homography: non-finite point");
+  limits::RequireInRange(options.max_iterations, 1, limits::kMaxIterations, "homography: max_iterations");
+  limits::RequireInRange(options.confidence, 0.0, 1.0, "homography: confidence");
+  limits::RequireFinite(options.threshold_px, "homography: threshold_px");
+  if (!(options.focal1 > 0.0 && options.focal2 > 0.0 && std::isfinite(options.focal1 * options.focal2))) {
+    throw std::invalid_argument("homography: focal lengths must be positive and finite");
+  }
   HomographyEstimate best;
   const int n = static_cast<int>(x1.rows());
   if (n < 4) return best;
@@ -123,6 +132,12 @@ HomographyEstimate EstimateHomographyRansac(const Points2& x1, const Points2& x2
 }
 
 std::vector<PlanarMotion> DecomposeHomography(const Eigen::Matrix3d& H, const Points2& x1, const Points2& x2) {
+  // OpenCV's visibility filter reads one point of each set per point of the first.
+  if (x1.rows() != x2.rows()) throw std::invalid_argument("homography decomposition: point counts differ");
+  if (x1.rows() == 0) throw std::invalid_argument("homography decomposition: no points");
+  if (!H.allFinite() || !x1.allFinite() || !x2.allFinite()) {
+    throw std::invalid_argument("homography decomposition: non-finite H or points");
+  }
   cv::Mat H_cv;
   cv::eigen2cv(H, H_cv);
   std::vector<cv::Mat> rotations, translations, normals;

@@ -11,9 +11,11 @@
 #include <stdexcept>
 #include <utility>
 
+#include "calibproj/common/limits.h"
 #include "calibproj/detect/floor_consistency.h"
 #include "calibproj/detect/marker_centre.h"
 #include "calibproj/ingest/detection_pipeline.h"
+#include "calibproj/ingest/option_table.h"
 #include "calibproj/sync/code_search.h"
 #include "calibproj/video/frame_ring.h"
 #include "calibproj/video/luma.h"
@@ -24,6 +26,9 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr int kProgressInterval = 25;
+// Decoded frames kept for the start code search, and patterns waiting for detection,
+// at most: each holds whole frames.
+constexpr int kMaxHeldFrames = 1024;
 
 void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument("ingest options: " + message);
@@ -568,6 +573,7 @@ class CameraIngest {
 }  // namespace
 
 void IngestOptions::Check() const {
+  VisitIngestOptions(*this, limits::OptionChecker{"ingest option "});
   sync.Check();
   pick.Check();
   detector.aruco.Check();
@@ -575,7 +581,8 @@ void IngestOptions::Check() const {
   roi.Check();
   homography.Check();
   merge.Check();
-  Require(mean_row_step >= 1, "mean_row_step must be at least 1");
+  Require(mean_row_step >= 1 && mean_row_step <= limits::kMaxImageSide,
+          "mean_row_step must be in [1, " + std::to_string(limits::kMaxImageSide) + "]");
   Require(luma_gamma > 0.0, "luma_gamma must be positive");
   Require(exposure_s >= 0.0, "exposure_s must be non-negative (0: estimate it)");
   Require(readout_bands == 0 || (readout_bands >= 3 && readout_bands <= 64),
@@ -583,10 +590,14 @@ void IngestOptions::Check() const {
   Require(readout_sigmas > 0.0, "readout_sigmas must be positive");
   Require(max_readout_sigma > 0.0, "max_readout_sigma must be positive");
   Require(max_frame_gap_s > 0.0 && std::isfinite(max_frame_gap_s), "max_frame_gap_s must be positive");
-  Require(lookback_frames >= 0, "lookback_frames must be non-negative");
+  // Frames held in memory: the lookback and the pending jobs.
+  Require(lookback_frames >= 0 && lookback_frames <= kMaxHeldFrames,
+          "lookback_frames must be in [0, " + std::to_string(kMaxHeldFrames) + "]");
   Require(search_interval >= 1, "search_interval must be at least 1");
-  Require(detection_threads >= 1, "detection_threads must be at least 1");
-  Require(max_pending_jobs >= 1, "max_pending_jobs must be at least 1");
+  Require(detection_threads >= 1 && detection_threads <= limits::kMaxThreads,
+          "detection_threads must be in [1, " + std::to_string(limits::kMaxThreads) + "]");
+  Require(max_pending_jobs >= 1 && max_pending_jobs <= kMaxHeldFrames,
+          "max_pending_jobs must be in [1, " + std::to_string(kMaxHeldFrames) + "]");
   Require(planning_lag >= 0, "planning_lag must be non-negative");
   Require(max_scales_per_msm >= 0, "max_scales_per_msm must be non-negative (0: every scale)");
   Require(bootstrap_downscale >= 1 && bootstrap_downscale <= 8, "bootstrap_downscale must be in [1, 8]");
@@ -599,6 +610,8 @@ CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDes
                                 const CameraModel& camera, const IngestOptions& options,
                                 const ProgressCallback& progress) {
   camera.lens.Check();
+  sequence.Check();
+  options.Check();
   return CameraIngest(video_path, sequence, camera, options, progress).Run();
 }
 

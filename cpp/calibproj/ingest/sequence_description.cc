@@ -5,9 +5,16 @@
 #include <limits>
 #include <stdexcept>
 
+#include "calibproj/common/limits.h"
+#include "calibproj/detect/marker_family.h"
+
 namespace calibproj::ingest {
 
 namespace {
+
+// Projector frame rates accepted: any real projector lies well inside.
+constexpr double kMinFps = 0.1;
+constexpr double kMaxFps = 100'000.0;
 
 void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument("sequence: " + message);
@@ -19,18 +26,32 @@ int SequenceDescription::FrameCount() const { return segments.empty() ? 0 : segm
 
 void SequenceDescription::Check() const {
   Require(!markers.empty(), "no marker family");
-  Require(projector_width > 0 && projector_height > 0, "projector resolution must be positive");
-  Require(fps > 0.0, "projector fps must be positive");
+  try {
+    detect::ParseMarkerFamily(markers);
+  } catch (const std::invalid_argument& error) {
+    Require(false, error.what());
+  }
+  Require(projector_width > 0 && projector_height > 0 && projector_width <= limits::kMaxImageSide &&
+              projector_height <= limits::kMaxImageSide,
+          "projector resolution must be in [1, " + std::to_string(limits::kMaxImageSide) + "] per side");
+  // The camera frames per projector frame follow from it: an absurd rate would make the
+  // light code templates and frame maps of the ingest absurdly long.
+  Require(fps >= kMinFps && fps <= kMaxFps, "projector fps must be in [" + limits::Number(kMinFps) + ", " +
+                                                limits::Number(kMaxFps) + "], got " + limits::Number(fps));
   Require(arrays > 0 && markers_per_array > 0, "arrays and markers_per_array must be positive");
-  Require(static_cast<int>(centres.size()) == arrays * markers_per_array,
-          "expected " + std::to_string(arrays * markers_per_array) + " centres, got " +
-              std::to_string(centres.size()));
+  const long long expected_centres = static_cast<long long>(arrays) * markers_per_array;
+  Require(static_cast<long long>(centres.size()) == expected_centres,
+          "expected " + std::to_string(expected_centres) + " centres, got " + std::to_string(centres.size()));
+  for (const cv::Point2d& c : centres) Require(std::isfinite(c.x) && std::isfinite(c.y), "centres must be finite");
+  for (const double scale : scales) Require(scale > 0.0 && std::isfinite(scale), "scales must be positive numbers");
   Require(!patterns.empty(), "no patterns");
   Require(!segments.empty(), "no segments");
   int expected_first = 0;
   for (const SegmentSpec& s : segments) {
     Require(s.first_frame == expected_first && s.last_frame >= s.first_frame,
             "segments must tile the frames from 0 without gaps");
+    Require(s.last_frame < limits::kMaxFrames,
+            "the sequence must have fewer than " + std::to_string(limits::kMaxFrames) + " frames");
     Require(s.kind == "white" || s.kind == "black" || s.kind == "start_code" || s.kind == "end_code" ||
                 s.kind == "patterns",
             "unknown segment kind '" + s.kind + "'");
@@ -45,7 +66,9 @@ void SequenceDescription::Check() const {
     const std::string where = "pattern " + std::to_string(i) + ": ";
     Require(p.array >= 0 && p.array < arrays, where + "array out of range");
     Require(p.scale_index >= 0 && p.scale_index < static_cast<int>(scales.size()), where + "scale out of range");
-    Require(p.marker_side_px > 0.0, where + "marker side must be positive");
+    Require(p.marker_side_px > 0.0 && p.marker_side_px <= limits::kMaxImageSide,
+            where + "marker side must be in (0, " + std::to_string(limits::kMaxImageSide) + "] px");
+    Require(std::isfinite(p.scale), where + "scale must be finite");
     Require(p.first_frame >= 0 && p.last_frame >= p.first_frame && p.last_frame < FrameCount(),
             where + "frames outside the sequence");
     Require(i == 0 || p.first_frame > patterns[i - 1].last_frame, where + "patterns must be in time order");

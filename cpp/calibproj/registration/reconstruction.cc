@@ -10,6 +10,7 @@
 #include <tuple>
 
 #include "calibproj/ba/rotation.h"
+#include "calibproj/common/limits.h"
 #include "calibproj/geometry/homography.h"
 #include "calibproj/geometry/pnp.h"
 #include "calibproj/geometry/triangulation.h"
@@ -72,18 +73,27 @@ double MedianParallaxDeg(const geometry::PlanarMotion& motion, const geometry::P
 }  // namespace
 
 void Options::Check() const {
+  for (const auto& [name, value] :
+       {std::pair{"loss_scale_px", loss_scale_px}, {"homography_threshold_px", homography_threshold_px},
+        {"pnp_threshold_px", pnp_threshold_px}, {"min_triangulation_angle_deg", min_triangulation_angle_deg},
+        {"min_pair_parallax_deg", min_pair_parallax_deg}, {"outlier_threshold_px", outlier_threshold_px},
+        {"outlier_sigma_factor", outlier_sigma_factor}, {"weak_rotation_sigma_deg", weak_rotation_sigma_deg}}) {
+    limits::RequireFinite(value, std::string("registration: ") + name);
+  }
   Require(homography_threshold_px > 0 && pnp_threshold_px > 0, "registration: RANSAC thresholds must be positive");
-  Require(ransac_max_iterations > 0, "registration: ransac_max_iterations must be positive");
+  limits::RequireInRange(ransac_max_iterations, 1, limits::kMaxIterations, "registration: ransac_max_iterations");
   Require(ransac_confidence > 0 && ransac_confidence < 1, "registration: ransac_confidence must be in (0, 1)");
   Require(min_pair_points >= 4, "registration: min_pair_points must be >= 4");
   Require(min_pnp_points >= 4, "registration: min_pnp_points must be >= 4");
   Require(min_triangulation_angle_deg >= 0, "registration: min_triangulation_angle_deg must be >= 0");
   Require(min_pair_parallax_deg >= 0, "registration: min_pair_parallax_deg must be >= 0");
   Require(outlier_threshold_px > 0 && outlier_sigma_factor >= 0, "registration: bad outlier threshold");
-  Require(max_refine_rounds >= 1, "registration: max_refine_rounds must be >= 1");
+  limits::RequireInRange(max_refine_rounds, 1, 1000, "registration: max_refine_rounds");
   Require(view_score_levels >= 1 && view_score_levels <= 12, "registration: view_score_levels must be in [1, 12]");
-  Require(num_threads >= 1, "registration: num_threads must be >= 1");
-  Require(intermediate_ba_iterations >= 0 && final_ba_iterations >= 0, "registration: BA iterations must be >= 0");
+  limits::RequireInRange(num_threads, 1, limits::kMaxThreads, "registration: num_threads");
+  limits::RequireInRange(intermediate_ba_iterations, 0, limits::kMaxIterations,
+                         "registration: intermediate_ba_iterations");
+  limits::RequireInRange(final_ba_iterations, 0, limits::kMaxIterations, "registration: final_ba_iterations");
   Require(weak_rotation_sigma_deg > 0, "registration: weak_rotation_sigma_deg must be positive");
 }
 
@@ -98,15 +108,18 @@ Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eige
   options_.Check();
   const int num_obs = static_cast<int>(camera_index_.size());
   Require(!cameras_.empty(), "registration: no cameras");
-  Require(num_points_ >= 0, "registration: negative point count");
+  limits::RequireInRange(num_points_, 0, limits::kMaxPoints, "registration: num_points");
   Require(point_index_.size() == num_obs && observed_.rows() == num_obs,
           "registration: camera_index, point_index and observed have different lengths");
   Require(observed_.allFinite(), "registration: non-finite observation");
   for (size_t c = 0; c < cameras_.size(); ++c) {
     const Camera& cam = cameras_[c];
-    Require(cam.K.fx > 0 && cam.K.fy > 0 && std::isfinite(cam.K.cx) && std::isfinite(cam.K.cy),
+    Require(cam.K.fx > 0 && cam.K.fy > 0 && std::isfinite(cam.K.fx * cam.K.fy) && std::isfinite(cam.K.cx) &&
+                std::isfinite(cam.K.cy) && std::isfinite(cam.K.skew),
             "registration: camera " + Str(int(c)) + " has invalid intrinsics");
-    Require(cam.width > 0 && cam.height > 0, "registration: camera " + Str(int(c)) + " has no image size");
+    Require(cam.width > 0 && cam.height > 0 && cam.width <= limits::kMaxImageSide &&
+                cam.height <= limits::kMaxImageSide,
+            "registration: camera " + Str(int(c)) + " has no valid image size");
   }
   camera_observations_.assign(cameras_.size(), {});
   point_observations_.assign(num_points_, {});
@@ -135,6 +148,7 @@ Eigen::Vector2d Reconstruction::Ray(int observation) const {
 }
 
 int Reconstruction::ViewScore(int camera) const {
+  Require(camera >= 0 && camera < num_cameras(), "view score: camera index out of range");
   VisibilityPyramid pyramid(options_.view_score_levels, cameras_[camera].width, cameras_[camera].height);
   for (int i : camera_observations_[camera]) {
     if (active_[i]) pyramid.Add(observed_(i, 0), observed_(i, 1));

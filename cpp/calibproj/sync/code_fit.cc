@@ -13,9 +13,36 @@
 #include <stdexcept>
 #include <string>
 
+#include "calibproj/common/limits.h"
+
 namespace calibproj::sync {
 
 namespace {
+
+// Bounds of the fit's grid and iterations, far above the defaults (50 offsets, 50
+// exposures, 50 iterations), so that a bad option cannot make it loop without limit.
+constexpr int kMaxOffsetSteps = 100'000;
+constexpr int kMaxExposureSteps = 10'000;
+constexpr int kMaxFitIterations = 10'000;
+
+// A starting map that places the windows on camera frames an int can count, and
+// windows inside the timeline.
+void CheckFitInputs(const std::vector<double>& signal, const LightTimeline& timeline,
+                    const std::vector<FrameWindow>& windows, const FrameMap& initial) {
+  if (signal.size() > static_cast<std::size_t>(limits::kMaxFrames)) {
+    throw std::invalid_argument("code fit: the signal has more than " + std::to_string(limits::kMaxFrames) + " frames");
+  }
+  limits::RequireInRange(initial.offset, -limits::kMaxFrames, limits::kMaxFrames, "code fit: map offset");
+  limits::RequireInRange(initial.rate, 1e-3, 1e3, "code fit: map rate");
+  limits::RequireInRange(initial.exposure, 0.0, limits::kMaxFrames, "code fit: map exposure");
+  for (const FrameWindow& window : windows) {
+    if (window.begin < 0 || window.end > timeline.frame_count() || window.begin >= window.end) {
+      throw std::invalid_argument("code fit: window of frames " + std::to_string(window.begin) + ".." +
+                                  std::to_string(window.end - 1) + " outside the projector's " +
+                                  std::to_string(timeline.frame_count()) + " frames");
+    }
+  }
+}
 
 void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument("code fit options: " + message);
@@ -319,21 +346,26 @@ FrameMap Refine(const LightTimeline& timeline, const std::vector<std::vector<Sam
 }  // namespace
 
 void CodeFitOptions::Check() const {
-  Require(offset_range > 0.0, "offset_range must be positive");
+  Require(offset_range > 0.0 && std::isfinite(offset_range), "offset_range must be positive");
   Require(offset_step > 0.0 && offset_step <= offset_range, "offset_step must be in (0, offset_range]");
+  Require(offset_range <= kMaxOffsetSteps * offset_step,
+          "offset_step is too small for offset_range (more than " + std::to_string(kMaxOffsetSteps) + " offsets)");
   Require(min_exposure > 0.0 && min_exposure <= max_exposure && max_exposure <= 1.0,
           "exposures must satisfy 0 < min_exposure <= max_exposure <= 1");
-  Require(exposure_steps >= 1, "exposure_steps must be at least 1");
-  Require(fixed_exposure >= 0.0, "fixed_exposure must be non-negative (0: fit it)");
-  Require(feasible_chi2 >= 0.0, "feasible_chi2 must be non-negative");
-  Require(plateau_tolerance >= 0.0, "plateau_tolerance must be non-negative");
-  Require(max_iterations >= 1, "max_iterations must be at least 1");
+  Require(exposure_steps >= 1 && exposure_steps <= kMaxExposureSteps,
+          "exposure_steps must be in [1, " + std::to_string(kMaxExposureSteps) + "]");
+  Require(fixed_exposure >= 0.0 && std::isfinite(fixed_exposure), "fixed_exposure must be non-negative (0: fit it)");
+  Require(feasible_chi2 >= 0.0 && std::isfinite(feasible_chi2), "feasible_chi2 must be non-negative");
+  Require(plateau_tolerance >= 0.0 && std::isfinite(plateau_tolerance), "plateau_tolerance must be non-negative");
+  Require(max_iterations >= 1 && max_iterations <= kMaxFitIterations,
+          "max_iterations must be in [1, " + std::to_string(kMaxFitIterations) + "]");
 }
 
 CodeFit FitCodeWindows(const std::vector<double>& signal, const LightTimeline& timeline,
                        const std::vector<FrameWindow>& windows, const FrameMap& initial, bool fit_rate,
                        const CodeFitOptions& options) {
   options.Check();
+  CheckFitInputs(signal, timeline, windows, initial);
   std::vector<std::vector<Sample>> samples;
   for (const FrameWindow& window : windows) {
     samples.push_back(WindowSamples(signal, window, initial, options));

@@ -5,9 +5,20 @@
 #include <stdexcept>
 #include <string>
 
+#include "calibproj/common/limits.h"
+
 namespace calibproj::sync {
 
 namespace {
+
+// Bounds of the search's work, far above the defaults (5 rates x 4 phases), so that a
+// bad option cannot make it loop or allocate without limit.
+constexpr int kMaxCandidateRates = 10'000;
+constexpr int kMaxPhases = 1'000;
+constexpr double kMaxTemplateSamples = 1e8;
+// Camera fps / projector fps: a 1000 fps camera of a 1 fps projector, or the reverse.
+constexpr double kMinNominalRate = 1e-3;
+constexpr double kMaxNominalRate = 1e3;
 
 void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument("code search options: " + message);
@@ -120,7 +131,10 @@ double CorrelationWithGaps(const std::vector<double>& signal, const CodeTemplate
 void CodeSearchOptions::Check() const {
   Require(rate_search >= 0.0 && rate_search < 0.5, "rate_search must be in [0, 0.5)");
   Require(rate_step > 0.0, "rate_step must be positive");
-  Require(phases >= 1, "phases must be at least 1");
+  Require(rate_search <= kMaxCandidateRates * rate_step,
+          "rate_step is too small for rate_search (more than " + std::to_string(kMaxCandidateRates) +
+              " candidate rates)");
+  Require(phases >= 1 && phases <= kMaxPhases, "phases must be in [1, " + std::to_string(kMaxPhases) + "]");
   Require(exposure > 0.0 && exposure <= 1.0, "exposure must be in (0, 1] camera frames");
   Require(max_missing_share >= 0.0 && max_missing_share < 0.9, "max_missing_share must be in [0, 0.9)");
   Require(detrend_frames >= 0 && detrend_frames <= 1000, "detrend_frames must be in [0, 1000]");
@@ -148,7 +162,17 @@ std::vector<double> Detrended(const std::vector<double>& values, int half_window
 std::vector<CodeTemplate> MakeCodeTemplates(const LightTimeline& timeline, const FrameWindow& window,
                                             double nominal_rate, const CodeSearchOptions& options) {
   options.Check();
-  if (!(nominal_rate > 0.0)) throw std::invalid_argument("code search: the nominal rate must be positive");
+  if (!(nominal_rate >= kMinNominalRate && nominal_rate <= kMaxNominalRate)) {
+    throw std::invalid_argument("code search: the nominal rate (camera fps / projector fps) must be in [" +
+                                limits::Number(kMinNominalRate) + ", " + limits::Number(kMaxNominalRate) +
+                                "], got " + limits::Number(nominal_rate));
+  }
+  const double rates = 2.0 * std::floor(options.rate_search / options.rate_step + 1e-9) + 1.0;
+  if (window.size() * nominal_rate * rates * options.phases > kMaxTemplateSamples) {
+    throw std::invalid_argument("code search: a code window of " + std::to_string(window.size()) +
+                                " frames at this rate, rate_search, rate_step and phases needs templates of more "
+                                "than " + limits::Number(kMaxTemplateSamples) + " samples");
+  }
   std::vector<CodeTemplate> templates;
   for (double rate : CandidateRates(nominal_rate, options)) {
     for (int p = 0; p < options.phases; ++p) {

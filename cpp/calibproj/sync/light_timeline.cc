@@ -5,12 +5,22 @@
 #include <stdexcept>
 #include <string>
 
+#include "calibproj/common/limits.h"
+
 namespace calibproj::sync {
 
 void LightCode::Check(const char* what) const {
   const std::string name(what);
   if (bits.empty()) throw std::invalid_argument(name + ": the light code has no bits");
   if (frames_per_bit < 1) throw std::invalid_argument(name + ": frames_per_bit must be at least 1");
+  // Within the longest sequence, so that EndFrame() cannot overflow.
+  const long long end = first_frame + static_cast<long long>(bits.size()) * frames_per_bit;
+  if (first_frame < 0 || end > limits::kMaxFrames) {
+    throw std::invalid_argument(name + ": the light code must lie within frames 0.." +
+                                std::to_string(limits::kMaxFrames) + ", got first_frame " +
+                                std::to_string(first_frame) + " and " + std::to_string(bits.size()) + " bits of " +
+                                std::to_string(frames_per_bit) + " frames");
+  }
   int ones = 0;
   for (int bit : bits) {
     if (bit != 0 && bit != 1) throw std::invalid_argument(name + ": light code bits must be 0 or 1");
@@ -22,6 +32,9 @@ void LightCode::Check(const char* what) const {
 }
 
 LightTimeline::LightTimeline(std::vector<double> levels) : levels_(std::move(levels)) {
+  if (levels_.size() > static_cast<std::size_t>(limits::kMaxFrames)) {
+    throw std::invalid_argument("light timeline: more than " + std::to_string(limits::kMaxFrames) + " frames");
+  }
   cumulative_.assign(levels_.size() + 1, 0.0);
   for (std::size_t k = 0; k < levels_.size(); ++k) {
     const double level = levels_[k];

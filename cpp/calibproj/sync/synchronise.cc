@@ -5,9 +5,26 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "calibproj/common/limits.h"
+
 namespace calibproj::sync {
 
 namespace {
+
+// The inputs every search of a code needs: a valid code inside the timeline and a
+// signal of a bounded length.
+void CheckSearchInputs(const std::vector<double>& signal, const LightTimeline& timeline, const LightCode& code,
+                       const std::string& what) {
+  code.Check((what + " light code").c_str());
+  if (code.EndFrame() > timeline.frame_count()) {
+    throw std::invalid_argument(what + " light code: frames " + std::to_string(code.first_frame) + ".." +
+                                std::to_string(code.EndFrame() - 1) + " lie outside the projector's " +
+                                std::to_string(timeline.frame_count()) + " frames");
+  }
+  if (signal.size() > static_cast<std::size_t>(limits::kMaxFrames)) {
+    throw std::invalid_argument("signal: more than " + std::to_string(limits::kMaxFrames) + " frames");
+  }
+}
 
 void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument("sync options: " + message);
@@ -68,8 +85,11 @@ void SyncOptions::Check() const {
   fit.Check();
   Require(min_correlation > 0.0 && min_correlation <= 1.0, "min_correlation must be in (0, 1]");
   Require(max_rate_deviation > 0.0 && max_rate_deviation < 0.5, "max_rate_deviation must be in (0, 0.5)");
-  Require(context_before >= 0 && context_after >= 0, "context_before and context_after must be non-negative");
-  Require(guard_samples >= 1, "guard_samples must be at least 1");
+  Require(context_before >= 0 && context_after >= 0 && context_before <= limits::kMaxFrames &&
+              context_after <= limits::kMaxFrames,
+          "context_before and context_after must be in [0, " + std::to_string(limits::kMaxFrames) + "]");
+  Require(guard_samples >= 1 && guard_samples <= limits::kMaxFrames,
+          "guard_samples must be in [1, " + std::to_string(limits::kMaxFrames) + "]");
 }
 
 FrameWindow CodeWindow(const LightTimeline& timeline, const LightCode& code, const SyncOptions& options) {
@@ -90,6 +110,7 @@ CodeLocation LocateCode(const std::vector<double>& signal, const LightTimeline& 
                         double nominal_rate, const SyncOptions& options, const std::string& source,
                         const std::string& what, int first_shift, int end_shift) {
   options.Check();
+  CheckSearchInputs(signal, timeline, code, what);
   const FrameWindow window = CodeWindow(timeline, code, options);
   const CodeMatch match = SearchCode(signal, timeline, window, nominal_rate, options.search, first_shift, end_shift);
   if (!match.valid()) {
@@ -112,6 +133,8 @@ SyncResult SynchroniseFromStart(const std::vector<double>& signal, const LightTi
                                 const LightCode& start, const LightCode& end, const CodeLocation& start_location,
                                 double nominal_rate, const SyncOptions& options, const std::string& source) {
   options.Check();
+  CheckSearchInputs(signal, timeline, start, "start");
+  CheckSearchInputs(signal, timeline, end, "end");
   // The end code's window starts where the start code and the nominal rate put it.
   const FrameWindow end_window = CodeWindow(timeline, end, options);
   const double distance = end_window.begin - start.first_frame;

@@ -5,6 +5,8 @@
 #include <sstream>
 #include <utility>
 
+#include "calibproj/common/limits.h"
+
 namespace calibproj::video {
 
 namespace {
@@ -17,7 +19,7 @@ constexpr double kMaxBackwardFrames = 2.0;
 FrameClock::FrameClock(double period_s, double max_gap_s, bool use_timestamps, std::string source)
     : period_(period_s), max_gap_(max_gap_s), use_timestamps_(use_timestamps), source_(std::move(source)) {
   if (!(period_ > 0.0) || !std::isfinite(period_)) throw std::invalid_argument(source_ + ": no frame period");
-  if (!(max_gap_ > 0.0)) throw std::invalid_argument("max_frame_gap_s must be positive");
+  if (!(max_gap_ > 0.0) || !std::isfinite(max_gap_)) throw std::invalid_argument("max_frame_gap_s must be positive");
 }
 
 int FrameClock::Place(double seconds) {
@@ -48,6 +50,13 @@ int FrameClock::Place(double seconds) {
       std::ostringstream message;
       message << source_ << ": the timestamps jump by " << seconds - last_time_ << " s after frame "
               << stats_.frames - 1 << " (more than max_frame_gap_s = " << max_gap_ << " s)";
+      throw std::runtime_error(message.str());
+    }
+    // Slots index the signal, which would grow to the slot.
+    if (last_slot_ + steps > limits::kMaxFrames) {
+      std::ostringstream message;
+      message << source_ << ": the timestamps reach past frame " << limits::kMaxFrames << " after frame "
+              << stats_.frames - 1;
       throw std::runtime_error(message.str());
     }
     const int gap = static_cast<int>(steps);

@@ -5,6 +5,9 @@
 #include <limits>
 #include <cstdint>
 #include <stdexcept>
+#include <string>
+
+#include "calibproj/common/limits.h"
 
 namespace calibproj::video {
 
@@ -19,8 +22,10 @@ double RowSumGray(const std::uint8_t* row, int width, const std::array<float, 25
 }  // namespace
 
 LumaMeter::LumaMeter(double gamma, int row_step) : row_step_(row_step) {
-  if (row_step < 1) throw std::invalid_argument("luma: row_step must be at least 1");
-  if (!(gamma > 0.0)) throw std::invalid_argument("luma: gamma must be positive");
+  if (row_step < 1 || row_step > limits::kMaxImageSide) {
+    throw std::invalid_argument("luma: row_step must be in [1, " + std::to_string(limits::kMaxImageSide) + "]");
+  }
+  if (!(gamma > 0.0) || !std::isfinite(gamma)) throw std::invalid_argument("luma: gamma must be positive");
   for (int value = 0; value < 256; ++value) linear_[value] = static_cast<float>(std::pow(value / 255.0, gamma));
 }
 

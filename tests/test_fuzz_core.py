@@ -1,0 +1,813 @@
+"""Fuzzing of the C++ bindings: every public function, constructor, method and property
+of calibproj._core (and of calibproj._bench) called with bad arguments.
+
+Each callable has a valid baseline call; the bad calls replace one argument at a time
+(empty arrays, wrong shapes and dtypes, NaN and infinities, huge and tiny numbers,
+non-contiguous arrays, missing dictionary keys, absurd option values, ...), chosen from
+a fixed seed within a fixed budget. They run in a child process, which reports each
+call before and after making it, so that a segfault, an abort or a hang names the call
+instead of killing pytest. Every call must return or raise ValueError, TypeError or
+RuntimeError with a message.
+
+Run alone (with -s for the summary line):
+    PYTHONPATH=python python -m pytest tests/test_fuzz_core.py -q -s
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import selectors
+import subprocess
+import sys
+import time
+import types
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pytest
+
+from calibproj import _bench, _core
+
+SEED = 20250611
+# Bad calls per callable at most (the systematic list of a callable is sampled down to
+# this many), and in total at least.
+MAX_CALLS_PER_CALLABLE = 90
+MIN_TOTAL_CALLS = 1400
+CALL_TIMEOUT_S = 20.0
+CHILD_ADDRESS_SPACE_BYTES = 6 << 30  # an allocation without limit fails instead of swapping
+ALLOWED_OUTCOMES = {"ok", "ValueError", "TypeError", "RuntimeError"}
+MODULES = {"_core": _core, "_bench": _bench}
+# Where every keyword option meets every absurd value (the others sample them).
+EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "_core.sync.synchronise",
+                "_core.ingest.ingest_camera"}
+# No constructor by design; the tiny video holds no light code.
+BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.ingest.ingest_camera"}
+
+# Keyword options of registration.Reconstruction (cpp/bindings/registration.cc).
+REGISTRATION_OPTIONS = {
+    "model": "coplanar", "loss": "none", "loss_scale_px": 1.0, "homography_threshold_px": 3.0,
+    "pnp_threshold_px": 3.0, "ransac_max_iterations": 2000, "ransac_confidence": 0.9999, "seed": 0,
+    "min_pair_points": 15, "min_pnp_points": 6, "min_triangulation_angle_deg": 1.0, "min_pair_parallax_deg": 1.0,
+    "outlier_threshold_px": 1.0, "outlier_sigma_factor": 3.0, "max_refine_rounds": 5, "view_score_levels": 3,
+    "num_threads": 1, "intermediate_ba_iterations": 20, "final_ba_iterations": 100,
+    "weak_rotation_sigma_deg": 1.0,
+}
+
+
+# ---------------------------------------------------------------------------------------
+# What is bound: every public callable, by qualified name.
+
+
+def public_callables() -> list[str]:
+    """Qualified names of every public function, class (its constructor), method and
+    property of the extension modules, e.g. "_core.ba.bundle_adjust",
+    "_core.detect.MarkerDetector.detect"."""
+    names: list[str] = []
+
+    def walk(module: types.ModuleType, prefix: str) -> None:
+        for name in sorted(dir(module)):
+            if name.startswith("_"):
+                continue
+            value = getattr(module, name)
+            qualified = f"{prefix}.{name}"
+            if isinstance(value, types.ModuleType):
+                walk(value, qualified)
+            elif isinstance(value, type):
+                names.append(qualified)
+                for attribute, member in sorted(vars(value).items()):
+                    if attribute.startswith("_") or isinstance(member, value):
+                        continue  # private, or an enum's value
+                    if callable(member) or isinstance(member, property):
+                        names.append(f"{qualified}.{attribute}")
+            elif callable(value):
+                names.append(qualified)
+
+    for module_name, module in MODULES.items():
+        walk(module, module_name)
+    return names
+
+
+# ---------------------------------------------------------------------------------------
+# Bad values, each with a short description for the report.
+
+Mutation = tuple[str, Any]
+MISSING = object()  # the argument or key is left out
+
+BAD_FLOATS: list[Mutation] = [
+    ("nan", math.nan), ("inf", math.inf), ("-inf", -math.inf), ("0.0", 0.0), ("-1.0", -1.0),
+    ("1e-300", 1e-300), ("-1e-300", -1e-300), ("1e300", 1e300), ("-1e300", -1e300), ("2**31 as float", 2.0**31),
+]
+BAD_INTS: list[Mutation] = [
+    ("0", 0), ("-1", -1), ("-2**31", -2**31), ("2**31-1", 2**31 - 1), ("2**31", 2**31), ("2**63", 2**63),
+    ("10**6", 10**6), ("10**9", 10**9),
+]
+# Absurd option values: every option meets all of them.
+BAD_OPTIONS: list[Mutation] = [
+    ("nan", math.nan), ("inf", math.inf), ("-inf", -math.inf), ("1e300", 1e300), ("-1e300", -1e300),
+    ("1e-300", 1e-300), ("-1", -1), ("0", 0), ("2**31-1", 2**31 - 1), ("2**31", 2**31), ("'12'", "12"), ("None", None),
+]
+BAD_TYPES: list[Mutation] = [
+    ("None", None), ("a string", "12"), ("a list", [1.0, 2.0]), ("a dict", {"a": 1}), ("an object", object()),
+    ("True", True),
+]
+BAD_STRINGS: list[Mutation] = [
+    ("''", ""), ("'nonsense'", "nonsense"), ("NUL in a string", "a\x00b"), ("100k chars", "x" * 100_000),
+    ("non-ASCII", "caméra-\u00e9\u4e2d"), ("an int", 3), ("None", None), ("bytes", b"abc"),
+]
+
+
+def bad_numbers(value: float | int) -> list[Mutation]:
+    return [*BAD_FLOATS, *BAD_INTS, *BAD_TYPES]
+
+
+def bad_arrays(a: np.ndarray) -> list[Mutation]:
+    with np.errstate(all="ignore"):
+        return array_mutations(a)
+
+
+def array_mutations(a: np.ndarray) -> list[Mutation]:
+    out: list[Mutation] = [
+        ("empty (0, ...)", a[:0] if a.ndim else np.empty(0)), ("empty 1-D", np.empty(0)),
+        ("0-d array", np.array(1.0)), ("flattened", a.ravel()), ("extra leading axis", a[None]),
+        ("extra trailing axis", a[..., None]), ("as nested lists", a.tolist()),
+        ("float32", a.astype(np.float32)), ("int8", a.astype(np.int8)), ("complex", a.astype(np.complex128)),
+        ("bool", a.astype(bool)), ("strings", a.astype(str)), ("objects", a.astype(object)),
+        ("all NaN", np.full(a.shape, np.nan)), ("all inf", np.full(a.shape, np.inf)),
+        ("all 1e300", np.full(a.shape, 1e300)), ("all 1e-300", np.full(a.shape, 1e-300)),
+        ("zeros", np.zeros(a.shape, a.dtype)), ("negated", -a), ("times 1e300", a * 1e300 if a.dtype.kind == "f" else a),
+        *BAD_TYPES,
+    ]
+    if a.ndim >= 1 and a.size:
+        flat = a.astype(float).ravel()
+        for name, value in [("one NaN", np.nan), ("one inf", np.inf), ("one -inf", -np.inf), ("one 1e300", 1e300)]:
+            changed = flat.copy()
+            changed[len(changed) // 2] = value
+            out.append((name, changed.reshape(a.shape)))
+        if a.dtype.kind in "iu":
+            for name, value in [("one -1", -1), ("one 2**31-1", 2**31 - 1), ("one -2**31", -2**31), ("one 2**40", 2**40)]:
+                changed = a.astype(np.int64).ravel()
+                changed[len(changed) // 2] = value
+                out.append((name, changed.reshape(a.shape)))
+        out += [
+            ("one row fewer", a[:-1]), ("one row", a[:1]), ("one row more", np.concatenate([a, a[:1]])),
+            ("twice the rows", np.concatenate([a, a])), ("reversed rows (negative stride)", a[::-1]),
+            ("non-contiguous rows", np.repeat(a, 2, axis=0)[::2]),
+            ("10**6 rows, zero stride", np.broadcast_to(a[:1], (10**6, *a.shape[1:]))),
+        ]
+    if a.ndim >= 2:
+        out += [
+            ("one column fewer", a[..., :-1]), ("one column more", np.concatenate([a, a[..., :1]], axis=-1)),
+            ("Fortran order", np.asfortranarray(a)), ("transposed", a.T), ("non-contiguous columns",
+                                                                              np.repeat(a, 2, axis=-1)[..., ::2]),
+        ]
+    return out
+
+
+def deep_list(depth: int = 100_000) -> list:
+    out: list = []
+    for _ in range(depth):
+        out = [out]
+    return out
+
+
+def bad_dicts(d: dict, rng: np.random.Generator) -> list[Mutation]:
+    """A nested dict with one entry changed, removed or replaced, at every path."""
+    out: list[Mutation] = [("empty dict", {}), ("a list", list(d.values())), ("None", None), ("an int", 3)]
+    for path in dict_paths(d):
+        where = "/".join(str(p) for p in path)
+        value = get_path(d, path)
+        if isinstance(path[-1], str):
+            out.append((f"{where} removed", set_path(d, path, MISSING)))
+        choices = [*BAD_TYPES, ("nan", math.nan), ("1e-300", 1e-300), ("1e300", 1e300), ("-1", -1),
+                   ("2**31-1", 2**31 - 1), ("2**31", 2**31), ("[]", []), ("deeply nested list", deep_list(3000))]
+        if isinstance(value, list) and value:
+            choices += [("a huge list", value * 1000), ("reversed", value[::-1])]
+        for name, bad in choices:
+            out.append((f"{where}={name}", set_path(d, path, bad)))
+    return out
+
+
+def dict_paths(value: Any, prefix: tuple = ()) -> list[tuple]:
+    """Paths to every entry of nested dicts, and to the first item of every list."""
+    paths = []
+    if isinstance(value, dict):
+        for key, item in value.items():
+            paths.append((*prefix, key))
+            paths += dict_paths(item, (*prefix, key))
+    elif isinstance(value, list) and value:
+        paths.append((*prefix, 0))
+        paths += dict_paths(value[0], (*prefix, 0))
+    return paths
+
+
+def get_path(value: Any, path: tuple) -> Any:
+    for key in path:
+        value = value[key]
+    return value
+
+
+def set_path(value: Any, path: tuple, new: Any) -> Any:
+    """A copy of `value` with the entry at `path` replaced by `new` (removed if MISSING)."""
+    if not path:
+        return new
+    copy = dict(value) if isinstance(value, dict) else list(value)
+    if len(path) == 1 and new is MISSING:
+        del copy[path[0]]
+    else:
+        copy[path[0]] = set_path(copy[path[0]], path[1:], new)
+    return copy
+
+
+def bad_values(value: Any, rng: np.random.Generator) -> list[Mutation]:
+    if isinstance(value, np.ndarray):
+        return bad_arrays(value)
+    if isinstance(value, _core.detect.CornerRefinement):
+        return [("an undefined value 7", _core.detect.CornerRefinement(7)),
+                ("an undefined value -1", _core.detect.CornerRefinement(-1)), *BAD_TYPES]
+    if isinstance(value, bool):
+        return [("None", None), ("'yes'", "yes"), ("2", 2), ("an array", np.ones(2))]
+    if isinstance(value, (int, float)):
+        return bad_numbers(value)
+    if isinstance(value, str):
+        return list(BAD_STRINGS)
+    if isinstance(value, dict):
+        return bad_dicts(value, rng)
+    if isinstance(value, (list, tuple)):
+        return [("empty", type(value)()), ("one item", value[:1]), ("one item more", [*value, value[-1]]),
+                ("NaN items", [math.nan] * len(value)), ("huge items", [2**31] * len(value)),
+                ("strings", ["a"] * len(value)), ("deeply nested", deep_list(3000)), *BAD_TYPES]
+    return list(BAD_TYPES)
+
+
+# ---------------------------------------------------------------------------------------
+# Valid baselines.
+
+
+@dataclasses.dataclass
+class Call:
+    callable: str  # qualified name (public_callables())
+    label: str
+    run: Callable[[], Any]
+    allowed: frozenset[str] = frozenset(ALLOWED_OUTCOMES)
+
+
+@dataclasses.dataclass
+class Spec:
+    """A valid call of one callable: positional arguments by name, keyword arguments,
+    and the keyword options it takes besides (name -> default)."""
+
+    args: list[tuple[str, Any]]
+    kwargs: dict[str, Any] = dataclasses.field(default_factory=dict)
+    options: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+
+def plane_scene(cameras: int = 4, points: int = 30, seed: int = 5) -> dict[str, np.ndarray]:
+    """Cameras 5 units above a floor of points, all seeing every point, in pixels."""
+    rng = np.random.default_rng(seed)
+    X = np.column_stack([rng.uniform(-1, 1, points), rng.uniform(-1, 1, points), np.zeros(points)])
+    K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
+    poses, observed, camera_index, point_index = [], [], [], []
+    for c in range(cameras):
+        angle = 2 * np.pi * c / cameras
+        w = np.array([0.15 * np.cos(angle), 0.15 * np.sin(angle), 0.1 * c])
+        t = np.array([0.5 * np.cos(angle), 0.5 * np.sin(angle), 5.0])
+        theta = np.linalg.norm(w)
+        k = w / theta
+        Kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        R = np.eye(3) + np.sin(theta) * Kx + (1 - np.cos(theta)) * Kx @ Kx
+        x = (K @ (X @ R.T + t).T).T
+        observed.append(x[:, :2] / x[:, 2:] + rng.normal(0, 0.3, (points, 2)))
+        poses.append(np.concatenate([w, t]))
+        camera_index += [c] * points
+        point_index += list(range(points))
+    return {
+        "camera_index": np.array(camera_index, np.int32), "point_index": np.array(point_index, np.int32),
+        "observed": np.concatenate(observed), "K": np.stack([K] * cameras), "poses": np.array(poses),
+        "points": X, "plane": np.array([0.0, 0.0, 1.0, 0.0]),
+        "image_sizes": np.array([[640.0, 480.0]] * cameras),
+    }
+
+
+def camera_signal(light: np.ndarray, offset: float, rate: float, exposure: float, frames: int,
+                  rng: np.random.Generator) -> np.ndarray:
+    """Mean brightness a camera records of the projector's light (see test_sync)."""
+    cumulative = np.concatenate([[0.0], np.cumsum(light)])
+
+    def integral(t):
+        t = np.clip(t, 0.0, len(light))
+        k = np.minimum(t.astype(int), len(light) - 1)
+        return cumulative[k] + (t - k) * light[k]
+
+    start = (np.arange(frames) - offset) / rate
+    mean = (integral(start + exposure / rate) - integral(start)) / (exposure / rate)
+    return 0.08 + 0.6 * mean + rng.normal(0.0, 0.002, frames)
+
+
+def write_files(folder: Path) -> dict[str, str]:
+    """Files the path arguments point at: a tiny video, an empty file, garbage, a video
+    cut in half, a folder."""
+    folder.mkdir(parents=True, exist_ok=True)
+    video = folder / "tiny.mkv"
+    rng = np.random.default_rng(1)
+    frames = rng.integers(0, 255, (24, 48, 64), dtype=np.uint8)
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "gray", "-s", "64x48", "-r", "25",
+                    "-i", "-", "-c:v", "ffv1", str(video)], input=frames.tobytes(), check=True)
+    (folder / "empty.mp4").write_bytes(b"")
+    (folder / "garbage.mp4").write_bytes(rng.integers(0, 255, 5000, dtype=np.uint8).tobytes())
+    data = video.read_bytes()
+    (folder / "cut.mkv").write_bytes(data[: len(data) // 2])
+    (folder / "folder.mp4").mkdir(exist_ok=True)
+    return {name: str(folder / name) for name in ("tiny.mkv", "empty.mp4", "garbage.mp4", "cut.mkv", "folder.mp4")}
+
+
+def bad_paths(files: dict[str, str]) -> list[Mutation]:
+    return [("an empty file", files["empty.mp4"]), ("garbage bytes", files["garbage.mp4"]),
+            ("a truncated video", files["cut.mkv"]), ("a folder", files["folder.mp4"]),
+            ("a missing file", files["tiny.mkv"] + ".missing"), ("/dev/null", "/dev/null"), *BAD_STRINGS]
+
+
+class Baselines:
+    """Valid arguments and receivers for every callable."""
+
+    def __init__(self, files: dict[str, str]) -> None:
+        from calibproj.generate.builder import build_sequence
+
+        self.files = files
+        self.scene = plane_scene()
+        sequence = build_sequence(arrays=3, scales=(1.0, 2.0), grid=(2, 4), code_degree=4, reference_frames=8)
+        self.sequence = json.loads(json.dumps(sequence.to_dict()))
+        self.levels = np.asarray(_core.ingest.light_levels(self.sequence))
+        self.start_code = self.sequence["codes"]["start"]
+        self.end_code = self.sequence["codes"]["end"]
+        light = self.levels.copy()
+        light[np.isnan(light)] = 0.2
+        rng = np.random.default_rng(7)
+        self.rate = 25.0 / self.sequence["projector"]["fps"]
+        frames = int(9.0 + self.rate * len(light) + 20)
+        self.signal = camera_signal(light, 9.0, self.rate, 0.5, frames, rng)
+        self.bands = np.stack([camera_signal(light, 9.0 + 0.02 * b, self.rate, 0.5, frames, rng) for b in range(4)])
+        self.image = self.marker_image()
+        self.K = np.array([[80.0, 0, 32], [0, 80.0, 24], [0, 0, 1]])
+        self.dist = np.array([0.01, -0.002, 0.0, 0.0, 0.0])
+        self.apriltag_spec = next(s for s in _core.detect.family_specs() if s.startswith("apriltag"))
+
+    def marker_image(self) -> np.ndarray:
+        bits = np.asarray(_core.detect.marker_bits("aruco:4X4_50", 3))
+        cells = np.pad(bits, 1, constant_values=1)
+        image = np.kron(cells, np.ones((10, 10), np.uint8)) * 255
+        return np.ascontiguousarray(np.pad(image, 20, constant_values=255).astype(np.uint8))
+
+    def reconstruction(self, state: str = "fresh") -> Any:
+        s = self.scene
+        r = _core.registration.Reconstruction(s["K"], s["image_sizes"], len(s["points"]), s["camera_index"],
+                                              s["point_index"], s["observed"], min_pair_points=8)
+        if state in ("initialized", "registered"):
+            r.initialize(0, 1)
+        if state == "registered":
+            r.run()
+        return r
+
+    def specs(self) -> dict[str, Spec | None]:
+        """Valid calls by qualified name (None: a property or a method without arguments
+        whose receivers are listed in receivers())."""
+        s, f = self.scene, self.files
+        ba_args = [("camera_index", s["camera_index"]), ("point_index", s["point_index"]),
+                   ("observed", s["observed"]), ("intrinsics", s["K"]), ("poses", s["poses"]),
+                   ("points", s["points"]), ("plane", s["plane"])]
+        ba_kwargs = {"model": "coplanar", "loss": "huber", "loss_scale": 1.0, "max_iterations": 5,
+                     "function_tolerance": 1e-12, "gradient_tolerance": 1e-14, "parameter_tolerance": 1e-12,
+                     "num_threads": 1, "linear_solver": "auto", "refine_poses": True, "refine_points": True,
+                     "gauge_camera": 0, "scale_camera": -1, "compute_covariance": True, "full_report": False,
+                     "cache_rotations": True}
+        pose = s["poses"][0]
+        x = s["observed"][: len(s["points"])]
+        x1 = (x - 320.0) / 500.0
+        x2 = (s["observed"][len(s["points"]): 2 * len(s["points"])] - 320.0) / 500.0
+        H = np.linalg.lstsq(np.column_stack([x1, np.ones(len(x1))]), np.column_stack([x2, np.ones(len(x2))]),
+                            rcond=None)[0].T
+        corners = np.array([[[10.0, 10], [50, 10], [50, 50], [10, 50]], [[60.0, 10], [90, 12], [88, 40], [62, 38]]])
+        sequence = self.sequence
+        sync_options = _core.sync.option_defaults()
+        ingest_options = _core.ingest.option_defaults()
+        marker_corners = np.array([[20.0, 20], [80, 20], [80, 80], [20, 80]])
+        n = 12
+        return {
+            "_core.ba.bundle_adjust": Spec(ba_args, ba_kwargs),
+            "_bench.bundle_adjust_autodiff": Spec(ba_args, ba_kwargs),
+            "_core.ba.evaluate_free_cost": Spec([("K", s["K"][0]), ("observed", x[0]), ("pose", pose),
+                                                ("point", s["points"][0]), ("want", [True, True])]),
+            "_core.ba.evaluate_plane_cost": Spec([("K", s["K"][0]), ("observed", x[0]), ("pose", pose),
+                                                 ("plane", s["plane"]), ("ab", np.array([0.1, 0.2])),
+                                                 ("want", [True, True, True])]),
+            "_core.ba.point_on_plane": Spec([("plane", s["plane"]), ("ab", np.array([0.1, 0.2]))]),
+            "_core.ba.plane_manifold": Spec([("reference_normal", np.array([0.0, 0, 1])), ("fix_offset", False),
+                                            ("x", s["plane"]), ("y", np.array([0.0, 0.1, 1.0, 0.2])),
+                                            ("delta", np.array([0.01, 0.02, 0.03]))]),
+            "_core.ba.fixed_distance_pose_manifold": Spec([("reference_translation", pose[3:]), ("x", pose),
+                                                          ("y", s["poses"][1]), ("delta", np.full(5, 0.01))]),
+            "_core.geometry.estimate_similarity": Spec([("src", s["points"]), ("dst", 2.0 * s["points"] + 1.0)]),
+            "_core.geometry.triangulate_linear": Spec([
+                ("R", np.stack([np.eye(3)] * n)), ("t", np.tile([[0.0, 0, 5], [1.0, 0, 5]], (n // 2, 1))),
+                ("rays", np.tile([[0.0, 0.0], [0.2, 0.0]], (n // 2, 1))),
+                ("point_index", np.repeat(np.arange(n // 2, dtype=np.int64), 2)), ("num_points", n // 2)]),
+            "_core.geometry.estimate_homography": Spec([("x1", x1), ("x2", x2), ("threshold_px", 3.0),
+                                                       ("focal1", 500.0), ("focal2", 500.0),
+                                                       ("max_iterations", 200), ("seed", 1)]),
+            "_core.geometry.decompose_homography": Spec([("H", H), ("x1", x1), ("x2", x2)]),
+            "_core.geometry.Similarity3": Spec([]),
+            "_core.registration.Reconstruction": Spec(
+                [("intrinsics", s["K"]), ("image_sizes", s["image_sizes"]), ("num_points", len(s["points"])),
+                 ("camera_index", s["camera_index"]), ("point_index", s["point_index"]),
+                 ("observed", s["observed"])], options=REGISTRATION_OPTIONS),
+            "_core.registration.Reconstruction.initialize": Spec([("camera1", 0), ("camera2", 1)]),
+            "_core.registration.Reconstruction.register_camera": Spec([("camera", 2)]),
+            "_core.registration.Reconstruction.add_points": Spec([("camera", 1)]),
+            "_core.registration.Reconstruction.adjust": Spec([("final", True)]),
+            "_core.registration.Reconstruction.filter_outliers": Spec([("thresholds", [1.0, 1.0, 1.0, 1.0])]),
+            "_core.registration.Reconstruction.view_score": Spec([("camera", 1)]),
+            "_core.registration.Reconstruction.run": Spec([("log", lambda message: None)]),
+            "_core.registration.view_score": Spec([("pixels", s["observed"][:30]), ("width", 640.0),
+                                                  ("height", 480.0), ("levels", 3)]),
+            "_core.detect.family_specs": Spec([]),
+            "_core.detect.family_info": Spec([("spec", "aruco:4X4_50")]),
+            "_core.detect.marker_bits": Spec([("spec", "aruco:4X4_50"), ("id", 3)]),
+            "_core.detect.marker_centres": Spec([("corners", corners)]),
+            "_core.detect.check_floor_consistency": Spec([("projector", s["points"][:, :2] * 100),
+                                                         ("image", s["observed"][:30]), ("threshold_px", 3.0),
+                                                         ("min_points", 8), ("min_share", 0.3)]),
+            "_core.detect.MarkerDetector": Spec([("spec", "aruco:4X4_50"), ("aruco", _core.detect.ArucoOptions()),
+                                                ("apriltag", _core.detect.AprilTagOptions())]),
+            "_core.detect.MarkerDetector.detect": Spec([("image", self.image)]),
+            "_core.detect.ArucoOptions": Spec([]),
+            "_core.detect.AprilTagOptions": Spec([]),
+            "_core.detect.CornerRefinementOptions": Spec([]),
+            "_core.detect.CornerRefinement": Spec([("value", 1)]),
+            "_core.video.probe": Spec([("path", f["tiny.mkv"])]),
+            "_core.video.frame_timestamps": Spec([("path", f["tiny.mkv"])]),
+            "_core.video.frame_period": Spec([("times", [0.0, 0.04, 0.08, 0.16, 0.2])]),
+            "_core.video.luma_signal": Spec([("path", f["tiny.mkv"]), ("gamma", 2.2), ("row_step", 2),
+                                            ("use_timestamps", True), ("max_frame_gap_s", 2.0)]),
+            "_core.sync.option_defaults": Spec([]),
+            "_core.sync.synchronise": Spec([("signal", self.signal), ("levels", self.levels),
+                                           ("start_code", self.start_code), ("end_code", self.end_code),
+                                           ("nominal_rate", self.rate), ("source", "cam")], options=sync_options),
+            "_core.sync.locate_code": Spec([("signal", self.signal), ("levels", self.levels),
+                                           ("code", self.start_code), ("nominal_rate", self.rate),
+                                           ("source", "cam")], options=sync_options),
+            "_core.sync.estimate_readout": Spec([("band_signals", self.bands), ("levels", self.levels),
+                                                ("start_code", self.start_code), ("end_code", self.end_code),
+                                                ("map", {"offset": 9.0, "rate": self.rate, "exposure": 0.5})],
+                                               options=sync_options),
+            "_core.ingest.option_defaults": Spec([]),
+            "_core.ingest.light_levels": Spec([("sequence", sequence)]),
+            "_core.ingest.lens_tables_map": Spec([("K", self.K), ("dist", self.dist), ("resolution", (64, 48)),
+                                                 ("points", s["observed"][:5] / 10), ("undistort", True)]),
+            "_core.ingest.refine_undistorted_corners": Spec([
+                ("image", self.image), ("corners", marker_corners), ("K", self.K), ("dist", self.dist),
+                ("cells", 6), ("outward_fraction", 0.45), ("passes", 6)]),
+            "_core.ingest.ingest_camera": Spec(
+                [("video", f["tiny.mkv"]), ("sequence", sequence), ("K", self.K), ("dist", self.dist),
+                 ("resolution", (64, 48)), ("source", "cam"), ("aruco", _core.detect.ArucoOptions()),
+                 ("apriltag", _core.detect.AprilTagOptions()), ("progress", lambda decoded, total: None)],
+                options=ingest_options),
+        }
+
+    def receivers(self) -> dict[str, dict[str, Callable[[], Any]]]:
+        """Objects whose methods and properties are called, by class, in several states."""
+        s = self.scene
+        return {
+            "_core.registration.Reconstruction": {
+                state: (lambda state=state: self.reconstruction(state))
+                for state in ("fresh", "initialized", "registered")},
+            "_core.geometry.Similarity3": {
+                "estimated": lambda: _core.geometry.estimate_similarity(s["points"], s["points"] * 2),
+                "degenerate": lambda: _core.geometry.estimate_similarity(s["points"][:1], s["points"][:1])},
+            "_core.detect.MarkerDetector": {
+                "aruco": lambda: _core.detect.MarkerDetector("aruco:4X4_50"),
+                "apriltag": lambda: _core.detect.MarkerDetector(self.apriltag_spec)},
+            "_core.detect.ArucoOptions": {"default": _core.detect.ArucoOptions},
+            "_core.detect.AprilTagOptions": {"default": _core.detect.AprilTagOptions},
+            "_core.detect.CornerRefinementOptions": {"default": _core.detect.CornerRefinementOptions},
+            "_core.detect.CornerRefinement": {"edges": lambda: _core.detect.CornerRefinement.edges},
+        }
+
+    def use_options(self, cls: str, options: Any) -> Any:
+        """Detection with options whose field was set to a bad value."""
+        if cls.endswith("CornerRefinementOptions"):
+            aruco = _core.detect.ArucoOptions()
+            aruco.refinement = options
+            return _core.detect.MarkerDetector("aruco:4X4_50", aruco=aruco).detect(self.image)
+        if cls.endswith("ArucoOptions"):
+            return _core.detect.MarkerDetector("aruco:4X4_50", aruco=options).detect(self.image)
+        return _core.detect.MarkerDetector(self.apriltag_spec, apriltag=options).detect(self.image)
+
+
+# ---------------------------------------------------------------------------------------
+# The calls.
+
+
+def resolve(qualified: str) -> Any:
+    module, *rest = qualified.split(".")
+    value: Any = MODULES[module]
+    for name in rest:
+        value = getattr(value, name)
+    return value
+
+
+def spec_calls(qualified: str, name: str, target: Callable[[], Callable], spec: Spec, baselines: Baselines,
+               rng: np.random.Generator) -> list[Call]:
+    """The valid call, then one argument or option at a time replaced by bad values;
+    `name` labels the calls of `qualified`."""
+
+    def call(label: str, args: list[Any], kwargs: dict[str, Any]) -> Call:
+        args = [a for a in args if a is not MISSING]
+        kwargs = {k: v for k, v in kwargs.items() if v is not MISSING}
+        return Call(qualified, f"{name}({label})", lambda: target()(*args, **kwargs))
+
+    values = [v for _, v in spec.args]
+    calls = [call("valid", values, spec.kwargs), call("no arguments", [], {}),
+             call("an extra argument", [*values, 1.0], spec.kwargs),
+             call("an unknown keyword", values, {**spec.kwargs, "no_such_option": 1})]
+    for i, (arg, value) in enumerate(spec.args):
+        mutations = bad_paths(baselines.files) if arg in ("path", "video") else bad_values(value, rng)
+        if arg == "progress":
+            mutations = [("raises ValueError", raise_value_error), ("wrong signature", lambda: None),
+                         ("not callable", 3)]
+        if arg == "log":
+            mutations = [("raises ValueError", raise_value_error), ("wrong signature", lambda: None),
+                         ("not callable", 3), ("None", None)]
+        calls.append(call(f"{arg} left out", values[:i], spec.kwargs))
+        for label, bad in mutations:
+            calls.append(call(f"{arg}={label}", [*values[:i], bad, *values[i + 1:]], spec.kwargs))
+    return calls
+
+
+def option_calls(qualified: str, target: Callable[[], Callable], spec: Spec, every: bool) -> list[Call]:
+    """Each keyword option set to each absurd value, the others valid; a NaN or an
+    infinity must be refused (ValueError or TypeError). `every`: all options, else those
+    of spec.kwargs only."""
+    values = [v for _, v in spec.args]
+    calls = []
+    for key, value in ({**spec.kwargs, **spec.options} if every else spec.kwargs).items():
+        mutations = BAD_OPTIONS if not isinstance(value, (bool, str)) else [*BAD_TYPES, ("''", "")]
+        for label, bad in mutations:
+            kwargs = {**spec.kwargs, key: bad}
+            refused = isinstance(bad, float) and not math.isfinite(bad)
+            calls.append(Call(qualified, f"{qualified}({key}={label})",
+                              lambda kwargs=kwargs: target()(*values, **kwargs),
+                              frozenset({"ValueError", "TypeError"}) if refused else frozenset(ALLOWED_OUTCOMES)))
+    return calls
+
+
+def raise_value_error(*args: Any) -> None:
+    raise ValueError("raised by the callback")
+
+
+def sample(calls: list[Call], rng: np.random.Generator, size: int = MAX_CALLS_PER_CALLABLE) -> list[Call]:
+    """The first call (the valid one), then at most size - 1 of the others."""
+    if len(calls) <= size:
+        return calls
+    chosen = rng.choice(np.arange(1, len(calls)), size - 1, replace=False)
+    return [calls[0], *(calls[i] for i in sorted(chosen))]
+
+
+def generate_calls(files: dict[str, str]) -> list[Call]:
+    """Every bad call, in a fixed order, from SEED."""
+    baselines = Baselines(files)
+    specs = baselines.specs()
+    receivers = baselines.receivers()
+    calls: list[Call] = []
+    for index, name in enumerate(public_callables()):
+        rng = np.random.default_rng([SEED, index])
+        owner, _, member = name.rpartition(".")
+        own: list[Call] = []
+        if owner in receivers:  # a method or property of a bound class
+            for state, make in receivers[owner].items():
+                own += member_calls(name, owner, member, state, make, specs.get(name), baselines, rng)
+        elif name in specs:
+            target = lambda name=name: resolve(name)  # noqa: E731
+            own = spec_calls(name, name, target, specs[name], baselines, rng)
+            options = option_calls(name, target, specs[name], every=name in EVERY_OPTION)
+            own = [*sample(own, rng), *(options if name in EVERY_OPTION else sample(options, rng, 30))]
+            calls += own
+            continue
+        else:
+            own = [Call(name, f"{name}: no baseline", lambda name=name: missing_baseline(name))]
+        calls += sample(own, rng)
+    return calls
+
+
+def member_calls(name: str, owner: str, member: str, state: str, make: Callable[[], Any], spec: Spec | None,
+                 baselines: Baselines, rng: np.random.Generator) -> list[Call]:
+    attribute = vars(resolve(owner))[member]
+    if isinstance(attribute, property):
+        calls = [Call(name, f"{name} of {state}", lambda: getattr(make(), member))]
+        if attribute.fset is not None:
+            value = getattr(make(), member)
+            for label, bad in bad_values(value, rng):
+                calls.append(Call(name, f"{name}={label} of {state}, then detection",
+                                  lambda bad=bad: set_and_use(make, member, bad, owner, baselines)))
+        return calls
+    target = lambda: getattr(make(), member)  # noqa: E731 (a fresh receiver per call)
+    if spec is None:
+        return [Call(name, f"{name}() of {state}", lambda: target()()),
+                Call(name, f"{name}(an extra argument) of {state}", lambda: target()(1))]
+    calls = spec_calls(name, f"{name} of {state}", target, spec, baselines, rng)
+    return calls if state == "fresh" or owner != "_core.registration.Reconstruction" else calls[:1]
+
+
+def set_and_use(make: Callable[[], Any], member: str, value: Any, owner: str, baselines: Baselines) -> Any:
+    receiver = make()
+    setattr(receiver, member, value)
+    if owner.endswith("Options"):
+        return baselines.use_options(owner, receiver)
+    return receiver
+
+
+def missing_baseline(name: str) -> None:
+    raise AssertionError(f"{name} has no baseline in tests/test_fuzz_core.py")
+
+
+# ---------------------------------------------------------------------------------------
+# The child process: runs calls from a start index, reporting each on a pipe.
+
+
+def child_main(folder: str, start: int, stride: int) -> None:
+    import faulthandler
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (CHILD_ADDRESS_SPACE_BYTES, CHILD_ADDRESS_SPACE_BYTES))
+    faulthandler.enable()
+    report = os.fdopen(os.dup(1), "w", buffering=1)
+    os.dup2(2, 1)  # whatever the library prints goes to stderr, not into the reports
+    files = {path.name: str(path) for path in Path(folder).iterdir()}
+    calls = generate_calls(files)
+    for index in range(start, len(calls), stride):
+        report.write(f"start {index}\n")
+        try:
+            calls[index].run()
+            outcome, message = "ok", ""
+        except BaseException as error:  # noqa: BLE001 (every outcome is reported)
+            outcome, message = type(error).__name__, str(error)
+        report.write(json.dumps({"index": index, "outcome": outcome, "message": message[:300]}) + "\n")
+    report.write("end\n")
+
+
+CHILD = ("import sys; sys.path.insert(0, sys.argv[1]); import test_fuzz_core as t; "
+         "t.child_main(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))")
+SHARDS = 2  # children at once, each making every SHARDS-th call
+
+
+@dataclasses.dataclass
+class Outcome:
+    index: int
+    outcome: str  # "ok", an exception's name, "crash (signal N)", "hang"
+    message: str
+
+
+class LineReader:
+    def __init__(self, process: subprocess.Popen) -> None:
+        self.process = process
+        self.buffer = b""
+        self.selector = selectors.DefaultSelector()
+        self.selector.register(process.stdout, selectors.EVENT_READ)
+
+    def line(self, timeout: float) -> str | None:
+        """The next line; None at the end of the output; TimeoutError after `timeout`."""
+        deadline = time.monotonic() + timeout
+        while b"\n" not in self.buffer:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 or not self.selector.select(remaining):
+                raise TimeoutError
+            chunk = os.read(self.process.stdout.fileno(), 65536)
+            if not chunk:
+                return None
+            self.buffer += chunk
+        line, self.buffer = self.buffer.split(b"\n", 1)
+        return line.decode()
+
+
+class Shard:
+    """One child at a time making calls first, first + SHARDS, ...; a child that
+    crashes or hangs is replaced by one starting after the call that killed it."""
+
+    def __init__(self, folder: Path, first: int, count: int, log: Path) -> None:
+        self.folder, self.count, self.log = folder, count, log
+        self.outcomes: list[Outcome] = []
+        self.next = first
+        self.current: int | None = None
+        self.done = first >= count
+        self.process: subprocess.Popen | None = None
+        if not self.done:
+            self.spawn()
+
+    def spawn(self) -> None:
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+        self.log_offset = self.log.stat().st_size if self.log.exists() else 0
+        with open(self.log, "ab") as stderr:
+            self.process = subprocess.Popen(
+                [sys.executable, "-c", CHILD, str(Path(__file__).parent), str(self.folder), str(self.next),
+                 str(SHARDS)], stdout=subprocess.PIPE, stderr=stderr, env=env)
+        self.reader = LineReader(self.process)
+        self.current = None
+        self.deadline = time.monotonic() + 120.0  # generating the calls comes first
+
+    def poll(self) -> None:
+        """Reads what the child reported so far (returns within a fraction of a second)."""
+        try:
+            line = self.reader.line(min(0.2, max(0.0, self.deadline - time.monotonic())))
+        except TimeoutError:
+            if time.monotonic() < self.deadline:
+                return
+            self.process.kill()
+            self.finish(Outcome(self.current if self.current is not None else self.next, "hang",
+                                f"no answer within {CALL_TIMEOUT_S:.0f} s"))
+            return
+        if line is None or line == "end":
+            self.finish(None if line == "end" else Outcome(
+                self.current if self.current is not None else self.next,
+                f"crash (exit status {self.process.wait()})", self.child_log()))
+        elif line.startswith("start "):
+            self.current = int(line.split()[1])
+            self.deadline = time.monotonic() + CALL_TIMEOUT_S
+        else:
+            entry = json.loads(line)
+            self.outcomes.append(Outcome(entry["index"], entry["outcome"], entry["message"]))
+            self.next = entry["index"] + SHARDS
+            self.current = None
+            self.deadline = time.monotonic() + CALL_TIMEOUT_S
+
+    def finish(self, failure: Outcome | None) -> None:
+        self.process.wait()
+        self.process.stdout.close()
+        if failure is None:
+            self.done = True
+            return
+        if self.current is None and failure.outcome.startswith("crash") and not self.outcomes:
+            raise AssertionError(f"a child died before its first call: {self.child_log()}")
+        self.outcomes.append(failure)
+        self.next = failure.index + SHARDS
+        self.done = self.next >= self.count
+        if not self.done:
+            self.spawn()
+
+    def child_log(self) -> str:
+        """What the dead child wrote to stderr (the Python stack of a fatal signal)."""
+        with open(self.log, "rb") as log:
+            log.seek(self.log_offset)
+            lines = log.read().decode(errors="replace").splitlines()
+        return " | ".join(line.strip() for line in lines[-8:] if line.strip() and "Extension modules" not in line)
+
+
+def run_in_children(folder: Path, count: int, log: Path) -> list[Outcome]:
+    shards = [Shard(folder, first, count, log) for first in range(SHARDS)]
+    while not all(shard.done for shard in shards):
+        for shard in shards:
+            if not shard.done:
+                shard.poll()
+    return sorted((o for shard in shards for o in shard.outcomes), key=lambda o: o.index)
+
+
+# ---------------------------------------------------------------------------------------
+# The tests.
+
+
+def test_every_public_callable_has_a_baseline(tmp_path: Path) -> None:
+    files = write_files(tmp_path)
+    baselines = Baselines(files)
+    covered = set(baselines.specs())
+    receivers = baselines.receivers()
+    for name in public_callables():
+        owner = name.rpartition(".")[0]
+        assert name in covered or owner in receivers, f"{name} is bound but not fuzzed: add a baseline"
+    stale = covered - set(public_callables())
+    assert not stale, f"baselines of callables that are no longer bound: {sorted(stale)}"
+    # The valid calls are valid, so that the bad ones test what they claim to.
+    for name, spec in baselines.specs().items():
+        if name.rpartition(".")[0] in receivers or name in BASELINES_THAT_RAISE:
+            continue
+        resolve(name)(*[v for _, v in spec.args], **spec.kwargs)
+
+
+def test_bad_calls_neither_crash_nor_hang(tmp_path: Path) -> None:
+    files = write_files(tmp_path / "files")
+    names = public_callables()
+    calls = generate_calls(files)
+    assert len(calls) >= MIN_TOTAL_CALLS
+    assert {c.callable for c in calls} == set(names)
+    started = time.perf_counter()
+    outcomes = run_in_children(tmp_path / "files", len(calls), tmp_path / "child.log")
+    elapsed = time.perf_counter() - started
+    assert len({o.index for o in outcomes}) == len(calls), "some calls were not made"
+    bad = [f"{calls[o.index].label}: {o.outcome}: {o.message}" for o in outcomes
+           if o.outcome not in calls[o.index].allowed or (o.outcome != "ok" and not o.message.strip())]
+    counts: dict[str, int] = {}
+    for o in outcomes:
+        counts[o.outcome] = counts.get(o.outcome, 0) + 1
+    print(f"\nfuzzed {len(calls)} calls of {len(names)} callables in {elapsed:.1f} s: "
+          + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    assert not bad, f"{len(bad)} of {len(calls)} bad calls failed:\n" + "\n".join(bad)
