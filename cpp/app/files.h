@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace calibproj::app {
 
@@ -19,8 +20,21 @@ class InputError : public std::runtime_error {
 // its "schema" tag; InputError names the file and the problem.
 nlohmann::json ReadSchemaJson(const std::filesystem::path& path, const std::string& kind, int major);
 
-// Parses any JSON file (InputError naming the file when it is not JSON).
+// Parses any JSON file (InputError naming the file when it is not JSON, or nests
+// arrays and objects deeper than kMaxJsonDepth).
 nlohmann::json ReadJson(const std::filesystem::path& path);
+constexpr int kMaxJsonDepth = 512;
+
+// Values of a document with the type its schema gives them; std::invalid_argument
+// naming `what` otherwise. nlohmann converts silently between booleans, floats and
+// integers (true as 1, 1e30 as an int), so a file is read through these.
+double NumberValue(const nlohmann::json& value, const std::string& what);
+long long IntegerValue(const nlohmann::json& value, const std::string& what, long long lo, long long hi);
+int IntValue(const nlohmann::json& value, const std::string& what);
+bool BoolValue(const nlohmann::json& value, const std::string& what);
+std::string StringValue(const nlohmann::json& value, const std::string& what);
+std::vector<double> NumberList(const nlohmann::json& value, const std::string& what);
+std::vector<int> IntList(const nlohmann::json& value, const std::string& what);
 
 // Writes text to a temporary file in the same folder, then renames it over `path`.
 void AtomicWrite(const std::filesystem::path& path, const std::string& text);

@@ -5,6 +5,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/core/eigen.hpp>
 
+#include "calibproj/common/limits.h"
 #include "files.h"
 
 namespace calibproj::app {
@@ -38,6 +39,10 @@ void Check(const fs::path& path, const CameraIntrinsics& in) {
   } else if (in.has_resolution && (in.width <= 0 || in.height <= 0 || in.width != std::floor(in.width) ||
                                    in.height != std::floor(in.height))) {
     problem = "resolution must be two positive integers [width, height]";
+  } else if (!(in.ImageWidth() > 0 && in.ImageWidth() <= limits::kMaxImageSide && in.ImageHeight() > 0 &&
+               in.ImageHeight() <= limits::kMaxImageSide)) {
+    // Without a resolution the principal point gives the image size.
+    problem = "image size must be at most " + std::to_string(limits::kMaxImageSide) + " pixels per side";
   }
   if (!problem.empty()) throw InputError(path.string() + ": intrinsics of '" + in.name + "': " + problem);
 }
@@ -62,17 +67,20 @@ Eigen::Matrix3d MatrixFromJson(const fs::path& path, const nlohmann::json& value
   return K;
 }
 
-std::vector<double> VectorFromJson(const fs::path& path, const nlohmann::json& value) {
+std::vector<double> VectorFromJson(const fs::path& path, const nlohmann::json& value, const std::string& what) {
   std::vector<double> out;
   if (value.is_null()) return out;
-  if (!value.is_array()) throw InputError(path.string() + ": K and dist must be numbers");
+  if (!value.is_array()) throw InputError(path.string() + ": " + what + " must be numbers");
   for (const auto& v : value) {
     if (v.is_array()) {
-      for (const auto& w : v) out.push_back(w.get<double>());
+      for (const auto& w : v) {
+        if (!w.is_number()) throw InputError(path.string() + ": " + what + " must be numbers");
+        out.push_back(w.get<double>());
+      }
     } else if (v.is_number()) {
       out.push_back(v.get<double>());
     } else {
-      throw InputError(path.string() + ": K and dist must be numbers");
+      throw InputError(path.string() + ": " + what + " must be numbers");
     }
   }
   return out;
@@ -86,7 +94,7 @@ CameraIntrinsics FromJson(const fs::path& path) {
     try {
       const auto& rgb = document.at("sensors").at("RGB");
       in.K = MatrixFromJson(path, rgb.at("intrinsics").at("data"));
-      in.dist = VectorFromJson(path, rgb.at("distortionCoefficients").at("data"));
+      in.dist = VectorFromJson(path, rgb.at("distortionCoefficients").at("data"), "K and dist");
     } catch (const nlohmann::json::exception&) {
       throw InputError(path.string() +
                        ": expected sensors.RGB.intrinsics.data and sensors.RGB.distortionCoefficients.data");
@@ -98,8 +106,8 @@ CameraIntrinsics FromJson(const fs::path& path) {
     if (!ours.contains(key)) throw InputError(path.string() + ": missing field '" + key + "'");
   }
   in.K = MatrixFromJson(path, ours.at("K"));
-  in.dist = VectorFromJson(path, ours.value("dist", nlohmann::json::array()));
-  const std::vector<double> resolution = VectorFromJson(path, ours.at("resolution"));
+  in.dist = VectorFromJson(path, ours.contains("dist") ? ours.at("dist") : nlohmann::json::array(), "K and dist");
+  const std::vector<double> resolution = VectorFromJson(path, ours.at("resolution"), "resolution");
   if (resolution.size() != 2) throw InputError(path.string() + ": resolution must be [width, height]");
   in.has_resolution = true;
   in.width = resolution[0];
@@ -158,12 +166,19 @@ CameraIntrinsics ReadIntrinsics(const fs::path& path) {
   if (!fs::is_regular_file(path)) throw InputError(path.string() + ": no such intrinsics file");
   const std::string suffix = Lower(path.extension().string());
   CameraIntrinsics in;
-  if (std::find(kYamlSuffixes.begin(), kYamlSuffixes.end(), suffix) != kYamlSuffixes.end()) {
-    in = FromOpenCvStorage(path);
-  } else if (suffix == ".json") {
-    in = FromJson(path);
-  } else {
-    throw InputError(path.string() + ": unknown intrinsics format (expected .json, .yaml, .yml or .xml)");
+  // Whatever the readers throw names the file.
+  try {
+    if (std::find(kYamlSuffixes.begin(), kYamlSuffixes.end(), suffix) != kYamlSuffixes.end()) {
+      in = FromOpenCvStorage(path);
+    } else if (suffix == ".json") {
+      in = FromJson(path);
+    } else {
+      throw InputError(path.string() + ": unknown intrinsics format (expected .json, .yaml, .yml or .xml)");
+    }
+  } catch (const InputError&) {
+    throw;
+  } catch (const std::exception& error) {
+    throw InputError(path.string() + ": not a readable intrinsics file (" + error.what() + ")");
   }
   if (in.dist.empty()) in.dist.assign(5, 0.0);
   Check(path, in);

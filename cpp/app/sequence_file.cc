@@ -12,38 +12,47 @@ namespace {
 
 using nlohmann::json;
 
-ingest::PatternSpec PatternFromJson(const json& p) {
+// The list at document[key] (json::out_of_range when it is missing).
+const json& ListAt(const json& document, const char* key) {
+  const json& list = document.at(key);
+  if (!list.is_array()) throw std::invalid_argument(std::string(key) + ": expected a list");
+  return list;
+}
+
+ingest::PatternSpec PatternFromJson(const json& p, const std::string& where) {
   ingest::PatternSpec pattern;
-  pattern.array = p.at("array").get<int>();
-  pattern.scale_index = p.at("scale_index").get<int>();
-  pattern.scale = p.at("scale").get<double>();
-  pattern.marker_side_px = p.at("marker_side_px").get<double>();
-  pattern.first_frame = p.at("first_frame").get<int>();
-  pattern.last_frame = p.at("last_frame").get<int>();
-  pattern.omitted = p.at("omitted").get<std::vector<int>>();
+  pattern.array = IntValue(p.at("array"), where + ".array");
+  pattern.scale_index = IntValue(p.at("scale_index"), where + ".scale_index");
+  pattern.scale = NumberValue(p.at("scale"), where + ".scale");
+  pattern.marker_side_px = NumberValue(p.at("marker_side_px"), where + ".marker_side_px");
+  pattern.first_frame = IntValue(p.at("first_frame"), where + ".first_frame");
+  pattern.last_frame = IntValue(p.at("last_frame"), where + ".last_frame");
+  pattern.omitted = IntList(p.at("omitted"), where + ".omitted");
   return pattern;
 }
 
-sync::LightCode CodeFromJson(const json& c) {
+sync::LightCode CodeFromJson(const json& c, const std::string& where) {
   sync::LightCode code;
-  code.bits = c.at("bits").get<std::vector<int>>();
-  code.frames_per_bit = c.at("frames_per_bit").get<int>();
-  code.first_frame = c.at("first_frame").get<int>();
+  code.bits = IntList(c.at("bits"), where + ".bits");
+  code.frames_per_bit = IntValue(c.at("frames_per_bit"), where + ".frames_per_bit");
+  code.first_frame = IntValue(c.at("first_frame"), where + ".first_frame");
   return code;
 }
 
 // Centres are [array][marker][x, y]; every array has the same number of markers.
 void ReadCentres(const json& document, ingest::SequenceDescription* s) {
-  const auto centres = document.at("centres").get<std::vector<std::vector<std::vector<double>>>>();
+  const json& centres = ListAt(document, "centres");
   s->arrays = static_cast<int>(centres.size());
-  s->markers_per_array = centres.empty() ? 0 : static_cast<int>(centres[0].size());
-  for (const auto& array : centres) {
+  for (const json& array : centres) {
+    if (!array.is_array()) throw std::invalid_argument("centres: expected a list of centres per array");
+    if (&array == &centres[0]) s->markers_per_array = static_cast<int>(array.size());
     if (static_cast<int>(array.size()) != s->markers_per_array) {
       throw std::invalid_argument("every array needs the same number of centres");
     }
-    for (const auto& xy : array) {
-      if (xy.size() != 2) throw std::invalid_argument("centres must be [x, y] pairs");
-      s->centres.emplace_back(xy[0], xy[1]);
+    for (const json& xy : array) {
+      const std::vector<double> point = NumberList(xy, "centres");
+      if (point.size() != 2) throw std::invalid_argument("centres must be [x, y] pairs");
+      s->centres.emplace_back(point[0], point[1]);
     }
   }
 }
@@ -52,22 +61,26 @@ ingest::SequenceDescription SequenceFromJson(const json& document) {
   ingest::SequenceDescription s;
   const json& markers = document.at("markers");
   const json& projector = document.at("projector");
-  s.markers = markers.at("spec").get<std::string>();
-  s.inverted = markers.at("inverted").get<bool>();
-  const auto resolution = projector.at("resolution").get<std::vector<int>>();
+  s.markers = StringValue(markers.at("spec"), "markers.spec");
+  s.inverted = BoolValue(markers.at("inverted"), "markers.inverted");
+  const std::vector<int> resolution = IntList(projector.at("resolution"), "projector.resolution");
   if (resolution.size() != 2) throw std::invalid_argument("projector resolution must be [width, height]");
   s.projector_width = resolution[0];
   s.projector_height = resolution[1];
-  s.fps = projector.at("fps").get<double>();
-  s.scales = document.at("layout").at("scales").get<std::vector<double>>();
+  s.fps = NumberValue(projector.at("fps"), "projector.fps");
+  s.scales = NumberList(document.at("layout").at("scales"), "layout.scales");
   ReadCentres(document, &s);
-  for (const auto& p : document.at("patterns")) s.patterns.push_back(PatternFromJson(p));
-  for (const auto& seg : document.at("segments")) {
-    s.segments.push_back({seg.at("kind").get<std::string>(), seg.at("first_frame").get<int>(),
-                          seg.at("last_frame").get<int>()});
+  for (const json& p : ListAt(document, "patterns")) {
+    s.patterns.push_back(PatternFromJson(p, "patterns[" + std::to_string(s.patterns.size()) + "]"));
   }
-  s.start_code = CodeFromJson(document.at("codes").at("start"));
-  s.end_code = CodeFromJson(document.at("codes").at("end"));
+  for (const json& seg : ListAt(document, "segments")) {
+    const std::string where = "segments[" + std::to_string(s.segments.size()) + "]";
+    s.segments.push_back({StringValue(seg.at("kind"), where + ".kind"),
+                          IntValue(seg.at("first_frame"), where + ".first_frame"),
+                          IntValue(seg.at("last_frame"), where + ".last_frame")});
+  }
+  s.start_code = CodeFromJson(document.at("codes").at("start"), "codes.start");
+  s.end_code = CodeFromJson(document.at("codes").at("end"), "codes.end");
   s.Check();
   return s;
 }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 #include "files.h"
@@ -70,8 +71,19 @@ Tracks ReadTracks(const fs::path& path) {
     const auto& observations = document.at("observations");
     if (!names_json.is_array()) throw std::invalid_argument("cameras: expected a list of names");
     if (!observations.is_object()) throw std::invalid_argument("observations: expected an object {camera: {point_ids, xy}}");
-    if (!document.value("undistorted", true)) throw std::invalid_argument("only undistorted observations are supported");
-    std::vector<std::string> names = names_json.get<std::vector<std::string>>();
+    if (document.contains("undistorted") && !BoolValue(document.at("undistorted"), "undistorted")) {
+      throw std::invalid_argument("only undistorted observations are supported");
+    }
+    std::vector<std::string> names;
+    for (const auto& name : names_json) names.push_back(StringValue(name, "cameras"));
+    // Observations are keyed by name: a second camera of one name would get the first's.
+    std::vector<std::string> sorted = names;
+    std::sort(sorted.begin(), sorted.end());
+    if (std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end()) {
+      std::string listed;
+      for (const auto& name : names) listed += (listed.empty() ? "'" : ", '") + name + "'";
+      throw std::invalid_argument("duplicate camera names in [" + listed + "]");
+    }
     std::vector<int> camera;
     std::vector<std::int64_t> ids;
     std::vector<Eigen::Vector2d> pixels;
@@ -83,25 +95,31 @@ Tracks ReadTracks(const fs::path& path) {
     for (size_t c = 0; c < names.size(); ++c) {
       if (!observations.contains(names[c])) continue;
       const auto& entry = observations.at(names[c]);
-      const auto camera_ids = entry.at("point_ids").get<std::vector<std::int64_t>>();
-      const auto camera_xy = entry.at("xy").get<std::vector<std::vector<double>>>();
-      if (camera_ids.size() != camera_xy.size()) {
-        throw std::invalid_argument("observations." + names[c] + ": " + std::to_string(camera_ids.size()) +
-                                    " point_ids but " + std::to_string(camera_xy.size()) + " xy");
+      const std::string where = "observations." + names[c];
+      const auto& ids_json = entry.at("point_ids");
+      const auto& xy_json = entry.at("xy");
+      if (!ids_json.is_array() || !xy_json.is_array()) {
+        throw std::invalid_argument(where + ": point_ids and xy must be lists");
       }
-      for (size_t k = 0; k < camera_ids.size(); ++k) {
-        if (camera_xy[k].size() != 2 || !std::isfinite(camera_xy[k][0]) || !std::isfinite(camera_xy[k][1])) {
-          throw std::invalid_argument("observations must be finite pixel pairs");
-        }
-        if (camera_ids[k] < 0) throw std::invalid_argument("point ids must be non-negative");
+      if (ids_json.size() != xy_json.size()) {
+        throw std::invalid_argument(where + ": " + std::to_string(ids_json.size()) + " point_ids but " +
+                                    std::to_string(xy_json.size()) + " xy");
+      }
+      for (size_t k = 0; k < ids_json.size(); ++k) {
+        const std::vector<double> xy = NumberList(xy_json[k], where + ".xy");
+        if (xy.size() != 2) throw std::invalid_argument("observations must be finite pixel pairs");
+        const long long id = IntegerValue(ids_json[k], where + ".point_ids", std::numeric_limits<std::int64_t>::min(),
+                                          std::numeric_limits<std::int64_t>::max());
+        if (id < 0) throw std::invalid_argument("point ids must be non-negative");
         camera.push_back(static_cast<int>(c));
-        ids.push_back(camera_ids[k]);
-        pixels.emplace_back(camera_xy[k][0], camera_xy[k][1]);
+        ids.push_back(id);
+        pixels.emplace_back(xy[0], xy[1]);
       }
     }
     std::optional<int> markers;
     if (document.contains("markers_per_array") && !document.at("markers_per_array").is_null()) {
-      markers = document.at("markers_per_array").get<int>();
+      markers = static_cast<int>(IntegerValue(document.at("markers_per_array"), "markers_per_array", 1,
+                                              std::numeric_limits<int>::max()));
     }
     return MakeTracks(names, camera, ids, pixels, markers);
   } catch (const nlohmann::json::exception& error) {
