@@ -10,6 +10,8 @@
 #include <initializer_list>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
+#include <vector>
 
 #include "calibproj/common/limits.h"
 
@@ -63,13 +65,36 @@ inline std::string TypeName(const pybind11::handle& value) {
   return pybind11::str(pybind11::type::handle_of(value).attr("__name__"));
 }
 
+// What a value of type T is called in messages.
+template <typename T>
+struct Expected {
+  static std::string Name() {
+    if constexpr (std::is_same_v<T, bool>) return "True or False";
+    else if constexpr (std::is_integral_v<T>) return "an integer";
+    else if constexpr (std::is_floating_point_v<T>) return "a number";
+    else if constexpr (std::is_same_v<T, std::string>) return "a string";
+    else if constexpr (std::is_same_v<T, pybind11::dict>) return "a dict";
+    else return "a list";
+  }
+};
+template <typename Item>
+struct Expected<std::vector<Item>> {
+  static std::string Name() {
+    if constexpr (std::is_arithmetic_v<Item>) {
+      return std::is_integral_v<Item> ? "a list of integers" : "a list of numbers";
+    } else {
+      return "a list of lists";
+    }
+  }
+};
+
 // value cast to T; TypeError naming `what` when it cannot be.
 template <typename T>
 T CastTo(const pybind11::handle& value, const std::string& what) {
   try {
     return value.cast<T>();
   } catch (const pybind11::cast_error&) {
-    throw pybind11::type_error(what + ": unexpected value of type " + TypeName(value));
+    throw pybind11::type_error(what + ": expected " + Expected<T>::Name() + ", got " + TypeName(value));
   }
 }
 
@@ -87,7 +112,7 @@ T DictItem(const pybind11::handle& d, const char* key, const std::string& what) 
   try {
     return item.cast<T>();
   } catch (const pybind11::cast_error&) {
-    throw std::invalid_argument(what + "['" + key + "']: unexpected value of type " + TypeName(item));
+    throw std::invalid_argument(what + "['" + key + "']: expected " + Expected<T>::Name() + ", got " + TypeName(item));
   }
 }
 

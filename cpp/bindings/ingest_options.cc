@@ -56,7 +56,7 @@ bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const py:
   return setter.found;
 }
 
-void CheckSyncOptionValues(sync::SyncOptions& o) { VisitSync(o, limits::OptionChecker{"sync option "}); }
+void CheckSyncOptionValues(sync::SyncOptions& o) { VisitSync(o, limits::OptionChecker{"sync options: "}); }
 
 py::dict SyncOptionDefaults() {
   sync::SyncOptions o;

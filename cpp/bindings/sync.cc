@@ -31,8 +31,8 @@ sync::SyncOptions SyncOptionsFromKwargs(const py::kwargs& kwargs) {
     const std::string key = py::str(item.first);
     if (!SetSyncOption(&options, key, item.second)) ThrowUnknownOption("sync", key, SyncOptionDefaults());
   }
-  CheckSyncOptionValues(options);
   options.Check();
+  CheckSyncOptionValues(options);
   return options;
 }
 

@@ -38,14 +38,19 @@ inline void RequireInRange(double value, double lo, double hi, const std::string
 }
 
 // Checks one option of any arithmetic type: finite and of a magnitude up to
-// kMaxMagnitude; bool options are always fine.
+// kMaxMagnitude; bool options are always fine. Run after the options' own checks,
+// which name their ranges, as a net for the options those leave unbounded.
 struct OptionChecker {
   std::string prefix;  // e.g. "sync option "
 
   template <typename T>
   void operator()(const char* name, const T& value, const char* /*help*/ = nullptr) const {
     if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
-      RequireInRange(static_cast<double>(value), -kMaxMagnitude, kMaxMagnitude, prefix + name);
+      const double number = static_cast<double>(value);
+      if (!(std::abs(number) <= kMaxMagnitude)) {
+        throw std::invalid_argument(prefix + name + " must be a finite number of magnitude at most " +
+                                    Number(kMaxMagnitude) + ", got " + Number(number));
+      }
     }
   }
 };

@@ -60,7 +60,6 @@ struct DetectionsDeleter {
 }  // namespace
 
 void AprilTagOptions::Check() const {
-  VisitAprilTagOptions(*this, limits::OptionChecker{"AprilTag options: "});
   // libapriltag sizes its blur kernel and decimated image from these, unchecked.
   Require(quad_decimate >= 1.0f && quad_decimate <= 64.0f, "quad_decimate must be in [1, 64]");
   Require(quad_sigma >= 0.0f && quad_sigma <= 100.0f, "quad_sigma must be in [0, 100]");

@@ -41,7 +41,6 @@ double Contrast(const cv::Mat& gray, double share) {
 }  // namespace
 
 void ArucoOptions::Check() const {
-  VisitArucoOptions(*this, limits::OptionChecker{"ArUco options: "});
   Require(min_marker_perimeter_rate > 0.0, "min_marker_perimeter_rate must be positive");
   Require(max_marker_perimeter_rate > min_marker_perimeter_rate,
           "max_marker_perimeter_rate must exceed min_marker_perimeter_rate");
@@ -66,6 +65,7 @@ void ArucoOptions::Check() const {
   Require(perspective_remove_ignored_margin_per_cell >= 0.0 && perspective_remove_ignored_margin_per_cell < 0.5,
           "perspective_remove_ignored_margin_per_cell must be in [0, 0.5)");
   refinement.Check();
+  VisitArucoOptions(*this, limits::OptionChecker{"ArUco options: "});
 }
 
 ArucoDetector::ArucoDetector(const MarkerFamily& family, const ArucoOptions& options)

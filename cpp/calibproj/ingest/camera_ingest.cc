@@ -573,7 +573,6 @@ class CameraIngest {
 }  // namespace
 
 void IngestOptions::Check() const {
-  VisitIngestOptions(*this, limits::OptionChecker{"ingest option "});
   sync.Check();
   pick.Check();
   detector.aruco.Check();
@@ -604,6 +603,7 @@ void IngestOptions::Check() const {
   edges.Check();
   consistency.Check();
   Require(edge_gap_share > 0.0 && edge_gap_share <= 1.0, "edge_gap_share must be in (0, 1]");
+  VisitIngestOptions(*this, limits::OptionChecker{"ingest options: "});
 }
 
 CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,
