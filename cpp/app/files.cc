@@ -72,8 +72,11 @@ double NumberValue(const nlohmann::json& value, const std::string& what) {
 }
 
 long long IntegerValue(const nlohmann::json& value, const std::string& what, long long lo, long long hi) {
-  if (!value.is_number_integer() && !(value.is_number_float() && value.get<double>() == std::floor(value.get<double>()))) {
-    throw std::invalid_argument(what + ": expected an integer, got " + (value.is_number() ? value.dump() : TypeOf(value)));
+  const bool integral = value.is_number_integer() ||
+                        (value.is_number_float() && value.get<double>() == std::floor(value.get<double>()));
+  if (!integral) {
+    throw std::invalid_argument(what + ": expected an integer, got " +
+                                (value.is_number() ? value.dump() : TypeOf(value)));
   }
   // Compared as doubles first: a float or an unsigned beyond the range does not convert.
   const double approximate = value.get<double>();

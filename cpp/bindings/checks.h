@@ -48,7 +48,9 @@ inline void RequireShape(const pybind11::array& array, std::initializer_list<pyb
 inline void RequireFiniteValues(const DoubleArray& array, const std::string& what) {
   const double* data = array.data();
   for (pybind11::ssize_t i = 0; i < array.size(); ++i) {
-    if (!std::isfinite(data[i])) throw std::invalid_argument(what + ": non-finite value at flat index " + std::to_string(i));
+    if (!std::isfinite(data[i])) {
+      throw std::invalid_argument(what + ": non-finite value at flat index " + std::to_string(i));
+    }
   }
 }
 

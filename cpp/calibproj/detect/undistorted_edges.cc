@@ -188,7 +188,9 @@ std::optional<Quad> RefineUndistortedCorners(const cv::Mat& gray, const cv::Poin
       throw std::invalid_argument("edge refinement: non-finite corner");
     }
   }
-  if (gray.empty() || gray.type() != CV_8UC1) throw std::invalid_argument("edge refinement: expected a non-empty 8-bit image");
+  if (gray.empty() || gray.type() != CV_8UC1) {
+    throw std::invalid_argument("edge refinement: expected a non-empty 8-bit image");
+  }
   const std::vector<cv::Point2d> corners = lens.Undistort({distorted.begin(), distorted.end()});
   std::optional<Quad> quad = Quad{corners[0], corners[1], corners[2], corners[3]};
   // Profiles are measured in image pixels: their length follows the detected module.
