@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 namespace calibproj::sync {
 
@@ -10,6 +11,7 @@ namespace {
 
 // Sharp bands needed, and the share of the image height their centres must span.
 constexpr int kMinBands = 3;
+constexpr int kMaxBands = 64;
 constexpr double kMinSpread = 0.3;
 // Bands whose offsets that fit span more than this (camera frames, half-width) saw no
 // light change sharply enough to place them.
@@ -95,6 +97,11 @@ ReadoutEstimate EstimateInWindow(const std::vector<std::vector<double>>& band_si
 ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_signals, const LightTimeline& timeline,
                                 const std::vector<FrameWindow>& windows, const FrameMap& map,
                                 const CodeFitOptions& options) {
+  // One code fit per band and window: as many bands as the ingest measures at most.
+  if (band_signals.size() > static_cast<std::size_t>(kMaxBands)) {
+    throw std::invalid_argument("readout: at most " + std::to_string(kMaxBands) + " bands, got " +
+                                std::to_string(band_signals.size()));
+  }
   // Each code window on its own, at the whole frame's rate; that rate is biased by the
   // rolling shutter (its box model fits codes seen at different phases differently),
   // so two windows give the first row's rate from where each puts its code.
