@@ -330,7 +330,7 @@ class Baselines:
     """Valid arguments and receivers for every callable."""
 
     def __init__(self, files: dict[str, str]) -> None:
-        from calibproj.generate.builder import build_sequence
+        from calibproj.sequence.builder import build_sequence
 
         self.files = files
         self.scene = plane_scene()
@@ -434,7 +434,9 @@ class Baselines:
             "_core.detect.marker_centres": Spec([("corners", corners)]),
             "_core.detect.check_floor_consistency": Spec([("projector", s["points"][:, :2] * 100),
                                                          ("image", s["observed"][:30]), ("threshold_px", 3.0),
-                                                         ("min_points", 8), ("min_share", 0.3)]),
+                                                         ("min_points", 8), ("min_share", 0.3),
+                                                         ("positions", [i % 10 for i in range(30)]),
+                                                         ("min_positions", 3)]),
             "_core.detect.MarkerDetector": Spec([("spec", "aruco:4X4_50"), ("aruco", _core.detect.ArucoOptions()),
                                                 ("apriltag", _core.detect.AprilTagOptions())]),
             "_core.detect.MarkerDetector.detect": Spec([("image", self.image)]),

@@ -91,7 +91,7 @@ class Inputs:
 
 
 def make_inputs(folder: Path) -> Inputs:
-    from calibproj.generate.builder import build_sequence
+    from calibproj.sequence.builder import build_sequence
 
     rng = np.random.default_rng(SEED)
     videos = folder / "videos"
