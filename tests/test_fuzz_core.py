@@ -32,6 +32,8 @@ import pytest
 
 from calibproj import _bench, _core
 
+from test_sync import camera_signal  # the tests folder is on sys.path under pytest
+
 SEED = 20250611
 # Bad calls per callable at most (the systematic list of a callable is sampled down to
 # this many), and in total at least.
@@ -60,6 +62,7 @@ REGISTRATION_OPTIONS = {
 
 # ---------------------------------------------------------------------------------------
 # What is bound: every public callable, by qualified name.
+
 
 
 def public_callables() -> list[str]:
@@ -286,21 +289,6 @@ def plane_scene(cameras: int = 4, points: int = 30, seed: int = 5) -> dict[str, 
         "points": X, "plane": np.array([0.0, 0.0, 1.0, 0.0]),
         "image_sizes": np.array([[640.0, 480.0]] * cameras),
     }
-
-
-def camera_signal(light: np.ndarray, offset: float, rate: float, exposure: float, frames: int,
-                  rng: np.random.Generator) -> np.ndarray:
-    """Mean brightness a camera records of the projector's light (see test_sync)."""
-    cumulative = np.concatenate([[0.0], np.cumsum(light)])
-
-    def integral(t):
-        t = np.clip(t, 0.0, len(light))
-        k = np.minimum(t.astype(int), len(light) - 1)
-        return cumulative[k] + (t - k) * light[k]
-
-    start = (np.arange(frames) - offset) / rate
-    mean = (integral(start + exposure / rate) - integral(start)) / (exposure / rate)
-    return 0.08 + 0.6 * mean + rng.normal(0.0, 0.002, frames)
 
 
 def write_files(folder: Path) -> dict[str, str]:

@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from test_native import find_native  # the tests folder is on sys.path under pytest
+
 REPO = Path(__file__).resolve().parents[1]
 SEED = 20250612
 RUN_TIMEOUT_S = 30.0
@@ -36,19 +38,6 @@ WORKERS = 2
 BUDGET = {"tracks": 170, "calibrate_intrinsics": 110, "sequence": 170, "detect_intrinsics": 60}
 MIN_FILES = 500
 CAMERAS = 4
-
-
-def find_native() -> Path:
-    """The installed executable (next to this interpreter), else the developer build."""
-    candidates = [
-        Path(sys.executable).parent / "calibproj-native",
-        Path(shutil.which("calibproj-native") or "/nonexistent"),
-        REPO / "build" / "dev" / "cpp" / "app" / "calibproj-native",
-    ]
-    for candidate in candidates:
-        if candidate.is_file() and os.access(candidate, os.X_OK):
-            return candidate
-    raise FileNotFoundError(f"calibproj-native not found in {[str(c) for c in candidates]}")
 
 
 # ---------------------------------------------------------------------------------------
