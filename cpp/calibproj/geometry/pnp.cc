@@ -11,10 +11,9 @@ namespace calibproj::geometry {
 
 namespace {
 
-// Moves the points' centroid to the origin and scales their RMS distance from it to 1
-// (SQPnP rejects samples whose spread is below an absolute threshold, so the result
-// would depend on the reconstruction's arbitrary unit). Returns false when they do not
-// spread beyond rounding.
+// Moves the points' centroid to the origin and scales their RMS distance from it to 1,
+// so that the solvers' tolerances do not depend on the reconstruction's arbitrary unit.
+// Returns false when the points do not spread beyond rounding.
 bool Normalise(std::vector<cv::Point3d>* points, cv::Point3d* centroid, double* scale) {
   cv::Point3d mean(0, 0, 0);
   for (const auto& p : *points) mean += p;
