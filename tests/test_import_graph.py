@@ -14,6 +14,7 @@ import ast
 import functools
 import importlib
 import importlib.machinery
+import importlib.util
 import types
 from pathlib import Path
 
@@ -35,14 +36,18 @@ def module_files(source: Path = SOURCE, package: str = PACKAGE) -> dict[str, Pat
 
 
 def is_module(name: str, modules: dict[str, Path]) -> bool:
-    """A Python module of the tree, or an extension module built into it (``_core``)."""
+    """A Python module of the tree, or an extension module of its package (``_core``):
+    built into the tree, or installed beside the package that is imported."""
     if name in modules:
         return True
     parent, _, last = name.rpartition(".")
     folder = modules.get(parent)
     if folder is None or folder.name != "__init__.py":
         return False
-    return any((folder.parent / (last + suffix)).exists() for suffix in importlib.machinery.EXTENSION_SUFFIXES)
+    if any((folder.parent / (last + suffix)).exists() for suffix in importlib.machinery.EXTENSION_SUFFIXES):
+        return True
+    spec = importlib.util.find_spec(name)
+    return spec is not None and isinstance(spec.loader, importlib.machinery.ExtensionFileLoader)
 
 
 def imported_names(module: str, path: Path, modules: dict[str, Path]) -> set[str]:
