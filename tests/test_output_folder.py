@@ -143,7 +143,8 @@ def test_paths_that_cannot_be_written_are_named(tmp_path: Path, monkeypatch: pyt
         OutputFile(tmp_path / "tracks.json").open()
 
 
-def test_a_full_disk_is_found_before_the_work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def pretend_the_disk_is_full(monkeypatch: pytest.MonkeyPatch) -> None:
+    """os.statvfs reports no free block left, everything else as it is."""
     real = os.statvfs
 
     class Full:
@@ -152,6 +153,10 @@ def test_a_full_disk_is_found_before_the_work(tmp_path: Path, monkeypatch: pytes
             self.f_flag, self.f_frsize, self.f_bavail = stats.f_flag, stats.f_frsize, 0
 
     monkeypatch.setattr(os, "statvfs", Full)
+
+
+def test_a_full_disk_is_found_before_the_work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    pretend_the_disk_is_full(monkeypatch)
     with pytest.raises(OutputError, match=f"{tmp_path / 'out'}: the disk is full"):
         OutputFolder(tmp_path / "out").open()
     assert not (tmp_path / "out").exists() and siblings(tmp_path / "out") == []
@@ -235,14 +240,7 @@ def test_calibrate_checks_its_output_before_the_ingest(small: Path, tmp_path: Pa
     assert "another calibproj run is writing it" in one_error_line(capsys)
     holder.abort()
 
-    real = os.statvfs
-
-    class Full:
-        def __init__(self, path):
-            stats = real(path)
-            self.f_flag, self.f_frsize, self.f_bavail = stats.f_flag, stats.f_frsize, 0
-
-    monkeypatch.setattr(os, "statvfs", Full)
+    pretend_the_disk_is_full(monkeypatch)
     assert main([*base, str(tmp_path / "full")]) == 2
     assert f"{tmp_path / 'full'}: the disk is full" in one_error_line(capsys)
     assert not (tmp_path / "full").exists()
