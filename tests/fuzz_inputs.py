@@ -294,3 +294,45 @@ def all_mutations(inputs: Inputs, rng: np.random.Generator, budget: dict[str, in
               "sequence": (sequence_mutations, inputs.sequence),
               "detect_intrinsics": (intrinsics_mutations, inputs.detect_intrinsics)}
     return {fmt: maker(document, rng, budget[fmt]) for fmt, (maker, document) in makers.items()}
+
+
+# ---------------------------------------------------------------------------------------
+# Runs of either tool (the same command line).
+
+
+@dataclasses.dataclass
+class Run:
+    """One invocation: the mutated file among valid ones, and the arguments."""
+
+    fmt: str
+    mutation: Mutation
+    file: Path
+    args: list[str]
+
+
+def prepare(root: Path, inputs: Inputs, fmt: str, index: int, mutation: Mutation) -> Run:
+    """A folder of its own per run, with the mutated file in place of the valid one."""
+    folder = root / f"{fmt}-{index:03d}"
+    folder.mkdir(parents=True)
+    if fmt in ("tracks", "calibrate_intrinsics"):
+        intrinsics = folder / "intrinsics"
+        intrinsics.mkdir()
+        for c in range(CAMERAS):
+            (intrinsics / f"cam{c}.json").write_bytes(dumps(inputs.calibrate_intrinsics))
+        tracks = folder / "tracks.json"
+        tracks.write_bytes(dumps(inputs.tracks))
+        target = tracks if fmt == "tracks" else intrinsics / "cam1.json"
+        target.write_bytes(mutation.data)
+        return Run(fmt, mutation, target, ["calibrate", "--tracks", str(tracks), "--intrinsics", str(intrinsics),
+                                           "--out", str(folder / "out")])
+    intrinsics = folder / "intrinsics"
+    intrinsics.mkdir()
+    for name in ("cam0", "cam1"):
+        (intrinsics / f"{name}.json").write_bytes(dumps(inputs.detect_intrinsics))
+    sequence = folder / "sequence.json"
+    sequence.write_bytes(dumps(inputs.sequence))
+    target = sequence if fmt == "sequence" else intrinsics / "cam0.json"
+    target.write_bytes(mutation.data)
+    return Run(fmt, mutation, target, ["detect", str(inputs.videos), "--sequence", str(sequence), "--intrinsics",
+                                       str(intrinsics), "--out", str(folder / "out" / "tracks.json"),
+                                       "--no-progress", "--workers", "1"])

@@ -15,7 +15,6 @@ Run alone (with -s for the summary line):
 from __future__ import annotations
 
 import concurrent.futures
-import dataclasses
 import subprocess
 import time
 from pathlib import Path
@@ -24,7 +23,7 @@ import numpy as np
 import pytest
 
 # The tests folder is on sys.path under pytest.
-from fuzz_inputs import CAMERAS, Inputs, Mutation, all_mutations, dumps, make_inputs
+from fuzz_inputs import Mutation, Run, all_mutations, dumps, make_inputs, prepare
 from test_native import find_native
 
 SEED = 20250612
@@ -37,42 +36,6 @@ MIN_FILES = 500
 
 # ---------------------------------------------------------------------------------------
 # Runs.
-
-
-@dataclasses.dataclass
-class Run:
-    fmt: str
-    mutation: Mutation
-    file: Path
-    args: list[str]
-
-
-def prepare(root: Path, inputs: Inputs, fmt: str, index: int, mutation: Mutation) -> Run:
-    """A folder of its own per run, with the mutated file in place of the valid one."""
-    folder = root / f"{fmt}-{index:03d}"
-    folder.mkdir(parents=True)
-    if fmt in ("tracks", "calibrate_intrinsics"):
-        intrinsics = folder / "intrinsics"
-        intrinsics.mkdir()
-        for c in range(CAMERAS):
-            (intrinsics / f"cam{c}.json").write_bytes(dumps(inputs.calibrate_intrinsics))
-        tracks = folder / "tracks.json"
-        tracks.write_bytes(dumps(inputs.tracks))
-        target = tracks if fmt == "tracks" else intrinsics / "cam1.json"
-        target.write_bytes(mutation.data)
-        return Run(fmt, mutation, target, ["calibrate", "--tracks", str(tracks), "--intrinsics", str(intrinsics),
-                                           "--out", str(folder / "out")])
-    intrinsics = folder / "intrinsics"
-    intrinsics.mkdir()
-    for name in ("cam0", "cam1"):
-        (intrinsics / f"{name}.json").write_bytes(dumps(inputs.detect_intrinsics))
-    sequence = folder / "sequence.json"
-    sequence.write_bytes(dumps(inputs.sequence))
-    target = sequence if fmt == "sequence" else intrinsics / "cam0.json"
-    target.write_bytes(mutation.data)
-    return Run(fmt, mutation, target, ["detect", str(inputs.videos), "--sequence", str(sequence), "--intrinsics",
-                                       str(intrinsics), "--out", str(folder / "out" / "tracks.json"),
-                                       "--no-progress", "--workers", "1"])
 
 
 def execute(native: Path, run: Run) -> str | None:
