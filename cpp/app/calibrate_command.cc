@@ -5,6 +5,7 @@
 
 #include "files.h"
 #include "intrinsics_file.h"
+#include "output_folder.h"
 #include "results_file.h"
 #include "calibproj/registration/incremental.h"
 #include "calibproj/registration/result.h"
@@ -59,21 +60,18 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
 
 namespace {
 
-void CheckOutputFolder(const fs::path& out, bool force) {
-  std::string existing;
-  for (const auto& name : kResultFiles) {
-    if (fs::exists(out / name)) existing += (existing.empty() ? "" : ", ") + name;
-  }
-  if (!existing.empty() && !force) {
-    throw InputError(out.string() + ": already holds results (" + existing + "); use --force to overwrite them");
-  }
+// The results written into the staging folder, then moved into place.
+void SaveResults(OutputFolder& folder, const registration::RegistrationResult& result, const ResultFiles& names) {
+  folder.Write([&](const fs::path& staging) { WriteResults(staging, result, names); });
+  folder.Commit();
 }
 
 }  // namespace
 
-int RunCalibrate(const CalibrateArguments& arguments) {
-  const fs::path out(arguments.out);
-  CheckOutputFolder(out, arguments.force);
+int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
+  // Checked and locked before the inputs are read, as the Python command does.
+  OutputFolder out(arguments.out, arguments.force, kResultFiles, interrupts);
+  out.Open();
   Tracks tracks = ReadTracks(arguments.tracks);
   const auto intrinsics = LoadIntrinsicsDir(arguments.intrinsics);
 
@@ -101,7 +99,7 @@ int RunCalibrate(const CalibrateArguments& arguments) {
   names.cameras = tracks.cameras;
   names.point_ids = tracks.point_ids;
   if (cameras.empty()) {  // every camera failed before registration
-    WriteResults(out, registration::RegistrationResult{}, names);
+    SaveResults(out, registration::RegistrationResult{}, names);
     for (const auto& [name, reason] : names.left_out) std::cout << name << ": FAILED " << reason << "\n";
     return 1;
   }
@@ -115,7 +113,7 @@ int RunCalibrate(const CalibrateArguments& arguments) {
       reconstruction, [](const std::string& message) { std::cerr << message << "\n"; }, tracks.cameras);
   const registration::RegistrationResult result = registration::Summarize(reconstruction);
 
-  WriteResults(out, result, names);
+  SaveResults(out, result, names);
   int registered = 0;
   for (size_t c = 0; c < result.cameras.size(); ++c) {
     const auto& camera = result.cameras[c];
@@ -128,7 +126,7 @@ int RunCalibrate(const CalibrateArguments& arguments) {
     }
   }
   for (const auto& [name, reason] : names.left_out) std::cout << name << ": FAILED " << reason << "\n";
-  std::cout << "results in " << out.string() << " (unit: arbitrary)\n";
+  std::cout << "results in " << arguments.out << " (unit: arbitrary)\n";
   return registered > 0 ? 0 : 1;
 }
 

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "calibproj/registration/reconstruction.h"
+#include "interrupts.h"
 
 namespace calibproj::app {
 
@@ -23,6 +24,8 @@ struct CalibrateArguments {
 // when the command line is parsed.
 std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App** command);
 
-int RunCalibrate(const CalibrateArguments& arguments);
+// 0 when a camera was registered, 1 when none was.
+// The results folder is written as one transaction (output_folder.h).
+int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts);
 
 }  // namespace calibproj::app

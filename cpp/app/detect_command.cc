@@ -15,6 +15,7 @@
 #include "detect_report.h"
 #include "files.h"
 #include "intrinsics_file.h"
+#include "output_folder.h"
 #include "sequence_file.h"
 #include "tracks_file.h"
 
@@ -362,7 +363,11 @@ std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** comm
   return args;
 }
 
-int RunDetect(const DetectArguments& arguments) {
+int RunDetect(const DetectArguments& arguments, Interrupts& interrupts) {
+  // Checked and locked before the inputs are read and the long ingest, as the Python
+  // command does.
+  OutputFile output(arguments.out, interrupts);
+  output.Open();
   const ingest::SequenceDescription sequence = ReadSequence(arguments.sequence);
   const auto videos = VideoPaths(arguments.videos);
   try {
@@ -375,10 +380,13 @@ int RunDetect(const DetectArguments& arguments) {
                        &setup.options.detector);
   const std::vector<CameraOutcome> outcomes = IngestAll(videos, arguments, setup, sequence);
 
-  const fs::path out(arguments.out);
-  WriteTracks(out, TracksFrom(outcomes, sequence.markers_per_array));
   const nlohmann::ordered_json report = DetectReport(outcomes, arguments.sequence, sequence);
-  AtomicWrite(out.parent_path() / kReportName, DumpSchemaJson("detect_report", 1, report));
+  output.Write([&](const fs::path& out) {
+    WriteTracks(out, TracksFrom(outcomes, sequence.markers_per_array));
+    const fs::path folder = out.has_parent_path() ? out.parent_path() : fs::path(".");
+    AtomicWrite(folder / kReportName, DumpSchemaJson("detect_report", 1, report));
+  });
+  output.Close();
   std::cout << (arguments.json ? report.dump(1) : FormatDetectReport(report)) << "\n";
   const bool all_failed = std::none_of(outcomes.begin(), outcomes.end(), [](const auto& o) { return o.ok(); });
   return all_failed ? 1 : 0;

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "calibproj/ingest/camera_ingest.h"
+#include "interrupts.h"
 
 namespace calibproj::app {
 
@@ -30,7 +31,8 @@ struct DetectArguments {
 // like the Python IngestOptions fields) to the app.
 std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** command);
 
-// 0 when at least one camera gave tracks, 1 when every camera failed.
-int RunDetect(const DetectArguments& arguments);
+// 0 when at least one camera gave tracks, 1 when every camera failed. The tracks file
+// and the report beside it are each written atomically (output_folder.h, OutputFile).
+int RunDetect(const DetectArguments& arguments, Interrupts& interrupts);
 
 }  // namespace calibproj::app

@@ -1,5 +1,9 @@
 #include "files.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
@@ -147,21 +151,53 @@ nlohmann::json ReadSchemaJson(const fs::path& path, const std::string& kind, int
   return document;
 }
 
-void AtomicWrite(const fs::path& path, const std::string& text) {
-  if (!path.parent_path().empty()) fs::create_directories(path.parent_path());
+bool WriteFully(int fd, std::string_view data) {
+  while (!data.empty()) {
+    const ssize_t written = write(fd, data.data(), data.size());
+    if (written < 0 && errno == EINTR) continue;
+    if (written <= 0) {
+      if (written == 0) errno = EIO;
+      return false;
+    }
+    data.remove_prefix(static_cast<size_t>(written));
+  }
+  return true;
+}
+
+namespace {
+
+// A new file `.<name>.<random>.tmp` beside `path`, opened for writing, with the
+// permissions a plain open() gives.
+int CreateTemporaryBeside(const fs::path& path, fs::path* temporary) {
+  const fs::path folder = path.has_parent_path() ? path.parent_path() : fs::path(".");
   std::random_device random;
-  const fs::path tmp = path.parent_path() / ("." + path.filename().string() + "." + std::to_string(random()) + ".tmp");
-  {
-    std::ofstream out(tmp, std::ios::binary);
-    out << text;
-    out.flush();
-    if (!out) {
-      std::error_code ignored;
-      fs::remove(tmp, ignored);
-      throw std::runtime_error(path.string() + ": cannot write");
+  constexpr int kAttempts = 100;
+  for (int attempt = 0; attempt < kAttempts; ++attempt) {
+    *temporary = folder / ("." + path.filename().string() + "." + std::to_string(random()) + ".tmp");
+    const int fd = open(temporary->c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd >= 0) return fd;
+    if (errno != EEXIST) {
+      throw fs::filesystem_error("cannot create", *temporary, std::error_code(errno, std::system_category()));
     }
   }
-  fs::rename(tmp, path);
+  throw fs::filesystem_error("cannot create", *temporary, std::make_error_code(std::errc::file_exists));
+}
+
+}  // namespace
+
+void AtomicWrite(const fs::path& path, const std::string& text) {
+  if (path.has_parent_path()) fs::create_directories(path.parent_path());
+  fs::path temporary;
+  const int fd = CreateTemporaryBeside(path, &temporary);
+  int error = 0;
+  if (!WriteFully(fd, text) || fsync(fd) != 0) error = errno;
+  if (close(fd) != 0 && error == 0) error = errno;
+  std::error_code failure = error ? std::error_code(error, std::system_category()) : std::error_code();
+  if (!failure) fs::rename(temporary, path, failure);
+  if (failure) {
+    unlink(temporary.c_str());
+    throw fs::filesystem_error("cannot write", path, failure);
+  }
 }
 
 std::string DumpSchemaJson(const std::string& kind, int major, const nlohmann::ordered_json& body) {

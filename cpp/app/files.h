@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace calibproj::app {
@@ -36,8 +37,14 @@ std::string StringValue(const nlohmann::json& value, const std::string& what);
 std::vector<double> NumberList(const nlohmann::json& value, const std::string& what);
 std::vector<int> IntList(const nlohmann::json& value, const std::string& what);
 
-// Writes text to a temporary file in the same folder, then renames it over `path`.
+// Writes text to a temporary file in the same folder, syncs it, then renames it over
+// `path`: readers see the old file or the whole new one. std::filesystem::filesystem_error
+// with the system's error (a full disk, ...) when that fails; no temporary file stays.
 void AtomicWrite(const std::filesystem::path& path, const std::string& text);
+
+// Writes all of `data` to the file descriptor (retrying short writes); false with errno
+// set when a write fails.
+bool WriteFully(int fd, std::string_view data);
 
 // A finite double as Python's repr() writes it (shortest digits that read back to the
 // same value; fixed notation for exponents -4..15, with ".0" when integral), so that a

@@ -1,5 +1,9 @@
 // calibproj-native: calibration of a camera network on a machine without Python.
 // The same C++ steps as the calibproj Python package, the same files in and out.
+//
+// Exit status (README, "Exit status"): 0 done; 1 the run failed for another reason than
+// its input (cameras not calibrated, another run writing the same output); 2 a bad
+// invocation or input, reported in one line; 130 interrupted (interrupts.h).
 
 #include <CLI/CLI.hpp>
 #include <exception>
@@ -8,6 +12,15 @@
 #include "calibrate_command.h"
 #include "detect_command.h"
 #include "files.h"
+#include "interrupts.h"
+#include "output_folder.h"
+
+namespace {
+
+constexpr int kExitFailure = 1;
+constexpr int kExitUsage = 2;
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"calibproj-native: external calibration of camera networks from projected multi-scale markers"};
@@ -19,15 +32,21 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {
-    return app.exit(error);
+    // CLI11 has an exit status per kind of error; the project has one for them all.
+    return app.exit(error) == 0 ? 0 : kExitUsage;
   }
   const std::string command = calibrate->parsed() ? "calibrate" : detect->parsed() ? "detect" : "";
+  const std::string prefix = "calibproj-native " + command;
+  calibproj::app::Interrupts interrupts(prefix);
   try {
-    if (calibrate->parsed()) return calibproj::app::RunCalibrate(*calibrate_args);
-    if (detect->parsed()) return calibproj::app::RunDetect(*detect_args);
+    if (calibrate->parsed()) return calibproj::app::RunCalibrate(*calibrate_args, interrupts);
+    if (detect->parsed()) return calibproj::app::RunDetect(*detect_args, interrupts);
+  } catch (const calibproj::app::OutputBusyError& error) {
+    std::cerr << prefix << ": error: " << error.what() << "\n";
+    return kExitFailure;
   } catch (const std::exception& error) {
-    std::cerr << "calibproj-native " << command << ": error: " << error.what() << "\n";
-    return 2;
+    std::cerr << prefix << ": error: " << error.what() << "\n";
+    return kExitUsage;
   }
-  return 2;
+  return kExitUsage;
 }

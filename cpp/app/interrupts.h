@@ -1,0 +1,51 @@
+#pragma once
+// Ctrl-C (SIGINT) and SIGTERM for calibproj-native: an interruption runs the cleanup of
+// the output being written (its staging folder goes, the previous output stays) and
+// exits with status 130, as the Python commands do on Ctrl-C.
+//
+// The signals are blocked in the thread that creates Interrupts, and so in every thread
+// started afterwards, and taken by a thread of its own (sigwait): the cleanup runs as
+// ordinary code, not in a signal handler. The writes and renames of an output happen
+// inside a Hold(): an interruption waits for such a section to end and exits before
+// the next one starts, so it never sees half a rename.
+
+#include <signal.h>
+
+#include <atomic>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <thread>
+
+namespace calibproj::app {
+
+class Interrupts {
+ public:
+  // `prefix` starts the message an interruption prints ("calibproj-native calibrate").
+  explicit Interrupts(std::string prefix);
+  ~Interrupts();
+  Interrupts(const Interrupts&) = delete;
+  Interrupts& operator=(const Interrupts&) = delete;
+
+  // A section that an interruption waits for.
+  std::unique_lock<std::mutex> Hold();
+
+  // What an interruption does before it exits (an empty function: nothing); set within
+  // a section, so that it always matches what is on disk.
+  void SetCleanup(const std::unique_lock<std::mutex>& held, std::function<void()> cleanup);
+
+  static constexpr int kExitStatus = 130;  // 128 + SIGINT, as shells report it
+
+ private:
+  void WaitForSignals();
+
+  std::string prefix_;
+  sigset_t signals_;
+  sigset_t previous_mask_;
+  std::mutex mutex_;
+  std::function<void()> cleanup_;
+  std::atomic<bool> stopping_{false};
+  std::thread waiter_;
+};
+
+}  // namespace calibproj::app

@@ -1,0 +1,134 @@
+#pragma once
+// Outputs written as one transaction, as the Python package writes them
+// (calibproj/io/output_folder.py), with its file names, its lock and its messages, so
+// that a Python run and a native run on the same output exclude each other.
+//
+// OutputFolder(path):
+// 1. Open(), before any long work, checks that the folder can be written and says so in
+//    one line naming the path when it cannot (an existing file, a parent folder that is
+//    not writable, a full disk, results already there without force, a folder of other
+//    files); it takes the lock (flock on `.<name>.lock` beside the folder: a second run
+//    fails at once) and creates the staging folder `.<name>.tmp-XXXXXX` beside it;
+// 2. Write() writes into the staging folder;
+// 3. Commit() moves the staging folder into place (the previous folder aside, the new
+//    one in, the previous one deleted): force replaces the whole previous folder.
+// Abort() (also on destruction, and on an interruption) deletes the staging folder and
+// leaves the previous folder as it was. A run killed outright leaves at most a hidden
+// staging folder, which the next run on the same path deletes.
+//
+// OutputFile(path) does the checks and the locking for a command that writes single
+// files (detect), each of them written atomically.
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "files.h"
+#include "interrupts.h"
+
+namespace calibproj::app {
+
+// An output that cannot be written, named in the message: exit status 2.
+class OutputError : public InputError {
+ public:
+  using InputError::InputError;
+};
+
+// Another run (native or Python) holds the lock of the same output: exit status 1.
+class OutputBusyError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Below this much free space on the disk of the output, a run is refused before it
+// starts (the results of a calibration take a few megabytes).
+constexpr std::uintmax_t kMinFreeBytes = 8 * 1024 * 1024;
+
+// `text` as Python's pathlib spells it ("out/" and "./out" are "out"), so that the
+// messages name a path as the Python commands do.
+std::filesystem::path PathlibPath(const std::string& text);
+
+// An exclusive flock on a lock file, taken without waiting (Python's fcntl.flock on the
+// same file excludes it, and the other way round).
+class OutputLock {
+ public:
+  OutputLock() = default;
+  ~OutputLock() { Release(); }
+  OutputLock(const OutputLock&) = delete;
+  OutputLock& operator=(const OutputLock&) = delete;
+
+  // OutputBusyError when another run holds it; OutputError naming `target` when the
+  // lock file cannot be created.
+  void Acquire(const std::filesystem::path& lock_file, const std::filesystem::path& target);
+  // Deletes the lock file, then lets go of it.
+  void Release() noexcept;
+
+ private:
+  std::filesystem::path path_;
+  int fd_ = -1;
+};
+
+class OutputFolder {
+ public:
+  // signature: files of which at least one marks a folder this command wrote; a
+  // non-empty folder holding none of them is refused, with force or without (force
+  // never deletes a folder of other files).
+  OutputFolder(const std::string& path, bool force, std::vector<std::string> signature, Interrupts& interrupts);
+  ~OutputFolder() { Abort(); }
+  OutputFolder(const OutputFolder&) = delete;
+  OutputFolder& operator=(const OutputFolder&) = delete;
+
+  // Checks, locks, and creates the staging folder.
+  void Open();
+  // Calls write(staging); a filesystem error in it is an OutputError naming the folder.
+  void Write(const std::function<void(const std::filesystem::path& staging)>& write);
+  // Moves the staging folder into place and releases the lock.
+  void Commit();
+  // Deletes the staging folder and releases the lock; the previous folder stays.
+  void Abort() noexcept;
+
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  void Recover(const std::filesystem::path& parent);
+  void CheckExisting() const;
+  void CreateStaging(const std::filesystem::path& parent);
+  void MoveIntoPlace();
+  // Abort() for a caller that holds the interrupts (and for the interruption itself).
+  void Discard() noexcept;
+
+  std::filesystem::path path_;
+  bool force_;
+  std::vector<std::string> signature_;
+  Interrupts& interrupts_;
+  OutputLock lock_;
+  std::filesystem::path staging_;  // empty when there is none
+};
+
+class OutputFile {
+ public:
+  OutputFile(const std::string& path, Interrupts& interrupts);
+  ~OutputFile() { Close(); }
+  OutputFile(const OutputFile&) = delete;
+  OutputFile& operator=(const OutputFile&) = delete;
+
+  // Checks that the file can be written (not a folder, its folder writable, the disk
+  // not full) and takes its lock.
+  void Open();
+  // Calls write(path); a filesystem error in it is an OutputError naming the file.
+  void Write(const std::function<void(const std::filesystem::path& path)>& write);
+  // Releases the lock.
+  void Close() noexcept;
+
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+  Interrupts& interrupts_;
+  OutputLock lock_;
+};
+
+}  // namespace calibproj::app

@@ -1,0 +1,195 @@
+"""calibproj-native writes its outputs as the Python commands do (calibproj/io/output_folder.py):
+a results folder replaced whole or not at all, the same lock (a Python run and a native run
+on one output exclude each other), the same refusals in one line, the same exit statuses."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from calibproj.io.output_folder import OutputBusyError, OutputFile, OutputFolder
+from calibproj.simulate import simulate_tracks
+from test_native import NATIVE, error_line, run_native, run_python
+from test_output_folder import siblings, snapshot
+
+EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
+WAIT_S = 60.0
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> Path:
+    """Tracks of the small room (3 cameras) with their intrinsics."""
+    out = tmp_path_factory.mktemp("small")
+    simulate_tracks("small", out, noise_px=0.3, seed=2)
+    return out
+
+
+def calibrate_args(sim: Path, out: Path, *extra: str) -> list[str]:
+    return ["calibrate", "--tracks", str(sim / "tracks.json"), "--intrinsics", str(sim / "intrinsics"),
+            "--out", str(out), *extra]
+
+
+def detect_args(tmp_path: Path, out: Path) -> list[str]:
+    """A detect run whose inputs do not exist: the output is checked before them."""
+    return ["detect", str(tmp_path / "no-videos"), "--sequence", str(tmp_path / "no-sequence.json"),
+            "--intrinsics", str(tmp_path / "no-intrinsics"), "--out", str(out), "--no-progress"]
+
+
+def test_force_replaces_the_whole_folder(small: Path, tmp_path: Path) -> None:
+    out = tmp_path / "results"
+    assert run_native(*calibrate_args(small, out)).returncode == 0
+    # What an earlier run of the Python command left beside the three files.
+    (out / "colmap").mkdir()
+    (out / "colmap" / "cameras.txt").write_text("stale export")
+    (out / "report.html").write_text("stale report")
+    before = snapshot(out)
+
+    refused = run_native(*calibrate_args(small, out))
+    assert refused.returncode == EXIT_USAGE
+    assert error_line(refused) == (f"{out}: already holds results (camera_poses.json, metrics.json, points.ply); "
+                                   f"use --force to overwrite them")
+    assert snapshot(out) == before
+
+    forced = run_native(*calibrate_args(small, out, "--force"))
+    assert forced.returncode == 0, forced.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["camera_poses.json", "metrics.json", "points.ply"]
+    assert snapshot(out)["camera_poses.json"] == before["camera_poses.json"]  # the same calibration again
+    assert siblings(out) == []
+
+
+def test_force_never_deletes_a_folder_of_other_files(small: Path, tmp_path: Path) -> None:
+    out = tmp_path / "notes"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    for force in ([], ["--force"]):
+        result = run_native(*calibrate_args(small, out, *force))
+        assert result.returncode == EXIT_USAGE
+        assert error_line(result) == f"{out}: is not empty (notes.txt) and holds no output of this command; " \
+                                     "choose another folder"
+    assert snapshot(out) == {"notes.txt": b"mine"} and siblings(out) == []
+
+
+def test_unwritable_outputs_give_the_python_line(small: Path, tmp_path: Path) -> None:
+    a_file = tmp_path / "results.txt"
+    a_file.write_text("x")
+    cases = {
+        "a file as --out": calibrate_args(small, a_file),
+        "a folder inside a file": calibrate_args(small, a_file / "results"),
+        "a folder as detect's --out": detect_args(tmp_path, tmp_path),
+        "a file inside a file as detect's --out": detect_args(tmp_path, a_file / "tracks.json"),
+    }
+    for case, args in cases.items():
+        python, native = run_python(*args), run_native(*args)
+        assert python.returncode == native.returncode == EXIT_USAGE, (case, python.stderr, native.stderr)
+        assert error_line(native) == error_line(python), case
+        assert str(a_file if "file" in case else tmp_path) in error_line(native), case
+    assert a_file.read_text() == "x"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_a_read_only_parent_is_named(small: Path, tmp_path: Path) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        result = run_native(*calibrate_args(small, locked / "results"))
+    finally:
+        locked.chmod(0o755)
+    assert result.returncode == EXIT_USAGE
+    assert error_line(result) == f"{locked / 'results'}: cannot write in {locked} (permission denied)"
+
+
+def test_a_python_run_holding_the_output_keeps_native_runs_out(small: Path, tmp_path: Path) -> None:
+    out = tmp_path / "busy"
+    holder = OutputFolder(out).open()
+    try:
+        started = time.perf_counter()
+        result = run_native(*calibrate_args(small, out, "--force"))
+        assert result.returncode == EXIT_FAILURE
+        assert error_line(result) == (f"{out}: another calibproj run is writing it (lock held on "
+                                      f"{tmp_path / '.busy.lock'}); wait for it to end or choose another output")
+        assert time.perf_counter() - started < WAIT_S / 4  # at once, not after the calibration
+        assert holder.staging.is_dir() and not out.exists()
+    finally:
+        holder.abort()
+
+    tracks = tmp_path / "tracks.json"
+    file_holder = OutputFile(tracks).open()
+    try:
+        result = run_native(*detect_args(tmp_path, tracks))
+        assert result.returncode == EXIT_FAILURE
+        assert "another calibproj run is writing it" in error_line(result)
+    finally:
+        file_holder.close()
+    assert siblings(out) == [] and siblings(tracks) == []
+
+
+def full_pipe() -> tuple[int, int]:
+    """A pipe whose buffer is full: a process writing to it blocks until it is read."""
+    read_end, write_end = os.pipe()
+    os.set_blocking(write_end, False)
+    for chunk in (b"\0" * 4096, b"\0"):
+        try:
+            while True:
+                os.write(write_end, chunk)
+        except BlockingIOError:
+            pass
+    os.set_blocking(write_end, True)  # the child shares the open file, and must block
+    return read_end, write_end
+
+
+def wait_for(condition, what: str) -> None:
+    deadline = time.monotonic() + WAIT_S
+    while not condition():
+        assert time.monotonic() < deadline, f"no {what} after {WAIT_S:.0f} s"
+        time.sleep(0.01)
+
+
+@pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_an_interrupted_run_leaves_the_previous_folder(small: Path, tmp_path: Path, signal_number: int) -> None:
+    out = tmp_path / "results"
+    assert run_native(*calibrate_args(small, out)).returncode == 0
+    (out / "colmap").mkdir()
+    (out / "colmap" / "cameras.txt").write_text("an earlier export")
+    before = snapshot(out)
+
+    # stderr is a full pipe: the run stops at its first progress line, in the middle of
+    # the registration (its staging folder made, its results not written), until the
+    # pipe is read. The signal comes while it waits there.
+    read_end, write_end = full_pipe()
+    process = subprocess.Popen([str(NATIVE), *calibrate_args(small, out, "--force")], stdout=subprocess.DEVNULL,
+                               stderr=write_end)
+    os.close(write_end)
+    stderr = bytearray()
+    reader = threading.Thread(target=lambda: stderr.extend(drain(read_end)))
+    try:
+        wait_for(lambda: any(name.startswith(".results.tmp-") for name in siblings(out)), "staging folder")
+        with pytest.raises(OutputBusyError):  # the native run holds the lock Python takes
+            OutputFolder(out, force=True).open()
+        process.send_signal(signal_number)
+        reader.start()
+        assert process.wait(timeout=WAIT_S) == EXIT_INTERRUPTED
+        reader.join(timeout=WAIT_S)
+    finally:
+        process.kill()
+        process.wait()
+    lines = stderr.replace(b"\0", b"").decode().splitlines()
+    assert lines[-1] == "calibproj-native calibrate: interrupted", lines
+    assert snapshot(out) == before and siblings(out) == []
+
+
+def drain(fd: int) -> bytes:
+    with os.fdopen(fd, "rb") as pipe:
+        return pipe.read()
+
+
+def test_bad_invocations_exit_with_status_2() -> None:
+    assert run_native("calibrate", "--no-such-option").returncode == EXIT_USAGE
+    assert run_native().returncode == EXIT_USAGE
+    assert run_native("calibrate", "--help").returncode == 0
