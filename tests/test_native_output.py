@@ -4,7 +4,9 @@ on one output exclude each other), the same refusals in one line, the same exit 
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
 import signal
 import subprocess
 import threading
@@ -187,6 +189,19 @@ def test_an_interrupted_run_leaves_the_previous_folder(small: Path, tmp_path: Pa
 def drain(fd: int) -> bytes:
     with os.fdopen(fd, "rb") as pipe:
         return pipe.read()
+
+
+def test_a_camera_not_calibrated_gives_status_1_and_the_others(small: Path, tmp_path: Path) -> None:
+    intrinsics = tmp_path / "intrinsics"
+    intrinsics.mkdir()
+    for camera in ("cam1", "cam2"):
+        shutil.copy(small / "intrinsics" / f"{camera}.json", intrinsics)
+    out = tmp_path / "results"
+    result = run_native("calibrate", "--tracks", str(small / "tracks.json"), "--intrinsics", str(intrinsics),
+                        "--out", str(out))
+    assert result.returncode == EXIT_FAILURE, result.stderr
+    poses = json.loads((out / "camera_poses.json").read_text())
+    assert sorted(poses["cameras"]) == ["cam1", "cam2"] and list(poses["failed"]) == ["cam3"]
 
 
 def test_bad_invocations_exit_with_status_2() -> None:

@@ -127,7 +127,8 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   }
   for (const auto& [name, reason] : names.left_out) std::cout << name << ": FAILED " << reason << "\n";
   std::cout << "results in " << arguments.out << " (unit: arbitrary)\n";
-  return registered > 0 ? 0 : 1;
+  const bool all_calibrated = registered == static_cast<int>(result.cameras.size()) && names.left_out.empty();
+  return all_calibrated ? 0 : 1;
 }
 
 }  // namespace calibproj::app

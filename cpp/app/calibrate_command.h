@@ -24,7 +24,8 @@ struct CalibrateArguments {
 // when the command line is parsed.
 std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App** command);
 
-// 0 when a camera was registered, 1 when none was.
+// 0 when every camera was calibrated, 1 when some were not (the others are written),
+// as `calibproj calibrate` (README, "Exit status").
 // The results folder is written as one transaction (output_folder.h).
 int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts);
 
