@@ -170,6 +170,8 @@ def test_native_and_python_detect_the_same_tracks(room: Path, tmp_path: Path) ->
         assert report_cc["cameras"][name].get("error") == camera.get("error"), name
         assert report_cc["cameras"][name].get("msms_kept") == camera.get("msms_kept"), name
     assert "camera stray: " in native.stderr
+    # Written atomically under the lock: no temporary or lock file stays beside them.
+    assert sorted(p.name for p in (tmp_path / "native").iterdir()) == ["detect_report.json", "tracks.json"]
     assert python.stdout.splitlines()[-1] == native.stdout.splitlines()[-1]
 
 

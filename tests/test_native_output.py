@@ -77,6 +77,17 @@ def test_force_never_deletes_a_folder_of_other_files(small: Path, tmp_path: Path
     assert snapshot(out) == {"notes.txt": b"mine"} and siblings(out) == []
 
 
+def test_a_link_as_out_writes_where_it_leads(small: Path, tmp_path: Path) -> None:
+    link = tmp_path / "latest"
+    link.symlink_to("run1")  # nothing there yet
+    assert run_native(*calibrate_args(small, link)).returncode == 0
+    assert link.is_symlink() and (tmp_path / "run1" / "camera_poses.json").is_file()
+    refused = run_native(*calibrate_args(small, link))
+    assert error_line(refused).startswith(f"{tmp_path / 'run1'}: already holds results")
+    assert run_native(*calibrate_args(small, link, "--force")).returncode == 0
+    assert link.is_symlink() and siblings(tmp_path / "run1") == []
+
+
 def test_unwritable_outputs_give_the_python_line(small: Path, tmp_path: Path) -> None:
     a_file = tmp_path / "results.txt"
     a_file.write_text("x")

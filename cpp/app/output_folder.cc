@@ -115,8 +115,22 @@ std::string Joined(const std::vector<std::string>& items) {
   return out;
 }
 
-fs::path LockFileOf(const fs::path& parent, const fs::path& target) {
-  return parent / ("." + target.filename().string() + ".lock");
+// The path a symbolic link leads to, absolute, also when it leads nowhere yet (as
+// Python's Path.resolve()): the output is written there, not over the link.
+fs::path Resolved(const fs::path& link) {
+  constexpr int kMaxLinks = 40;  // as the kernel's ELOOP
+  fs::path path = fs::absolute(link);
+  for (int followed = 0; followed < kMaxLinks && fs::is_symlink(path); ++followed) {
+    const fs::path target = fs::read_symlink(path);
+    path = target.is_absolute() ? target : path.parent_path() / target;
+  }
+  return fs::weakly_canonical(path);
+}
+
+// `.<name>.lock` beside the target, spelled as Python spells it (no "./" in front).
+fs::path LockFileOf(const fs::path& target) {
+  const std::string name = "." + target.filename().string() + ".lock";
+  return target.has_parent_path() ? target.parent_path() / name : fs::path(name);
 }
 
 }  // namespace
@@ -181,10 +195,10 @@ OutputFolder::OutputFolder(const std::string& path, bool force, std::vector<std:
 
 void OutputFolder::Open() {
   const auto held = interrupts_.Hold();
-  if (fs::is_symlink(path_)) path_ = fs::canonical(path_);
+  if (fs::is_symlink(path_)) path_ = Resolved(path_);
   if (fs::exists(path_) && !fs::is_directory(path_)) throw OutputError(path_.string() + ": exists and is not a folder");
   const fs::path parent = CheckParent(path_);
-  lock_.Acquire(LockFileOf(parent, path_), path_);
+  lock_.Acquire(LockFileOf(path_), path_);
   interrupts_.SetCleanup(held, [this] { Discard(); });
   try {
     Recover(parent);
@@ -312,7 +326,7 @@ void OutputFile::Open() {
   const auto held = interrupts_.Hold();
   if (fs::is_directory(path_)) throw OutputError(path_.string() + ": is a folder; give the path of a file");
   const fs::path parent = CheckParent(path_);
-  lock_.Acquire(LockFileOf(parent, path_), path_);
+  lock_.Acquire(LockFileOf(path_), path_);
   interrupts_.SetCleanup(held, [this] { lock_.Release(); });
   try {
     Probe(parent, path_);
