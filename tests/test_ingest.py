@@ -304,3 +304,62 @@ def test_failing_cameras_are_reported_and_the_others_give_tracks(aruco, apriltag
     report = result.report()["cameras"]
     assert report["cam1"]["status"] == "ok"
     assert all(report[name]["status"] == "failed" for name in expected)
+    # The camera whose end code is cut off carries its brightness trace for the report
+    # (a flickering start code in it); a camera that failed otherwise does not.
+    trace = report["cut"]["brightness"]
+    values = np.asarray(trace["values"], dtype=float)
+    assert trace["frames_per_value"] >= 1 and len(values) > 20 and np.nanstd(values) > 0.05
+    assert "brightness" not in report["corrupt"] and "brightness" not in report["wrongsize"]
+    # Each camera that decoded a frame has its thumbnail, of the configured width.
+    assert result.cameras["cam1"].thumbnail().shape[1] == 640
+    assert result.cameras["cut"].thumbnail() is None
+
+
+def test_a_failed_sync_is_drawn_in_the_report(tmp_path) -> None:
+    from calibproj.report.page import sync_plots
+
+    values = [0.1] * 40 + [0.1, 0.9] * 20 + [0.5] * 100
+    report = {"cameras": {"cut": {"status": "failed", "error": "cut.mp4: end light code not found",
+                                  "brightness": {"frames_per_value": 2, "values": values}},
+                          "bad": {"status": "failed", "error": "x", "brightness": {"values": "nonsense"}}}}
+    plots = sync_plots(report, dpi=40)
+    assert [plot.file_name for plot in plots] == ["sync_cut.png"]
+    assert plots[0].png.startswith(b"\x89PNG")
+
+
+def test_an_interrupted_ingest_stops_every_camera_early(aruco, monkeypatch):
+    """Ctrl-C while the cameras decode: the KeyboardInterrupt reaches the caller, and
+    every camera's C++ ingest stops at its next progress call instead of decoding its
+    video to the end (the worker threads used to run on for seconds)."""
+    import signal
+    import threading
+
+    import calibproj.ingest as ingest_module
+
+    out, sequence, _ = aruco
+    first_call = threading.Event()
+    seen: dict[str, list[tuple[int, int]]] = {}
+    original = ingest_module._Progress.callback
+
+    def callback(self, name):
+        inner = original(self, name)
+
+        def update(decoded: int, total: int) -> None:
+            seen.setdefault(name, []).append((decoded, total))
+            first_call.set()
+            inner(decoded, total)
+
+        return update
+
+    monkeypatch.setattr(ingest_module._Progress, "callback", callback)
+    def press_ctrl_c() -> None:  # a real SIGINT to the main thread, as a terminal sends it
+        if first_call.wait(120):
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+
+    threading.Thread(target=press_ctrl_c, daemon=True).start()
+    with pytest.raises(KeyboardInterrupt):
+        ingest(out / "videos", sequence, out / "intrinsics", progress=False, workers=2)
+    assert seen and not [t for t in threading.enumerate() if t.name.startswith("ingest")]
+    for name, calls in seen.items():
+        decoded, total = calls[-1]
+        assert total > 0 and decoded < total / 2, (name, calls)

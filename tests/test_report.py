@@ -18,6 +18,9 @@ from calibproj.simulate import simulate_tracks
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 # Plots of the whole calibration: errors per camera, 3D scene, top and side views.
 SCENE_PLOTS = 3
+# Plots of each camera: error histogram, residuals over the image, coverage (and a
+# frame of its video with its detections, when calibrated from videos).
+CAMERA_PLOTS = 3
 
 
 def starved(tracks, camera: str, keep: int):
@@ -49,7 +52,7 @@ def test_report_embeds_every_plot_and_saves_it(report_with_a_failed_camera) -> N
     path, calibration = report_with_a_failed_camera
     page = path.read_text(encoding="utf-8")
     images = embedded_images(page)
-    assert len(images) == page.count("<img ") == SCENE_PLOTS + len(calibration.metrics)
+    assert len(images) == page.count("<img ") == SCENE_PLOTS + CAMERA_PLOTS * len(calibration.metrics)
     assert all(image.startswith(PNG_SIGNATURE) for image in images)
     files = sorted((path.parent / "report").glob("*.png"))
     assert len(files) == len(images)
@@ -79,7 +82,7 @@ def test_calibrate_writes_the_report_by_default(tmp_path, capsys) -> None:
                    str(tmp_path / "sim" / "intrinsics"), "--out", str(tmp_path / "r")])
     assert status == 0
     page = (tmp_path / "r" / "report.html").read_text(encoding="utf-8")
-    assert len(embedded_images(page)) == SCENE_PLOTS + 3
+    assert len(embedded_images(page)) == SCENE_PLOTS + CAMERA_PLOTS * 3
     assert (tmp_path / "r" / "report" / "scene_3d.png").is_file()
     assert sorted(p.name for p in (tmp_path / "r" / "intrinsics").iterdir()) == ["cam1.json", "cam2.json", "cam3.json"]
 
@@ -122,3 +125,79 @@ def test_sync_table_gives_each_cameras_sync_with_its_uncertainty_and_failures() 
     assert "15.00 &plusmn; 0.40" in page and "12.3" in page
     assert "700 / 14 / 1" in page and "93 / 2 / 1" in page and "40 at 1x, 80 at 3x" in page
     assert "FAILED: cam2.mp4: start light code not found &lt;here&gt;" in page
+
+
+def test_the_page_fits_a_phone() -> None:
+    """A viewport, tables that scroll sideways inside the page, plots in a grid that
+    wraps to one column and images that shrink to the screen."""
+    from calibproj.report.page import STYLE, _scroll
+
+    assert "max-width: 100%" in STYLE and "overflow-x: auto" in STYLE and "auto-fit" in STYLE
+    assert _scroll("<table></table>") == '<div class="scroll"><table></table></div>'
+
+
+def test_report_page_has_viewport_warnings_numbers_and_no_provenance_note(report_with_a_failed_camera) -> None:
+    page = report_with_a_failed_camera[0].read_text(encoding="utf-8")
+    assert '<meta name="viewport" content="width=device-width, initial-scale=1">' in page
+    assert "Camera cam3 FAILED" in page  # in the warnings above the tables
+    assert "Positions and intrinsics" in page and "tilt from down [deg]" in page
+    assert "No provenance recorded" in page  # results written without calibrate
+    assert "0 by construction" in page  # coplanar: no floor RMS of 1e-16 shown as a measurement
+
+
+def test_error_bar_whiskers_stop_at_zero() -> None:
+    from calibproj.report.figures import error_whiskers
+
+    lower, upper = error_whiskers([0.02, 0.5], [0.05, 0.1])
+    np.testing.assert_allclose(lower, [0.02, 0.1])  # never below zero
+    np.testing.assert_allclose(upper, [0.05, 0.1])
+
+
+def test_a_camera_without_observations_is_drawn_empty(report_with_a_failed_camera) -> None:
+    """Its coverage plot shows no observed cell (a colour scale of 0..0 used to paint every cell full)."""
+    import cv2
+
+    from calibproj.io.intrinsics import load_intrinsics_dir
+    from calibproj.report.data import camera_views
+    from calibproj.report.figures import camera_coverage
+    from calibproj.tracks import Tracks
+
+    path, calibration = report_with_a_failed_camera
+    tracks = Tracks.read(path.parent / "tracks.json")
+    intrinsics = load_intrinsics_dir(path.parent / "intrinsics")
+    empty = [v for v in camera_views(calibration, tracks.select(tracks.camera_index != 0), intrinsics)
+             if v.name == tracks.camera_names[0]][0]
+    assert len(empty.observed_px) == 0
+    image = cv2.imdecode(np.frombuffer(camera_coverage(empty), np.uint8), cv2.IMREAD_COLOR)
+    b, g, r = (image[..., i].astype(int) for i in range(3))
+    green = (g - np.maximum(r, b)) > 60
+    assert green.mean() < 0.02  # only the colour bar
+
+
+def test_numbers_table_gives_centre_height_tilt_and_heading() -> None:
+    """A camera 2.5 m above (1, -2) looking straight down; another tilted 30 deg towards +x."""
+    from types import SimpleNamespace
+
+    from calibproj.calibration import Calibration, CameraMetrics
+    from calibproj.io.intrinsics import Intrinsics
+    from calibproj.report.page import numbers_table
+
+    def pose(centre, tilt_deg):
+        a = np.radians(tilt_deg)
+        axis = np.array([np.sin(a), 0.0, -np.cos(a)])
+        x = np.array([0.0, -1.0, 0.0])
+        R = np.vstack([x, np.cross(axis, x), axis])
+        return R, -R @ np.asarray(centre, dtype=float)
+
+    poses = {"down": pose([1.0, -2.0, 2.5], 0.0), "tilted": pose([0.0, 0.0, 3.0], 30.0)}
+    metrics = {n: CameraMetrics(0.1, 0.05, 10, 10, 10, 10, centre_sigma=0.0012) for n in poses}
+    calibration = Calibration(poses, {}, metrics, np.zeros((0, 3)), np.zeros(0, dtype=np.int64), unit="m")
+    camera = Intrinsics(name="any", K=np.array([[900.0, 0, 640], [0, 905.0, 360], [0, 0, 1]]),
+                        dist=[-0.1, 0.02, 0, 0, 0], resolution=(1280, 720))
+    views = [SimpleNamespace(name=n, registered=True, pose=poses[n], metrics=metrics[n], intrinsics=camera,
+                             image_size=lambda: (1280.0, 720.0)) for n in poses]
+    rows = numbers_table(calibration, views).split("</tr>")
+    cells = [re.findall(r"<td[^>]*>([^<]*)</td>", row) for row in rows[1:3]]
+    assert cells[0][:7] == ["down", "1.0000", "-2.0000", "2.5000", "1.20", "0.00", "0.0"]
+    assert cells[1][3] == "3.0000" and cells[1][5] == "30.00" and cells[1][6] == "0.0"
+    assert cells[1][7:12] == ["900.0", "905.0", "640.0", "360.0", "-0.1"]

@@ -86,11 +86,17 @@ def parse_arguments(parser: SuggestingArgumentParser, argv: list[str] | None) ->
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parse_arguments(parser, argv)
+    # Recorded in the outputs that say how they were made (provenance.json).
+    args.command_line = ["calibproj", *(sys.argv[1:] if argv is None else argv)]
     level = logging.WARNING - 10 * min(args.verbose + 1, 2)
     logging.basicConfig(level=level, format="%(message)s")
     prefix = f"calibproj {args.command}"
     try:
-        return int(args.run(args) or EXIT_OK)
+        from tqdm.contrib.logging import logging_redirect_tqdm
+
+        # Log lines go through tqdm.write while bars are open: never in the middle of a bar.
+        with logging_redirect_tqdm():
+            return int(args.run(args) or EXIT_OK)
     except KeyboardInterrupt:
         print(f"{prefix}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from calibproj.io.file_names import path_as_recorded
 from calibproj.io.output_folder import OutputFolder
 
 logger = logging.getLogger(__name__)
@@ -56,24 +57,28 @@ class DemoResult:
     seconds: dict[str, float]
 
 
-def run_demo(out: str | os.PathLike, options: DemoOptions | None = None, progress: bool = True) -> DemoResult:
-    """Generate, render, calibrate and compare into ``out`` (see the module docstring).
+def run_demo(out: str | os.PathLike, options: DemoOptions | None = None, progress: bool = True,
+             command: list[str] | None = None) -> DemoResult:
+    """Generate, render, calibrate and compare into ``out`` (see the module docstring);
+    ``command``: the command line recorded in the results' provenance (None: a Python call).
 
     ``out`` is written as one transaction (``calibproj.io.output_folder``): an existing
     demo folder is only replaced, whole, with ``options.force``."""
     options = options or DemoOptions()
     folder = OutputFolder(out, force=options.force, signature=DEMO_SIGNATURE).open()
     with folder, folder.writing() as staging:
-        comparison, evaluation, calibration, seconds = _run(staging, options, progress)
+        comparison, evaluation, calibration, seconds = _run(staging, options, progress, command)
     logger.info("demo written to %s", folder.path)
     return DemoResult(comparison, evaluation, calibration, folder.path / "results" / "report.html", seconds)
 
 
-def _run(out: Path, options: DemoOptions, progress: bool) -> tuple[object, object, object, dict[str, float]]:
+def _run(out: Path, options: DemoOptions, progress: bool,
+         command: list[str] | None) -> tuple[object, object, object, dict[str, float]]:
     from calibproj.comparison import compare
     from calibproj.evaluation import evaluate
     from calibproj.pipeline import calibrate
     from calibproj.registration import RegistrationOptions
+    from calibproj.report import write_report
     from calibproj.sequence import generate
     from calibproj.simulate.render import simulate_videos
 
@@ -97,11 +102,13 @@ def _run(out: Path, options: DemoOptions, progress: bool) -> tuple[object, objec
     calibration = calibrate(
         out / "room" / "videos", out / "room" / "intrinsics", sequence=out / "sequence" / "sequence.json",
         out=results, options=RegistrationOptions(model=options.model), scale=f"marker-size:{marker_side_m:.9f}",
-        exports=["yaml", "colmap", "anipose"], progress=progress,
+        exports=["yaml", "colmap", "anipose"], progress=progress, command=command,
     )
     seconds["calibrate"] = time.perf_counter() - start
     comparison = compare(results / "camera_poses.json", out / "room" / "truth.json")
     evaluation = evaluate(results, out / "room" / "eval_tracks.json")
+    evaluation.save(results, path_as_recorded(out / "room" / "eval_tracks.json", results))
+    write_report(results)  # again, with the evaluation
     return comparison, evaluation, calibration, seconds
 
 

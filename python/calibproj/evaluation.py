@@ -31,14 +31,16 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics
 from calibproj.reprojection import depths, project
-from calibproj.results import load_results, resolve_intrinsics
+from calibproj.io.jsonio import write_json
+from calibproj.results import EVALUATION_FILE, load_results, resolve_intrinsics
 from calibproj.tracks import Tracks
 
 logger = logging.getLogger(__name__)
@@ -47,6 +49,8 @@ THRESHOLDS_PX = (0.5, 2.0, 5.0)
 INITIALISATIONS = ("pair", "all-views")
 LOSSES = ("none", "huber", "cauchy")
 MIN_VIEWS = 2
+EVALUATION_KIND = "evaluation"
+EVALUATION_MAJOR = 1
 
 
 @dataclass
@@ -141,6 +145,19 @@ class Evaluation:
                 name: {"mean_px": c.mean_px, "std_px": c.std_px, "n": c.n} for name, c in self.cameras.items()
             },
         }
+
+    def save(self, results_dir: str | os.PathLike, tracks_source: str | None = None,
+             options: EvaluationOptions | None = None) -> Path:
+        """Write ``<results_dir>/evaluation.json`` (``calibproj.evaluation/1``): the
+        ``evaluate --json`` document with each failed camera's reason, the evaluation
+        data's path and the options, for the report to show."""
+        body = {**self.to_json(),
+                "failures": {name: c.failure for name, c in self.cameras.items() if c.failure is not None},
+                "tracks": tracks_source,
+                "options": asdict(options or EvaluationOptions())}
+        path = Path(results_dir) / EVALUATION_FILE
+        write_json(path, EVALUATION_KIND, EVALUATION_MAJOR, body)
+        return path
 
 
 def evaluate(

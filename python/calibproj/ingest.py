@@ -29,8 +29,9 @@ from typing import Any
 import numpy as np
 
 from calibproj.ingest_options import IngestOptions
+from calibproj.io.file_names import path_as_recorded, safe_file_names
 from calibproj.io.intrinsics import INTRINSICS_SUFFIXES, Intrinsics, read_intrinsics
-from calibproj.io.jsonio import write_json
+from calibproj.io.jsonio import atomic_write_bytes, write_json
 from calibproj.tracks import Tracks, msm_point_ids
 
 logger = logging.getLogger(__name__)
@@ -39,6 +40,9 @@ VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v", ".mts", ".webm")
 REPORT_KIND = "detect_report"
 REPORT_MAJOR = 1
 DEFAULT_WORKERS = 2
+# A camera failure whose report carries the video's brightness trace.
+SYNC_FAILURE = "light code not found"
+BRIGHTNESS_VALUES = 1500
 
 
 @dataclass
@@ -59,6 +63,10 @@ class CameraIngest:
     intrinsics: str
     error: str | None = None
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
+    # Mean brightness per frame of a camera whose light codes were not found, averaged
+    # over `brightness_step` frames per value: what the report draws to show why.
+    brightness: np.ndarray | None = field(default=None, repr=False)
+    brightness_step: int = 1
 
     @property
     def ok(self) -> bool:
@@ -70,6 +78,9 @@ class CameraIngest:
                                  "status": "ok" if self.ok else "failed"}
         if not self.ok:
             entry["error"] = self.error
+            if self.brightness is not None:
+                entry["brightness"] = {"frames_per_value": self.brightness_step,
+                                       "values": [round(float(v), 5) for v in self.brightness]}
             return entry
         raw = self.raw
         entry["sync"] = _sync_summary(raw["sync"], raw["video"]["fps"], projector_fps)
@@ -91,6 +102,11 @@ class CameraIngest:
         entry["seconds"] = {"total": raw["seconds_total"], "detection": raw["seconds_detection"]}
         return entry
 
+    def thumbnail(self) -> np.ndarray | None:
+        """The grey copy of the first frame sent to detection (``IngestOptions.thumbnail_width``), or None."""
+        image = self.raw.get("thumbnail") if self.ok else None
+        return image if image is not None and image.size else None
+
 
 @dataclass
 class IngestResult:
@@ -102,23 +118,59 @@ class IngestResult:
     markers: str
     projector_fps: float
     scales: list[float]
+    pattern_arrays: list[int] = field(default_factory=list)  # the array each pattern shows
 
     @property
     def failed(self) -> dict[str, str]:
         """Camera name -> error message of the cameras that failed."""
         return {name: camera.error for name, camera in self.cameras.items() if camera.error is not None}
 
-    def report(self) -> dict[str, Any]:
-        """The body of ``detect_report.json``."""
-        return {
-            "sequence": self.sequence_source,
-            "markers": self.markers,
-            "cameras": {name: camera.summary(self.projector_fps, self.scales) for name, camera in self.cameras.items()},
-        }
+    def report(self, thumbnails: Mapping[str, str] | None = None,
+               recorded_from: str | os.PathLike | None = None) -> dict[str, Any]:
+        """The body of ``detect_report.json``; ``thumbnails`` (camera -> file, relative
+        to the report) adds each camera's ``thumbnail`` entry: file, pattern, array, and
+        the factor from video to thumbnail pixels. With ``recorded_from`` (the folder the
+        report will be in), input paths beside it are recorded relative to it."""
+        def recorded(path: str) -> str:
+            return path_as_recorded(path, recorded_from) if recorded_from is not None and Path(path).exists() \
+                else path
 
-    def write_report(self, path: str | os.PathLike) -> None:
-        """Write ``detect_report.json`` (``calibproj.detect_report/1``) atomically."""
-        write_json(path, REPORT_KIND, REPORT_MAJOR, self.report())
+        cameras = {}
+        for name, camera in self.cameras.items():
+            cameras[name] = camera.summary(self.projector_fps, self.scales)
+            for key in ("video", "intrinsics"):
+                cameras[name][key] = recorded(cameras[name][key])
+            if thumbnails and name in thumbnails:
+                cameras[name]["thumbnail"] = self._thumbnail_entry(camera, thumbnails[name])
+        return {"sequence": recorded(self.sequence_source), "markers": self.markers, "cameras": cameras}
+
+    def _thumbnail_entry(self, camera: CameraIngest, file: str) -> dict[str, Any]:
+        pattern = int(camera.raw["thumbnail_pattern"])
+        array = self.pattern_arrays[pattern] if 0 <= pattern < len(self.pattern_arrays) else None
+        return {"file": file, "pattern": pattern, "array": array,
+                "scale": camera.thumbnail().shape[1] / float(camera.raw["video"]["width"])}
+
+    def write_thumbnails(self, folder: str | os.PathLike) -> dict[str, str]:
+        """Each camera's thumbnail as ``<folder>/<camera>.png``; camera -> file path."""
+        import cv2
+
+        written = {}
+        for name, file_name in safe_file_names(list(self.cameras)).items():
+            image = self.cameras[name].thumbnail()
+            if image is None:
+                continue
+            ok, png = cv2.imencode(".png", image)
+            if ok:
+                path = Path(folder) / file_name
+                atomic_write_bytes(path, png.tobytes())
+                written[name] = str(path)
+        return written
+
+    def write_report(self, path: str | os.PathLike, thumbnails: Mapping[str, str] | None = None,
+                     recorded_from: str | os.PathLike | None = None) -> None:
+        """Write ``detect_report.json`` (``calibproj.detect_report/1``) atomically
+        (``thumbnails`` and ``recorded_from``: see :meth:`report`)."""
+        write_json(path, REPORT_KIND, REPORT_MAJOR, self.report(thumbnails, recorded_from))
 
 
 def detect(
@@ -179,7 +231,7 @@ def ingest(
     aruco, apriltag = _detector_options(sequence.markers.system, detector_options or {})
     document = sequence.to_dict()
     names = list(video_paths)
-    bars = _ProgressBars(names, enabled=progress)
+    bars = _Progress(names, enabled=progress)
     exposures = dict(exposures or {})
     unknown = sorted(set(exposures) - set(names))
     if unknown:
@@ -192,19 +244,25 @@ def ingest(
 
     try:
         with ThreadPoolExecutor(max_workers=max(1, workers), thread_name_prefix="ingest") as pool:
-            cameras = dict(zip(names, pool.map(run, names)))
+            try:
+                cameras = dict(zip(names, pool.map(run, names)))
+            except BaseException:
+                # Before the pool waits for its threads: they stop at their next frames.
+                pool.shutdown(wait=False, cancel_futures=True)
+                bars.cancel()
+                raise
     finally:
         bars.close()
     tracks = _tracks(cameras, sequence.centres.shape[1])
     return IngestResult(tracks, cameras, sequence_source, sequence.markers.spec, float(sequence.fps),
-                        [float(s) for s in sequence.layout.scales])
+                        [float(s) for s in sequence.layout.scales], [int(p.array) for p in sequence.patterns])
 
 
 class _CameraJob:
     """Runs the C++ ingest of one camera and turns failures into reports."""
 
     def __init__(self, document: dict[str, Any], options: IngestOptions, aruco: Any, apriltag: Any,
-                 bars: _ProgressBars) -> None:
+                 bars: _Progress) -> None:
         self.document = document
         self.kwargs = options.to_kwargs()
         self.aruco = aruco
@@ -224,27 +282,39 @@ class _CameraJob:
                 str(video), self.document, camera_intrinsics.K, camera_intrinsics.dist, resolution, source,
                 self.aruco, self.apriltag, self.bars.callback(name), **self.kwargs)
         except (ValueError, RuntimeError, OSError) as error:
+            if self.bars.cancelled.is_set():  # the C++ core reports the interruption as its error
+                raise KeyboardInterrupt(f"camera {name}: ingest interrupted") from None
             report.error = str(error)
             logger.warning("camera %s: %s", name, error)
+            if SYNC_FAILURE in report.error:
+                report.brightness, report.brightness_step = _brightness_trace(video, self.kwargs)
         else:
             logger.info("camera %s: %d MSMs", name, len(report.raw["centres"]["array"]))
         return report
 
 
-class _ProgressBars:
-    """One tqdm bar per camera, updated from the C++ threads (tqdm locks internally)."""
+class _Progress:
+    """Per camera a progress bar (``calibproj.progress``: tqdm on a terminal, periodic
+    log lines elsewhere), updated from the C++ threads, and the way to stop them: once
+    ``cancel`` is called, the next progress call of every camera raises, which unwinds
+    its C++ ingest within a fraction of a second (it calls back every 25 frames)."""
 
     def __init__(self, names: list[str], enabled: bool) -> None:
         self.enabled = enabled
         self.bars: dict[str, Any] = {}
         self.lock = threading.Lock()
         self.positions = {name: index for index, name in enumerate(names)}
+        self.cancelled = threading.Event()
+
+    def cancel(self) -> None:
+        self.cancelled.set()
 
     def callback(self, name: str) -> Any:
-        if not self.enabled:
-            return None
-
         def update(decoded: int, total: int) -> None:
+            if self.cancelled.is_set():
+                raise KeyboardInterrupt(f"camera {name}: ingest interrupted")
+            if not self.enabled:
+                return
             bar = self._bar(name, total)
             if total > 0 and bar.total != max(total, decoded):
                 bar.total = max(total, decoded)
@@ -253,17 +323,33 @@ class _ProgressBars:
         return update
 
     def _bar(self, name: str, total: int) -> Any:
-        from tqdm import tqdm
+        from calibproj.progress import progress_bar
 
         with self.lock:
             if name not in self.bars:
-                self.bars[name] = tqdm(total=total or None, desc=name, unit="frame", position=self.positions[name],
-                                       leave=True, disable=None)
+                self.bars[name] = progress_bar(total or None, f"camera {name}", position=self.positions[name])
             return self.bars[name]
 
     def close(self) -> None:
         for bar in self.bars.values():
             bar.close()
+
+
+def _brightness_trace(video: Path, kwargs: Mapping[str, Any]) -> tuple[np.ndarray | None, int]:
+    """The video's mean brightness per frame, averaged down to at most
+    BRIGHTNESS_VALUES values (a second decoding pass, made only for a failed sync)."""
+    from calibproj import _core
+
+    try:
+        signal = _core.video.luma_signal(str(video), kwargs["luma_gamma"], kwargs["mean_row_step"])
+    except (ValueError, RuntimeError, OSError) as error:
+        logger.info("camera video %s: no brightness trace (%s)", video, error)
+        return None, 1
+    step = max(1, int(np.ceil(len(signal) / BRIGHTNESS_VALUES)))
+    padded = np.full(step * int(np.ceil(len(signal) / step)), np.nan)
+    padded[:len(signal)] = signal
+    with np.errstate(invalid="ignore"):
+        return np.nanmean(padded.reshape(-1, step), axis=1), step
 
 
 def luma_signal(video: str | os.PathLike, options: IngestOptions | None = None) -> np.ndarray:

@@ -171,6 +171,8 @@ class IngestOptions:
         planning_lag: a pattern's regions are planned from the detections of the patterns
             at least this many before it, whatever the threads' timing, so that results
             do not depend on how fast detection keeps up.
+        thumbnail_width: width in pixels of the grey copy of the first frame sent to
+            detection, which the report draws the camera's detections on (0: none).
     """
 
     min_correlation: float = 0.8
@@ -253,6 +255,7 @@ class IngestOptions:
     detection_threads: int = 1
     max_pending_jobs: int = 4
     planning_lag: int = 4
+    thumbnail_width: int = 640
 
     def replace(self, **changes: Any) -> IngestOptions:
         """A copy with some fields changed; ValueError naming an unknown field."""

@@ -22,11 +22,12 @@ from pathlib import Path
 from typing import Any
 
 from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir, write_intrinsics_dir
+from calibproj.io.intrinsics import Intrinsics, intrinsics_of_cameras, write_intrinsics_dir
 from calibproj.io.output_folder import OutputFolder
 from calibproj.registration import RegistrationOptions
 from calibproj.registration import calibrate as register
-from calibproj.results import CALIBRATION_FILES, DETECT_REPORT_FILE, INTRINSICS_DIR, TRACKS_FILE
+from calibproj.provenance import provenance, write_provenance
+from calibproj.results import CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, TRACKS_FILE
 from calibproj.tracks import Tracks
 
 logger = logging.getLogger(__name__)
@@ -46,6 +47,7 @@ def calibrate(
     detector_options: Mapping[str, Any] | None = None,
     workers: int = 2,
     progress: bool = True,
+    command: list[str] | None = None,
 ) -> Calibration:
     """Calibrate a camera network and, with ``out``, write its results folder.
 
@@ -65,9 +67,10 @@ def calibrate(
             of the earlier run remains); without it an existing folder is an error.
         ingest_options, detector_options, workers, progress: passed to
             ``calibproj.ingest.ingest`` when ``source`` is videos.
+        command: the command line to record in ``provenance.json`` (None: a Python call).
     """
     from calibproj.export import parse_formats
-    from calibproj.scale import apply_scale, check_measurement, parse_scale
+    from calibproj.scale import check_measurement, parse_scale, scale_factor, scaled
 
     formats = parse_formats(",".join(exports)) if exports else []
     measurement = parse_scale(scale) if scale else None
@@ -79,28 +82,41 @@ def calibrate(
                           _projected_markers(sequence, None) if measurement.kind == "marker-size" else None)
     folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
-        if isinstance(intrinsics, (str, os.PathLike)):
-            intrinsics = load_intrinsics_dir(intrinsics)
-        intrinsics = dict(intrinsics)
-        tracks, left_out, ingest_result = _tracks_of(source, sequence, intrinsics, ingest_options, detector_options,
-                                                     workers, progress)
+        intrinsics_source = intrinsics
+        given = source if videos is not None or isinstance(source, Tracks) else Tracks.read(source)
+        # Before the ingest: a bad or missing file fails its own camera only (the reason
+        # names the file and the problem), a missing or empty folder the whole run.
+        intrinsics, unusable = intrinsics_of_cameras(
+            intrinsics_source, video_camera_names(videos) if videos is not None else given.camera_names)
+        tracks, ingest_failed, ingest_result = _tracks_of(given, sequence, intrinsics_source, ingest_options,
+                                                          detector_options, workers, progress)
+        left_out = _left_out(ingest_failed, unusable)
         markers = None
         if sequence is not None and measurement is not None:
             markers = _projected_markers(sequence, tracks.markers_per_array)
         if measurement is not None:
             check_measurement(measurement, tracks.camera_names, markers)
         calibration = register(tracks, intrinsics, options, left_out=left_out)
-        scale_error = None
+        scale_error, scale_source = None, None
         if measurement is not None and calibration.registered:
             try:
-                calibration = apply_scale(calibration, measurement, markers)
+                factor = scale_factor(calibration, measurement, markers)
+                calibration = scaled(calibration, factor)
+                scale_source = {"measurement": str(measurement), "metres_per_unit": factor}
             except ValueError as error:
                 if folder is None:
                     raise
                 scale_error = error
+                scale_source = {"measurement": str(measurement), "error": str(error)}
         if folder is not None:
+            record = provenance(folder.path, command=command, source=source, sequence=sequence,
+                                intrinsics=intrinsics_source, markers=ingest_result.markers if ingest_result is not None else None,
+                                model=calibration.model, options=options, scale=scale_source,
+                                videos=_video_files(ingest_result))
             with folder.writing() as staging:
-                _write_results(staging, calibration, tracks, intrinsics, formats, report, ingest_result)
+                write_provenance(staging, record)  # first: the report shows it
+                _write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,
+                               ingest_result)
             folder.commit()
             logger.info("results written to %s", folder.path)
         if scale_error is not None:
@@ -146,6 +162,19 @@ def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, w
     return result.tracks, result.failed, result
 
 
+def _video_files(ingest_result: Any) -> dict[str, str]:
+    return {} if ingest_result is None else {n: c.video for n, c in ingest_result.cameras.items()}
+
+
+def _left_out(ingest_failed: dict[str, str], unusable_intrinsics: dict[str, str]) -> dict[str, str]:
+    """The cameras that cannot enter the registration, with the reason: those the ingest
+    failed (logged by ``_tracks_of``) and those without usable intrinsics."""
+    for name, reason in unusable_intrinsics.items():
+        if name not in ingest_failed:
+            logger.error("camera %s failed: %s", name, reason)
+    return {**unusable_intrinsics, **ingest_failed}
+
+
 def _projected_markers(sequence: Any, markers_per_array: int | None) -> Any:
     from calibproj.scale import ProjectedMarkers, read_projected_markers
 
@@ -154,8 +183,8 @@ def _projected_markers(sequence: Any, markers_per_array: int | None) -> Any:
     return ProjectedMarkers.from_sequence(sequence)
 
 
-def _write_results(out: Path, calibration: Calibration, tracks: Tracks, intrinsics: Mapping[str, Intrinsics],
-                   formats: list[str], report: bool, ingest_result: Any) -> None:
+def _write_results(out: Path, final: Path, calibration: Calibration, tracks: Tracks,
+                   intrinsics: Mapping[str, Intrinsics], formats: list[str], report: bool, ingest_result: Any) -> None:
     from calibproj.export import export_all
     from calibproj.report import write_report
 
@@ -163,7 +192,9 @@ def _write_results(out: Path, calibration: Calibration, tracks: Tracks, intrinsi
     write_intrinsics_dir(out / INTRINSICS_DIR, used)
     tracks.write(out / TRACKS_FILE)
     if ingest_result is not None:
-        ingest_result.write_report(out / DETECT_REPORT_FILE)
+        thumbnails = ingest_result.write_thumbnails(out / FRAMES_DIR)
+        relative = {name: Path(path).relative_to(out).as_posix() for name, path in thumbnails.items()}
+        ingest_result.write_report(out / DETECT_REPORT_FILE, relative, recorded_from=final)
     calibration.save(out)
     export_all(calibration, formats, out, used, tracks)
     if report:

@@ -6,7 +6,12 @@
 
 - ``camera_poses.json``, ``metrics.json``, ``points.ply``: the calibration
   (``calibproj.calibration``);
-- ``tracks.json`` and, from videos, ``detect_report.json``: the observations;
+- ``tracks.json`` and, from videos, ``detect_report.json`` with ``frames/<camera>.png``
+  (a grey thumbnail per camera): the observations;
+- ``provenance.json``: when, how and from what the folder was made
+  (``calibproj.provenance``);
+- ``evaluation.json``: the evaluation on independent points, when one was made
+  (``calibproj evaluate --save``);
 - ``intrinsics/``: the intrinsics used, one file per camera;
 - ``report.html`` and ``report/*.png`` (``calibproj.report``);
 - exports (``calibproj.export``).
@@ -25,6 +30,8 @@ CALIBRATION_FILES = ("camera_poses.json", "metrics.json", "points.ply")
 TRACKS_FILE = "tracks.json"
 DETECT_REPORT_FILE = "detect_report.json"
 INTRINSICS_DIR = "intrinsics"
+FRAMES_DIR = "frames"
+EVALUATION_FILE = "evaluation.json"
 
 
 def load_results(results: Calibration | str | os.PathLike) -> Calibration:

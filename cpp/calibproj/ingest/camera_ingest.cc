@@ -387,6 +387,7 @@ class CameraIngest {
   void AddFrame(int frame, const cv::Mat& gray_frame) {
     const bool first = pending_.frames.empty();
     const bool averaging = wanted_[pending_.pattern] > 1;
+    if (first && result_.thumbnail.empty()) KeepThumbnail(gray_frame, pending_.pattern);
     if (first) {
       pending_.job.regions.resize(pending_.rects.size());
       pending_.sums.resize(pending_.rects.size());
@@ -403,6 +404,15 @@ class CameraIngest {
       if (first) pending_.job.regions[i] = detect::RegionImage{std::move(gray), pending_.rects[i].tl()};
     }
     pending_.frames.push_back(frame);
+  }
+
+  void KeepThumbnail(const cv::Mat& gray_frame, int pattern) {
+    if (options_.thumbnail_width <= 0 || gray_frame.empty()) return;
+    const double factor = std::min(1.0, static_cast<double>(options_.thumbnail_width) / gray_frame.cols);
+    const cv::Size size(std::max(1, cvRound(gray_frame.cols * factor)),
+                        std::max(1, cvRound(gray_frame.rows * factor)));
+    cv::resize(gray_frame, result_.thumbnail, size, 0.0, 0.0, cv::INTER_AREA);
+    result_.thumbnail_pattern = pattern;
   }
 
   void SubmitPending() {
@@ -598,6 +608,7 @@ void IngestOptions::Check() const {
   Require(max_pending_jobs >= 1 && max_pending_jobs <= kMaxHeldFrames,
           "max_pending_jobs must be in [1, " + std::to_string(kMaxHeldFrames) + "]");
   Require(planning_lag >= 0, "planning_lag must be non-negative");
+  Require(thumbnail_width >= 0 && thumbnail_width <= 4096, "thumbnail_width must be in [0, 4096]");
   Require(max_scales_per_msm >= 0, "max_scales_per_msm must be non-negative (0: every scale)");
   Require(bootstrap_downscale >= 1 && bootstrap_downscale <= 8, "bootstrap_downscale must be in [1, 8]");
   edges.Check();

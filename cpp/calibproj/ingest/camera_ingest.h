@@ -104,6 +104,9 @@ struct IngestOptions {
   // detections of the patterns at least this many before it, whatever the threads'
   // timing: results do not depend on how fast detection keeps up.
   int planning_lag = 4;
+  // A grey copy of the first frame sent to detection, this many pixels wide, for the
+  // report to draw detections on (0: none).
+  int thumbnail_width = 640;
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;
@@ -149,6 +152,8 @@ struct CameraIngestResult {
   double homography_rms_px = 0.0;
   double seconds_total = 0.0;
   double seconds_detection = 0.0;  // CPU time of the detection threads
+  cv::Mat thumbnail;               // CV_8U, empty when thumbnail_width is 0
+  int thumbnail_pattern = -1;      // the pattern the thumbnail shows
 };
 
 // Called now and then with the frames decoded so far and the declared total.

@@ -99,6 +99,7 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("detection_threads", o.detection_threads, "detection threads per camera");
   visit("max_pending_jobs", o.max_pending_jobs, "patterns waiting for detection at most");
   visit("planning_lag", o.planning_lag, "patterns are planned from the detections this many patterns back");
+  visit("thumbnail_width", o.thumbnail_width, "width of the grey thumbnail of a detected frame (0: none)");
 }
 
 }  // namespace calibproj::ingest

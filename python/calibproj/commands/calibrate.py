@@ -78,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         force=args.force,
         workers=args.workers,
         progress=not args.no_progress,
+        command=getattr(args, "command_line", None),
     )
     rows = calibration_summary(calibration)
     if args.json:

@@ -32,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
 
     options = dataclass_from_args(DemoOptions, args)
     started = time.perf_counter()
-    result = run_demo(args.out, options, progress=not args.no_progress)
+    result = run_demo(args.out, options, progress=not args.no_progress, command=getattr(args, "command_line", None))
     total = time.perf_counter() - started
     print()
     print("Pose errors against the ground truth (after Sim(3) alignment):")

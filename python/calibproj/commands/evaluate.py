@@ -28,6 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--intrinsics", metavar="DIR",
                         help="per-camera intrinsics folder (default: RESULTS/intrinsics)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON (for programs)")
+    parser.add_argument("--save", action="store_true",
+                        help="also write RESULTS/evaluation.json and show it in RESULTS/report.html")
     add_dataclass_arguments(parser, EvaluationOptions, "evaluation options")
 
 
@@ -41,6 +43,12 @@ def run(args: argparse.Namespace) -> int:
         raise FileNotFoundError(f"{args.results}: no such results folder")
     options = dataclass_from_args(EvaluationOptions, args)
     evaluation = evaluate(args.results, args.tracks, args.intrinsics, options)
+    if args.save:
+        from calibproj.io.file_names import path_as_recorded
+        from calibproj.report import write_report
+
+        evaluation.save(args.results, path_as_recorded(args.tracks, args.results), options)
+        write_report(args.results, intrinsics=args.intrinsics)
     if args.json:
         print(json.dumps(evaluation.to_json(), indent=1))
     else:

@@ -178,6 +178,13 @@ def _unit_label(calibration: Calibration) -> str:
 # -- errors of all cameras --------------------------------------------------------------------
 
 
+def error_whiskers(means: Sequence[float], stds: Sequence[float]) -> np.ndarray:
+    """Lower and upper whisker lengths, ``(2, N)``: one standard deviation, the lower
+    stopping at zero (an error is never negative)."""
+    means, stds = np.asarray(means, dtype=float), np.asarray(stds, dtype=float)
+    return np.array([np.minimum(stds, means), stds])
+
+
 def error_bars(views: Sequence[CameraView], dpi: int = DEFAULT_DPI) -> bytes:
     """Mean reprojection error per camera with its standard deviation; failed cameras marked."""
     figure = Figure(figsize=(max(6.0, 0.7 * len(views) + 2.0), 3.6))
@@ -186,7 +193,7 @@ def error_bars(views: Sequence[CameraView], dpi: int = DEFAULT_DPI) -> bytes:
     means = [v.metrics.mean_px if v.metrics and v.metrics.mean_px is not None else 0.0 for v in views]
     stds = [v.metrics.std_px if v.metrics and v.metrics.std_px is not None else 0.0 for v in views]
     colours = ["#2b7bba" if v.registered else FAILED_COLOUR for v in views]
-    axes.bar(positions, means, yerr=stds, color=colours, capsize=3)
+    axes.bar(positions, means, yerr=error_whiskers(means, stds), color=colours, capsize=3)
     for position, view in zip(positions, views):
         if not view.registered:
             axes.text(position, 0.0, "failed", rotation=90, ha="center", va="bottom", color=FAILED_COLOUR)
@@ -198,26 +205,102 @@ def error_bars(views: Sequence[CameraView], dpi: int = DEFAULT_DPI) -> bytes:
     return png_bytes(figure, dpi)
 
 
+def brightness_trace(values: Sequence[float], frames_per_value: int, reason: str,
+                     dpi: int = DEFAULT_DPI) -> bytes:
+    """A failed camera's mean brightness over its video: the light codes (fast
+    black/white flicker at the start and the end) should stand out of it."""
+    figure = Figure(figsize=(10.0, 3.0))
+    axes = figure.subplots()
+    values = np.asarray(values, dtype=float)
+    axes.plot(np.arange(len(values)) * frames_per_value, values, color="#2b7bba", linewidth=0.8)
+    axes.set_xlabel("video frame")
+    axes.set_ylabel("mean brightness")
+    axes.set_title(_wrapped(reason, 110), fontsize=8)
+    axes.grid(True, linewidth=0.3)
+    figure.tight_layout()
+    return png_bytes(figure, dpi)
+
+
+def _wrapped(text: str, width: int) -> str:
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, width)[:4])
+
+
 # -- one camera -------------------------------------------------------------------------------
 
 
-def camera_panels(view: CameraView, dpi: int = DEFAULT_DPI) -> bytes:
-    """Error histogram, residuals over the image and image coverage of one camera."""
-    figure = Figure(figsize=(14.0, 4.0))
-    histogram, residuals, coverage = figure.subplots(1, 3, gridspec_kw={"width_ratios": [1.0, 1.45, 1.3]})
+PANEL_SIZE = (5.0, 3.8)  # inches: one per-camera plot, readable at a phone's width
+
+
+def camera_errors(view: CameraView, dpi: int = DEFAULT_DPI) -> bytes:
+    """Histogram of one camera's reprojection errors (or why there is none)."""
+    figure = Figure(figsize=PANEL_SIZE)
+    axes = figure.subplots()
     if view.registered and len(view.residuals):
-        _histogram(histogram, view.errors, view.metrics)
-        _residual_map(figure, residuals, view)
+        _histogram(axes, view.errors, view.metrics)
     else:
-        # The page states the reason of a failure; the plot only says why it is empty.
-        message = "not registered: no reprojection errors" if not view.registered else \
-            "no observation of a reconstructed point"
-        histogram.text(1.2, 0.5, message, ha="center", va="center", transform=histogram.transAxes)
-        histogram.set_axis_off()
-        residuals.set_axis_off()
-    _coverage(figure, coverage, view)
-    figure.subplots_adjust(left=0.05, right=0.94, bottom=0.13, top=0.86, wspace=0.42)
+        _empty(axes, "not registered: no reprojection errors" if not view.registered
+               else "no observation of a reconstructed point")
+    figure.tight_layout()
     return png_bytes(figure, dpi)
+
+
+def camera_residuals(view: CameraView, dpi: int = DEFAULT_DPI) -> bytes:
+    """One camera's residuals over its image (or why there are none)."""
+    figure = Figure(figsize=PANEL_SIZE)
+    axes = figure.subplots()
+    if view.registered and len(view.residuals):
+        _residual_map(figure, axes, view)
+    else:
+        _empty(axes, "no residuals to draw")
+    figure.tight_layout()
+    return png_bytes(figure, dpi)
+
+
+def camera_coverage(view: CameraView, dpi: int = DEFAULT_DPI) -> bytes:
+    """How one camera's observations cover its image."""
+    figure = Figure(figsize=PANEL_SIZE)
+    axes = figure.subplots()
+    _coverage(figure, axes, view)
+    figure.tight_layout()
+    return png_bytes(figure, dpi)
+
+
+def camera_detections(view: CameraView, thumbnail: np.ndarray, scale: float, array: int | None,
+                      dpi: int = DEFAULT_DPI) -> bytes:
+    """A frame of the camera's video with what was found in it: the detected MSM
+    centres of the array it shows, where the calibration reprojects their points, and
+    every observation the outlier filter left out (of any array)."""
+    figure = Figure(figsize=PANEL_SIZE)
+    axes = figure.subplots()
+    height, width = thumbnail.shape[:2]
+    size = view.image_size() or (width / scale, height / scale)
+    axes.imshow(thumbnail, cmap="gray", vmin=0, vmax=255, extent=(-0.5, size[0] - 0.5, size[1] - 0.5, -0.5),
+                interpolation="antialiased")
+    shown = view.observed_arrays == array if array is not None else np.zeros(len(view.observed_px), dtype=bool)
+    detected = view.observed_px[shown]
+    axes.scatter(detected[:, 0], detected[:, 1], s=30, facecolors="none", edgecolors="#2ecc71", linewidths=0.9,
+                 label=f"detected ({len(detected)})")
+    reprojected = view.projected_px[view.residual_arrays == array] if array is not None else np.zeros((0, 2))
+    axes.scatter(reprojected[:, 0], reprojected[:, 1], s=30, marker="+", c="#ff33cc", linewidths=0.9,
+                 label=f"reprojected ({len(reprojected)})")
+    outliers = view.residual_at_px[view.outliers]
+    axes.scatter(outliers[:, 0], outliers[:, 1], s=30, marker="x", c=FAILED_COLOUR, linewidths=1.2,
+                 label=f"left out, all arrays ({len(outliers)})")
+    _image_frame(axes, view)
+    axes.set_xlim(-0.5, size[0] - 0.5)
+    axes.set_ylim(size[1] - 0.5, -0.5)
+    which = f"array {array}" if array is not None else "no array known"
+    axes.set_title(f"a frame of the video ({which})", fontsize=10)
+    axes.legend(fontsize=7, loc="lower right", framealpha=0.8)
+    figure.tight_layout()
+    return png_bytes(figure, dpi)
+
+
+def _empty(axes, message: str) -> None:
+    axes.text(0.5, 0.5, message, ha="center", va="center", transform=axes.transAxes)
+    axes.set_axis_off()
 
 
 def _histogram(axes, errors: np.ndarray, metrics) -> None:
@@ -304,8 +387,9 @@ def _coverage(figure: Figure, axes, view: CameraView) -> None:
     cells_y = COVERAGE_CELLS if height > width else max(1, round(COVERAGE_CELLS * height / width))
     counts, _, _ = np.histogram2d(points[:, 0], points[:, 1], bins=(cells_x, cells_y),
                                   range=((-0.5, width - 0.5), (-0.5, height - 0.5)))
+    # vmax at least 1: a camera without observations is drawn empty, not saturated.
     image = axes.imshow(counts.T, extent=(-0.5, width - 0.5, height - 0.5, -0.5), cmap="Greens",
-                        interpolation="nearest", vmin=0)
+                        interpolation="nearest", vmin=0, vmax=max(1.0, float(counts.max())))
     if len(points):
         axes.scatter(points[:, 0], points[:, 1], s=0.2, c="#222222", alpha=0.3, linewidths=0)
     colourbar = figure.colorbar(image, ax=axes, fraction=0.046, pad=0.02)

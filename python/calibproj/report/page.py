@@ -3,21 +3,28 @@
 from __future__ import annotations
 
 import base64
+import hashlib
 import html
 import json
 import logging
 import os
 import re
+import shlex
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from calibproj.calibration import Calibration
+from calibproj.io.file_names import safe_file_names
 from calibproj.io.intrinsics import Intrinsics
 from calibproj.io.jsonio import atomic_write_bytes, atomic_write_text
 from calibproj.report import figures
 from calibproj.report.data import CameraView, camera_views
-from calibproj.results import DETECT_REPORT_FILE, TRACKS_FILE, load_results, resolve_intrinsics
+from calibproj.provenance import read_provenance
+from calibproj.results import DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, load_results, resolve_intrinsics
 from calibproj.tracks import Tracks
 from calibproj.version import __version__
 
@@ -27,17 +34,28 @@ REPORT_FILE = "report.html"
 FIGURES_DIR = "report"
 
 STYLE = """
-body { font-family: sans-serif; margin: 2em auto; max-width: 1200px; color: #222; }
+body { font-family: sans-serif; margin: 2em auto; max-width: 1200px; padding: 0 1em; color: #222;
+       line-height: 1.4; }
 h1 { margin-bottom: 0.2em; }
-table { border-collapse: collapse; margin: 1em 0; }
+p.meta { color: #555; margin-top: 0; }
+.scroll { overflow-x: auto; -webkit-overflow-scrolling: touch; margin: 1em 0; }
+table { border-collapse: collapse; }
 th, td { border: 1px solid #ccc; padding: 0.3em 0.7em; text-align: right; }
 th { background: #f0f0f0; }
-td.name, th.name { text-align: left; }
-td.failed { color: #c0392b; text-align: left; font-weight: bold; }
-.summary td { text-align: left; }
-img { max-width: 100%; display: block; margin: 0.5em 0; }
-p.failed { color: #c0392b; font-weight: bold; }
+td.name, th.name, .summary td, .pairs td { text-align: left; }
+td.failed, td.weak { color: #c0392b; text-align: left; font-weight: bold; }
+td.code { font-family: monospace; text-align: left; word-break: break-all; }
+img { max-width: 100%; height: auto; display: block; margin: 0.5em 0; }
+figure { margin: 0.5em 0; }
+.grid { display: grid; grid-template-columns: repeat(auto-fit, minmax(320px, 1fr)); gap: 0.5em 1em; }
+p.failed, p.warning { color: #c0392b; font-weight: bold; }
+div.warnings { border-left: 4px solid #c0392b; background: #fdf2f0; padding: 0.3em 1em; }
 section.camera { border-top: 1px solid #ddd; margin-top: 1.5em; }
+@media (max-width: 600px) {
+  body { margin: 0.5em auto; padding: 0 0.5em; font-size: 15px; }
+  th, td { padding: 0.25em 0.4em; }
+  h1 { font-size: 1.5em; }
+}
 """
 
 
@@ -59,7 +77,9 @@ def write_report(
     """Write ``report.html`` and ``report/*.png`` into a results folder; returns the page's path.
 
     Args:
-        results_dir: a folder written by ``calibproj calibrate`` (``camera_poses.json``, ...).
+        results_dir: a folder written by ``calibproj calibrate`` (``camera_poses.json``, ...;
+            ``detect_report.json``, ``provenance.json`` and ``evaluation.json`` are shown
+            when present).
         tracks: the tracks the calibration was made from, ``Tracks`` or ``tracks.json``;
             ``None`` reads ``<results_dir>/tracks.json``.
         intrinsics: per-camera intrinsics or their folder; ``None`` reads
@@ -73,118 +93,329 @@ def write_report(
         tracks = results_dir / TRACKS_FILE
     tracks = tracks if isinstance(tracks, Tracks) else Tracks.read(tracks)
     views = camera_views(calibration, tracks, intrinsics)
-    scene, cameras = draw_plots(calibration, views, dpi)
+    inputs = ReportInputs(detect_report=_optional_json(results_dir / DETECT_REPORT_FILE, "sync and detection"),
+                          provenance=read_provenance(results_dir),
+                          evaluation=_optional_json(results_dir / EVALUATION_FILE, "evaluation"))
+    scene, cameras = draw_plots(calibration, views, dpi, _thumbnails(results_dir, inputs.detect_report))
+    sync = sync_plots(inputs.detect_report, dpi)
     folder = results_dir / FIGURES_DIR
-    for plot in [*scene, *cameras.values()]:
+    for plot in [*scene, *sync, *(plot for plots in cameras.values() for plot in plots)]:
         atomic_write_bytes(folder / plot.file_name, plot.png)
     path = results_dir / REPORT_FILE
-    atomic_write_text(path, render_page(calibration, views, scene, cameras, _detect_report(results_dir)))
+    atomic_write_text(path, render_page(calibration, views, scene, cameras, inputs, sync))
     logger.info("report written: %s (%.1f MB)", path, path.stat().st_size / 1e6)
     return path
 
 
-def draw_plots(calibration: Calibration, views: list[CameraView], dpi: int) -> tuple[list[Plot], dict[str, Plot]]:
-    """The scene plots and one plot per camera (by name)."""
-    scene = [Plot("errors.png", "Reprojection error per camera", figures.error_bars(views, dpi))]
+@dataclass(frozen=True)
+class ReportInputs:
+    """What the report shows beyond the calibration: each a parsed JSON body, or None."""
+
+    detect_report: dict | None = None
+    provenance: dict | None = None
+    evaluation: dict | None = None
+
+
+@dataclass(frozen=True, eq=False)  # numpy field
+class Thumbnail:
+    """A grey frame of a camera's video (``frames/<camera>.png``) and what it shows."""
+
+    image: np.ndarray
+    scale: float  # thumbnail pixels per video pixel
+    array: int | None  # the projected array in it
+
+
+def draw_plots(calibration: Calibration, views: list[CameraView], dpi: int,
+               thumbnails: Mapping[str, Thumbnail] | None = None) -> tuple[list[Plot], dict[str, list[Plot]]]:
+    """The scene plots, and the plots of each camera (by name)."""
+    scene = [Plot("errors.png", "Fit residual per camera (the calibration's own observations)",
+                  figures.error_bars(views, dpi))]
     if calibration.poses:
         scene.append(Plot("scene_3d.png", "Cameras, floor and points", figures.scene_3d(calibration, views, dpi)))
         scene.append(Plot("scene_views.png", "Top and side views", figures.scene_views(calibration, views, dpi)))
-    file_names = unique_file_names([v.name for v in views])
-    cameras = {
-        view.name: Plot(file_names[view.name], f"Camera {view.name}", figures.camera_panels(view, dpi))
-        for view in views
-    }
+    stems = safe_file_names([v.name for v in views], prefix="camera_", suffix="")
+    thumbnails = thumbnails or {}
+    cameras = {}
+    for view in views:
+        stem = stems[view.name]
+        plots = []
+        thumbnail = thumbnails.get(view.name)
+        if thumbnail is not None:
+            plots.append(Plot(f"{stem}_frame.png", f"{view.name}: a frame with its detections",
+                              figures.camera_detections(view, thumbnail.image, thumbnail.scale, thumbnail.array,
+                                                        dpi)))
+        plots += [
+            Plot(f"{stem}_errors.png", f"{view.name}: fit residuals", figures.camera_errors(view, dpi)),
+            Plot(f"{stem}_residuals.png", f"{view.name}: residuals over the image",
+                 figures.camera_residuals(view, dpi)),
+            Plot(f"{stem}_coverage.png", f"{view.name}: coverage of the image", figures.camera_coverage(view, dpi)),
+        ]
+        cameras[view.name] = plots
     return scene, cameras
 
 
-def unique_file_names(names: list[str]) -> dict[str, str]:
-    """``camera_<name>.png`` with characters unsafe in file names replaced, made unique."""
-    out: dict[str, str] = {}
-    taken: set[str] = set()
-    for name in names:
-        stem = "camera_" + re.sub(r"[^A-Za-z0-9_.-]", "_", name)
-        candidate, suffix = stem, 1
-        while candidate.lower() in taken:
-            suffix += 1
-            candidate = f"{stem}_{suffix}"
-        taken.add(candidate.lower())
-        out[name] = candidate + ".png"
+def sync_plots(detect_report: dict | None, dpi: int) -> list[Plot]:
+    """The brightness trace of each camera whose light codes were not found."""
+    cameras = (detect_report or {}).get("cameras") or {}
+    traces = {name: c for name, c in cameras.items() if isinstance(c, dict) and isinstance(c.get("brightness"), dict)}
+    stems = safe_file_names(list(traces), prefix="sync_")
+    plots = []
+    for name, camera in traces.items():
+        trace = camera["brightness"]
+        values, step = trace.get("values"), trace.get("frames_per_value")
+        if not isinstance(values, list) or not values or not isinstance(step, int) or step < 1:
+            continue
+        reason = str(camera.get("error", "sync failed"))
+        plots.append(Plot(stems[name], f"{name}: brightness over the video (sync failed)",
+                          figures.brightness_trace([v if isinstance(v, (int, float)) else np.nan for v in values],
+                                                   step, reason, dpi)))
+    return plots
+
+
+def _thumbnails(results_dir: Path, detect_report: dict | None) -> dict[str, Thumbnail]:
+    """The thumbnails the detect report names (missing or unreadable ones are skipped)."""
+    import cv2
+
+    out = {}
+    for name, camera in ((detect_report or {}).get("cameras") or {}).items():
+        entry = camera.get("thumbnail") if isinstance(camera, dict) else None
+        if not isinstance(entry, dict) or not isinstance(entry.get("file"), str):
+            continue
+        path = results_dir / entry["file"]
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE) if path.is_file() else None
+        scale = entry.get("scale")
+        if image is None or not isinstance(scale, (int, float)) or not scale > 0:
+            logger.warning("%s: thumbnail of camera %s not read", path, name)
+            continue
+        array = entry.get("array")
+        out[str(name)] = Thumbnail(image, float(scale), array if isinstance(array, int) else None)
     return out
 
 
 # -- HTML -----------------------------------------------------------------------------------
 
 
-def _detect_report(results_dir: Path) -> dict | None:
-    """The results' detect_report.json (calibrated from videos), or None (from tracks,
-    or unreadable: the report then has no sync section, and says why in the log)."""
-    path = results_dir / DETECT_REPORT_FILE
+def _optional_json(path: Path, what: str) -> dict | None:
+    """A JSON file of the results that the report shows if present, or None (absent,
+    or unreadable: the report then goes without that section and says why in the log)."""
     if not path.exists():
         return None
     try:
-        return json.loads(path.read_text())
+        body = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as error:
-        logger.warning("%s: not read (%s); the report has no sync and detection section", path, error)
+        logger.warning("%s: not read (%s); the report has no %s section", path, error, what)
         return None
+    return body if isinstance(body, dict) else None
 
 
 def render_page(calibration: Calibration, views: list[CameraView], scene: list[Plot],
-                cameras: dict[str, Plot], detect_report: dict | None = None) -> str:
+                cameras: dict[str, list[Plot]], inputs: ReportInputs | None = None,
+                sync: list[Plot] | None = None) -> str:
+    inputs = inputs or ReportInputs()
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
         "<title>calibproj calibration report</title>",
         f"<style>{STYLE}</style></head><body>",
         "<h1>Calibration report</h1>",
-        _summary(calibration, views),
+        _meta_line(inputs.provenance),
+        _warnings(views),
+        _scroll(_summary(calibration, views, inputs.provenance)),
         "<h2>Cameras</h2>",
-        _camera_table(views, cameras),
-        *(["<h2>Sync and detection</h2>", sync_table(detect_report)] if detect_report else []),
+        "<p>Fit residual: reprojection error of the observations the calibration was made from "
+        "(inliers). It measures how well the model fits, not how accurate the pose is: a camera "
+        "with few points fits them closely. &sigma;: one standard deviation from the bundle "
+        "adjustment's covariance, worst axis, relative to the first camera of the registration.</p>",
+        _scroll(_camera_table(views, calibration.unit)),
+        *(["<h2>Evaluation on independent points</h2>", evaluation_table(inputs.evaluation)]
+          if inputs.evaluation else []),
+        "<h2>Positions and intrinsics</h2>",
+        _scroll(numbers_table(calibration, views)),
+        *(["<h2>Sync and detection</h2>", _scroll(sync_table(inputs.detect_report)), *map(_figure, sync or [])]
+          if inputs.detect_report else []),
         "<h2>Scene</h2>",
         *(_figure(plot) for plot in scene),
         "<h2>Per camera</h2>",
         *(_camera_section(view, cameras[view.name]) for view in views),
+        *(["<h2>Provenance</h2>", _scroll(provenance_table(inputs.provenance))] if inputs.provenance else []),
         f"<p><small>calibproj {html.escape(__version__)}</small></p>",
         "</body></html>",
     ]
     return "\n".join(parts) + "\n"
 
 
-def _summary(calibration: Calibration, views: list[CameraView]) -> str:
+def _scroll(table: str) -> str:
+    """A table that scrolls sideways on a narrow screen instead of widening the page."""
+    return f'<div class="scroll">{table}</div>'
+
+
+def _meta_line(provenance: dict | None) -> str:
+    if not provenance:
+        return '<p class="meta">No provenance recorded (results not written by calibproj calibrate).</p>'
+    created = html.escape(str(provenance.get("created", "?")))
+    version = html.escape(str(provenance.get("calibproj", "?")))
+    return f'<p class="meta">Made {created} with calibproj {version}; see Provenance at the end.</p>'
+
+
+def _warnings(views: list[CameraView]) -> str:
+    lines = []
+    for view in views:
+        m = view.metrics
+        if view.registered and m is not None and m.weak:
+            sigma = "unknown" if m.rotation_sigma_deg is None else f"{m.rotation_sigma_deg:.3f} deg"
+            lines.append(f"<p class=\"warning\">Camera {html.escape(view.name)} is WEAK: its rotation is known "
+                         f"to {sigma} (1 &sigma;) from {m.inliers} observations. Its small fit residual does not "
+                         "mean it is accurate; more points in its view (a denser grid, more arrays) help.</p>")
+        elif not view.registered:
+            lines.append(f"<p class=\"warning\">Camera {html.escape(view.name)} FAILED: "
+                         f"{html.escape(view.failure or 'not registered')}</p>")
+    return f'<div class="warnings">{"".join(lines)}</div>' if lines else ""
+
+
+def _summary(calibration: Calibration, views: list[CameraView], provenance: dict | None) -> str:
     registered = sum(1 for v in views if v.registered)
     unit = "metres" if calibration.unit == "m" else "arbitrary (first camera at height 1)"
+    if calibration.model == "coplanar":
+        floor = "0 by construction (the coplanar model puts every point on the floor plane)"
+    else:
+        floor = f"{calibration.floor_rms:.4g}" + (" m" if calibration.unit == "m" else "")
     rows = [
         ("registered cameras", f"{registered} of {len(views)}"),
         ("model", calibration.model),
         ("unit", unit),
+        ("scale from", _scale_source(calibration, provenance)),
         ("points", str(len(calibration.points))),
-        ("floor RMS", f"{calibration.floor_rms:.4g}" + (" m" if calibration.unit == "m" else "")),
+        ("points' RMS distance to the floor", floor),
         ("registration order", ", ".join(calibration.registration_order) or "-"),
     ]
     body = "".join(f"<tr><th class=\"name\">{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
     return f'<table class="summary">{body}</table>'
 
 
-def _camera_table(views: list[CameraView], cameras: dict[str, Plot]) -> str:
+def _scale_source(calibration: Calibration, provenance: dict | None) -> str:
+    scale = (provenance or {}).get("scale")
+    if isinstance(scale, dict) and scale.get("measurement"):
+        if scale.get("error"):
+            return f"{scale['measurement']}: not applied ({scale['error']})"
+        factor = scale.get("metres_per_unit")
+        return f"{scale['measurement']}" + (f" ({factor:.6g} m per unit)" if isinstance(factor, (int, float)) else "")
+    return "unknown (no provenance)" if calibration.unit == "m" and not provenance else "no measurement"
+
+
+def _camera_table(views: list[CameraView], unit: str) -> str:
+    centre_unit = "mm" if unit == "m" else "units"
     header = ("<tr><th class=\"name\">camera</th><th>fit residual mean [px]</th><th>std [px]</th>"
               "<th>observations</th><th>inliers</th><th>track &ge; 2 observations</th><th>view score</th>"
-              "<th>rotation &sigma; [deg]</th><th>centre &sigma;</th></tr>")
+              f"<th>rotation &sigma; [deg]</th><th>centre &sigma; [{centre_unit}]</th></tr>")
     rows = [header]
     for view in views:
-        name = f'<td class="name"><a href="#{_anchor(cameras[view.name])}">{html.escape(view.name)}</a></td>'
+        name = f'<td class="name"><a href="#{_anchor(view.name)}">{html.escape(view.name)}</a></td>'
         if not view.registered:
             reason = html.escape(view.failure or "not registered")
             rows.append(f'<tr>{name}<td class="failed" colspan="8">FAILED: {reason}</td></tr>')
             continue
         m = view.metrics
+        centre_sigma = None if m is None or m.centre_sigma is None else m.centre_sigma * (1e3 if unit == "m" else 1.0)
         cells = [_number(m.mean_px, 3), _number(m.std_px, 3), str(m.observations), str(m.inliers),
                  str(m.track2_observations), str(m.view_score), _number(m.rotation_sigma_deg, 4),
-                 _number(m.centre_sigma, 4)] if m else ["-"] * 8
-        weak = (f'<tr><td></td><td class="failed" colspan="8">WEAK: rotation known to '
+                 _number(centre_sigma, 2 if unit == "m" else 5)] if m else ["-"] * 8
+        weak = (f'<tr><td></td><td class="weak" colspan="8">WEAK: rotation known to '
                 f'{m.rotation_sigma_deg:.3f} deg (1 sigma); more points in its view help</td></tr>'
                 if m is not None and m.weak and m.rotation_sigma_deg is not None else "")
         rows.append(f"<tr>{name}" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>" + weak)
     return "<table>" + "".join(rows) + "</table>"
+
+
+def numbers_table(calibration: Calibration, views: list[CameraView]) -> str:
+    """Per registered camera: its centre with 1-sigma, height, tilt from straight down,
+    heading, and the intrinsics used."""
+    metric = calibration.unit == "m"
+    unit = "m" if metric else "units"
+    header = (f"<tr><th class=\"name\">camera</th><th>x [{unit}]</th><th>y [{unit}]</th><th>height z [{unit}]</th>"
+              f"<th>centre &sigma; [{'mm' if metric else unit}]</th><th>tilt from down [deg]</th>"
+              "<th>heading [deg]</th><th>fx [px]</th><th>fy [px]</th><th>cx [px]</th><th>cy [px]</th>"
+              "<th>k1</th><th>k2</th><th>image [px]</th></tr>")
+    rows = [header]
+    for view in views:
+        if not view.registered:
+            continue
+        R, t = view.pose
+        centre = -R.T @ t
+        axis = R[2]  # optical axis in the floor frame (third row of R)
+        tilt = float(np.degrees(np.arccos(np.clip(-axis[2], -1.0, 1.0))))
+        heading = float(np.degrees(np.arctan2(axis[1], axis[0])))
+        sigma = view.metrics.centre_sigma if view.metrics is not None else None
+        cells = [_number(c, 4) for c in centre] + [
+            _number(None if sigma is None else sigma * (1e3 if metric else 1.0), 2 if metric else 5),
+            f"{tilt:.2f}", f"{heading:.1f}", *_intrinsics_cells(view)]
+        rows.append(f'<tr><td class="name">{html.escape(view.name)}</td>'
+                    + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    return "<table>" + "".join(rows) + "</table>"
+
+
+def _intrinsics_cells(view: CameraView) -> list[str]:
+    camera = view.intrinsics
+    if camera is None:
+        return ["-"] * 7
+    K, dist = np.asarray(camera.K, dtype=float), np.asarray(camera.dist, dtype=float).ravel()
+    size = view.image_size()
+    image = f"{size[0]:.0f} x {size[1]:.0f}" if size is not None else "-"
+    k1, k2 = (f"{dist[i]:.4g}" if dist.size > i else "-" for i in (0, 1))
+    return [f"{K[0, 0]:.1f}", f"{K[1, 1]:.1f}", f"{K[0, 2]:.1f}", f"{K[1, 2]:.1f}", k1, k2, image]
+
+
+def evaluation_table(document: dict) -> str:
+    """``evaluation.json`` (``calibproj evaluate --save``): success rates and per-camera errors."""
+    rates = document.get("success_rate") or {}
+    line = ", ".join(f"{html.escape(str(v))} % under {html.escape(str(k))} px" for k, v in rates.items())
+    source = document.get("tracks")
+    rows = ["<tr><th class=\"name\">camera</th><th>mean [px]</th><th>std [px]</th><th>observations</th></tr>"]
+    for name, camera in (document.get("cameras") or {}).items():
+        camera = camera if isinstance(camera, dict) else {}
+        failure = (document.get("failures") or {}).get(name)
+        cell = f'<td class="name">{html.escape(str(name))}</td>'
+        if camera.get("mean_px") is None:
+            rows.append(f'<tr>{cell}<td class="failed" colspan="3">FAILED: {html.escape(str(failure or "-"))}'
+                        "</td></tr>")
+            continue
+        rows.append(f"<tr>{cell}<td>{_number(camera.get('mean_px'), 3)}</td><td>{_number(camera.get('std_px'), 3)}"
+                    f"</td><td>{html.escape(str(camera.get('n', '-')))}</td></tr>")
+    intro = ("<p>Reprojection error on points that took no part in the calibration"
+             + (f" ({html.escape(str(source))})" if source else "") + f": success {line}.</p>")
+    return intro + _scroll("<table>" + "".join(rows) + "</table>")
+
+
+def provenance_table(provenance: dict) -> str:
+    """When, how and from what the results were made (``provenance.json``)."""
+    inputs = provenance.get("inputs") or {}
+    command = provenance.get("command")
+    rows = [
+        ("made", provenance.get("created")),
+        ("calibproj", provenance.get("calibproj")),
+        ("command", " ".join(shlex.quote(str(a)) for a in command) if isinstance(command, list)
+         else "Python API call"),
+        ("Python, platform", f"{provenance.get('python')}, {provenance.get('platform')}"),
+        ("markers", provenance.get("markers") or "-"),
+        ("model", provenance.get("model")),
+        ("source", _identity(inputs.get("source"))),
+        ("sequence", _identity(inputs.get("sequence"))),
+        ("intrinsics", _identity(inputs.get("intrinsics"))),
+        *((f"video {name}", _identity(entry)) for name, entry in (inputs.get("videos") or {}).items()),
+    ]
+    body = "".join(f'<tr><th class="name">{html.escape(str(k))}</th><td class="code">{html.escape(str(v))}</td></tr>'
+                   for k, v in rows)
+    return f'<table class="pairs">{body}</table>'
+
+
+def _identity(entry: Any) -> str:
+    if not isinstance(entry, dict):
+        return "-" if entry is None else str(entry)
+    details = [f"{entry['bytes']} bytes" if "bytes" in entry else None,
+               f"sha256 {entry['sha256']}" if "sha256" in entry else None,
+               f"modified {entry['modified']}" if "modified" in entry else None]
+    extra = ", ".join(d for d in details if d)
+    return f"{entry.get('path', '?')}" + (f" ({extra})" if extra else "")
 
 
 def sync_table(detect_report: dict) -> str:
@@ -223,22 +454,23 @@ def _sync_cells(camera: dict) -> list[str]:
             str(camera.get("detections_inconsistent", "-"))]
 
 
-def _camera_section(view: CameraView, plot: Plot) -> str:
-    title = f'<section class="camera" id="{_anchor(plot)}"><h3>{html.escape(view.name)}</h3>'
+def _camera_section(view: CameraView, plots: list[Plot]) -> str:
+    title = f'<section class="camera" id="{_anchor(view.name)}"><h3>{html.escape(view.name)}</h3>'
     status = "" if view.registered else f'<p class="failed">FAILED: {html.escape(view.failure or "")}</p>'
-    return title + status + _figure(plot, with_caption=False) + "</section>"
+    grid = '<div class="grid">' + "".join(_figure(plot) for plot in plots) + "</div>"
+    return title + status + grid + "</section>"
 
 
-def _figure(plot: Plot, with_caption: bool = True) -> str:
+def _figure(plot: Plot) -> str:
     data = base64.b64encode(plot.png).decode("ascii")
     caption = html.escape(plot.caption)
-    below = f"<figcaption>{caption}</figcaption>" if with_caption else ""
+    below = f"<figcaption>{caption}</figcaption>"
     return f'<figure><img alt="{caption}" src="data:image/png;base64,{data}">{below}</figure>'
 
 
-def _anchor(plot: Plot) -> str:
-    """The camera plot's file stem: unique, and safe in a URL fragment."""
-    return Path(plot.file_name).stem
+def _anchor(name: str) -> str:
+    """A camera's fragment id: safe in a URL, unique among the cameras."""
+    return "camera-" + re.sub(r"[^A-Za-z0-9_-]", "_", name) + "-" + hashlib.sha1(name.encode()).hexdigest()[:6]
 
 
 def _number(value: float | None, digits: int) -> str:

@@ -280,11 +280,16 @@ def _greedy_omissions(outside: np.ndarray, close: np.ndarray) -> tuple[int, ...]
 
 
 def _write_video(sequence: Sequence, path: Path, crf: int, preset: str, progress: bool) -> None:
-    from tqdm import tqdm
+    from calibproj.progress import progress_bar
 
-    with GreyVideoWriter(path, sequence.projector, sequence.fps, crf=crf, preset=preset) as writer:
-        for index in tqdm(range(sequence.frame_count), desc=path.name, unit="frame", disable=not progress):
-            writer.write(sequence.frame(index))
+    bar = progress_bar(sequence.frame_count, f"write {path.name}", enabled=progress)
+    try:
+        with GreyVideoWriter(path, sequence.projector, sequence.fps, crf=crf, preset=preset) as writer:
+            for index in range(sequence.frame_count):
+                writer.write(sequence.frame(index))
+                bar.update(1)
+    finally:
+        bar.close()
 
 
 def _write_pngs(sequence: Sequence, folder: Path) -> None:

@@ -477,8 +477,7 @@ def _people_in_view(scene: Scene, view: FloorView, camera: Camera) -> PeopleInVi
 def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clocks: dict[str, CameraClock],
                 views: dict[str, FloorView], folder: Path, seed: int, options: RenderOptions,
                 progress: bool) -> dict[str, CameraVideo]:
-    from tqdm import tqdm
-
+    from calibproj.progress import progress_bar
     from calibproj.sequence.video import GreyVideoWriter
 
     layout = _atlas_layout(scene, views, options)
@@ -498,8 +497,8 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
                                          crf=options.crf if camera.crf is None else camera.crf,
                                          preset=options.preset,
                                          timestamps_s=clock.timestamps() if timed else None)
-                bar = tqdm(total=clocks[camera.name].frame_count, desc=camera.name, unit="frame", position=index,
-                           disable=not progress, leave=True)
+                bar = progress_bar(clocks[camera.name].frame_count, f"render {camera.name}", enabled=progress,
+                                   position=index)
                 renderers.append(_CameraRenderer(camera, clocks[camera.name], *model, writer, atlases, timeline, bar,
                                                  people))
             _run_chunks(renderers, atlases, camera_pool, options.chunk_s)
