@@ -198,7 +198,7 @@ def test_calibrate_force_leaves_nothing_of_the_previous_run(small: Path, tmp_pat
     assert main(calibrate_args(small, out, "--export", "colmap")) == 0
     assert (out / "colmap" / "cameras.txt").read_text().count(" PINHOLE ") + \
         (out / "colmap" / "cameras.txt").read_text().count(" OPENCV ") == 3
-    assert (out / "report" / "camera_cam3.png").is_file()
+    assert (out / "report" / "camera_cam3_errors.png").is_file()
     # Without --force the previous results stay, and nothing was computed.
     assert main(calibrate_args(small, out)) == 2
     assert "use --force" in one_error_line(capsys) and (out / "colmap").is_dir()
@@ -206,7 +206,7 @@ def test_calibrate_force_leaves_nothing_of_the_previous_run(small: Path, tmp_pat
     two = tmp_path / "two.json"
     Tracks.read(small / "tracks.json").keep_cameras(["cam1", "cam2"]).write(two)
     assert main(calibrate_args(small, out, "--force", tracks=two)) == 0
-    assert not (out / "colmap").exists() and not (out / "report" / "camera_cam3.png").exists()
+    assert not (out / "colmap").exists() and not (out / "report" / "camera_cam3_errors.png").exists()
     assert sorted(p.name for p in (out / "intrinsics").iterdir()) == ["cam1.json", "cam2.json"]
     assert sorted(json.loads((out / "camera_poses.json").read_text())["cameras"]) == ["cam1", "cam2"]
     assert siblings(out) == []
