@@ -62,9 +62,20 @@ def test_videos_to_results_in_both_models(room: Path, tmp_path: Path) -> None:
     errors = compare(tmp_path / "free" / "camera_poses.json", truth)
     assert errors.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
     assert errors.translation_rmse_pct < MAX_TRANSLATION_RMSE_PCT
-    # The report page embeds its plots.
+    # The report page embeds its plots, a frame of each camera among them.
     page = (results / "report.html").read_text()
     assert page.count("<img") >= 4 and all(name in page for name in calibration.registered)
+    detect_report = json.loads((results / "detect_report.json").read_text())
+    for name in calibration.registered:
+        thumbnail = detect_report["cameras"][name]["thumbnail"]
+        frame = cv2.imread(str(results / thumbnail["file"]), cv2.IMREAD_GRAYSCALE)
+        assert frame is not None and frame.shape[1] == round(640 * thumbnail["scale"])
+        assert f"{name}: a frame with its detections" in page
+        # Videos that are not beside the results folder are recorded by their absolute path.
+        assert detect_report["cameras"][name]["video"] == str((room / "room" / "videos" / f"{name}.mp4").resolve())
+    provenance = json.loads((results / "provenance.json").read_text())
+    assert set(provenance["inputs"]["videos"]) == set(calibration.registered)
+    assert provenance["markers"] == detect_report["markers"] and provenance["command"] is None
     assert cv2.FileStorage(str(results / "calibration_opencv.yaml"), cv2.FILE_STORAGE_READ).isOpened()
 
 
