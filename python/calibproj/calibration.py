@@ -12,16 +12,18 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from calibproj.io.json_values import boolean, describe, integer, number, text
 from calibproj.io.jsonio import FormatError, atomic_write_text, read_json, write_json
 from calibproj.io.poses import read_poses, write_camera_poses
 
 METRICS_KIND = "metrics"
+MODELS = ("free", "coplanar")  # of the registration (calibproj.registration)
 SCHEMA_MAJOR = 1
 PLY_SCHEMA = "calibproj.points/1"
 
@@ -144,23 +146,57 @@ class Calibration:
     def load(cls, directory: str | os.PathLike) -> Calibration:
         directory = Path(directory)
         poses = read_poses(directory / "camera_poses.json")
-        document = read_json(directory / "metrics.json", METRICS_KIND, SCHEMA_MAJOR)
+        path = directory / "metrics.json"
+        document = read_json(path, METRICS_KIND, SCHEMA_MAJOR)
         try:
-            metrics = {name: CameraMetrics(**entry) for name, entry in document["cameras"].items()}
-        except (KeyError, TypeError) as error:
-            raise FormatError(f"{directory / 'metrics.json'}: bad camera metrics ({error})") from None
+            metrics, summary = _metrics_of(document)
+        except ValueError as error:
+            raise FormatError(f"{path}: {error}") from None
         points, point_ids = read_ply(directory / "points.ply")
-        return cls(
-            poses=poses.poses,
-            failed=poses.failed,
-            metrics=metrics,
-            points=points,
-            point_ids=point_ids,
-            unit=poses.unit,
-            model=str(document.get("model", "coplanar")),
-            registration_order=list(document.get("registration_order", [])),
-            floor_rms=float(document.get("floor_rms", 0.0)),
-        )
+        return cls(poses=poses.poses, failed=poses.failed, metrics=metrics, points=points, point_ids=point_ids,
+                   unit=poses.unit, **summary)
+
+
+def _metrics_of(document: dict[str, Any]) -> tuple[dict[str, CameraMetrics], dict[str, Any]]:
+    """The per-camera metrics of a ``metrics.json`` and its model, registration order
+    and floor RMS; ValueError naming the entry."""
+    cameras = document.get("cameras")
+    if not isinstance(cameras, dict):
+        raise ValueError("cameras: expected an object {name: metrics}")
+    metrics = {name: _camera_metrics(f"cameras.{name}", entry) for name, entry in cameras.items()}
+    model = document.get("model", "coplanar")
+    if type(model) is not str or model not in MODELS:
+        raise ValueError(f"model must be one of {list(MODELS)}, got {describe(model)}")
+    order = document.get("registration_order", [])
+    if not isinstance(order, list) or not all(type(name) is str for name in order):
+        raise ValueError("registration_order: expected a list of camera names")
+    floor_rms = number(document.get("floor_rms", 0.0), "floor_rms", minimum=0.0)
+    return metrics, {"model": model, "registration_order": order, "floor_rms": floor_rms}
+
+
+def _camera_metrics(where: str, entry: Any) -> CameraMetrics:
+    if not isinstance(entry, dict):
+        raise ValueError(f"{where}: expected an object of metrics")
+    known = {f.name: f for f in fields(CameraMetrics)}
+    unknown = sorted(set(entry) - set(known))
+    missing = [name for name, f in known.items() if name not in entry and f.default is MISSING]
+    if unknown or missing:
+        raise ValueError(f"{where}: " + "; ".join(filter(None, [unknown and f"unknown field(s) {unknown}",
+                                                                 missing and f"missing field(s) {missing}"])))
+    return CameraMetrics(**{name: _metric_value(name, value, f"{where}.{name}") for name, value in entry.items()})
+
+
+def _metric_value(name: str, value: Any, where: str) -> Any:
+    """One checked field of ``CameraMetrics``."""
+    if name in ("observations", "inliers", "track2_observations", "view_score"):
+        return integer(value, where, minimum=0)
+    if name == "weak":
+        return boolean(value, where)
+    if value is None:
+        return None
+    if name == "failure":
+        return text(value, where)
+    return number(value, where, minimum=0.0)  # pixels and sigmas
 
 
 def _finite_or_none(value: float) -> float | None:

@@ -23,13 +23,12 @@ from typing import Any
 import numpy as np
 
 from calibproj import _core
-from calibproj.calibration import Calibration
+from calibproj.calibration import MODELS, Calibration
 from calibproj.io.intrinsics import Intrinsics
 from calibproj.tracks import Tracks
 
 logger = logging.getLogger(__name__)
 
-MODELS = ("free", "coplanar")
 LOSSES = ("none", "huber", "cauchy")
 
 

@@ -27,10 +27,13 @@ from typing import Any
 
 import numpy as np
 
+from calibproj.io.json_values import boolean, describe, integer_array, number_array
 from calibproj.io.jsonio import FormatError, atomic_write_text, read_json, schema_tag
 
 SCHEMA_KIND = "tracks"
 SCHEMA_MAJOR = 1
+MAX_POINT_ID = 2**63 - 1  # point ids are int64
+MAX_INT32 = 2**31 - 1  # markers_per_array is an int in the C++ core
 
 
 @dataclass(frozen=True, eq=False)  # numpy fields: compare the arrays explicitly
@@ -234,29 +237,25 @@ class Tracks:
         document = read_json(path, SCHEMA_KIND, SCHEMA_MAJOR)
         try:
             return cls._from_document(document)
-        except (ValueError, TypeError, KeyError) as error:
+        except ValueError as error:
             raise FormatError(f"{path}: {error}") from None
 
     @classmethod
     def _from_document(cls, document: dict[str, Any]) -> Tracks:
         names = document.get("cameras")
         observations = document.get("observations")
-        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        if not isinstance(names, list) or not all(type(n) is str for n in names):
             raise ValueError("cameras: expected a list of names")
         if not isinstance(observations, dict):
             raise ValueError("observations: expected an object {camera: {point_ids, xy}}")
         unknown = set(observations) - set(names)
         if unknown:
             raise ValueError(f"observations of camera(s) {sorted(unknown)} not listed in cameras")
-        if document.get("undistorted", True) is not True:
+        if boolean(document.get("undistorted", True), "undistorted") is not True:
             raise ValueError("only undistorted observations are supported")
         cameras, ids, xy = [], [], []
         for index, name in enumerate(names):
-            entry = observations.get(name, {"point_ids": [], "xy": []})
-            camera_ids = np.asarray(entry["point_ids"], dtype=np.int64).reshape(-1)
-            camera_xy = np.asarray(entry["xy"], dtype=float).reshape(-1, 2)
-            if len(camera_ids) != len(camera_xy):
-                raise ValueError(f"observations.{name}: {len(camera_ids)} point_ids but {len(camera_xy)} xy")
+            camera_ids, camera_xy = _camera_observations(observations.get(name), f"observations.{name}")
             cameras.append(np.full(len(camera_ids), index, dtype=np.int32))
             ids.append(camera_ids)
             xy.append(camera_xy)
@@ -264,6 +263,19 @@ class Tracks:
             names, _concatenate(cameras, np.int32), _concatenate(ids, np.int64),
             np.concatenate(xy) if xy else np.zeros((0, 2)), document.get("markers_per_array"),
         )
+
+
+def _camera_observations(entry: Any, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """Point ids and pixels of one camera's entry (none when the camera has no entry)."""
+    if entry is None:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+    if not isinstance(entry, dict) or "point_ids" not in entry or "xy" not in entry:
+        raise ValueError(f"{where}: expected an object {{point_ids, xy}}")
+    camera_ids = integer_array(entry["point_ids"], f"{where}.point_ids", 0, MAX_POINT_ID)
+    camera_xy = number_array(entry["xy"], f"{where}.xy", (None, 2))
+    if len(camera_ids) != len(camera_xy):
+        raise ValueError(f"{where}: {len(camera_ids)} point_ids but {len(camera_xy)} xy")
+    return camera_ids, camera_xy
 
 
 def msm_point_ids(arrays: np.ndarray, markers: np.ndarray, markers_per_array: int) -> np.ndarray:
@@ -298,6 +310,6 @@ def _check_markers_per_array(markers_per_array: Any) -> int | None:
     if markers_per_array is None:
         return None
     integer = isinstance(markers_per_array, (int, np.integer)) and not isinstance(markers_per_array, bool)
-    if not integer or markers_per_array <= 0:
-        raise ValueError(f"markers_per_array must be a positive integer or null, got {markers_per_array!r}")
+    if not integer or not 0 < markers_per_array <= MAX_INT32:
+        raise ValueError(f"markers_per_array must be a positive integer or null, got {describe(markers_per_array)}")
     return int(markers_per_array)

@@ -14,16 +14,17 @@ that importing this module stays cheap.
 
 from __future__ import annotations
 
-import json
 import math
 import os
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from calibproj.io.jsonio import FormatError, read_json, write_json
+from calibproj.io.json_values import describe, is_number, number_array
+from calibproj.io.jsonio import FormatError, read_json, read_json_value, write_json
 
 SCHEMA_KIND = "intrinsics"
 SCHEMA_MAJOR = 1
@@ -40,6 +41,9 @@ UNDISTORT_MAX_ITERATIONS = 200
 
 YAML_SUFFIXES = (".yaml", ".yml", ".xml")
 INTRINSICS_SUFFIXES = (".json", *YAML_SUFFIXES)
+
+# Image sides the C++ core takes (calibproj/common/limits.h, kMaxImageSide), pixels.
+MAX_IMAGE_SIDE = 1 << 16
 
 
 @dataclass(frozen=True, eq=False)  # numpy fields: compare K and dist explicitly
@@ -206,8 +210,12 @@ def _intrinsics_problem(K: np.ndarray, dist: np.ndarray, resolution: Any) -> str
     if dist.size not in DISTORTION_LENGTHS:
         return f"dist must have {', '.join(map(str, DISTORTION_LENGTHS))} coefficients, got {dist.size}"
     if resolution is not None:
-        if len(resolution) != 2 or any(int(v) != v or v <= 0 for v in resolution):
+        if len(resolution) != 2 or not all(math.isfinite(v) and v == int(v) and v > 0 for v in resolution):
             return f"resolution must be two positive integers [width, height], got {resolution}"
+    # Without a resolution the principal point gives the image size (registration.image_size).
+    sides = resolution if resolution is not None else (2.0 * K[0, 2] + 1.0, 2.0 * K[1, 2] + 1.0)
+    if not all(0 < side <= MAX_IMAGE_SIDE for side in sides):
+        return f"image size must be at most {MAX_IMAGE_SIDE} pixels per side, got {sides[0]:g}x{sides[1]:g}"
     return None
 
 
@@ -222,10 +230,7 @@ def read_intrinsics(path: str | os.PathLike, name: str | None = None) -> Intrins
         return _read_opencv_storage(path, name)
     if suffix != ".json":
         raise FormatError(f"{path}: unknown intrinsics format (expected .json, .yaml, .yml or .xml)")
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise FormatError(f"{path}: not valid JSON ({error})") from None
+    document = read_json_value(path)
     if isinstance(document, dict) and "sensors" in document:
         return _from_reference_json(path, document, name)
     return _from_our_json(path, name)
@@ -243,19 +248,65 @@ def write_intrinsics_dir(directory: str | os.PathLike, cameras: dict[str, Intrin
 
 
 def load_intrinsics_dir(directory: str | os.PathLike) -> dict[str, Intrinsics]:
-    """All intrinsics files of a directory, keyed by camera name (the file stem)."""
+    """All intrinsics files of a directory, keyed by camera name (the file stem); the
+    first bad file is a FormatError."""
+    cameras, unusable = intrinsics_of_cameras(directory, _intrinsics_files(directory))
+    for reason in unusable.values():
+        raise FormatError(reason)
+    return cameras
+
+
+def intrinsics_of_cameras(
+    source: Mapping[str, Intrinsics] | str | os.PathLike, names: Iterable[str]
+) -> tuple[dict[str, Intrinsics], dict[str, str]]:
+    """The intrinsics of the named cameras, from a mapping or a directory, and why the
+    others have none: ``(name -> Intrinsics, name -> reason)``. A bad, missing or
+    doubled file fails its own camera only, the reason naming the file and the problem.
+
+    Raises:
+        FormatError: ``source`` is no directory, or one without any intrinsics file.
+    """
+    names = list(dict.fromkeys(names))
+    if isinstance(source, Mapping):
+        found = {name: source[name] for name in names if name in source}
+        known = ", ".join(sorted(source)) or "none"
+        return found, {name: f"no intrinsics for camera {name!r} (cameras with intrinsics: {known})"
+                       for name in names if name not in source}
+    directory = Path(source)
+    files = _intrinsics_files(directory)
+    cameras: dict[str, Intrinsics] = {}
+    unusable: dict[str, str] = {}
+    for name in names:
+        paths = files.get(name, [])
+        if len(paths) != 1:
+            unusable[name] = _missing_or_doubled(directory, name, paths)
+            continue
+        try:
+            cameras[name] = read_intrinsics(paths[0], name)
+        except FormatError as error:
+            unusable[name] = str(error)
+    return cameras, unusable
+
+
+def _intrinsics_files(directory: str | os.PathLike) -> dict[str, list[Path]]:
+    """Camera name -> its intrinsics files in ``directory`` (one, normally)."""
     directory = Path(directory)
     if not directory.is_dir():
         raise FormatError(f"{directory}: no such intrinsics directory")
-    files = sorted(p for p in directory.iterdir() if p.is_file() and p.suffix.lower() in INTRINSICS_SUFFIXES)
-    out: dict[str, Intrinsics] = {}
-    for path in files:
-        if path.stem in out:
-            raise FormatError(f"{path}: a second intrinsics file for camera {path.stem!r}")
-        out[path.stem] = read_intrinsics(path)
-    if not out:
+    files: dict[str, list[Path]] = {}
+    for path in sorted(directory.iterdir()):
+        if path.is_file() and path.suffix.lower() in INTRINSICS_SUFFIXES:
+            files.setdefault(path.stem, []).append(path)
+    if not files:
         raise FormatError(f"{directory}: no intrinsics files (*.json, *.yaml, *.yml, *.xml)")
-    return out
+    return files
+
+
+def _missing_or_doubled(directory: Path, name: str, paths: list[Path]) -> str:
+    if paths:
+        return f"{paths[1]}: a second intrinsics file for camera {name!r}"
+    others = ", ".join(f"{name}{suffix}" for suffix in INTRINSICS_SUFFIXES[1:])
+    return f"{directory / f'{name}.json'}: no intrinsics file for camera {name!r} (also looked for {others})"
 
 
 def _from_our_json(path: Path, name: str) -> Intrinsics:
@@ -314,21 +365,24 @@ def _first_matrix(storage: Any, keys: tuple[str, ...]) -> np.ndarray | None:
 
 
 def _build(path: Path, name: str, K: Any, dist: Any, resolution: Any) -> Intrinsics:
+    """The intrinsics of a file's values, checked here for every format."""
     try:
-        K_array = np.array(K, dtype=float)
-        dist_array = np.array(dist, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise FormatError(f"{path}: K and dist must be numbers") from None
-    if K_array.size != 9:
-        raise FormatError(f"{path}: K must have 9 values (3x3), got {K_array.size}")
-    if resolution is not None:
-        try:
-            resolution = tuple(float(v) for v in resolution)
-        except (TypeError, ValueError):
-            raise FormatError(f"{path}: resolution must be [width, height], got {resolution!r}") from None
-        if any(not math.isfinite(v) for v in resolution):
-            raise FormatError(f"{path}: resolution must be finite, got {resolution!r}")
-    try:
+        K_array = number_array(K, "K")
+        dist_array = number_array(dist, "dist").ravel() if dist is not None else np.zeros(0)
+        if K_array.size != 9:
+            raise ValueError(f"K must have 9 values (3x3), got {K_array.size}")
+        if resolution is not None:
+            resolution = _resolution(resolution)
         return Intrinsics(name, resolution, K_array.reshape(3, 3), dist_array)
     except ValueError as error:
         raise FormatError(f"{path}: {error}") from None
+
+
+def _resolution(value: Any) -> tuple[int, int]:
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    sides = value if isinstance(value, (list, tuple)) else ()
+    if len(sides) != 2 or not all(is_number(side) and math.isfinite(side) and side == int(side) and side > 0
+                                  for side in sides):
+        raise ValueError(f"resolution must be two positive integers [width, height], got {describe(value)}")
+    return int(sides[0]), int(sides[1])

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from calibproj.io.json_values import boolean, describe, number, number_array, text
 from calibproj.io.jsonio import FormatError, check_schema, read_json_object, write_json
 
 POSES_KIND = "camera_poses"
@@ -107,36 +108,43 @@ def read_poses(path: str | os.PathLike) -> CameraPoses:
 
 
 def _poses_from_document(path: Path, document: dict[str, Any]) -> CameraPoses:
+    try:
+        return _poses_of(document, str(path))
+    except ValueError as error:
+        raise FormatError(f"{path}: {error}") from None
+
+
+def _poses_of(document: dict[str, Any], source: str) -> CameraPoses:
     unit = document.get("unit")
-    if unit not in UNITS:
-        raise FormatError(f"{path}: unit must be one of {list(UNITS)}, got {unit!r}")
+    if unit not in UNITS or type(unit) is not str:
+        raise ValueError(f"unit must be one of {list(UNITS)}, got {describe(unit)}")
     frame = document.get("frame", "floor")
     if frame != "floor":
-        raise FormatError(f"{path}: frame must be 'floor', got {frame!r}")
+        raise ValueError(f"frame must be 'floor', got {describe(frame)}")
     cameras = document.get("cameras")
     if not isinstance(cameras, dict):
-        raise FormatError(f"{path}: cameras: expected an object {{name: {{R, t, center}}}}")
-    poses = {name: _read_pose(path, name, entry) for name, entry in cameras.items()}
+        raise ValueError("cameras: expected an object {name: {R, t, center}}")
+    poses = {name: _read_pose(f"cameras.{name}", entry) for name, entry in cameras.items()}
     failed = document.get("failed", {})
     if not isinstance(failed, dict):
-        raise FormatError(f"{path}: failed: expected an object {{name: reason}}")
-    weak = frozenset(name for name, entry in cameras.items() if isinstance(entry, dict) and entry.get("weak") is True)
-    return CameraPoses(poses, unit, {str(k): str(v) for k, v in failed.items()}, str(path), weak)
+        raise ValueError("failed: expected an object {name: reason}")
+    reasons = {name: text(reason, f"failed.{name}") for name, reason in failed.items()}
+    weak = frozenset(name for name, entry in cameras.items() if entry.get("weak") is True)
+    return CameraPoses(poses, unit, reasons, source, weak)
 
 
-def _read_pose(path: Path, name: str, entry: Any) -> tuple[np.ndarray, np.ndarray]:
-    where = f"{path}: cameras.{name}"
+def _read_pose(where: str, entry: Any) -> tuple[np.ndarray, np.ndarray]:
     if not isinstance(entry, dict) or "R" not in entry or "t" not in entry:
-        raise FormatError(f"{where}: expected an object with R (3x3) and t (3)")
-    try:
-        R = np.array(entry["R"], dtype=float)
-        t = np.array(entry["t"], dtype=float)
-    except (TypeError, ValueError):
-        raise FormatError(f"{where}: R and t must be numbers") from None
-    if R.shape != (3, 3) or t.shape != (3,):
-        raise FormatError(f"{where}: R must be 3x3 and t 3 numbers, got shapes {R.shape} and {t.shape}")
-    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-        raise FormatError(f"{where}: R and t must be finite")
+        raise ValueError(f"{where}: expected an object with R (3x3) and t (3)")
+    R = number_array(entry["R"], f"{where}.R", (3, 3))
+    t = number_array(entry["t"], f"{where}.t", (3,))
+    if "center" in entry:
+        number_array(entry["center"], f"{where}.center", (3,))
+    if "weak" in entry:
+        boolean(entry["weak"], f"{where}.weak")
+    for key in ("rotation_sigma_deg", "centre_sigma"):
+        if entry.get(key) is not None:
+            number(entry[key], f"{where}.{key}", minimum=0.0)
     if np.abs(R @ R.T - np.eye(3)).max() > ROTATION_TOLERANCE or np.linalg.det(R) < 0:
-        raise FormatError(f"{where}: R is not a rotation matrix")
+        raise ValueError(f"{where}: R is not a rotation matrix")
     return R, t
