@@ -9,9 +9,18 @@ from __future__ import annotations
 KIND = "sequence"
 MAJOR = 1
 
-_FRAME = {"type": "integer", "minimum": 0}
+# Integers are ints of the C++ core: larger ones are refused here, the core names its
+# own limits (frames, image sides) when the file is loaded.
+_MAX_INT = 2**31 - 1
+
+
+def _integer(minimum: int) -> dict:
+    return {"type": "integer", "minimum": minimum, "maximum": _MAX_INT}
+
+
+_FRAME = _integer(0)
 _POSITIVE = {"type": "number", "exclusiveMinimum": 0}
-_PAIR_INT = {"type": "array", "items": {"type": "integer", "minimum": 1}, "minItems": 2, "maxItems": 2}
+_PAIR_INT = {"type": "array", "items": _integer(1), "minItems": 2, "maxItems": 2}
 _POINT = {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2}
 _RANGE = {
     "type": "object",
@@ -24,7 +33,7 @@ _CODE = {
     "required": ["bits", "frames_per_bit", "first_frame", "last_frame"],
     "properties": {
         "bits": {"type": "array", "items": {"enum": [0, 1]}, "minItems": 2},
-        "frames_per_bit": {"type": "integer", "minimum": 1},
+        "frames_per_bit": _integer(1),
         "first_frame": _FRAME,
         "last_frame": _FRAME,
     },
@@ -44,8 +53,9 @@ SEQUENCE_SCHEMA = {
                 "spec": {"type": "string"},
                 "system": {"enum": ["aruco", "apriltag"]},
                 "family": {"type": "string"},
-                "grid_cells": {"type": "integer", "minimum": 1},
-                "quad_cells": {"type": "integer", "minimum": 1},
+                "grid_cells": _integer(1),
+                "quad_cells": _integer(1),
+                "id_count": _integer(0),
                 "inverted": {"type": "boolean"},
             },
         },
@@ -60,7 +70,7 @@ SEQUENCE_SCHEMA = {
                          "min_gap_modules", "order"],
             "properties": {
                 "grid": _PAIR_INT,
-                "arrays": {"type": "integer", "minimum": 1},
+                "arrays": _integer(1),
                 "scales": {"type": "array", "items": _POSITIVE, "minItems": 1},
                 "marker_px": _POSITIVE,
                 "margin_px": {"type": "number"},
@@ -69,8 +79,8 @@ SEQUENCE_SCHEMA = {
                 "order": {"const": "array-major"},
             },
         },
-        "frames_per_pattern": {"type": "integer", "minimum": 1},
-        "frame_count": {"type": "integer", "minimum": 1},
+        "frames_per_pattern": _integer(1),
+        "frame_count": _integer(1),
         "centres": {"type": "array", "minItems": 1, "items": {"type": "array", "minItems": 1, "items": _POINT}},
         "scales": {
             "type": "array",
@@ -89,13 +99,13 @@ SEQUENCE_SCHEMA = {
                 "required": ["array", "scale_index", "scale", "marker_side_px", "first_frame", "last_frame",
                              "omitted"],
                 "properties": {
-                    "array": {"type": "integer", "minimum": 0},
-                    "scale_index": {"type": "integer", "minimum": 0},
+                    "array": _integer(0),
+                    "scale_index": _integer(0),
                     "scale": _POSITIVE,
                     "marker_side_px": _POSITIVE,
                     "first_frame": _FRAME,
                     "last_frame": _FRAME,
-                    "omitted": {"type": "array", "items": {"type": "integer", "minimum": 0}},
+                    "omitted": {"type": "array", "items": _integer(0)},
                 },
             },
         },

@@ -24,12 +24,15 @@ from calibproj.sequence.codes import LightCode
 from calibproj.sequence.layout import MsmLayout
 from calibproj.sequence.raster import draw_cells
 from calibproj.sequence.schema import KIND, MAJOR, SEQUENCE_SCHEMA
+from calibproj.io.json_values import describe
 from calibproj.io.jsonio import FormatError, read_json, write_json
 
 SEGMENT_KINDS = ("white", "black", "start_code", "end_code", "patterns")
 # Patterns kept rendered per sequence: consecutive frames mostly share one pattern, so
 # a few suffice for renderers that walk the timeline (one 1080p pattern is 2 MB).
 DEFAULT_PATTERN_CACHE = 8
+# Longest schema message kept, in characters (a message is one line to read).
+MAX_MESSAGE = 300
 
 
 @dataclass(frozen=True)
@@ -289,10 +292,11 @@ class Sequence:
             jsonschema.validate(document, SEQUENCE_SCHEMA)
         except jsonschema.ValidationError as error:
             where = "/".join(str(p) for p in error.absolute_path) or "top level"
-            raise FormatError(f"{path}: invalid sequence file at {where}: {error.message}") from None
+            raise FormatError(f"{path}: invalid sequence file at {where}: {_schema_message(error)}") from None
         try:
             sequence = cls.from_dict(document)
             sequence.validate()
+            _check_with_core(sequence)
         except ValueError as error:
             raise FormatError(f"{path}: invalid sequence file: {error}") from None
         return sequence
@@ -305,6 +309,25 @@ class Sequence:
         _check_segments(self.segments)
         _check_codes(self)
         _check_patterns(self)
+
+
+def _schema_message(error: Any) -> str:
+    """jsonschema's message with the offending value as JSON writes it, shortened (it
+    may be megabytes)."""
+    message = error.message.replace(repr(error.instance), describe(error.instance))
+    return message if len(message) <= MAX_MESSAGE else message[:MAX_MESSAGE] + "..."
+
+
+def _check_with_core(sequence: Sequence) -> None:
+    """The C++ core's checks of a sequence (its limits: projector frame rate and size,
+    frame count, marker family, ...), so that a file the ingest would refuse for every
+    camera is refused once, here, naming the file."""
+    from calibproj import _core
+
+    try:
+        _core.ingest.light_levels(sequence.to_dict())
+    except (ValueError, TypeError) as error:
+        raise ValueError(str(error).removeprefix("sequence: ")) from None
 
 
 def _check_centres(sequence: Sequence) -> None:
