@@ -10,6 +10,7 @@ import pytest
 
 from calibproj.io.intrinsics import (
     Intrinsics,
+    intrinsics_of_cameras,
     load_intrinsics_dir,
     read_intrinsics,
     write_intrinsics,
@@ -149,6 +150,26 @@ def test_directory_errors(tmp_path):
      '[0, 0, 1]]}', "resolution must be two positive integers"),
     ('{"schema": "calibproj.intrinsics/2", "resolution": [1920, 1080]}', "newer than this calibproj reads"),
     ('{"sensors": {"RGB": {"intrinsics": {}}}}', "expected sensors.RGB.intrinsics.data"),
+    # true and false are no numbers (they were read as 1.0 and 0.0).
+    ('{"schema": "calibproj.intrinsics/1", "resolution": [1920, 1080], "K": [[true, 0, 960], [0, 900, 540], '
+     '[0, 0, 1]]}', "K: expected numbers, got true"),
+    ('{"schema": "calibproj.intrinsics/1", "resolution": [1920, 1080], "K": [[900, 0, 960], [0, 900, 540], '
+     '[0, 0, 1]], "dist": [false, 0, 0, 0, 0]}', "dist: expected numbers, got false"),
+    ('{"schema": "calibproj.intrinsics/1", "resolution": [true, 1080], "K": [[900, 0, 960], [0, 900, 540], '
+     '[0, 0, 1]]}', r"resolution must be two positive integers \[width, height\], got \[true, 1080\]"),
+    ('{"schema": "calibproj.intrinsics/1", "resolution": [1920, 1080], "K": [["900", 0, 960], [0, 900, 540], '
+     '[0, 0, 1]]}', 'K: expected numbers, got "900"'),
+    ('{"sensors": {"RGB": {"intrinsics": {"data": [900, 0, 960, 0, 900, 540, 0, 0, true]}, '
+     '"distortionCoefficients": {"data": [0, 0, 0, 0, 0]}}}}', "K: expected numbers, got true"),
+    # NaN and infinities are no JSON, and a resolution past what the core takes is refused.
+    ('{"schema": "calibproj.intrinsics/1", "resolution": [1920, 1080], "K": [[NaN, 0, 960], [0, 900, 540], '
+     '[0, 0, 1]]}', r"not valid JSON \(NaN is not a JSON number\)"),
+    ('{"schema": "calibproj.intrinsics/1", "resolution": [1920, 1080], "K": [[1e400, 0, 960], [0, 900, 540], '
+     '[0, 0, 1]]}', "number 1e400 is beyond the range of a double"),
+    ('{"schema": "calibproj.intrinsics/1", "resolution": [1e300, 1080], "K": [[900, 0, 960], [0, 900, 540], '
+     '[0, 0, 1]]}', "image size must be at most 65536 pixels per side"),
+    ('{"schema": "calibproj.intrinsics/1", "resolution": [1920, 1080], "K": ' + "[" * 600 + "]" * 600 + "}",
+     "nested deeper than 512 levels"),
 ])
 def test_malformed_files_name_the_file_and_problem(tmp_path, content, message):
     path = tmp_path / "bad.json"
@@ -172,3 +193,28 @@ def test_missing_and_unknown_files(tmp_path):
     (tmp_path / "broken.yaml").write_text("camera_matrix: [1, 2\n  : :")
     with pytest.raises(ValueError, match=r"broken\.yaml: not a readable OpenCV YAML/XML file"):
         read_intrinsics(tmp_path / "broken.yaml")
+
+
+def test_each_camera_gets_its_own_file_or_its_own_reason(tmp_path):
+    """A bad, missing or doubled file fails its own camera only; the reason names the file."""
+    write_intrinsics(tmp_path / "far1.json", gopro())
+    (tmp_path / "far2.json").write_text('{"schema": "calibproj.intrinsics/1", "resolution": [1920, 1080], '
+                                        '"K": [[true, 0, 960], [0, 900, 540], [0, 0, 1]]}')
+    write_intrinsics(tmp_path / "far3.json", gopro())
+    (tmp_path / "far3.yml").write_text("%YAML:1.0\n")
+    (tmp_path / "unused.json").write_text("{broken")  # a camera nobody asks for is not read
+    cameras, unusable = intrinsics_of_cameras(tmp_path, ["far1", "far2", "far3", "far4"])
+    assert sorted(cameras) == ["far1"] and cameras["far1"].name == "far1"
+    assert unusable == {
+        "far2": f"{tmp_path / 'far2.json'}: K: expected numbers, got true",
+        "far3": f"{tmp_path / 'far3.yml'}: a second intrinsics file for camera 'far3'",
+        "far4": f"{tmp_path / 'far4.json'}: no intrinsics file for camera 'far4' (also looked for far4.yaml, "
+                "far4.yml, far4.xml)",
+    }
+    with pytest.raises(ValueError, match=r"far2\.json: K: expected numbers"):
+        load_intrinsics_dir(tmp_path)  # every file, strictly
+    given = {"far1": cameras["far1"]}
+    assert intrinsics_of_cameras(given, ["far1", "far5"]) == (
+        given, {"far5": "no intrinsics for camera 'far5' (cameras with intrinsics: far1)"})
+    with pytest.raises(ValueError, match="no such intrinsics directory"):
+        intrinsics_of_cameras(tmp_path / "missing", ["far1"])

@@ -11,11 +11,13 @@ from pathlib import Path
 import cv2
 import pytest
 
+from calibproj.cli import EXIT_FAILURE, main
 from calibproj.comparison import compare
 from calibproj.evaluation import evaluate
 from calibproj.sequence import generate
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
+from calibproj.simulate.geometric import simulate_tracks
 from calibproj.simulate.render import simulate_videos
 
 # The small room: 3 cameras at 640x360 (fx 305) 3.5 m from the floor centre; its poses
@@ -117,6 +119,51 @@ def test_bad_invocations_exit_non_zero_with_one_clear_line(room: Path, tmp_path:
                      "--out", str(tmp_path / "e"), "--no-report", "--no-progress")
     assert result.returncode == 1
     line = one_error_line(result)
-    assert "cam2" in line and "intrinsics" in line
+    assert f"cam2: {partial / 'cam2.json'}: no intrinsics file for camera 'cam2'" in line
     poses = json.loads((tmp_path / "e" / "camera_poses.json").read_text())
     assert sorted(poses["cameras"]) == ["cam1", "cam3"] and "cam2" in poses["failed"]
+
+    # A broken intrinsics file (true in K, once read as 1.0) fails its own camera only.
+    broken = tmp_path / "broken"
+    shutil.copytree(intrinsics, broken)
+    document = json.loads((broken / "cam3.json").read_text())
+    document["K"][1][1] = True
+    (broken / "cam3.json").write_text(json.dumps(document))
+    result = run_cli("calibrate", str(videos), "--sequence", str(sequence), "--intrinsics", str(broken),
+                     "--out", str(tmp_path / "f"), "--no-report", "--no-progress")
+    assert result.returncode == 1
+    reason = f"{broken / 'cam3.json'}: K: expected numbers, got true"
+    assert one_error_line(result).endswith(f"failed: cam3: {reason}")
+    poses = json.loads((tmp_path / "f" / "camera_poses.json").read_text())
+    assert sorted(poses["cameras"]) == ["cam1", "cam2"] and poses["failed"] == {"cam3": reason}
+
+
+def test_a_camera_whose_intrinsics_file_is_bad_or_missing_fails_alone(
+        tmp_path: Path, capsys: pytest.CaptureFixture, caplog: pytest.LogCaptureFixture) -> None:
+    """From tracks: one camera's intrinsics file holds true in K, another's is missing.
+    Those two fail, with the file and the problem in the results, the log and the
+    error line; the seven others are calibrated as well as ever (exit status 1)."""
+    simulate_tracks("or-full", tmp_path / "sim", noise_px=0.3, seed=1, eval_points=0, eval_points_per_camera=0)
+    intrinsics = tmp_path / "sim" / "intrinsics"
+    document = json.loads((intrinsics / "far2.json").read_text())
+    document["K"][0][0] = True
+    (intrinsics / "far2.json").write_text(json.dumps(document))
+    (intrinsics / "near2.json").unlink()
+    results = tmp_path / "results"
+    status = main(["calibrate", "--tracks", str(tmp_path / "sim" / "tracks.json"), "--intrinsics", str(intrinsics),
+                   "--out", str(results), "--no-report", "--no-progress"])
+    assert status == EXIT_FAILURE
+    reasons = {"far2": f"{intrinsics / 'far2.json'}: K: expected numbers, got true",
+               "near2": f"{intrinsics / 'near2.json'}: no intrinsics file for camera 'near2' (also looked for "
+                        "near2.yaml, near2.yml, near2.xml)"}
+    stderr = capsys.readouterr().err
+    assert ": error: " not in stderr
+    assert f"calibproj calibrate: 2 camera(s) failed: far2: {reasons['far2']}; near2: {reasons['near2']}" in stderr
+    assert all(f"camera {name} failed: {reason}" in caplog.text for name, reason in reasons.items())
+    assert json.loads((results / "camera_poses.json").read_text())["failed"] == reasons
+    metrics = json.loads((results / "metrics.json").read_text())["cameras"]
+    assert {name: metrics[name]["failure"] for name in reasons} == reasons
+    errors = compare(results / "camera_poses.json", tmp_path / "sim" / "truth.json")
+    assert sorted(errors.missing) == ["far2", "near2"] and len(errors.registered) == 7
+    assert errors.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
+    assert errors.translation_rmse_pct < MAX_TRANSLATION_RMSE_PCT
