@@ -114,6 +114,32 @@ def test_cli_json_with_the_results_intrinsics(results, capsys) -> None:
     assert "100 % under 2 px" in capsys.readouterr().out
 
 
+def test_a_camera_without_usable_intrinsics_fails_alone(results, tmp_path, capsys, caplog) -> None:
+    """One camera's intrinsics file holds true in K: that camera is not evaluated, the
+    file and the problem reported; the others are judged as ever (exit status 1)."""
+    intrinsics = tmp_path / "intrinsics"
+    intrinsics.mkdir()
+    for name in ("cam1", "cam2", "cam3"):
+        (intrinsics / f"{name}.json").write_text((results / "sim" / "intrinsics" / f"{name}.json").read_text())
+    document = json.loads((intrinsics / "cam2.json").read_text())
+    document["K"][2][2] = True
+    (intrinsics / "cam2.json").write_text(json.dumps(document))
+    reason = f"{intrinsics / 'cam2.json'}: K: expected numbers, got true"
+    capsys.readouterr()
+    status = main(["evaluate", str(results / "results"), "--tracks", str(results / "sim" / "eval_tracks.json"),
+                   "--intrinsics", str(intrinsics)])
+    assert status == 1
+    output = capsys.readouterr()
+    assert output.err.splitlines()[-1] == f"calibproj evaluate: 1 camera(s) without usable intrinsics: cam2: {reason}"
+    assert ": error: " not in output.err
+    assert f"camera cam2: no usable intrinsics: {reason}" in caplog.text
+    assert f"FAILED: no usable intrinsics: {reason}" in output.out
+    evaluation = evaluate(results / "results", results / "sim" / "eval_tracks.json", intrinsics)
+    assert evaluation.unusable_intrinsics == {"cam2": reason}
+    assert evaluation.cameras["cam2"].mean_px is None
+    assert all(evaluation.cameras[name].mean_px < 0.5 for name in ("cam1", "cam3"))
+
+
 @pytest.mark.parametrize(
     "arguments, message",
     [

@@ -37,10 +37,10 @@ from pathlib import Path
 import numpy as np
 
 from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics
+from calibproj.io.intrinsics import Intrinsics, intrinsics_of_cameras
 from calibproj.reprojection import depths, project
 from calibproj.io.jsonio import write_json
-from calibproj.results import EVALUATION_FILE, load_results, resolve_intrinsics
+from calibproj.results import EVALUATION_FILE, intrinsics_source, load_results
 from calibproj.tracks import Tracks
 
 logger = logging.getLogger(__name__)
@@ -116,6 +116,8 @@ class Evaluation:
         point_ids: evaluation points triangulated and refined, ``(E,)``.
         points: their refined positions in the calibration's floor frame, ``(E, 3)``.
         errors: per camera, the reprojection error of each of its observations, pixels.
+        unusable_intrinsics: registered cameras left out for want of usable intrinsics,
+            with the reason (the file and its problem).
     """
 
     cameras: dict[str, CameraEvaluation]
@@ -123,6 +125,7 @@ class Evaluation:
     point_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     errors: dict[str, np.ndarray] = field(default_factory=dict)
+    unusable_intrinsics: dict[str, str] = field(default_factory=dict)
 
     def success_rate(self, threshold_px: float) -> float:
         """Percentage of cameras whose mean error is below ``threshold_px``."""
@@ -179,15 +182,17 @@ def evaluate(
     """
     options = options or EvaluationOptions()
     calibration = load_results(results)
-    intrinsics = resolve_intrinsics(results, intrinsics)
+    source = intrinsics_source(results, intrinsics)
     tracks = tracks if isinstance(tracks, Tracks) else Tracks.read(tracks)
-    usable = [name for name in calibration.poses if name in tracks.camera_names]
-    missing_intrinsics = [name for name in usable if name not in intrinsics]
-    if missing_intrinsics:
-        raise ValueError(f"no intrinsics for registered camera(s) {', '.join(missing_intrinsics)}")
+    wanted = [name for name in calibration.poses if name in tracks.camera_names]
+    # A bad or missing intrinsics file fails its own camera, the reason naming the file.
+    intrinsics, unusable = intrinsics_of_cameras(source, wanted)
+    for name, reason in unusable.items():
+        logger.error("camera %s: no usable intrinsics: %s", name, reason)
+    usable = [name for name in wanted if name in intrinsics]
     point_ids, points, errors, behind = _triangulate_and_refine(calibration, tracks, intrinsics, usable, options)
-    evaluation = Evaluation(_camera_results(calibration, tracks, errors, behind), tuple(thresholds_px),
-                            point_ids, points, errors)
+    evaluation = Evaluation(_camera_results(calibration, tracks, errors, behind, unusable), tuple(thresholds_px),
+                            point_ids, points, errors, unusable)
     logger.info("evaluation: %d points refined; success %s", len(point_ids),
                 ", ".join(f"{evaluation.success_rate(t):.0f} % under {_threshold_key(t)} px" for t in thresholds_px))
     return evaluation
@@ -312,13 +317,13 @@ def best_pair(R: np.ndarray, rays: np.ndarray) -> tuple[int, int]:
 
 
 def _camera_results(calibration: Calibration, tracks: Tracks, errors: dict[str, np.ndarray],
-                    behind: dict[str, int]) -> dict[str, CameraEvaluation]:
+                    behind: dict[str, int], unusable: dict[str, str]) -> dict[str, CameraEvaluation]:
     names = list(dict.fromkeys([*calibration.metrics, *calibration.poses, *calibration.failed,
                                 *tracks.camera_names]))
     cameras = {}
     for name in names:
         camera_errors = errors.get(name, np.zeros(0))
-        failure = _failure(calibration, tracks, name, len(camera_errors))
+        failure = _failure(calibration, tracks, unusable, name, len(camera_errors))
         if behind.get(name):
             logger.warning("camera %s: %d evaluation points triangulated behind it; its pose is suspect",
                            name, behind[name])
@@ -330,13 +335,16 @@ def _camera_results(calibration: Calibration, tracks: Tracks, errors: dict[str, 
     return cameras
 
 
-def _failure(calibration: Calibration, tracks: Tracks, name: str, count: int) -> str | None:
+def _failure(calibration: Calibration, tracks: Tracks, unusable: dict[str, str], name: str,
+             count: int) -> str | None:
     if name in calibration.failed:
         return f"not registered: {calibration.failed[name]}"
     if name not in calibration.poses:
         return "not in the calibration"
     if name not in tracks.camera_names:
         return "not in the evaluation data"
+    if name in unusable:
+        return f"no usable intrinsics: {unusable[name]}"
     if count == 0:
         return "no evaluation point seen by this camera and another registered one"
     return None

@@ -49,13 +49,24 @@ def resolve_intrinsics(
     intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None,
 ) -> Mapping[str, Intrinsics]:
     """Intrinsics given, read from a folder, or from ``<results>/intrinsics``."""
+    source = intrinsics_source(results, intrinsics)
+    return source if isinstance(source, Mapping) else load_intrinsics_dir(source)
+
+
+def intrinsics_source(
+    results: Calibration | str | os.PathLike,
+    intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None,
+) -> Mapping[str, Intrinsics] | Path:
+    """The intrinsics given, or the folder to read them from (``<results>/intrinsics``
+    by default), for readers that take each camera's file on its own
+    (``calibproj.io.intrinsics.intrinsics_of_cameras``)."""
     if isinstance(intrinsics, Mapping):
         return intrinsics
     if intrinsics is not None:
-        return load_intrinsics_dir(intrinsics)
+        return Path(intrinsics)
     if isinstance(results, Calibration):
         raise ValueError("intrinsics are needed when the calibration is not read from a results folder")
     folder = Path(results) / INTRINSICS_DIR
     if not folder.is_dir():
         raise FileNotFoundError(f"{folder}: no intrinsics in the results folder; give them with --intrinsics DIR")
-    return load_intrinsics_dir(folder)
+    return folder

@@ -7,7 +7,8 @@ or more is triangulated (from the camera pair whose rays meet closest to a right
 angle), all points are refined together by bundle adjustment, and each camera's
 reprojection errors are reported. The success rate at a threshold is the percentage
 of cameras whose mean error is below it; cameras that failed to register count as
-failures. The intrinsics default to RESULTS/intrinsics.
+failures. The intrinsics default to RESULTS/intrinsics; a camera whose intrinsics file
+is bad or missing is left out, the file and the problem reported (exit status 1).
 
 With --json, prints {"success_rate": {"0.5": f, "2": f, "5": f}, "cameras": {name:
 {"mean_px", "std_px", "n"}}} (percentages; null errors for a camera without any).
@@ -35,6 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import json
+    import sys
     from pathlib import Path
 
     from calibproj.evaluation import EvaluationOptions, evaluate
@@ -53,6 +55,11 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(evaluation.to_json(), indent=1))
     else:
         print(format_table(evaluation))
+    if evaluation.unusable_intrinsics:
+        failures = "; ".join(f"{name}: {reason}" for name, reason in evaluation.unusable_intrinsics.items())
+        print(f"calibproj evaluate: {len(evaluation.unusable_intrinsics)} camera(s) without usable intrinsics: "
+              f"{failures}", file=sys.stderr)
+        return 1
     return 0
 
 
