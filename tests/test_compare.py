@@ -108,6 +108,26 @@ def test_too_few_common_cameras_is_an_error(truth):
         compare(CameraPoses(two, "m"), truth)
 
 
+def test_centres_that_cannot_be_aligned_name_the_estimate(truth):
+    """One camera 1e30 away: the others' centres coincide next to it, no similarity fits."""
+    far = {**truth.poses, "far1": (truth.poses["far1"][0], np.array([-1e30, 0.0, 0.0]))}
+    with pytest.raises(ValueError, match=r"^estimate.json: cannot be aligned on truth \(cameras far1, .*\): "):
+        compare(CameraPoses(far, "m", source="estimate.json"), truth)
+
+
+def test_pose_files_refuse_booleans_and_strings_as_numbers(tmp_path, truth):
+    path = tmp_path / "camera_poses.json"
+    write_camera_poses(path, truth.poses, "m")
+    for key, value, message in [("t", [True, 0, 0], "t: expected numbers, got true"),
+                                ("R", [["1", 0, 0], [0, 1, 0], [0, 0, 1]], 'R: expected numbers, got "1"'),
+                                ("weak", 1, "weak: expected true or false, got 1")]:
+        document = json.loads(path.read_text())
+        document["cameras"]["far1"][key] = value
+        (tmp_path / "bad.json").write_text(json.dumps(document))
+        with pytest.raises(ValueError, match=rf"bad\.json: cameras\.far1\.{message}"):
+            read_poses(tmp_path / "bad.json")
+
+
 def test_pose_files_round_trip_and_validation(tmp_path, truth):
     path = tmp_path / "camera_poses.json"
     write_camera_poses(path, truth.poses, "arbitrary", {"far9": "not seen"})

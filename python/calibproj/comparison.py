@@ -104,7 +104,11 @@ def compare(estimate: CameraPoses | str | os.PathLike, truth: CameraPoses | str 
         anchors = registered
     elif len(anchors) < len(registered):
         logger.info("aligned on the cameras not reported weak: %s", ", ".join(anchors))
-    scale, R_align, t_align = align_centers(estimate.centers(anchors), truth.centers(anchors))
+    try:
+        scale, R_align, t_align = align_centers(estimate.centers(anchors), truth.centers(anchors))
+    except ValueError as error:  # e.g. centres that coincide (one camera a thousand km away)
+        raise ValueError(f"{estimate.source or 'estimate'}: cannot be aligned on {truth.source or 'the reference'} "
+                         f"(cameras {', '.join(anchors)}): {error}") from None
     mean_distance = mean_pairwise_distance(truth.centers(truth.names))
     to_mm = 1000.0 if (estimate.is_metric and truth.is_metric) else None
     cameras = {}
