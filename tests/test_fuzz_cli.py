@@ -40,8 +40,8 @@ import pytest
 
 import calibproj
 # The tests folder is on sys.path under pytest.
-from fuzz_inputs import (Inputs, Mutation, Run, all_mutations, deep, dumps, fill, make_inputs, prepare,
-                         tracks_mutations)
+from fuzz_inputs import (RAW, Inputs, Mutation, Run, all_mutations, deep, dumps, fill, intrinsics_mutations,
+                         make_inputs, prepare, tracks_mutations)
 
 SEED = 20250613  # another seed than the native tool's fuzzing: other files
 RUN_TIMEOUT_S = 20.0
@@ -49,11 +49,11 @@ STARTUP_TIMEOUT_S = 60.0
 WORKERS = 2
 # Mutated files per input format.
 BUDGET = {"tracks": 200, "calibrate_intrinsics": 120, "sequence": 200, "detect_intrinsics": 80,
-          "eval_tracks": 80, "camera_poses": 100, "metrics": 80}
+          "eval_tracks": 80, "evaluate_intrinsics": 60, "camera_poses": 100, "metrics": 80}
 MIN_FILES = 500
 MAX_ERROR_LINE = 1000  # characters: one line a person reads
 # A camera's own file: a bad one fails that camera, not the run.
-PER_CAMERA = ("calibrate_intrinsics", "detect_intrinsics")
+PER_CAMERA = ("calibrate_intrinsics", "detect_intrinsics", "evaluate_intrinsics")
 
 
 # ---------------------------------------------------------------------------------------
@@ -178,10 +178,16 @@ def run_all(runs: list[Run]) -> list[dict[str, Any]]:
 # Results to evaluate and compare, and their mutations.
 
 
-def results_mutations(poses: dict, metrics: dict, eval_tracks: dict, rng: np.random.Generator) -> dict:
-    return {"eval_tracks": tracks_mutations(eval_tracks, rng, BUDGET["eval_tracks"]),
-            "camera_poses": poses_mutations(poses, rng, BUDGET["camera_poses"]),
-            "metrics": metrics_mutations(metrics, rng, BUDGET["metrics"])}
+def results_mutations(results: Path, rng: np.random.Generator) -> dict[str, list[Mutation]]:
+    """Mutations of the files of a results folder, per format."""
+    def read(name: str) -> dict:
+        return json.loads((results / name).read_text())
+
+    return {"eval_tracks": tracks_mutations(read("tracks.json"), rng, BUDGET["eval_tracks"]),
+            "evaluate_intrinsics": intrinsics_mutations(read("intrinsics/cam1.json"), rng,
+                                                        BUDGET["evaluate_intrinsics"]),
+            "camera_poses": poses_mutations(read("camera_poses.json"), rng, BUDGET["camera_poses"]),
+            "metrics": metrics_mutations(read("metrics.json"), rng, BUDGET["metrics"])}
 
 
 def poses_mutations(document: dict, rng: np.random.Generator, budget: int) -> list[Mutation]:
@@ -210,10 +216,10 @@ def poses_mutations(document: dict, rng: np.random.Generator, budget: int) -> li
         ("schema 'calibproj.camera_poses/99'", {**document, "schema": "calibproj.camera_poses/99"}),
         ("schema of tracks", {**document, "schema": "calibproj.tracks/1"}),
     ]
-    raw = [("t NaN", "t", "[NaN, 0, 0]"), ("t 1e400", "t", "[1e400, 0, 0]"), ("R nested 100000 deep", "R", deep(100_000)),
-           ("t a 5000-digit integer", "t", "[" + "7" * 5000 + ", 0, 0]")]
+    raw = [("t NaN", "t", "[NaN, 0, 0]"), ("t 1e400", "t", "[1e400, 0, 0]"),
+           ("R nested 100000 deep", "R", deep(100_000)), ("t a 5000-digit integer", "t", "[" + "7" * 5000 + ", 0, 0]")]
     out = [Mutation(label, dumps(doc), True) for label, doc in targeted]
-    out += [Mutation(label, dumps(with_first(key, "@@raw@@"), value), True) for label, key, value in raw]
+    out += [Mutation(label, dumps(with_first(key, RAW), value), True) for label, key, value in raw]
     return fill(out, document, rng, budget)
 
 
@@ -241,15 +247,23 @@ def metrics_mutations(document: dict, rng: np.random.Generator, budget: int) -> 
     ]
     raw = [("floor_rms NaN", "NaN"), ("floor_rms -Infinity", "-Infinity"), ("floor_rms nested", deep(100_000))]
     out = [Mutation(label, dumps(doc), True) for label, doc in targeted]
-    out += [Mutation(label, dumps({**document, "floor_rms": "@@raw@@"}, value), True) for label, value in raw]
+    out += [Mutation(label, dumps({**document, "floor_rms": RAW}, value), True) for label, value in raw]
     return fill(out, document, rng, budget)
 
 
 def prepare_results_run(root: Path, results: Path, fmt: str, index: int, mutation: Mutation) -> Run:
-    """evaluate (mutated evaluation tracks, or a copy of the results folder with a
-    mutated metrics.json) or compare (a mutated camera_poses.json with the valid one)."""
+    """evaluate (mutated evaluation tracks, a copy of the results' intrinsics with one
+    file mutated, or a copy of the results folder with a mutated metrics.json) or compare
+    (a mutated camera_poses.json with the valid one)."""
     folder = root / f"{fmt}-{index:03d}"
     folder.mkdir(parents=True)
+    if fmt == "evaluate_intrinsics":
+        intrinsics = folder / "intrinsics"
+        shutil.copytree(results / "intrinsics", intrinsics)
+        target = intrinsics / "cam1.json"
+        target.write_bytes(mutation.data)
+        return Run(fmt, mutation, target, ["evaluate", str(results), "--tracks", str(results / "tracks.json"),
+                                           "--intrinsics", str(intrinsics)])
     if fmt == "metrics":
         copy = folder / "results"
         shutil.copytree(results, copy)
@@ -316,18 +330,13 @@ def make_results(root: Path, inputs: Inputs) -> Path:
     return Path(run.args[run.args.index("--out") + 1])
 
 
-def read_json(path: Path) -> dict:
-    return json.loads(path.read_text())
-
-
 def test_mutated_input_files_fail_cleanly(tmp_path: Path) -> None:
     started = time.perf_counter()
     inputs = make_inputs(tmp_path / "inputs", SEED)
     results = make_results(tmp_path / "valid", inputs)
     rng = np.random.default_rng(SEED)
     mutations = all_mutations(inputs, rng, BUDGET)
-    extra = results_mutations(read_json(results / "camera_poses.json"), read_json(results / "metrics.json"),
-                              read_json(results / "tracks.json"), rng)
+    extra = results_mutations(results, rng)
     runs = [cli_args(prepare(tmp_path / "runs", inputs, fmt, index, mutation))
             for fmt, items in mutations.items() for index, mutation in enumerate(items)]
     runs += [prepare_results_run(tmp_path / "runs", results, fmt, index, mutation)
@@ -355,11 +364,12 @@ def test_the_valid_inputs_are_accepted(tmp_path: Path) -> None:
                                 Mutation("none", dumps(inputs.sequence), False)))
     valid = [sequence, *(prepare_results_run(tmp_path / "runs", results, fmt, 0, Mutation("none", data, False))
                          for fmt, data in [("eval_tracks", (results / "tracks.json").read_bytes()),
+                                           ("evaluate_intrinsics", (results / "intrinsics/cam1.json").read_bytes()),
                                            ("camera_poses", (results / "camera_poses.json").read_bytes()),
                                            ("metrics", (results / "metrics.json").read_bytes())])]
     answers = run_all(valid)
     # detect: every camera fails to synchronise (the videos hold no light code), status 1.
-    assert [answer.get("status") for answer in answers] == [1, 0, 0, 0], answers
+    assert [answer.get("status") for answer in answers] == [1, 0, 0, 0, 0], answers
     assert all(": error: " not in answer["stderr"] for answer in answers), answers
 
 
