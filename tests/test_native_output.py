@@ -215,6 +215,29 @@ def test_a_camera_not_calibrated_gives_status_1_and_the_others(small: Path, tmp_
     assert sorted(poses["cameras"]) == ["cam1", "cam2"] and list(poses["failed"]) == ["cam3"]
 
 
+def test_a_bad_intrinsics_file_fails_its_camera_only(small: Path, tmp_path: Path) -> None:
+    """As in the Python command: true in K fails cam2 alone, with the file and the
+    problem; the others are calibrated and the run exits 1. A second file for one
+    camera fails that camera too."""
+    intrinsics = tmp_path / "intrinsics"
+    shutil.copytree(small / "intrinsics", intrinsics)
+    bad = json.loads((intrinsics / "cam2.json").read_text())
+    bad["K"][0][0] = True
+    (intrinsics / "cam2.json").write_text(json.dumps(bad))
+    out = tmp_path / "results"
+    args = ["calibrate", "--tracks", str(small / "tracks.json"), "--intrinsics", str(intrinsics), "--out", str(out)]
+    result = run_native(*args)
+    assert result.returncode == EXIT_FAILURE and ": error: " not in result.stderr, result.stderr
+    poses = json.loads((out / "camera_poses.json").read_text())
+    assert sorted(poses["cameras"]) == ["cam1", "cam3"] and list(poses["failed"]) == ["cam2"]
+    assert str(intrinsics / "cam2.json") in poses["failed"]["cam2"]
+    assert f"camera cam2: {poses['failed']['cam2']}, left out" in result.stderr
+    shutil.copy(intrinsics / "cam3.json", intrinsics / "cam3.yaml")
+    result = run_native(*args, "--force")
+    failed = json.loads((out / "camera_poses.json").read_text())["failed"]
+    assert "a second intrinsics file for camera 'cam3'" in failed["cam3"], result.stderr
+
+
 def test_bad_invocations_exit_with_status_2() -> None:
     assert run_native("calibrate", "--no-such-option").returncode == EXIT_USAGE
     assert run_native().returncode == EXIT_USAGE

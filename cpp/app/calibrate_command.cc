@@ -73,17 +73,20 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   OutputFolder out(arguments.out, arguments.force, kResultFiles, interrupts);
   out.Open();
   Tracks tracks = ReadTracks(arguments.tracks);
-  const auto intrinsics = LoadIntrinsicsDir(arguments.intrinsics);
+  const IntrinsicsDir folder = LoadIntrinsicsDir(arguments.intrinsics);
+  const auto& intrinsics = folder.cameras;
 
   ResultFiles names;
   names.model = arguments.model;
   std::vector<std::string> missing;
   for (const auto& camera : tracks.cameras) {
-    if (!intrinsics.count(camera)) {
-      missing.push_back(camera);
-      names.left_out.emplace_back(camera, "no intrinsics for this camera");
-      std::cerr << "camera " << camera << ": no intrinsics, left out\n";
-    }
+    if (intrinsics.count(camera)) continue;
+    // A camera whose file is bad fails alone, with the file and its problem.
+    const auto bad = folder.unusable.find(camera);
+    const std::string reason = bad != folder.unusable.end() ? bad->second : "no intrinsics for this camera";
+    missing.push_back(camera);
+    names.left_out.emplace_back(camera, reason);
+    std::cerr << "camera " << camera << ": " << reason << ", left out\n";
   }
   if (!missing.empty()) tracks = tracks.WithoutCameras(missing);
 

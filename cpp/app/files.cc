@@ -204,7 +204,9 @@ std::string DumpSchemaJson(const std::string& kind, int major, const nlohmann::o
   nlohmann::ordered_json document;
   document["schema"] = "calibproj." + kind + "/" + std::to_string(major);
   for (const auto& [key, value] : body.items()) document[key] = value;
-  return document.dump(1) + "\n";
+  // A reason may quote a malformed input file: bytes that are not UTF-8 become U+FFFD
+  // instead of making the whole results file unwritable.
+  return document.dump(1, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace calibproj::app

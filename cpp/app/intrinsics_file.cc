@@ -185,7 +185,7 @@ CameraIntrinsics ReadIntrinsics(const fs::path& path) {
   return in;
 }
 
-std::map<std::string, CameraIntrinsics> LoadIntrinsicsDir(const fs::path& directory) {
+IntrinsicsDir LoadIntrinsicsDir(const fs::path& directory) {
   if (!fs::is_directory(directory)) throw InputError(directory.string() + ": no such intrinsics directory");
   std::vector<fs::path> files;
   for (const auto& entry : fs::directory_iterator(directory)) {
@@ -196,13 +196,21 @@ std::map<std::string, CameraIntrinsics> LoadIntrinsicsDir(const fs::path& direct
     }
   }
   std::sort(files.begin(), files.end());
-  std::map<std::string, CameraIntrinsics> out;
+  if (files.empty()) throw InputError(directory.string() + ": no intrinsics files (*.json, *.yaml, *.yml, *.xml)");
+  IntrinsicsDir out;
   for (const auto& path : files) {
     const std::string name = path.stem().string();
-    if (out.count(name)) throw InputError(path.string() + ": a second intrinsics file for camera '" + name + "'");
-    out[name] = ReadIntrinsics(path);
+    if (out.cameras.count(name) || out.unusable.count(name)) {
+      out.cameras.erase(name);
+      out.unusable[name] = path.string() + ": a second intrinsics file for camera '" + name + "'";
+      continue;
+    }
+    try {
+      out.cameras[name] = ReadIntrinsics(path);
+    } catch (const InputError& error) {
+      out.unusable[name] = error.what();
+    }
   }
-  if (out.empty()) throw InputError(directory.string() + ": no intrinsics files (*.json, *.yaml, *.yml, *.xml)");
   return out;
 }
 

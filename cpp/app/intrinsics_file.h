@@ -24,7 +24,14 @@ struct CameraIntrinsics {
 
 CameraIntrinsics ReadIntrinsics(const std::filesystem::path& path);
 
-// Every intrinsics file of a folder, keyed by camera name (the file stem).
-std::map<std::string, CameraIntrinsics> LoadIntrinsicsDir(const std::filesystem::path& directory);
+// The intrinsics files of a folder, keyed by camera name (the file stem). A file that
+// cannot be used (malformed, or a second file for one camera) fails its own camera only.
+struct IntrinsicsDir {
+  std::map<std::string, CameraIntrinsics> cameras;
+  std::map<std::string, std::string> unusable;  // camera -> the file and its problem
+};
+
+// Throws InputError when the folder does not exist or holds no intrinsics file at all.
+IntrinsicsDir LoadIntrinsicsDir(const std::filesystem::path& directory);
 
 }  // namespace calibproj::app
