@@ -201,3 +201,18 @@ def test_numbers_table_gives_centre_height_tilt_and_heading() -> None:
     assert cells[0][:7] == ["down", "1.0000", "-2.0000", "2.5000", "1.20", "0.00", "0.0"]
     assert cells[1][3] == "3.0000" and cells[1][5] == "30.00" and cells[1][6] == "0.0"
     assert cells[1][7:12] == ["900.0", "905.0", "640.0", "360.0", "-0.1"]
+
+
+def test_a_bad_intrinsics_file_leaves_its_camera_without_intrinsics(report_with_a_failed_camera, tmp_path,
+                                                                     caplog) -> None:
+    """The report of a folder whose cam1 file went bad is still written: cam1 without
+    intrinsics (no coverage frame), the log naming the file."""
+    import shutil
+
+    path, _ = report_with_a_failed_camera
+    folder = tmp_path / "results"
+    shutil.copytree(path.parent, folder)
+    (folder / "intrinsics" / "cam1.json").write_text('{"schema": "calibproj.intrinsics/1", "K": true}')
+    page = write_report(folder).read_text(encoding="utf-8")
+    assert "<h3>cam1</h3>" in page and "<h3>cam2</h3>" in page
+    assert any(str(folder / "intrinsics" / "cam1.json") in r.getMessage() for r in caplog.records)

@@ -30,7 +30,7 @@ import numpy as np
 
 from calibproj.ingest_options import IngestOptions
 from calibproj.io.file_names import path_as_recorded, safe_file_names
-from calibproj.io.intrinsics import INTRINSICS_SUFFIXES, Intrinsics, read_intrinsics
+from calibproj.io.intrinsics import Intrinsics, intrinsics_file, read_intrinsics
 from calibproj.io.jsonio import atomic_write_bytes, write_json
 from calibproj.tracks import Tracks, msm_point_ids
 
@@ -433,17 +433,9 @@ def _intrinsics_for(intrinsics: Any, name: str) -> tuple[Intrinsics | None, str]
         if isinstance(entry, Intrinsics):
             return entry, f"intrinsics of {name}"
         path = Path(entry)
-    else:
-        folder = Path(intrinsics)
-        if not folder.is_dir():
-            return None, f"{folder}: no such intrinsics folder"
-        candidates = [folder / f"{name}{suffix}" for suffix in INTRINSICS_SUFFIXES]
-        found = [p for p in candidates if p.is_file()]
-        if not found:
-            return None, f"{candidates[0]}: no intrinsics file for camera {name!r} (also looked for " \
-                         f"{', '.join(p.name for p in candidates[1:])})"
-        path = found[0]
     try:
+        if not isinstance(intrinsics, Mapping):
+            path = intrinsics_file(intrinsics, name)
         return read_intrinsics(path, name), str(path)
     except FormatError as error:
         return None, str(error)

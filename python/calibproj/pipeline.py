@@ -109,10 +109,10 @@ def calibrate(
                 scale_error = error
                 scale_source = {"measurement": str(measurement), "error": str(error)}
         if folder is not None:
+            markers_spec = ingest_result.markers if ingest_result is not None else None
             record = provenance(folder.path, command=command, source=source, sequence=sequence,
-                                intrinsics=intrinsics_source, markers=ingest_result.markers if ingest_result is not None else None,
-                                model=calibration.model, options=options, scale=scale_source,
-                                videos=_video_files(ingest_result))
+                                intrinsics=intrinsics_source, markers=markers_spec, model=calibration.model,
+                                options=options, scale=scale_source, videos=_video_files(ingest_result))
             with folder.writing() as staging:
                 write_provenance(staging, record)  # first: the report shows it
                 _write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,

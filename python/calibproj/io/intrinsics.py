@@ -277,15 +277,18 @@ def intrinsics_of_cameras(
     cameras: dict[str, Intrinsics] = {}
     unusable: dict[str, str] = {}
     for name in names:
-        paths = files.get(name, [])
-        if len(paths) != 1:
-            unusable[name] = _missing_or_doubled(directory, name, paths)
-            continue
         try:
-            cameras[name] = read_intrinsics(paths[0], name)
+            cameras[name] = read_intrinsics(_only_file(directory, name, files.get(name, [])), name)
         except FormatError as error:
             unusable[name] = str(error)
     return cameras, unusable
+
+
+def intrinsics_file(directory: str | os.PathLike, name: str) -> Path:
+    """The one intrinsics file of camera ``name`` in ``directory``; FormatError naming
+    the folder or the file when there is none, or more than one."""
+    directory = Path(directory)
+    return _only_file(directory, name, _intrinsics_files(directory).get(name, []))
 
 
 def _intrinsics_files(directory: str | os.PathLike) -> dict[str, list[Path]]:
@@ -302,11 +305,14 @@ def _intrinsics_files(directory: str | os.PathLike) -> dict[str, list[Path]]:
     return files
 
 
-def _missing_or_doubled(directory: Path, name: str, paths: list[Path]) -> str:
+def _only_file(directory: Path, name: str, paths: list[Path]) -> Path:
+    if len(paths) == 1:
+        return paths[0]
     if paths:
-        return f"{paths[1]}: a second intrinsics file for camera {name!r}"
+        raise FormatError(f"{paths[1]}: a second intrinsics file for camera {name!r}")
     others = ", ".join(f"{name}{suffix}" for suffix in INTRINSICS_SUFFIXES[1:])
-    return f"{directory / f'{name}.json'}: no intrinsics file for camera {name!r} (also looked for {others})"
+    raise FormatError(f"{directory / f'{name}.json'}: no intrinsics file for camera {name!r} "
+                      f"(also looked for {others})")
 
 
 def _from_our_json(path: Path, name: str) -> Intrinsics:

@@ -19,12 +19,12 @@ import numpy as np
 
 from calibproj.calibration import Calibration
 from calibproj.io.file_names import safe_file_names
-from calibproj.io.intrinsics import Intrinsics
+from calibproj.io.intrinsics import Intrinsics, intrinsics_of_cameras
 from calibproj.io.jsonio import atomic_write_bytes, atomic_write_text
 from calibproj.report import figures
 from calibproj.report.data import CameraView, camera_views
 from calibproj.provenance import read_provenance
-from calibproj.results import DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, load_results, resolve_intrinsics
+from calibproj.results import DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, intrinsics_source, load_results
 from calibproj.tracks import Tracks
 from calibproj.version import __version__
 
@@ -88,10 +88,14 @@ def write_report(
     """
     results_dir = Path(results_dir)
     calibration = load_results(results_dir)
-    intrinsics = resolve_intrinsics(results_dir, intrinsics)
     if tracks is None:
         tracks = results_dir / TRACKS_FILE
     tracks = tracks if isinstance(tracks, Tracks) else Tracks.read(tracks)
+    names = [*calibration.metrics, *calibration.poses, *calibration.failed, *tracks.camera_names]
+    # A camera whose intrinsics file is bad is drawn without it; the others are not held up.
+    intrinsics, unusable = intrinsics_of_cameras(intrinsics_source(results_dir, intrinsics), names)
+    for name, reason in unusable.items():
+        logger.warning("report: camera %s is drawn without intrinsics (%s)", name, reason)
     views = camera_views(calibration, tracks, intrinsics)
     inputs = ReportInputs(detect_report=_optional_json(results_dir / DETECT_REPORT_FILE, "sync and detection"),
                           provenance=read_provenance(results_dir),
