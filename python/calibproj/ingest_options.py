@@ -153,7 +153,13 @@ class IngestOptions:
             to every row's exposure, so that a picked frame shows one pattern in all
             its rows.
         max_readout_sigma: ... provided it is known to this many camera frames (1 sigma);
-            a readout known less well is reported, not used.
+            a readout known less well is reported, not used; the offset, which then
+            refers to rows near the middle, is reported uncertain by half the readout
+            (plus two sigma).
+        unmeasured_readout_frames: the readout of a camera where it cannot be measured
+            (no band of rows sees a light change) may be anything up to this many
+            camera frames: its offset is reported uncertain by half of it (0 assumes a
+            global shutter; 1, the default, any rolling shutter).
         use_timestamps: time comes from the container's frame timestamps: each frame
             is placed on the camera's frame grid, so dropped frames leave gaps instead
             of shifting every later frame (false: time from the decoding order, for
@@ -246,6 +252,7 @@ class IngestOptions:
     readout_bands: int = 16
     readout_sigmas: float = 3.0
     max_readout_sigma: float = 0.1
+    unmeasured_readout_frames: float = 1.0
     use_timestamps: bool = True
     max_frame_gap_s: float = 2.0
     mean_row_step: int = 2

@@ -269,10 +269,10 @@ class CameraIngest {
     if (!ReadoutApplies(sync->readout)) {
       // A readout known too poorly to move the map: the map is that of rows near the
       // middle, up to half the readout from the first row's.
-      if (sync->readout.valid) {
-        sync->offset_uncertainty = std::max(sync->offset_uncertainty,
-                                            0.5 * std::abs(sync->readout.readout) + sync->readout.readout_sigma);
-      }
+      const double readout_bound = sync->readout.valid
+                                       ? std::abs(sync->readout.readout) + 2.0 * sync->readout.readout_sigma
+                                       : options_.unmeasured_readout_frames;
+      sync->offset_uncertainty = std::max(sync->offset_uncertainty, 0.5 * readout_bound);
       return;
     }
     sync->readout.applied = true;
@@ -598,6 +598,8 @@ void IngestOptions::Check() const {
           "readout_bands must be 0 or in [3, 64]");
   Require(readout_sigmas > 0.0, "readout_sigmas must be positive");
   Require(max_readout_sigma > 0.0, "max_readout_sigma must be positive");
+  Require(unmeasured_readout_frames >= 0.0 && unmeasured_readout_frames <= 1.0,
+          "unmeasured_readout_frames must be in [0, 1] (a readout longer than a frame leaves no time to expose)");
   Require(max_frame_gap_s > 0.0 && std::isfinite(max_frame_gap_s), "max_frame_gap_s must be positive");
   // Frames held in memory: the lookback and the pending jobs.
   Require(lookback_frames >= 0 && lookback_frames <= kMaxHeldFrames,

@@ -94,6 +94,10 @@ struct IngestOptions {
   int readout_bands = 16;
   double readout_sigmas = 3.0;
   double max_readout_sigma = 0.1;
+  // A readout that could not be measured (no band sees a light change) may be anything
+  // up to this many camera frames: the offset, which then refers to rows near the middle,
+  // is reported uncertain by half of it (0 assumes a global shutter).
+  double unmeasured_readout_frames = 1.0;
   // Decoded grey frames kept while the start code is being looked for.
   int lookback_frames = 16;
   // Frames decoded between two incremental searches of the start code.

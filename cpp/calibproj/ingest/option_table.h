@@ -90,6 +90,8 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("readout_bands", o.readout_bands, "image bands measuring a rolling shutter's readout (0: none)");
   visit("readout_sigmas", o.readout_sigmas, "standard deviations a readout must reach to be applied");
   visit("max_readout_sigma", o.max_readout_sigma, "... and its largest sigma, camera frames");
+  visit("unmeasured_readout_frames", o.unmeasured_readout_frames,
+        "readout assumed at most when it cannot be measured, camera frames (0: global shutter)");
   visit("use_timestamps", o.use_timestamps, "time from container timestamps (false: decoding order)");
   visit("max_frame_gap_s", o.max_frame_gap_s, "largest gap between frame timestamps, seconds");
   visit("mean_row_step", o.mean_row_step, "the mean luma is taken over every n-th row");
