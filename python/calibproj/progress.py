@@ -62,7 +62,10 @@ class PeriodicProgress:
         with self.lock:
             self.n += count
             now = time.monotonic()
-            if now - self.last_line >= self.interval_s:
+            if self.total and self.n >= self.total and not self.closed:
+                self.closed = True  # done now, not when the caller gets round to closing
+                self._log(now, final=True)
+            elif now - self.last_line >= self.interval_s and not self.closed:
                 self.last_line = now
                 self._log(now)
 
