@@ -61,7 +61,9 @@ class IngestOptions:
             change only tells how its exposure splits, and the offset is known exactly
             only with the exposure.
         margin: projector frames kept clear of each pattern change, on either side.
-        average_frames: clean frames averaged per pattern before detection.
+        average_frames: clean frames averaged per pattern before detection (the most
+            central ones; fewer where the camera records fewer): averaging lowers the
+            sensor and compression noise that limits the centres under room light.
         spare_frames: further clean frames per pattern, after the first picked one, that
             stand in for picked frames the camera dropped.
         max_clock_drift: largest relative camera clock drift; widens the frames kept
@@ -203,7 +205,7 @@ class IngestOptions:
     gain_drift: bool = True
     exposure_s: float = 0.0
     margin: float = 0.1
-    average_frames: int = 1
+    average_frames: int = 3
     spare_frames: int = 2
     max_clock_drift: float = 2e-4
     use_roi: bool = True

@@ -12,8 +12,11 @@ namespace calibproj::video {
 struct PickOptions {
   // Projector frames kept clear of each pattern change, on either side.
   double margin = 0.1;
-  // Frames averaged per pattern before detection (the most central clean ones).
-  int average_frames = 1;
+  // Frames averaged per pattern before detection (the most central clean ones; fewer
+  // where the camera records fewer). Averaging lowers the sensor and compression noise
+  // that limits the centres under room light or saturation (room-light-strong: rotation
+  // error 0.0113 -> 0.0084 deg from 1 to 3 frames), at no cost in a dark room.
+  int average_frames = 3;
   // Further clean frames per pattern that stand in for picked frames the camera
   // dropped (later ones only: frames are decoded once, in order).
   int spare_frames = 2;
