@@ -30,6 +30,7 @@ COMMANDS = {
     "generate": "calibproj.commands.generate",
     "simulate": "calibproj.commands.simulate",
     "detect": "calibproj.commands.detect",
+    "intrinsics": "calibproj.commands.intrinsics",
     "calibrate": "calibproj.commands.calibrate",
     "compare": "calibproj.commands.compare",
     "evaluate": "calibproj.commands.evaluate",

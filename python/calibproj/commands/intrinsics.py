@@ -1,0 +1,72 @@
+"""Intrinsics from a calibration board seen in a video or images (OpenCV calibration).
+
+SOURCE is a video (every --step-th frame is looked at), a folder of images or one
+image. --board is `chessboard:COLSxROWS:SQUARE_M` (inner corners) or
+`charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT` (squares; e.g. charuco:5x7:0.04:0.03:4X4_50).
+Blurred views are left out and the views covering the image best are kept
+(--max-views); the camera matrix and distortion are written as calibproj's intrinsics
+JSON (the camera is named after OUT's file stem), with each parameter's 1-sigma, the
+RMS error of every view, and with --plot a PNG of where the corners lie in the image.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from calibproj.commands.options import add_dataclass_arguments
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from calibproj.board.calibration import BoardOptions
+
+    parser.add_argument("source", metavar="SOURCE", help="video, folder of images, or one image of the board")
+    parser.add_argument("--board", required=True, metavar="SPEC",
+                        help="chessboard:COLSxROWS:SQUARE_M or charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT")
+    parser.add_argument("--out", required=True, metavar="FILE", help="intrinsics JSON to write (<camera>.json)")
+    parser.add_argument("--plot", metavar="PNG", help="also draw the corners' coverage and the views' errors here")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON (for programs)")
+    add_dataclass_arguments(parser, BoardOptions, "board calibration options")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    from calibproj.board import BoardOptions, BoardSpec, calibrate_with_board
+    from calibproj.commands.options import dataclass_from_args
+    from calibproj.io.intrinsics import write_intrinsics
+    from calibproj.io.jsonio import atomic_write_bytes
+
+    board = BoardSpec.parse(args.board)  # before reading the video: a typo is one line at once
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise ValueError(f"{out}: exists (use --force to replace it)")
+    if out.is_dir() or (args.plot and Path(args.plot).is_dir()):
+        raise ValueError(f"{out if out.is_dir() else args.plot}: is a folder, not a file")
+    result = calibrate_with_board(args.source, board, name=out.stem, options=dataclass_from_args(BoardOptions, args))
+    write_intrinsics(out, result.intrinsics)
+    if args.plot:
+        from calibproj.board.figure import coverage_figure
+
+        atomic_write_bytes(args.plot, coverage_figure(result))
+    if args.json:
+        print(json.dumps(result.summary(), indent=1))
+    else:
+        print(format_result(result))
+        print(f"intrinsics written to {out}")
+    return 0
+
+
+def format_result(result) -> str:
+    K, sigma = result.intrinsics.K, result.sigmas
+    dist = ", ".join(f"{name} {value:.5f} +- {sigma.get(name, float('nan')):.5f}"
+                     for name, value in zip(("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"), result.intrinsics.dist))
+    worst = max(zip(result.view_rms_px, (v.label for v in result.views)))
+    return "\n".join([
+        f"board {result.board}: found in {result.found} of {result.seen} images, {len(result.views)} views used",
+        f"fx {K[0, 0]:.2f} +- {sigma['fx']:.2f}  fy {K[1, 1]:.2f} +- {sigma['fy']:.2f}  "
+        f"cx {K[0, 2]:.2f} +- {sigma['cx']:.2f}  cy {K[1, 2]:.2f} +- {sigma['cy']:.2f} px",
+        f"distortion: {dist}",
+        f"RMS reprojection error {result.rms_px:.3f} px (worst view {worst[1]}: {worst[0]:.3f} px)",
+    ])
