@@ -18,9 +18,9 @@ from calibproj.sequence.builder import build_sequence
 from calibproj.sequence.video import GreyVideoWriter
 from calibproj.ingest import ingest
 from calibproj.simulate.render import simulate_videos
-from calibproj.simulate.people import blocked
+from calibproj.simulate.people import ProjectorLight, blocked, surface_points
 from calibproj.simulate.render import RenderOptions
-from calibproj.simulate.scene import Person, load_scene
+from calibproj.simulate.scene import Person, Projector, load_scene
 
 MAX_SYNC_ERROR_FRAMES = 0.1
 DROP_RATE = 0.04
@@ -311,6 +311,40 @@ def test_a_person_blocks_the_rays_that_pass_through_them():
     assert hidden.tolist() == [True, True, False, False, False]
     assert Person((0.0, 0.0), (2.0, 0.0), start_s=1.0, speed_mps=0.5).centre(3.0).tolist() == [1.0, 0.0]
     assert Person((0.0, 0.0), (2.0, 0.0), start_s=1.0).centre(0.5) is None
+
+
+def test_the_body_point_a_camera_sees_is_on_the_side_or_the_top():
+    """The camera 3 m above (0, 0), the person of 1.7 m, radius 0.25, at (1, 0): the ray
+    to (1.5, 0) meets the near side at x = 0.75, z = 1.5; the ray to (2, 0) passes over
+    the near edge (z 1.875 there) and comes in through the top at x = 1 - 0.4 / 3."""
+    points, normals = surface_points(np.array([0.0, 0.0, 3.0]), np.array([[1.5, 0.0], [2.0, 0.0]]),
+                                     np.array([1.0, 0.0]), 0.25, 1.7)
+    np.testing.assert_allclose(points, [[0.75, 0.0, 1.5], [2.0 * (1.0 - 1.7 / 3.0), 0.0, 1.7]], atol=1e-12)
+    np.testing.assert_allclose(normals, [[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], atol=1e-12)
+
+
+def test_the_projection_lands_on_a_person():
+    """A projector 3 m above (0, 0) looking down, its image white only at the pixel above
+    (1, 0): a person's head there is lit in full (the top faces the projector), the side
+    facing away from the projector is not, the side facing it gets the light times its
+    incidence relative to the floor's; a content without that white pixel lights nothing."""
+    projector = Projector(position=(0.0, 0.0, 3.0), look_at=(0.0, 0.0, 0.0), resolution=(64, 48), fx=40.0)
+    K, R, t = projector.K, projector.R, projector.t
+    head = np.array([1.0, 0.0, 1.7])
+    pixel = K @ (R @ head + t)
+    column, row = (np.rint(pixel[:2] / pixel[2])).astype(int)
+    white = np.zeros((48, 64), np.uint8)
+    white[row, column] = 255
+    images = {"white": white, "dark": np.zeros_like(white)}
+    light = ProjectorLight(np.array(projector.position), K, R, t, projector.resolution, images.__getitem__)
+    points = np.array([head, [0.75, 0.0, 1.5], [1.25, 0.0, 1.5]])
+    normals = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    lit = light.light(points, normals, {"white": 1.0}, np.zeros(3, dtype=int))
+    assert lit[0] == pytest.approx(1.0) and lit[2] == 0.0  # the far side faces away
+    assert light.light(points[:1], normals[:1], {"dark": 1.0}, np.zeros(1, dtype=int))[0] == 0.0
+    # Half the exposure on each content (a pattern change during it): half the light.
+    half = light.light(points[:1], normals[:1], {"white": 0.5, "dark": 0.5}, np.zeros(1, dtype=int))
+    assert half[0] == pytest.approx(0.5)
 
 
 def test_a_person_hides_the_floor_and_shades_it(tmp_path):

@@ -52,7 +52,7 @@ from calibproj.simulate.atlas import AtlasLayout
 from calibproj.simulate.contents import AtlasStore
 from calibproj.simulate.geometric import evaluation_tracks
 from calibproj.simulate.floor_texture import floor_albedo
-from calibproj.simulate.people import PeopleInView
+from calibproj.simulate.people import PeopleInView, ProjectorLight
 from calibproj.simulate.photometric import CameraResponse, ExposureControl, SensorNoise, vignetting_gain
 from calibproj.simulate.scene import Camera, Floor, Photometric, Scene, load_scene, save_scene
 from calibproj.simulate.timeline import CameraClock, ContentKey, ProjectionTimeline
@@ -376,7 +376,7 @@ class _CameraRenderer:
         weights = self.weights[frame]
         if self.people is not None:
             time_s = float(self.starts[frame]) + 0.5 * self.clock.exposure_s
-            occluded = self.people.apply(self._irradiance(weights), self.response.ambient_gain, time_s)
+            occluded = self.people.apply(self._irradiance(weights), self.response.ambient_gain, time_s, weights)
             if occluded is not None:
                 return self.response.encode(occluded)
         return self._encoded(weights)
@@ -460,9 +460,11 @@ def _albedo(floor: Floor, view: FloorView, camera: Camera) -> np.ndarray | None:
     return albedo
 
 
-def _people_in_view(scene: Scene, view: FloorView, camera: Camera) -> PeopleInView | None:
+def _people_in_view(scene: Scene, view: FloorView, camera: Camera, sequence: Any) -> PeopleInView | None:
     """The scene's people as ``camera`` sees them, or None in an empty room."""
     import cv2
+
+    from calibproj.simulate.timeline import content_image
 
     if not scene.people:
         return None
@@ -470,7 +472,10 @@ def _people_in_view(scene: Scene, view: FloorView, camera: Camera) -> PeopleInVi
     if view.floor_x.shape[::-1] != tuple(camera.resolution):
         floor = [cv2.resize(values, camera.resolution, interpolation=cv2.INTER_AREA) for values in floor]
     photometric = scene.photometric
-    return PeopleInView(scene.people, camera.position, scene.projector.position, floor[0], floor[1],
+    projector = scene.projector
+    light = ProjectorLight(np.asarray(projector.position, dtype=float), projector.K, projector.R, projector.t,
+                           tuple(projector.resolution), lambda key: content_image(sequence, key))
+    return PeopleInView(scene.people, camera.position, light, floor[0], floor[1],
                         vignetting_gain(camera, photometric.vignetting), photometric.ambient, photometric.contrast)
 
 
@@ -490,7 +495,7 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
             for index, camera in enumerate(scene.cameras):
                 view = views.pop(camera.name)
                 model = _camera_model(camera, view, layout, scene, options, generators[index])
-                people = _people_in_view(scene, view, camera)
+                people = _people_in_view(scene, view, camera, sequence)
                 clock = clocks[camera.name]
                 timed = bool(clock.jitter_s or clock.dropped)
                 writer = GreyVideoWriter(folder / f"{camera.name}.mp4", camera.resolution, camera.fps,
