@@ -35,6 +35,7 @@ COMMANDS = {
     "compare": "calibproj.commands.compare",
     "evaluate": "calibproj.commands.evaluate",
     "demo": "calibproj.commands.demo",
+    "study": "calibproj.commands.study",
 }
 
 EXIT_OK = 0
