@@ -5,8 +5,9 @@ tasks and returns the results in the tasks' order, logging one line per result. 
 ``cluster`` address hands the work to an existing engine instead of a home-made one:
 ``ray://host:port`` (or ``ray:auto``) to a Ray cluster through
 ``ray.util.multiprocessing.Pool``, ``tcp://host:port`` to a Dask scheduler through
-``dask.distributed.Client``. Their packages are optional (``pip install ray`` or
-``pip install dask distributed``); a missing one is one clear error.
+``dask.distributed.Client``. Their packages are optional (``pip install "ray[client]"``
+or ``pip install dask distributed``); a missing one is one clear error. Checked by hand
+on a one-node Ray cluster (``ray start --head``, then ``ray:auto``).
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ def _on_cluster(function: Callable[[Any], Any], tasks: Sequence[Any], address: s
         try:
             from ray.util.multiprocessing import Pool
         except ImportError:
-            raise ValueError(f"--cluster {address}: Ray is not installed (pip install ray)") from None
+            raise ValueError(f"--cluster {address}: Ray is not installed (pip install 'ray[client]')") from None
         ray_address = "auto" if address == "ray:auto" else address
         with Pool(ray_address=ray_address) as pool:
             results = pool.map(function, list(tasks))
