@@ -46,7 +46,7 @@ def test_local_pool_keeps_the_order_and_cluster_addresses_are_checked() -> None:
 def test_recommendation_follows_the_measurements() -> None:
     def summary(small, ms, error, rot):
         return {"found_share_at_15px_or_less": small, "ms_per_frame": ms, "centre_rms_px_at_20px_or_more": error,
-                "rotation_rmse_deg_clean": rot}
+                "rotation_rmse_deg_clean": rot, "msm_centre_rms_px_clean": None}
 
     lines = recommendation({"aruco:4X4_50": summary(0.2, 60.0, 0.05, 0.004),
                             "apriltag:tag36h11": summary(0.5, 240.0, 0.04, 0.005)})
@@ -70,6 +70,7 @@ def test_a_small_study_writes_its_page_and_numbers(tmp_path: Path) -> None:
         assert summary["rotation_rmse_deg_clean"] < 0.2
     calibration = document["calibrations"][0]
     assert calibration["registered"] == calibration["cameras"] == 3
+    assert 0 < calibration["msm_centre_rms_px"] < 0.3
     text = page.read_text(encoding="utf-8")
     assert '<meta name="viewport"' in text and "Recommendation" in text and text.count("<img ") == 7
     assert all(not (isinstance(v, float) and math.isnan(v)) for row in document["images"] for v in row.values())
