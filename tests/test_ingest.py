@@ -139,7 +139,7 @@ def test_detections_come_from_clean_frames_only(aruco, aruco_results):
         assert raw["patterns_dropped"] == 0
         # Frames between the codes that show no pattern to detect are never converted.
         assert raw["frames_converted"] < raw["frames_decoded"]
-        assert raw["frames_detected"] <= IngestOptions().average_frames * len(sequence.patterns)
+        assert raw["frames_detected"] <= len(sequence.patterns)
 
 
 def test_merged_centre_is_the_mean_of_the_kept_scales(aruco_results):
@@ -156,21 +156,15 @@ def test_merged_centre_is_the_mean_of_the_kept_scales(aruco_results):
             assert np.all(records["deviation_px"][mine & ~records["kept"]] > options.max_deviation_px)
 
 
-def test_single_frames_stay_accurate(aruco):
-    """One frame per pattern instead of the default average of three."""
+def test_averaged_frames_stay_accurate(aruco):
     out, sequence, truth = aruco
-    result = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(average_frames=1),
+    result = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(average_frames=3),
                     progress=False)
     counts = np.concatenate([c.raw["records"]["frame_count"] for c in result.cameras.values()])
-    assert counts.max() == 1
-    check_accuracy({True: result}, truth)
-
-
-def test_frames_are_averaged_by_default(aruco_results):
-    counts = np.concatenate([c.raw["records"]["frame_count"] for c in aruco_results[True].cameras.values()])
     # As many as the camera records clean, up to three (the test room shows each pattern
     # for only 3 projector frames).
-    assert 1 < counts.max() <= IngestOptions().average_frames == 3
+    assert 1 < counts.max() <= 3
+    check_accuracy({True: result}, truth)
 
 
 def test_scales_a_camera_cannot_resolve_are_skipped(aruco, aruco_results):

@@ -62,8 +62,10 @@ class IngestOptions:
             only with the exposure.
         margin: projector frames kept clear of each pattern change, on either side.
         average_frames: clean frames averaged per pattern before detection (the most
-            central ones; fewer where the camera records fewer): averaging lowers the
-            sensor and compression noise that limits the centres under room light.
+            central ones; fewer where the camera records fewer). Three lower the sensor
+            and compression noise that limits the centres under strong room light, but
+            have been seen to cost a 60 fps camera on a strongly textured floor its
+            markers; one is the default.
         spare_frames: further clean frames per pattern, after the first picked one, that
             stand in for picked frames the camera dropped.
         max_clock_drift: largest relative camera clock drift; widens the frames kept
@@ -205,7 +207,7 @@ class IngestOptions:
     gain_drift: bool = True
     exposure_s: float = 0.0
     margin: float = 0.1
-    average_frames: int = 3
+    average_frames: int = 1
     spare_frames: int = 2
     max_clock_drift: float = 2e-4
     use_roi: bool = True
