@@ -44,16 +44,19 @@ def test_local_pool_keeps_the_order_and_cluster_addresses_are_checked() -> None:
 
 
 def test_recommendation_follows_the_measurements() -> None:
-    def summary(small, ms, error, rot):
-        return {"found_share_at_15px_or_less": small, "ms_per_frame": ms, "centre_rms_px_at_20px_or_more": error,
-                "rotation_rmse_deg_clean": rot, "msm_centre_rms_px_clean": None}
+    def summary(side90, at15, ms):
+        return {"smallest_side_px_found_90": side90, "found_share_at_15px": at15, "ms_per_frame": ms,
+                "centre_rms_px_at_20px_or_more": 0.05, "rotation_rmse_deg_clean": 0.005,
+                "msm_centre_rms_px_clean": 0.04}
 
-    lines = recommendation({"aruco:4X4_50": summary(0.2, 60.0, 0.05, 0.004),
-                            "apriltag:tag36h11": summary(0.5, 240.0, 0.04, 0.005)})
-    assert lines[0].startswith("Small markers (at most 15 px): apriltag:tag36h11 finds the most, 50 %")
+    lines = recommendation({"aruco:4X4_50": summary(25.0, 0.4, 60.0), "apriltag:tag36h11": summary(20.0, 0.5, 240.0)})
+    assert lines[0].startswith("Small markers: apriltag:tag36h11 resolves the smallest")
     assert "aruco:4X4_50 detects a frame in 60 ms, 4.0x faster" in lines[1]
-    assert lines[-1].startswith("Choose apriltag:tag36h11 where cameras see the markers at 15 px or less")
-    both = recommendation({"a:x": summary(0.6, 50.0, None, None), "b:y": summary(0.2, 90.0, None, None)})
+    assert lines[-1].startswith("Choose apriltag:tag36h11 where cameras see the markers small (90 % found from 20 px")
+    # The same side and shares a few markers apart: no family stands out for small markers.
+    even = recommendation({"a:x": summary(20.0, 0.45, 50.0), "b:y": summary(20.0, 0.40, 90.0)})
+    assert not any(line.startswith(("Small markers", "Choose")) for line in even)
+    both = recommendation({"a:x": summary(15.0, 0.9, 50.0), "b:y": summary(20.0, 0.5, 90.0)})
     assert both[-1] == "Choose a:x: it finds more small markers and is faster."
 
 

@@ -21,9 +21,10 @@ from calibproj.version import __version__
 
 STUDY_KIND = "study"
 STUDY_MAJOR = 1
-SMALL_PX = 15.0  # "small markers": this side or less
+SMALL_PX = 15.0  # "small markers": the side the sweeps always measure
 LARGE_PX = 20.0  # centre accuracy is judged from this side up
 FOUND_SHARE = 0.9
+SMALL_MARGIN = 0.1  # shares of markers found closer than this do not tell families apart
 
 
 def mean_by(rows: list[dict], family: str, sweep: str, x: str, y: str) -> tuple[np.ndarray, np.ndarray]:
@@ -31,7 +32,8 @@ def mean_by(rows: list[dict], family: str, sweep: str, x: str, y: str) -> tuple[
     groups: dict[float, list[float]] = defaultdict(list)
     for row in rows:
         if row["family"] == family and row["sweep"] == sweep:
-            groups[float(row[x])].append(float(row[y]))
+            # None: a measurement study.json stores as null (NaN, no marker found).
+            groups[float(row[x])].append(math.nan if row[y] is None else float(row[y]))
     xs = np.array(sorted(groups))
     with np.errstate(all="ignore"):
         ys = np.array([np.nanmean(groups[v]) if np.any(np.isfinite(groups[v])) else np.nan for v in xs])
@@ -43,13 +45,13 @@ def family_summary(images: list[dict], calibrations: list[dict], family: str) ->
     sides, rates = mean_by(images, family, "side", "side_px", "rate")
     _, errors = mean_by(images, family, "side", "side_px", "centre_rms_px")
     reached = [float(s) for s, r in zip(sides, rates) if r >= FOUND_SHARE]
-    small = rates[sides <= SMALL_PX]
+    small = rates[sides == SMALL_PX]
     large = errors[(sides >= LARGE_PX) & np.isfinite(errors)]
     own = [r for r in images if r["family"] == family]
     clean = [c for c in calibrations if c["family"] == family and c["condition"] == "clean"]
     return {
         "smallest_side_px_found_90": min(reached) if reached else None,
-        "found_share_at_15px_or_less": float(np.nanmean(small)) if len(small) else None,
+        "found_share_at_15px": float(small[0]) if len(small) else None,
         "centre_rms_px_at_20px_or_more": float(np.sqrt(np.mean(large ** 2))) if len(large) else None,
         "ms_per_frame": float(np.median([r["ms"] for r in own])) if own else None,
         "false_detections": int(sum(r["false"] for r in own)),
@@ -68,6 +70,21 @@ def _finite(value: Any) -> Any:
     return None if _nan(value) else value
 
 
+def _best_at_small(resolve: dict[str, float], at_small: dict[str, float]) -> str | None:
+    """The family that resolves the smallest markers: the smallest side with 90 % found,
+    then the most found at SMALL_PX; None when no family stands out by either (less than
+    SMALL_MARGIN apart at SMALL_PX)."""
+    if len(resolve) >= 2 and len(set(resolve.values())) > 1:
+        ordered = sorted(resolve, key=lambda f: (resolve[f], -at_small.get(f, 0.0)))
+        if resolve[ordered[0]] < resolve[ordered[1]]:
+            return ordered[0]
+    if len(at_small) >= 2:
+        ordered = sorted(at_small, key=at_small.get, reverse=True)
+        if at_small[ordered[0]] - at_small[ordered[1]] >= SMALL_MARGIN:
+            return ordered[0]
+    return None
+
+
 def _first(rows: list[dict], key: str) -> float | None:
     values = [r[key] for r in rows if r.get(key) is not None and not _nan(r[key])]
     return float(values[0]) if values else None
@@ -82,13 +99,15 @@ def recommendation(summary: dict[str, dict]) -> list[str]:
     faster, how accurate both are, and how the calibrations compare."""
     families = list(summary)
     lines = []
-    small = {f: s["found_share_at_15px_or_less"] for f, s in summary.items()
-             if s["found_share_at_15px_or_less"] is not None}
-    if len(small) >= 2:
-        best = max(small, key=small.get)
-        others = ", ".join(f"{f} {100 * v:.0f} %" for f, v in small.items() if f != best)
-        lines.append(f"Small markers (at most {SMALL_PX:g} px): {best} finds the most, {100 * small[best]:.0f} % "
-                     f"of them (vs {others}).")
+    resolve = {f: s["smallest_side_px_found_90"] for f, s in summary.items()
+               if s["smallest_side_px_found_90"] is not None}
+    at_small = {f: s["found_share_at_15px"] for f, s in summary.items() if s["found_share_at_15px"] is not None}
+    small_best = _best_at_small(resolve, at_small)
+    if small_best is not None:
+        sides = ", ".join(f"{f} {v:g} px" for f, v in resolve.items())
+        shares = ", ".join(f"{f} {100 * v:.0f} %" for f, v in at_small.items())
+        lines.append(f"Small markers: {small_best} resolves the smallest (90 % of the markers found from: {sides}; "
+                     f"found at {SMALL_PX:g} px: {shares}).")
     speed = {f: s["ms_per_frame"] for f, s in summary.items() if s["ms_per_frame"]}
     if len(speed) >= 2:
         fastest = min(speed, key=speed.get)
@@ -107,12 +126,14 @@ def recommendation(summary: dict[str, dict]) -> list[str]:
     if len(clean) >= 2:
         rotations = ", ".join(f"{f} {v:.4f} deg" for f, v in clean.items())
         lines.append(f"Calibration of the room (clean): {rotations}.")
-    if len(small) >= 2 and len(speed) >= 2:
-        best_small = max(small, key=small.get)
+    if small_best is not None and len(speed) >= 2:
+        best_small = small_best
         fastest = min(speed, key=speed.get)
         if best_small != fastest:
-            lines.append(f"Choose {best_small} where cameras see the markers at {SMALL_PX:g} px or less "
-                         f"(wide views, high mounts); {fastest} otherwise, for its speed.")
+            where = (f"90 % found from {resolve[best_small]:g} px" if best_small in resolve
+                     else f"{100 * at_small[best_small]:.0f} % found at {SMALL_PX:g} px")
+            lines.append(f"Choose {best_small} where cameras see the markers small ({where}: wide views, "
+                         f"high mounts); {fastest} otherwise, for its speed.")
         else:
             lines.append(f"Choose {best_small}: it finds more small markers and is faster.")
     return lines
@@ -203,11 +224,11 @@ def _calibration_bars(calibrations: list[dict], families: tuple[str, ...], dpi: 
 def _page(summary: dict[str, dict], advice: list[str], plots: list[tuple[str, bytes]], calibrations: list[dict],
           settings: dict[str, Any]) -> str:
     rows = ["<tr><th class=\"name\">family</th><th>smallest side with 90 % found [px]</th>"
-            "<th>found at &le; 15 px</th><th>centre RMS at &ge; 20 px [px]</th><th>ms per frame</th>"
+            "<th>found at 15 px</th><th>centre RMS at &ge; 20 px [px]</th><th>ms per frame</th>"
             "<th>false detections</th><th>MSM centre RMS in the room, clean [px]</th>"
             "<th>rotation RMSE, clean [deg]</th><th>evaluation, clean [px]</th></tr>"]
     for family, s in summary.items():
-        cells = [_cell(s["smallest_side_px_found_90"], "{:g}"), _cell(s["found_share_at_15px_or_less"], "{:.0%}"),
+        cells = [_cell(s["smallest_side_px_found_90"], "{:g}"), _cell(s["found_share_at_15px"], "{:.0%}"),
                  _cell(s["centre_rms_px_at_20px_or_more"], "{:.3f}"), _cell(s["ms_per_frame"], "{:.0f}"),
                  str(s["false_detections"]), _cell(s["msm_centre_rms_px_clean"], "{:.3f}"),
                  _cell(s["rotation_rmse_deg_clean"], "{:.4f}"),
