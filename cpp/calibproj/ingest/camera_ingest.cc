@@ -272,7 +272,8 @@ class CameraIngest {
       const double readout_bound = sync->readout.valid
                                        ? std::abs(sync->readout.readout) + 2.0 * sync->readout.readout_sigma
                                        : options_.unmeasured_readout_frames;
-      sync->offset_uncertainty = std::max(sync->offset_uncertainty, 0.5 * readout_bound);
+      // Added, not the larger of the two: the middle rows' offset is itself uncertain.
+      sync->offset_uncertainty += 0.5 * readout_bound;
       return;
     }
     sync->readout.applied = true;

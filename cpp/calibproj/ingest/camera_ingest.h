@@ -96,7 +96,7 @@ struct IngestOptions {
   double max_readout_sigma = 0.1;
   // A readout that could not be measured (no band sees a light change) may be anything
   // up to this many camera frames: the offset, which then refers to rows near the middle,
-  // is reported uncertain by half of it (0 assumes a global shutter).
+  // has its uncertainty widened by half of it (0 assumes a global shutter).
   double unmeasured_readout_frames = 1.0;
   // Decoded grey frames kept while the start code is being looked for.
   int lookback_frames = 16;
