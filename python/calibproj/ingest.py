@@ -432,10 +432,8 @@ def _intrinsics_for(intrinsics: Any, name: str) -> tuple[Intrinsics | None, str]
             return None, f"no intrinsics for camera {name!r} (cameras with intrinsics: {', '.join(sorted(intrinsics))})"
         if isinstance(entry, Intrinsics):
             return entry, f"intrinsics of {name}"
-        path = Path(entry)
     try:
-        if not isinstance(intrinsics, Mapping):
-            path = intrinsics_file(intrinsics, name)
+        path = Path(entry) if isinstance(intrinsics, Mapping) else intrinsics_file(intrinsics, name)
         return read_intrinsics(path, name), str(path)
     except FormatError as error:
         return None, str(error)
