@@ -103,12 +103,13 @@ def _run(out: Path, options: DemoOptions, progress: bool,
         out / "room" / "videos", out / "room" / "intrinsics", sequence=out / "sequence" / "sequence.json",
         out=results, options=RegistrationOptions(model=options.model), scale=f"marker-size:{marker_side_m:.9f}",
         exports=["yaml", "colmap", "anipose"], progress=progress, command=command,
+        report=False,  # drawn once below, with the evaluation
     )
     seconds["calibrate"] = time.perf_counter() - start
     comparison = compare(results / "camera_poses.json", out / "room" / "truth.json")
     evaluation = evaluate(results, out / "room" / "eval_tracks.json")
     evaluation.save(results, path_as_recorded(out / "room" / "eval_tracks.json", results))
-    write_report(results)  # again, with the evaluation
+    write_report(results)
     return comparison, evaluation, calibration, seconds
 
 
