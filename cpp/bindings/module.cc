@@ -29,4 +29,6 @@ PYBIND11_MODULE(_core, m) {
   calibproj::bindings::register_sync(sync);
   auto ingest = m.def_submodule("ingest", "One camera's video to MSM centres (sync, frame picking, detection)");
   calibproj::bindings::register_ingest(ingest);
+  auto selfcal = m.def_submodule("selfcal", "Lenses refined with the poses from points on the floor");
+  calibproj::bindings::register_selfcal(selfcal);
 }

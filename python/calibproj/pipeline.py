@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,9 @@ from calibproj.io.output_folder import OutputFolder
 from calibproj.registration import RegistrationOptions
 from calibproj.registration import calibrate as register
 from calibproj.provenance import provenance, write_provenance
+from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
+from calibproj.self_calibration import (RefineRequest, SelfCalibrationOptions, convert_tracks, self_calibrate,
+                                        write_self_calibration)
 from calibproj.results import CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, TRACKS_FILE
 from calibproj.tracks import Tracks
 
@@ -48,6 +51,8 @@ def calibrate(
     workers: int = 2,
     progress: bool = True,
     command: list[str] | None = None,
+    refine_intrinsics: str | Sequence[str] | None = None,
+    self_calibration_options: SelfCalibrationOptions | None = None,
 ) -> Calibration:
     """Calibrate a camera network and, with ``out``, write its results folder.
 
@@ -68,11 +73,19 @@ def calibrate(
         ingest_options, detector_options, workers, progress: passed to
             ``calibproj.ingest.ingest`` when ``source`` is videos.
         command: the command line to record in ``provenance.json`` (None: a Python call).
+        refine_intrinsics: lens entries to refine from the projection itself
+            (``calibproj.self_calibration``), e.g. ``"focal,k1,k2"`` for every camera or
+            ``["focal,k1,k2", "ceiling=none"]``; the intrinsics given are the start. The
+            refined intrinsics are the ones in ``intrinsics/``, ``tracks.json`` is
+            undistorted with them, and ``self_calibration.json`` says, per camera, what was
+            refined or held and why. None (default): the intrinsics given are used as they are.
+        self_calibration_options: knobs of that refinement (``SelfCalibrationOptions``).
     """
     from calibproj.export import parse_formats
     from calibproj.scale import check_measurement, parse_scale, scale_factor, scaled
 
     formats = parse_formats(",".join(exports)) if exports else []
+    request = RefineRequest.parse(refine_intrinsics) if refine_intrinsics else None
     measurement = parse_scale(scale) if scale else None
     if measurement is not None and measurement.kind == "marker-size" and sequence is None:
         raise ValueError(f"--scale {scale}: marker-size needs --sequence (the projection's sequence.json)")
@@ -80,6 +93,8 @@ def calibrate(
     if measurement is not None and videos is not None:  # before the long ingest
         check_measurement(measurement, video_camera_names(videos),
                           _projected_markers(sequence, None) if measurement.kind == "marker-size" else None)
+    if request is not None and videos is not None:
+        request.check_cameras(video_camera_names(videos))
     folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
         intrinsics_source = intrinsics
@@ -97,6 +112,10 @@ def calibrate(
         if measurement is not None:
             check_measurement(measurement, tracks.camera_names, markers)
         calibration = register(tracks, intrinsics, options, left_out=left_out)
+        self_calibration = None
+        if request is not None:
+            calibration, tracks, intrinsics, self_calibration = _self_calibrate(
+                tracks, intrinsics, calibration, request, self_calibration_options, options, left_out)
         scale_error, scale_source = None, None
         if measurement is not None and calibration.registered:
             try:
@@ -117,6 +136,8 @@ def calibrate(
                 write_provenance(staging, record)  # first: the report shows it
                 _write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,
                                ingest_result)
+                if self_calibration is not None:
+                    write_self_calibration(staging / SELF_CALIBRATION_FILE, *self_calibration)
             folder.commit()
             logger.info("results written to %s", folder.path)
         if scale_error is not None:
@@ -125,6 +146,21 @@ def calibrate(
         if folder is not None:
             folder.abort()  # nothing to do after the commit
     return calibration
+
+
+def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration: Calibration,
+                    request: RefineRequest, options: SelfCalibrationOptions | None,
+                    registration: RegistrationOptions | None, left_out: Mapping[str, str]):
+    """The calibration registered again with intrinsics refined from the first one:
+    ``(calibration, tracks, intrinsics, (self-calibration, given intrinsics, options))``."""
+    options = options or SelfCalibrationOptions()
+    if not calibration.registered:
+        return calibration, tracks, given, None
+    threads = registration.num_threads if registration is not None else 1
+    result = self_calibrate(tracks, given, calibration, request, options, num_threads=threads)
+    refined_tracks = convert_tracks(tracks, given, result.intrinsics)
+    calibration = register(refined_tracks, result.intrinsics, registration, left_out=left_out)
+    return calibration, refined_tracks, result.intrinsics, (result, given, options)
 
 
 def _videos_folder(source: Tracks | str | os.PathLike) -> Path | None:

@@ -35,6 +35,7 @@ from calibproj.commands.options import add_dataclass_arguments, dataclass_from_a
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from calibproj.registration import RegistrationOptions
+    from calibproj.self_calibration import SelfCalibrationOptions
 
     parser.add_argument("videos", nargs="?", metavar="VIDEOS_DIR", help="folder of camera videos (<camera>.mp4)")
     parser.add_argument("--tracks", metavar="FILE", help="tracks.json to calibrate from, instead of videos")
@@ -51,7 +52,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
     parser.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument("--refine-intrinsics", action="append", metavar="[CAMERA=]ENTRIES",
+                        help="refine these lens entries from the projection itself, starting from the "
+                             "intrinsics given: focal, pp, k1, k2, k3, tangential, or none; for every camera "
+                             "(focal,k1,k2) or one (ceiling=none); repeatable. Entries the data do not "
+                             "determine keep their given values and are reported (see self_calibration.json)")
     add_dataclass_arguments(parser, RegistrationOptions, "registration options")
+    add_dataclass_arguments(parser, SelfCalibrationOptions, "self-calibration options (with --refine-intrinsics)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from calibproj.calibration import calibration_summary
     from calibproj.pipeline import calibrate
     from calibproj.registration import RegistrationOptions
+    from calibproj.self_calibration import SelfCalibrationOptions
 
     if (args.videos is None) == (args.tracks is None):
         raise ValueError("give either VIDEOS_DIR (with --sequence) or --tracks FILE")
@@ -79,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
         progress=not args.no_progress,
         command=getattr(args, "command_line", None),
+        refine_intrinsics=args.refine_intrinsics,
+        self_calibration_options=dataclass_from_args(SelfCalibrationOptions, args),
     )
     rows = calibration_summary(calibration)
     if args.json:

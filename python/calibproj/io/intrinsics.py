@@ -316,11 +316,18 @@ def _only_file(directory: Path, name: str, paths: list[Path]) -> Path:
 
 
 def _from_our_json(path: Path, name: str) -> Intrinsics:
-    document = read_json(path, SCHEMA_KIND, SCHEMA_MAJOR)
+    return intrinsics_from_json(read_json(path, SCHEMA_KIND, SCHEMA_MAJOR), name, path)
+
+
+def intrinsics_from_json(document: Any, name: str, where: str | os.PathLike) -> Intrinsics:
+    """The intrinsics of the body of our format (``Intrinsics.to_json``); FormatError
+    naming ``where`` and the problem."""
+    if not isinstance(document, dict):
+        raise FormatError(f"{where}: expected an object with resolution, K and dist")
     for key in ("resolution", "K"):
         if key not in document:
-            raise FormatError(f"{path}: missing field {key!r}")
-    return _build(path, name, document["K"], document.get("dist", []), document["resolution"])
+            raise FormatError(f"{where}: missing field {key!r}")
+    return _build(Path(where), name, document["K"], document.get("dist", []), document["resolution"])
 
 
 def _from_reference_json(path: Path, document: dict[str, Any], name: str) -> Intrinsics:

@@ -1,0 +1,131 @@
+// Bindings of calibproj::selfcal: numpy arrays in, a dict of numpy arrays out.
+
+#include <pybind11/eigen.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "calibproj/selfcal/planar_cost.h"
+#include "calibproj/selfcal/self_calibration.h"
+#include "checks.h"
+#include "convert.h"
+#include "registry.h"
+
+namespace py = pybind11;
+
+namespace calibproj::bindings {
+
+namespace {
+
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+template <typename Matrix>
+Matrix Rows(const RowMatrix& array, int cols, const std::string& what) {
+  if (array.cols() != cols && array.size() > 0) {
+    throw std::invalid_argument(what + ": expected shape (N, " + std::to_string(cols) + "), got (" +
+                                std::to_string(array.rows()) + ", " + std::to_string(array.cols()) + ")");
+  }
+  Matrix out(array.rows(), cols);
+  if (array.size() > 0) out = array;
+  return out;
+}
+
+std::vector<selfcal::LensShape> Shapes(const RowMatrix& shapes) {
+  const auto rows = Rows<Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>>(shapes, 2, "shapes");
+  std::vector<selfcal::LensShape> out(rows.rows());
+  for (int c = 0; c < rows.rows(); ++c) out[c] = {rows(c, 0), rows(c, 1)};
+  return out;
+}
+
+py::dict SelfCalibratePy(const Eigen::VectorXi& camera_index, const Eigen::VectorXi& point_index,
+                         const RowMatrix& observed, const RowMatrix& lenses, const RowMatrix& shapes,
+                         const std::vector<std::vector<int>>& refine, const RowMatrix& poses, const RowMatrix& points,
+                         const std::string& loss, double loss_scale, int max_iterations, int num_threads,
+                         bool compute_covariance) {
+  selfcal::Options options;
+  options.loss = ParseLoss(loss);
+  options.loss_scale_px = loss_scale;
+  options.max_iterations = max_iterations;
+  options.num_threads = num_threads;
+  options.compute_covariance = compute_covariance;
+  selfcal::Data data;
+  data.camera_index = camera_index;
+  data.point_index = point_index;
+  data.observed = Rows<ba::PixelMatrix>(observed, 2, "observed");
+  data.lenses = Rows<selfcal::LensMatrix>(lenses, selfcal::kLensSize, "lenses");
+  data.shapes = Shapes(shapes);
+  data.refine = refine;
+  data.poses = Rows<ba::PoseMatrix>(poses, 6, "poses");
+  data.points = Rows<selfcal::FloorMatrix>(points, 2, "points");
+  selfcal::Result result;
+  {
+    py::gil_scoped_release release;
+    result = selfcal::SelfCalibrate(data, options);
+  }
+  py::dict out;
+  out["initial_cost"] = result.initial_cost;
+  out["final_cost"] = result.final_cost;
+  out["iterations"] = result.iterations;
+  out["termination"] = result.termination;
+  out["usable"] = result.usable;
+  out["gauge_points"] = Eigen::VectorXi(result.gauge_points);
+  out["lenses"] = result.lenses;
+  out["poses"] = result.poses;
+  out["points"] = result.points;
+  out["residuals"] = result.residuals;
+  out["noise_px"] = result.noise_px;
+  const auto cameras = static_cast<py::ssize_t>(result.lens_covariances.size());
+  py::array_t<double> covariances({cameras, py::ssize_t{selfcal::kLensSize}, py::ssize_t{selfcal::kLensSize}});
+  auto cov = covariances.mutable_unchecked<3>();
+  for (py::ssize_t c = 0; c < cameras; ++c) {
+    for (int i = 0; i < selfcal::kLensSize; ++i) {
+      for (int j = 0; j < selfcal::kLensSize; ++j) cov(c, i, j) = result.lens_covariances[c](i, j);
+    }
+  }
+  out["lens_covariances"] = covariances;
+  return out;
+}
+
+}  // namespace
+
+void register_selfcal(py::module_& m) {
+  m.attr("lens_size") = selfcal::kLensSize;
+  m.def("self_calibrate", &SelfCalibratePy, py::arg("camera_index"), py::arg("point_index"), py::arg("observed"),
+        py::arg("lenses"), py::arg("shapes"), py::arg("refine"), py::arg("poses"), py::arg("points"), py::kw_only(),
+        py::arg("loss") = "none", py::arg("loss_scale") = 1.0, py::arg("max_iterations") = 100,
+        py::arg("num_threads") = 1, py::arg("compute_covariance") = true,
+        R"doc(Poses, floor points and lenses refined together (Ceres), from raw pixels.
+
+Observations: camera_index (N,), point_index (N,), observed (N, 2) raw pixels.
+lenses (C, 8) [f, cx, cy, k1, k2, p1, p2, k3]; shapes (C, 2) [fy/fx, skew/fx];
+refine: per camera the lens entries (indices into the 8) that move; poses (C, 6)
+cam_from_floor [angle-axis, t]; points (P, 2) on the floor z = 0. Two points fix the
+floor's gauge. Returns a dict with the refined lenses, poses, points, residuals (N, 2),
+noise_px (C,) and, if compute_covariance, lens_covariances (C, 8, 8) in each camera's
+measured noise. Bad input raises ValueError naming the problem. Releases the GIL.)doc");
+  m.def(
+      "evaluate_planar_lens_cost",
+      [](const Eigen::VectorXd& shape, const Eigen::VectorXd& observed, const Eigen::VectorXd& pose,
+         const Eigen::VectorXd& point, const Eigen::VectorXd& lens) {
+        if (shape.size() != 2 || observed.size() != 2 || pose.size() != 6 || point.size() != 2 ||
+            lens.size() != selfcal::kLensSize) {
+          throw std::invalid_argument("expected shape (2,), observed (2,), pose (6,), point (2,), lens (8,)");
+        }
+        const selfcal::PlanarLensCost cost({shape(0), shape(1)}, observed);
+        const double* blocks[3] = {pose.data(), point.data(), lens.data()};
+        Eigen::Matrix<double, 2, 6, Eigen::RowMajor> J_pose;
+        Eigen::Matrix<double, 2, 2, Eigen::RowMajor> J_point;
+        selfcal::LensJacobian J_lens;
+        double* jacobians[3] = {J_pose.data(), J_point.data(), J_lens.data()};
+        Eigen::Vector2d residual;
+        const bool ok = cost.Evaluate(blocks, residual.data(), jacobians);
+        return py::make_tuple(ok, residual, RowMatrix(J_pose), RowMatrix(J_point), RowMatrix(J_lens));
+      },
+      py::arg("shape"), py::arg("observed"), py::arg("pose"), py::arg("point"), py::arg("lens"),
+      "Diagnostics: (ok, residual, J_pose, J_point, J_lens) of the floor-point lens cost.");
+}
+
+}  // namespace calibproj::bindings

@@ -1,0 +1,516 @@
+"""Self-calibration: each camera's focal length and lens distortion from the projection.
+
+The projected floor points seen by several cameras determine the cameras' intrinsics
+as well as their poses (planar self-calibration: the floor's circular points are shared
+by every camera, so each tilted view constrains its camera's focal length, and rows of
+markers that are straight on the floor constrain the distortion). This stage takes a
+calibration made with nominal intrinsics and refines, in one Ceres problem, the poses,
+the floor points and the requested lens entries of every registered camera, from the
+raw (distorted) pixels (``calibproj._core.selfcal``: analytic Jacobians).
+
+Observability comes from the covariance of the solution: a requested group of entries
+(focal length, principal point, distortion) that the data do not determine, e.g. for
+a camera looking nearly straight down or zoomed onto a small patch of floor, keeps its
+given values and is reported; the others are solved again with it held.
+
+Entries (``--refine-intrinsics``): ``focal`` (fx and fy together, their ratio kept),
+``pp`` (cx, cy), ``k1``, ``k2``, ``k3``, ``tangential`` (p1, p2); ``none``. The model
+refined is OpenCV's 5-coefficient one; a camera whose given distortion has more
+coefficients in use is refused.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
+
+import cv2
+import numpy as np
+
+from calibproj import _core
+from calibproj.calibration import Calibration
+from calibproj.io.intrinsics import Intrinsics, intrinsics_from_json
+from calibproj.io.jsonio import FormatError, read_json, write_json
+from calibproj.tracks import Tracks
+
+logger = logging.getLogger(__name__)
+
+# Entries of a lens block, in the order of calibproj._core.selfcal.
+LENS_ENTRIES = ("focal", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+# Names a user gives, the lens entries each stands for and the group it belongs to.
+REFINABLE = {
+    "focal": ((0,), "focal"),
+    "pp": ((1, 2), "principal point"),
+    "k1": ((3,), "distortion"),
+    "k2": ((4,), "distortion"),
+    "k3": ((7,), "distortion"),
+    "tangential": ((5, 6), "distortion"),
+}
+GROUPS = ("focal", "principal point", "distortion")
+# Entries are freed in stages, each kept only if the data determine it: the most
+# robust first; a free principal point, k3 and tangential terms make a partial view's
+# problem ill-conditioned and are tried last.
+STAGES = (("focal", "k1"), ("k2",), ("k3",), ("tangential",), ("pp",))
+ALL_CAMERAS = "*"
+DISTORTION_ENTRIES = (3, 4, 5, 6, 7)
+
+
+@dataclass(frozen=True)
+class RefineRequest:
+    """Which lens entries to refine, per camera (``ALL_CAMERAS`` for the rest)."""
+
+    entries: Mapping[str, tuple[str, ...]]
+
+    @classmethod
+    def parse(cls, values: str | Sequence[str]) -> RefineRequest:
+        """From ``"focal,k1,k2"`` (every camera) and/or ``"CAMERA=focal,k1"`` items;
+        ``"CAMERA=none"`` holds that camera. ValueError naming the bad item."""
+        items = [values] if isinstance(values, str) else list(values)
+        entries: dict[str, tuple[str, ...]] = {}
+        for item in items:
+            camera, _, names = item.rpartition("=")
+            camera = camera.strip() or ALL_CAMERAS
+            chosen = tuple(dict.fromkeys(n.strip() for n in names.split(",") if n.strip()))
+            if not chosen:
+                raise ValueError(f"--refine-intrinsics {item!r}: no entry named (use e.g. focal,k1,k2)")
+            if chosen == ("none",):
+                chosen = ()
+            unknown = [n for n in chosen if n not in REFINABLE]
+            if unknown:
+                raise ValueError(f"--refine-intrinsics {item!r}: unknown entry {unknown[0]!r} "
+                                 f"(known: {', '.join(REFINABLE)}, none)")
+            if camera in entries:
+                raise ValueError(f"--refine-intrinsics: camera {camera!r} given twice")
+            entries[camera] = chosen
+        return cls(entries)
+
+    def of(self, camera: str) -> tuple[str, ...]:
+        return self.entries.get(camera, self.entries.get(ALL_CAMERAS, ()))
+
+    def cameras_named(self) -> list[str]:
+        return [name for name in self.entries if name != ALL_CAMERAS]
+
+    def check_cameras(self, camera_names: Sequence[str]) -> None:
+        """ValueError when the request names a camera that is not among ``camera_names``."""
+        unknown = [name for name in self.cameras_named() if name not in camera_names]
+        if unknown:
+            raise ValueError(f"--refine-intrinsics: no camera named {unknown[0]!r} "
+                             f"(cameras: {', '.join(camera_names) or 'none'})")
+
+
+@dataclass
+class SelfCalibrationOptions:
+    """Knobs of the self-calibration.
+
+    Attributes:
+        max_focal_sigma: the focal length counts as determined when its 1-sigma
+            uncertainty is at most this share of it.
+        max_principal_point_sigma_px: the principal point counts as determined when the
+            1-sigma uncertainty of cx and cy is at most this many pixels (or the camera's
+            noise, if larger).
+        max_distortion_sigma_px: the distortion counts as determined when the 1-sigma
+            uncertainty of the displacement it causes stays below this many pixels (or
+            distortion_sigma_noise_ratio times the camera's noise, if larger) wherever
+            the camera saw the floor (elsewhere in the image nothing measured it).
+        distortion_sigma_noise_ratio: see max_distortion_sigma_px; the noise is the RMS
+            of one residual coordinate.
+        min_chi2_drop: an entry is kept only if freeing it lowers its camera's sum of
+            squared residuals by at least this many times the camera's noise variance
+            (25: a 5-sigma improvement), so that entries which only fit noise stay held.
+        first_loss_scale_px: Cauchy scale of the first solve, whose start may be far
+            off (tens of pixels at the image corners).
+        outlier_gate_px: after the first solve an observation is kept when its residual
+            is below this many pixels or outlier_gate_sigma_factor times its camera's
+            robust noise, whichever is larger.
+        outlier_gate_sigma_factor: see outlier_gate_px.
+        lens_solver_iterations: iterations of each Ceres solve.
+        max_sampled_points: observations per camera where the distortion's uncertainty
+            is sampled.
+    """
+
+    max_focal_sigma: float = 0.002
+    max_principal_point_sigma_px: float = 1.0
+    max_distortion_sigma_px: float = 0.1
+    distortion_sigma_noise_ratio: float = 1.0
+    min_chi2_drop: float = 25.0
+    first_loss_scale_px: float = 2.0
+    outlier_gate_px: float = 3.0
+    outlier_gate_sigma_factor: float = 4.0
+    lens_solver_iterations: int = 200
+    max_sampled_points: int = 500
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                raise ValueError(f"self-calibration option {f.name} must be a positive number, got {value!r}")
+
+
+@dataclass
+class LensReport:
+    """What the self-calibration did to one camera."""
+
+    camera: str
+    requested: list[str]
+    refined: list[str] = field(default_factory=list)  # entries changed from the given values
+    held: dict[str, str] = field(default_factory=dict)  # entry -> why its given value was kept
+    focal_sigma: float | None = None  # pixels
+    principal_point_sigma_px: float | None = None
+    distortion_sigma_px: float | None = None  # worst over the image
+    noise_px: float | None = None  # RMS of one residual coordinate
+    observations: int = 0
+    given: dict[str, float] = field(default_factory=dict)
+    result: dict[str, float] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class SelfCalibration:
+    """Refined intrinsics (every camera of the input; unchanged where nothing was refined)
+    and one report per camera that was asked for."""
+
+    intrinsics: dict[str, Intrinsics]
+    reports: dict[str, LensReport]
+
+
+def check_request(request: RefineRequest, intrinsics: Mapping[str, Intrinsics],
+                  camera_names: Sequence[str]) -> dict[str, str]:
+    """Cameras whose lens cannot be refined, with the reason (named in the request but
+    unknown cameras raise ValueError)."""
+    request.check_cameras(camera_names)
+    refused = {}
+    for name in camera_names:
+        if request.of(name) and name in intrinsics:
+            dist = intrinsics[name].dist
+            if dist.size > 5 and np.any(dist[5:] != 0.0):
+                refused[name] = (f"its distortion uses {dist.size} coefficients; self-calibration refines "
+                                 "OpenCV's 5-coefficient model (k1, k2, p1, p2, k3)")
+    return refused
+
+
+def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
+                   request: RefineRequest, options: SelfCalibrationOptions | None = None,
+                   num_threads: int = 1) -> SelfCalibration:
+    """Refine the requested lens entries of the registered cameras of ``calibration``.
+
+    ``tracks`` are undistorted with ``intrinsics`` (the nominal values); the result's
+    intrinsics are to be used with tracks converted by ``convert_tracks``.
+    """
+    options = options or SelfCalibrationOptions()
+    refused = check_request(request, intrinsics, tracks.camera_names)
+    problem = _Problem.build(tracks, intrinsics, calibration, request, refused)
+    reports = {name: LensReport(name, list(request.of(name)), given=_lens_dict(problem.given[c]))
+               for c, name in enumerate(problem.cameras) if request.of(name)}
+    for name, reason in refused.items():
+        reports[name] = LensReport(name, list(request.of(name)), held={entry: reason for entry in request.of(name)})
+    if problem.empty:
+        return SelfCalibration(dict(intrinsics), reports)
+    solve = {"max_iterations": options.lens_solver_iterations, "num_threads": num_threads}
+    # A first robust solve with the first two stages' entries brings the residuals near the
+    # noise, so that gross outliers can be told apart; the stages then start over.
+    problem.refine = problem.stage_entries(STAGES[0] + STAGES[1], [[] for _ in problem.cameras])
+    problem.gate(problem.solve(loss="cauchy", loss_scale=options.first_loss_scale_px, **solve), options)
+    problem.refine = [[] for _ in problem.cameras]
+    problem.lenses = problem.given.copy()
+    solution = problem.solve(loss="none", loss_scale=1.0, **solve)
+    for stage in STAGES:
+        solution = _run_stage(problem, stage, solution, options, reports, solve)
+    refined = dict(intrinsics)
+    for c, name in enumerate(problem.cameras):
+        if name not in reports or name in refused:
+            continue
+        lens = solution["lenses"][c] if problem.refine[c] else problem.given[c]
+        refined[name] = _intrinsics_of(intrinsics[name], lens)
+        report = reports[name]
+        report.refined = [name for name in report.requested if name not in report.held]
+        report.result = _lens_dict(lens)
+        report.noise_px = float(solution["noise_px"][c])
+        report.observations = int(np.sum(problem.camera_index == c))
+        _log_report(report)
+    return SelfCalibration(refined, reports)
+
+
+def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: dict[str, Any], options: SelfCalibrationOptions,
+               reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any]:
+    """Frees the stage's requested entries and solves; a camera whose lens is then not
+    determined gets them held at their given values and the stage starts over from
+    where it began. Returns the last solution."""
+    before = problem.refine
+    start = (problem.poses.copy(), problem.points.copy(), problem.lenses.copy())
+    rejected: set[int] = set()
+    while True:
+        problem.refine = problem.stage_entries(stage, before, rejected)
+        if problem.refine == before:
+            return solution  # nothing (left) to free: the state is the one it began with
+        attempt = problem.solve(loss="none", loss_scale=1.0, **solve)
+        failing = {}
+        for c, name in enumerate(problem.cameras):
+            if problem.refine[c] != before[c]:
+                failing[c] = (problem.undetermined(c, attempt, options, reports[name])
+                              or problem.insignificant(c, solution, attempt, len(problem.refine[c]) - len(before[c]),
+                                                       options))
+        failing = {c: why for c, why in failing.items() if why}
+        if not failing:
+            return attempt
+        for c, why in failing.items():
+            rejected.add(c)
+            for entry in stage:
+                if entry in reports[problem.cameras[c]].requested:
+                    reports[problem.cameras[c]].held[entry] = why
+        problem.poses, problem.points, problem.lenses = (a.copy() for a in start)
+
+
+def convert_tracks(tracks: Tracks, given: Mapping[str, Intrinsics], refined: Mapping[str, Intrinsics]) -> Tracks:
+    """Tracks undistorted with ``given`` re-expressed as undistorted with ``refined``."""
+    xy = tracks.xy.copy()
+    for c, name in enumerate(tracks.camera_names):
+        if name not in given or name not in refined or given[name] is refined[name]:
+            continue
+        rows = tracks.camera_index == c
+        xy[rows] = refined[name].undistort_points(given[name].distort_points(tracks.xy[rows]))
+    return replace(tracks, xy=xy)
+
+
+@dataclass
+class _Problem:
+    """The arrays of ``_core.selfcal.self_calibrate`` and which entries move."""
+
+    cameras: list[str]
+    camera_index: np.ndarray
+    point_index: np.ndarray
+    observed: np.ndarray
+    given: np.ndarray  # (C, 8) lenses as given
+    shapes: np.ndarray
+    refine: list[list[int]]
+    poses: np.ndarray
+    points: np.ndarray
+    lenses: np.ndarray  # (C, 8) current values
+    requested: list[tuple[str, ...]]  # per camera, entry names asked for
+
+
+    @property
+    def empty(self) -> bool:
+        return len(self.camera_index) == 0 or not any(self.requested)
+
+    @classmethod
+    def build(cls, tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
+              request: RefineRequest, refused: Mapping[str, str]) -> _Problem:
+        cameras = [n for n in tracks.camera_names if n in calibration.poses and n in intrinsics]
+        kept = tracks.keep_cameras(cameras).with_min_track_length(2) if cameras else Tracks.empty([])
+        cameras = list(kept.camera_names)
+        camera_index, point_index, xy = kept.bundle_arrays()
+        observed = xy.copy()
+        for c, name in enumerate(cameras):
+            rows = camera_index == c
+            observed[rows] = intrinsics[name].distort_points(xy[rows])
+        poses = np.array([_pose_vector(*calibration.poses[n]) for n in cameras]).reshape(-1, 6)
+        points = _floor_points(kept, intrinsics, calibration)
+        requested = [() if name in refused else request.of(name) for name in cameras]
+        given = np.array([_lens_of(intrinsics[n]) for n in cameras]).reshape(-1, 8)
+        return cls(cameras, camera_index.astype(np.int32), point_index.astype(np.int32), observed, given,
+                   np.array([[i.K[1, 1] / i.K[0, 0], i.K[0, 1] / i.K[0, 0]] for i in map(intrinsics.get, cameras)]
+                            ).reshape(-1, 2),
+                   [[] for _ in cameras], poses, points, given.copy(), requested)
+
+    def solve(self, **kwargs: Any) -> dict[str, Any]:
+        solution = _core.selfcal.self_calibrate(self.camera_index, self.point_index, self.observed, self.lenses,
+                                                self.shapes, self.refine, self.poses, self.points, **kwargs)
+        self.lenses, self.poses, self.points = solution["lenses"], solution["poses"], solution["points"]
+        return solution
+
+    def gate(self, solution: dict[str, Any], options: SelfCalibrationOptions) -> None:
+        """Keeps the observations within the gate of their camera's noise, and the
+        points still seen twice."""
+        error = np.linalg.norm(solution["residuals"], axis=1)
+        noise = solution["noise_px"]
+        keep = np.isfinite(error)
+        for c in range(len(self.cameras)):
+            rows = self.camera_index == c
+            inliers = error[rows & keep]
+            sigma = 1.4826 * np.median(inliers) / np.sqrt(2.0) if len(inliers) else noise[c]
+            keep &= ~rows | (error < max(options.outlier_gate_px, options.outlier_gate_sigma_factor * sigma))
+        seen = np.bincount(self.point_index[keep], minlength=len(self.points))
+        keep &= seen[self.point_index] >= 2
+        used = np.unique(self.point_index[keep])
+        remap = np.full(len(self.points), -1, dtype=np.int32)
+        remap[used] = np.arange(len(used), dtype=np.int32)
+        self.camera_index, self.observed = self.camera_index[keep], self.observed[keep]
+        self.point_index = remap[self.point_index[keep]]
+        self.points = self.points[used]
+
+    def seen(self, camera: int, count: int) -> np.ndarray:
+        """Normalised coordinates (pinhole) of up to ``count`` of the camera's observations."""
+        rows = np.flatnonzero(self.camera_index == camera)
+        rows = rows[:: max(1, len(rows) // count)]
+        R = cv2.Rodrigues(self.poses[camera, :3])[0]
+        in_camera = self.points[self.point_index[rows]] @ R[:, :2].T + self.poses[camera, 3:]
+        return in_camera[:, :2] / in_camera[:, 2:]
+
+    def stage_entries(self, stage: tuple[str, ...], before: list[list[int]],
+                      rejected: set[int] = frozenset()) -> list[list[int]]:
+        """Per camera, the entries refined with the stage's requested ones added (not for
+        cameras in ``rejected``)."""
+        out = []
+        for c, entries in enumerate(before):
+            added = [] if c in rejected else [k for name in stage if name in self.requested[c]
+                                               for k in REFINABLE[name][0]]
+            out.append(sorted(set(entries) | set(added)))
+        return out
+
+    def insignificant(self, c: int, before: dict[str, Any], after: dict[str, Any], added: int,
+                      options: SelfCalibrationOptions) -> str | None:
+        """Why the entries just freed do not earn their place for camera ``c`` (its
+        residuals, in units of its noise, fell by less than ``min_chi2_drop`` per entry),
+        or None. Without this test an entry that only fits noise would be kept."""
+        rows = self.camera_index == c
+        variance = float(after["noise_px"][c]) ** 2
+        drop = (np.nansum(before["residuals"][rows] ** 2) - np.nansum(after["residuals"][rows] ** 2)) / variance
+        if drop >= options.min_chi2_drop * added:
+            return None
+        return (f"does not improve the fit: the residuals fell by {max(drop, 0.0):.1f} noise variances, "
+                f"less than {options.min_chi2_drop:g} per entry")
+
+    def undetermined(self, c: int, solution: dict[str, Any], options: SelfCalibrationOptions,
+                     report: LensReport) -> str | None:
+        """Why camera ``c``'s refined lens is not determined by the data (its worst group
+        against its limit), or None; records the groups' uncertainties in ``report``."""
+        lens = solution["lenses"][c]
+        sigmas = _group_sigmas(solution["lens_covariances"][c], lens, self.shapes[c],
+                               self.seen(c, options.max_sampled_points))
+        report.focal_sigma = sigmas.get("focal", report.focal_sigma)
+        report.principal_point_sigma_px = sigmas.get("principal point", report.principal_point_sigma_px)
+        report.distortion_sigma_px = sigmas.get("distortion", report.distortion_sigma_px)
+        limits = _limits(options, lens[0], float(solution["noise_px"][c]))
+        excess = {group: sigma / limits[group] for group, sigma in sigmas.items() if sigma > limits[group]}
+        if not excess:
+            return None
+        group = max(excess, key=excess.get)
+        unit = f"px ({sigmas[group] / lens[0]:.2%})" if group == "focal" else "px"
+        return f"not determined by the data: {group} 1 sigma {sigmas[group]:.3g} {unit} exceeds {limits[group]:.3g} px"
+
+
+def _limits(options: SelfCalibrationOptions, focal: float, noise_px: float) -> dict[str, float]:
+    """The largest 1-sigma uncertainty, in pixels, at which each group counts as determined."""
+    return {"focal": options.max_focal_sigma * focal,
+            "principal point": max(options.max_principal_point_sigma_px, noise_px),
+            "distortion": max(options.max_distortion_sigma_px, options.distortion_sigma_noise_ratio * noise_px)}
+
+
+def _group_sigmas(covariance: np.ndarray, lens: np.ndarray, shape: np.ndarray, seen: np.ndarray) -> dict[str, float]:
+    """1 sigma of each refined group: focal (px), principal point (px, worse axis) and
+    the distortion's displacement (px, worst over ``seen``, normalised coordinates of
+    the camera's observations: elsewhere in the image nothing measured it)."""
+    variances = np.diag(covariance)
+    out = {}
+    if variances[0] > 0:
+        out["focal"] = float(np.sqrt(variances[0]))
+    if variances[1] > 0 or variances[2] > 0:
+        out["principal point"] = float(np.sqrt(max(variances[1], variances[2])))
+    distortion = np.array(DISTORTION_ENTRIES)
+    if np.any(variances[distortion] > 0) and len(seen):
+        x, y = seen[:, 0], seen[:, 1]
+        r2 = x * x + y * y
+        # d(displacement)/d(k1, k2, p1, p2, k3), pixels: (N, 2, 5)
+        J = lens[0] * np.stack([np.column_stack([x * r2, x * r2**2, 2 * x * y, r2 + 2 * x * x, x * r2**3]),
+                                np.column_stack([y * r2, y * r2**2, r2 + 2 * y * y, 2 * x * y, y * r2**3])], axis=1)
+        J[:, 1] *= shape[0]
+        block = covariance[np.ix_(distortion, distortion)]
+        worst = np.linalg.eigvalsh(J @ block @ J.transpose(0, 2, 1))[:, -1].max()
+        out["distortion"] = float(np.sqrt(max(worst, 0.0)))
+    return out
+
+
+def _pose_vector(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return np.concatenate([cv2.Rodrigues(np.asarray(R, dtype=float))[0].ravel(), np.asarray(t, dtype=float)])
+
+
+def _floor_points(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration) -> np.ndarray:
+    """Floor coordinates of each point of ``tracks``: the calibration's where it has the
+    point, else the median of its rays' intersections with the floor z = 0."""
+    known = {int(i): row for row, i in enumerate(calibration.point_ids)}
+    hits = np.full((len(tracks.xy), 2), np.nan)
+    for c, name in enumerate(tracks.camera_names):
+        rows = tracks.camera_index == c
+        R, t = calibration.poses[name]
+        rays = np.column_stack([intrinsics[name].normalize(tracks.xy[rows]), np.ones(rows.sum())]) @ R
+        centre = -R.T @ t
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = -centre[2] / rays[:, 2]
+        on_floor = centre[:2] + scale[:, None] * rays[:, :2]
+        on_floor[~(scale > 0)] = np.nan
+        hits[rows] = on_floor
+    points = np.zeros((tracks.num_points, 2))
+    for p, point_id in enumerate(tracks.point_ids):
+        if int(point_id) in known:
+            points[p] = calibration.points[known[int(point_id)], :2]
+        else:
+            points[p] = np.nanmedian(hits[tracks.point_index == p], axis=0)
+    return points
+
+
+def _lens_of(intrinsics: Intrinsics) -> np.ndarray:
+    dist = np.zeros(5)
+    dist[: min(5, intrinsics.dist.size)] = intrinsics.dist[:5]
+    K = intrinsics.K
+    return np.array([K[0, 0], K[0, 2], K[1, 2], dist[0], dist[1], dist[2], dist[3], dist[4]])
+
+
+def _intrinsics_of(given: Intrinsics, lens: np.ndarray) -> Intrinsics:
+    scale = lens[0] / given.K[0, 0]
+    K = np.array([[lens[0], given.K[0, 1] * scale, lens[1]], [0.0, given.K[1, 1] * scale, lens[2]], [0, 0, 1]])
+    return Intrinsics(given.name, given.resolution, K, lens[[3, 4, 5, 6, 7]])
+
+
+def _lens_dict(lens: np.ndarray) -> dict[str, float]:
+    return {name: float(value) for name, value in zip(LENS_ENTRIES, lens)}
+
+
+def _log_report(report: LensReport) -> None:
+    given, result = report.given, report.result
+    change = 100.0 * (result["focal"] / given["focal"] - 1.0) if given and result else 0.0
+    logger.info("camera %s: intrinsics refined (%s): focal %.2f -> %.2f px (%+.2f %%, 1 sigma %s px), "
+                "k1 %.4f -> %.4f, noise %.3f px%s", report.camera, ", ".join(report.refined) or "nothing",
+                given["focal"], result["focal"], change,
+                "-" if report.focal_sigma is None else f"{report.focal_sigma:.3g}", given["k1"], result["k1"],
+                report.noise_px or 0.0,
+                "".join(f"; {group} held: {why}" for group, why in report.held.items()))
+
+
+SCHEMA_KIND = "self_calibration"
+SCHEMA_MAJOR = 1
+FILE_NAME = "self_calibration.json"
+
+
+def write_self_calibration(path: str | os.PathLike, result: SelfCalibration, given: Mapping[str, Intrinsics],
+                           options: SelfCalibrationOptions) -> None:
+    """``self_calibration.json``: per camera what was refined or held and why, the
+    uncertainties, and the intrinsics given (tracks undistorted with them are converted
+    by ``convert_tracks``)."""
+    cameras = {}
+    for name, report in result.reports.items():
+        entry = report.to_json()
+        if name in given and given[name].resolution is not None:
+            entry["given_intrinsics"] = given[name].to_json()
+        cameras[name] = entry
+    write_json(path, SCHEMA_KIND, SCHEMA_MAJOR, {"options": asdict(options), "cameras": cameras})
+
+
+def read_given_intrinsics(path: str | os.PathLike) -> dict[str, Intrinsics]:
+    """The intrinsics given to the self-calibration of a results folder's
+    ``self_calibration.json`` (FormatError naming the file and entry)."""
+    document = read_json(path, SCHEMA_KIND, SCHEMA_MAJOR)
+    cameras = document.get("cameras")
+    if not isinstance(cameras, dict):
+        raise FormatError(f"{path}: cameras: expected an object {{name: report}}")
+    out = {}
+    for name, entry in cameras.items():
+        if not isinstance(entry, dict):
+            raise FormatError(f"{path}: cameras.{name}: expected an object")
+        if entry.get("given_intrinsics") is not None:
+            out[name] = intrinsics_from_json(entry["given_intrinsics"], name, f"{path}: cameras.{name}.given_intrinsics")
+    return out
