@@ -387,6 +387,16 @@ class Baselines:
             "_core.ba.evaluate_plane_cost": Spec([("K", s["K"][0]), ("observed", x[0]), ("pose", pose),
                                                  ("plane", s["plane"]), ("ab", np.array([0.1, 0.2])),
                                                  ("want", [True, True, True])]),
+            "_core.selfcal.self_calibrate": Spec(
+                [("camera_index", s["camera_index"]), ("point_index", s["point_index"]), ("observed", s["observed"]),
+                 ("lenses", np.tile([500.0, 320.0, 240.0, 0, 0, 0, 0, 0], (len(s["poses"]), 1))),
+                 ("shapes", np.tile([1.0, 0.0], (len(s["poses"]), 1))), ("refine", [[0, 3]] * len(s["poses"])),
+                 ("poses", s["poses"]), ("points", s["points"][:, :2])],
+                {"loss": "cauchy", "loss_scale": 2.0, "max_iterations": 5, "num_threads": 1,
+                 "compute_covariance": True}),
+            "_core.selfcal.evaluate_planar_lens_cost": Spec([
+                ("shape", np.array([1.0, 0.0])), ("observed", x[0]), ("pose", pose), ("point", s["points"][0, :2]),
+                ("lens", np.array([500.0, 320.0, 240.0, -0.1, 0.01, 0, 0, 0]))]),
             "_core.ba.point_on_plane": Spec([("plane", s["plane"]), ("ab", np.array([0.1, 0.2]))]),
             "_core.ba.plane_manifold": Spec([("reference_normal", np.array([0.0, 0, 1])), ("fix_offset", False),
                                             ("x", s["plane"]), ("y", np.array([0.0, 0.1, 1.0, 0.2])),

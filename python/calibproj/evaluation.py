@@ -176,11 +176,14 @@ def evaluate(
         results: a ``Calibration`` or a results folder (``camera_poses.json``, ...).
         tracks: evaluation observations, ``Tracks`` or an ``eval_tracks.json``.
         intrinsics: per-camera intrinsics or their folder; ``None`` reads
-            ``<results>/intrinsics`` (what ``calibrate`` writes there).
+            ``<results>/intrinsics`` (what ``calibrate`` writes there; when it refined
+            them, ``tracks``, undistorted with the intrinsics given to it, are
+            re-expressed with the refined ones).
         options: ``EvaluationOptions`` (defaults if ``None``).
         thresholds_px: success thresholds.
     """
     options = options or EvaluationOptions()
+    from_results_folder = intrinsics is None and not isinstance(results, Calibration)
     calibration = load_results(results)
     source = intrinsics_source(results, intrinsics)
     tracks = tracks if isinstance(tracks, Tracks) else Tracks.read(tracks)
@@ -190,12 +193,28 @@ def evaluate(
     for name, reason in unusable.items():
         logger.error("camera %s: no usable intrinsics: %s", name, reason)
     usable = [name for name in wanted if name in intrinsics]
+    if from_results_folder:
+        tracks = _undistorted_as_refined(Path(results), tracks, intrinsics)
     point_ids, points, errors, behind = _triangulate_and_refine(calibration, tracks, intrinsics, usable, options)
     evaluation = Evaluation(_camera_results(calibration, tracks, errors, behind, unusable), tuple(thresholds_px),
                             point_ids, points, errors, unusable)
     logger.info("evaluation: %d points refined; success %s", len(point_ids),
                 ", ".join(f"{evaluation.success_rate(t):.0f} % under {_threshold_key(t)} px" for t in thresholds_px))
     return evaluation
+
+
+def _undistorted_as_refined(results: Path, tracks: Tracks, intrinsics: Mapping[str, Intrinsics]) -> Tracks:
+    """Evaluation tracks are undistorted with the intrinsics the user has; a calibration
+    that refined them (``self_calibration.json``) keeps the refined ones in its folder,
+    so the tracks are re-expressed with those."""
+    from calibproj.self_calibration import FILE_NAME, convert_tracks, read_given_intrinsics
+
+    path = results / FILE_NAME
+    if not path.is_file():
+        return tracks
+    given = read_given_intrinsics(path)
+    logger.info("evaluation tracks re-expressed with the refined intrinsics of %s", ", ".join(sorted(given)) or "no camera")
+    return convert_tracks(tracks, given, intrinsics)
 
 
 # -- triangulation and refinement ----------------------------------------------------------

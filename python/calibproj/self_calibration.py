@@ -112,9 +112,9 @@ class SelfCalibrationOptions:
             1-sigma uncertainty of cx and cy is at most this many pixels (or the camera's
             noise, if larger).
         max_distortion_sigma_px: the distortion counts as determined when the 1-sigma
-            uncertainty of the displacement it causes stays below this many pixels (or
-            distortion_sigma_noise_ratio times the camera's noise, if larger) wherever
-            the camera saw the floor (elsewhere in the image nothing measured it).
+            uncertainty of the displacement it causes, RMS over the points the camera saw
+            (elsewhere in the image nothing measured it), is at most this many pixels (or
+            distortion_sigma_noise_ratio times the camera's noise, if larger).
         distortion_sigma_noise_ratio: see max_distortion_sigma_px; the noise is the RMS
             of one residual coordinate.
         min_chi2_drop: an entry is kept only if freeing it lowers its camera's sum of
@@ -131,10 +131,10 @@ class SelfCalibrationOptions:
             is sampled.
     """
 
-    max_focal_sigma: float = 0.002
+    max_focal_sigma: float = 0.01
     max_principal_point_sigma_px: float = 1.0
-    max_distortion_sigma_px: float = 0.1
-    distortion_sigma_noise_ratio: float = 1.0
+    max_distortion_sigma_px: float = 0.3
+    distortion_sigma_noise_ratio: float = 2.0
     min_chi2_drop: float = 25.0
     first_loss_scale_px: float = 2.0
     outlier_gate_px: float = 3.0
@@ -220,6 +220,7 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
     solution = problem.solve(loss="none", loss_scale=1.0, **solve)
     for stage in STAGES:
         solution = _run_stage(problem, stage, solution, options, reports, solve)
+    solution = _hold_undetermined(problem, solution, options, reports, solve)
     refined = dict(intrinsics)
     for c, name in enumerate(problem.cameras):
         if name not in reports or name in refused:
@@ -237,9 +238,9 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
 
 def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: dict[str, Any], options: SelfCalibrationOptions,
                reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any]:
-    """Frees the stage's requested entries and solves; a camera whose lens is then not
-    determined gets them held at their given values and the stage starts over from
-    where it began. Returns the last solution."""
+    """Frees the stage's requested entries and solves; a camera whose fit they do not
+    improve significantly gets them held at their given values and the stage starts
+    over from where it began. Returns the last solution."""
     before = problem.refine
     start = (problem.poses.copy(), problem.points.copy(), problem.lenses.copy())
     rejected: set[int] = set()
@@ -251,9 +252,8 @@ def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: dict[str, An
         failing = {}
         for c, name in enumerate(problem.cameras):
             if problem.refine[c] != before[c]:
-                failing[c] = (problem.undetermined(c, attempt, options, reports[name])
-                              or problem.insignificant(c, solution, attempt, len(problem.refine[c]) - len(before[c]),
-                                                       options))
+                failing[c] = problem.insignificant(c, solution, attempt, len(problem.refine[c]) - len(before[c]),
+                                                   options)
         failing = {c: why for c, why in failing.items() if why}
         if not failing:
             return attempt
@@ -263,6 +263,32 @@ def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: dict[str, An
                 if entry in reports[problem.cameras[c]].requested:
                     reports[problem.cameras[c]].held[entry] = why
         problem.poses, problem.points, problem.lenses = (a.copy() for a in start)
+
+
+def _hold_undetermined(problem: _Problem, solution: dict[str, Any], options: SelfCalibrationOptions,
+                       reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any]:
+    """Holds at their given values, one group per camera and pass, the groups whose
+    uncertainty exceeds their limit, and solves again until every group left is
+    determined. Returns the last solution."""
+    for _ in range(len(GROUPS)):
+        held = False
+        for c, name in enumerate(problem.cameras):
+            if not problem.refine[c]:
+                continue
+            why, group = problem.undetermined(c, solution, options, reports[name])
+            if group is None:
+                continue
+            entries = [entry for entry in reports[name].requested if REFINABLE[entry][1] == group]
+            for entry in entries:
+                reports[name].held.setdefault(entry, why)
+            lens_entries = [k for entry in entries for k in REFINABLE[entry][0]]
+            problem.refine[c] = [k for k in problem.refine[c] if k not in lens_entries]
+            problem.lenses[c, lens_entries] = problem.given[c, lens_entries]
+            held = True
+        if not held:
+            return solution
+        solution = problem.solve(loss="none", loss_scale=1.0, **solve)
+    return solution
 
 
 def convert_tracks(tracks: Tracks, given: Mapping[str, Intrinsics], refined: Mapping[str, Intrinsics]) -> Tracks:
@@ -376,9 +402,10 @@ class _Problem:
                 f"less than {options.min_chi2_drop:g} per entry")
 
     def undetermined(self, c: int, solution: dict[str, Any], options: SelfCalibrationOptions,
-                     report: LensReport) -> str | None:
-        """Why camera ``c``'s refined lens is not determined by the data (its worst group
-        against its limit), or None; records the groups' uncertainties in ``report``."""
+                     report: LensReport) -> tuple[str, str | None]:
+        """The group of camera ``c``'s refined lens that the data determine worst, if
+        beyond its limit, with why: ``(why, group)``, or ``("", None)``; records the
+        groups' uncertainties in ``report``."""
         lens = solution["lenses"][c]
         sigmas = _group_sigmas(solution["lens_covariances"][c], lens, self.shapes[c],
                                self.seen(c, options.max_sampled_points))
@@ -388,10 +415,11 @@ class _Problem:
         limits = _limits(options, lens[0], float(solution["noise_px"][c]))
         excess = {group: sigma / limits[group] for group, sigma in sigmas.items() if sigma > limits[group]}
         if not excess:
-            return None
+            return "", None
         group = max(excess, key=excess.get)
         unit = f"px ({sigmas[group] / lens[0]:.2%})" if group == "focal" else "px"
-        return f"not determined by the data: {group} 1 sigma {sigmas[group]:.3g} {unit} exceeds {limits[group]:.3g} px"
+        return (f"not determined by the data: {group} 1 sigma {sigmas[group]:.3g} {unit} "
+                f"exceeds {limits[group]:.3g} px", group)
 
 
 def _limits(options: SelfCalibrationOptions, focal: float, noise_px: float) -> dict[str, float]:
@@ -403,8 +431,9 @@ def _limits(options: SelfCalibrationOptions, focal: float, noise_px: float) -> d
 
 def _group_sigmas(covariance: np.ndarray, lens: np.ndarray, shape: np.ndarray, seen: np.ndarray) -> dict[str, float]:
     """1 sigma of each refined group: focal (px), principal point (px, worse axis) and
-    the distortion's displacement (px, worst over ``seen``, normalised coordinates of
-    the camera's observations: elsewhere in the image nothing measured it)."""
+    the distortion's displacement (px, along its worse axis, RMS over ``seen``, the
+    normalised coordinates of the camera's observations: elsewhere in the image nothing
+    measured it)."""
     variances = np.diag(covariance)
     out = {}
     if variances[0] > 0:
@@ -420,8 +449,8 @@ def _group_sigmas(covariance: np.ndarray, lens: np.ndarray, shape: np.ndarray, s
                                 np.column_stack([y * r2, y * r2**2, r2 + 2 * y * y, 2 * x * y, y * r2**3])], axis=1)
         J[:, 1] *= shape[0]
         block = covariance[np.ix_(distortion, distortion)]
-        worst = np.linalg.eigvalsh(J @ block @ J.transpose(0, 2, 1))[:, -1].max()
-        out["distortion"] = float(np.sqrt(max(worst, 0.0)))
+        along_worst_axis = np.linalg.eigvalsh(J @ block @ J.transpose(0, 2, 1))[:, -1]
+        out["distortion"] = float(np.sqrt(max(np.mean(along_worst_axis), 0.0)))
     return out
 
 

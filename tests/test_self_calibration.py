@@ -1,0 +1,235 @@
+"""Self-calibration: the lens cost's Jacobians, the solver on data with known truth, the
+observability decisions and the whole calibration with --refine-intrinsics."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from calibproj import _core
+from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir
+from calibproj.pipeline import calibrate
+from calibproj.self_calibration import (FILE_NAME, RefineRequest, SelfCalibrationOptions, check_request,
+                                        convert_tracks, read_given_intrinsics, self_calibrate)
+from calibproj.simulate.geometric import simulate_tracks
+
+selfcal = _core.selfcal
+LENS = np.array([900.0, 955.0, 545.0, -0.26, 0.09, 0.0003, -0.0002, -0.012])
+SHAPE = np.array([1.0006, 0.0])
+
+
+def numeric_jacobian(f, x: np.ndarray, step: float = 1e-6) -> np.ndarray:
+    columns = []
+    for i in range(len(x)):
+        h = step * max(1.0, abs(x[i]))
+        e = np.zeros(len(x))
+        e[i] = h
+        columns.append((f(x + e) - f(x - e)) / (2 * h))
+    return np.array(columns).T
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_lens_cost_jacobians_match_numeric_ones(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    pose = np.concatenate([rng.normal(0, 0.3, 3), [0.1, -0.2, 3.0]])
+    point = rng.uniform(-0.6, 0.6, 2)
+    observed = np.array([500.0, 400.0])
+    ok, residual, J_pose, J_point, J_lens = selfcal.evaluate_planar_lens_cost(SHAPE, observed, pose, point, LENS)
+    assert ok
+
+    def residual_of(p=pose, q=point, lens=LENS):
+        return selfcal.evaluate_planar_lens_cost(SHAPE, observed, p, q, lens)[1]
+
+    for analytic, numeric in [(J_pose, numeric_jacobian(lambda p: residual_of(p=p), pose)),
+                              (J_point, numeric_jacobian(lambda q: residual_of(q=q), point)),
+                              (J_lens, numeric_jacobian(lambda lens: residual_of(lens=lens), LENS))]:
+        np.testing.assert_allclose(analytic, numeric, rtol=1e-6, atol=1e-6 * np.abs(numeric).max())
+
+
+def test_lens_cost_projects_as_opencv() -> None:
+    pose = np.array([0.2, -0.1, 0.05, 0.1, -0.2, 3.0])
+    point = np.array([0.4, -0.3])
+    K = np.array([[LENS[0], 0, LENS[1]], [0, LENS[0] * SHAPE[0], LENS[2]], [0, 0, 1]])
+    expected, _ = cv2.projectPoints(np.array([[*point, 0.0]]), pose[:3], pose[3:], K, LENS[3:])
+    residual = selfcal.evaluate_planar_lens_cost(SHAPE, np.zeros(2), pose, point, LENS)[1]
+    np.testing.assert_allclose(residual, expected.ravel(), atol=1e-9)
+
+
+def test_lens_cost_refuses_points_behind_and_non_positive_focal() -> None:
+    behind = np.array([0.0, 0.0, 0.0, 0.0, 0.0, -3.0])
+    assert not selfcal.evaluate_planar_lens_cost(SHAPE, np.zeros(2), behind, np.zeros(2), LENS)[0]
+    zero_focal = LENS.copy()
+    zero_focal[0] = 0.0
+    front = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 3.0])
+    assert not selfcal.evaluate_planar_lens_cost(SHAPE, np.zeros(2), front, np.zeros(2), zero_focal)[0]
+
+
+def synthetic_floor(seed: int = 0, noise_px: float = 0.0):
+    """Five tilted cameras over a floor grid, all seeing every point, with a wide lens."""
+    rng = np.random.default_rng(seed)
+    xs, ys = np.meshgrid(np.linspace(-1.5, 1.5, 13), np.linspace(-1.0, 1.0, 9))
+    points = np.column_stack([xs.ravel(), ys.ravel()])
+    poses, camera_index, point_index, observed = [], [], [], []
+    for c in range(5):
+        angle = 2 * np.pi * c / 5
+        centre = np.array([3.0 * np.cos(angle), 3.0 * np.sin(angle), 2.5])
+        forward = -centre / np.linalg.norm(centre)
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        R = np.array([right, np.cross(forward, right), forward])
+        t = -R @ centre
+        poses.append(np.concatenate([cv2.Rodrigues(R)[0].ravel(), t]))
+        K = np.array([[LENS[0], 0, LENS[1]], [0, LENS[0] * SHAPE[0], LENS[2]], [0, 0, 1]])
+        pixels, _ = cv2.projectPoints(np.column_stack([points, np.zeros(len(points))]), poses[-1][:3], t, K, LENS[3:])
+        observed.append(pixels.reshape(-1, 2) + rng.normal(0, noise_px, (len(points), 2)))
+        camera_index += [c] * len(points)
+        point_index += list(range(len(points)))
+    return (np.array(camera_index, np.int32), np.array(point_index, np.int32), np.concatenate(observed),
+            np.array(poses), points)
+
+
+def test_solver_recovers_focal_and_distortion_from_a_wrong_start() -> None:
+    camera_index, point_index, observed, poses, points = synthetic_floor()
+    start = np.tile([LENS[0] * 1.08, LENS[1], LENS[2], 0, 0, 0, 0, 0], (5, 1))
+    rng = np.random.default_rng(3)
+    noisy_poses = poses + np.concatenate([rng.normal(0, 0.01, (5, 3)), rng.normal(0, 0.02, (5, 3))], axis=1)
+    refine = [[0, 3, 4, 5, 6, 7]] * 5
+    solution = selfcal.self_calibrate(camera_index, point_index, observed, start, np.tile(SHAPE, (5, 1)), refine,
+                                      noisy_poses, points + rng.normal(0, 0.01, points.shape), max_iterations=200)
+    assert solution["usable"]
+    # The gauge: two points are held, so the scale and the floor frame are those of the truth.
+    np.testing.assert_allclose(solution["lenses"][:, 0], LENS[0], rtol=1e-6)
+    np.testing.assert_allclose(solution["lenses"][:, 3:], np.tile(LENS[3:], (5, 1)), atol=1e-5)
+    assert np.abs(solution["residuals"]).max() < 1e-5
+    # Covariances: refined entries only, positive on the diagonal.
+    covariances = solution["lens_covariances"]
+    assert covariances.shape == (5, 8, 8)
+    assert np.all(covariances[:, 0, 0] > 0) and np.all(covariances[:, 1, 1] == 0)
+
+
+def test_covariance_matches_the_scatter_of_repeated_solves() -> None:
+    """The focal length's 1 sigma from the covariance agrees with the spread of the
+    estimates over independent noise draws (to the precision 25 draws allow)."""
+    estimates, sigmas = [], []
+    for seed in range(25):
+        camera_index, point_index, observed, poses, points = synthetic_floor(seed, noise_px=0.5)
+        solution = selfcal.self_calibrate(camera_index, point_index, observed, np.tile(LENS, (5, 1)),
+                                          np.tile(SHAPE, (5, 1)), [[0, 3]] * 5, poses, points)
+        estimates.append(solution["lenses"][0, 0])
+        sigmas.append(np.sqrt(solution["lens_covariances"][0, 0, 0]))
+    ratio = np.std(estimates) / np.mean(sigmas)
+    assert 0.6 < ratio < 1.5
+
+
+def test_bad_input_is_a_clear_error() -> None:
+    camera_index, point_index, observed, poses, points = synthetic_floor()
+    lenses, shapes = np.tile(LENS, (5, 1)), np.tile(SHAPE, (5, 1))
+    with pytest.raises(ValueError, match="lens entry 9 out of range"):
+        selfcal.self_calibrate(camera_index, point_index, observed, lenses, shapes, [[9]] * 5, poses, points)
+    with pytest.raises(ValueError, match="listed twice"):
+        selfcal.self_calibrate(camera_index, point_index, observed, lenses, shapes, [[0, 0]] * 5, poses, points)
+    with pytest.raises(ValueError, match="differ in number"):
+        selfcal.self_calibrate(camera_index, point_index, observed, lenses[:4], shapes, [[0]] * 5, poses, points)
+    flipped = poses.copy()
+    flipped[0, 5] = -flipped[0, 5] - 10.0
+    with pytest.raises(ValueError, match="cannot be projected"):
+        selfcal.self_calibrate(camera_index, point_index, observed, lenses, shapes, [[0]] * 5, flipped, points)
+
+
+def test_refine_request_parsing() -> None:
+    request = RefineRequest.parse(["focal,k1,k2", "ceiling=none", "near1=focal"])
+    assert request.of("far1") == ("focal", "k1", "k2")
+    assert request.of("ceiling") == ()
+    assert request.of("near1") == ("focal",)
+    with pytest.raises(ValueError, match="unknown entry 'k9'"):
+        RefineRequest.parse("focal,k9")
+    with pytest.raises(ValueError, match="given twice"):
+        RefineRequest.parse(["far1=focal", "far1=k1"])
+    with pytest.raises(ValueError, match="no entry named"):
+        RefineRequest.parse("far1=")
+    with pytest.raises(ValueError, match="no camera named 'nobody'"):
+        RefineRequest.parse("nobody=focal").check_cameras(["far1"])
+    with pytest.raises(ValueError, match="must be a positive number"):
+        SelfCalibrationOptions(min_chi2_drop=float("nan"))
+
+
+def test_a_rational_lens_model_is_refused_for_its_camera_only() -> None:
+    K = np.array([[900.0, 0, 640], [0, 900, 360], [0, 0, 1]])
+    rational = Intrinsics("a", (1280, 720), K, np.array([-0.2, 0.05, 0, 0, 0, 0.1, 0, 0]))
+    plain = Intrinsics("b", (1280, 720), K, np.zeros(5))
+    refused = check_request(RefineRequest.parse("focal,k1"), {"a": rational, "b": plain}, ["a", "b"])
+    assert list(refused) == ["a"] and "8 coefficients" in refused["a"]
+
+
+def nominal_of(truth: Intrinsics, focal_factor: float) -> Intrinsics:
+    """The same principal point, the focal length off by ``focal_factor``, no distortion."""
+    K = truth.K.copy()
+    K[0, 0] *= focal_factor
+    K[1, 1] *= focal_factor
+    return Intrinsics(truth.name, truth.resolution, K, np.zeros(5))
+
+
+@pytest.fixture(scope="module")
+def or_room(tmp_path_factory: pytest.TempPathFactory):
+    """The mock operating room (six far-field GoPros, two on lamps, the zoomed ceiling
+    camera) with intrinsics 8 % off and no distortion, calibrated with the true
+    intrinsics and with refinement from the nominal ones."""
+    folder = tmp_path_factory.mktemp("or-full")
+    simulation = simulate_tracks("or-full", folder / "sim", seed=1, noise_px=0.1)
+    truth = simulation.intrinsics
+    nominal = {name: nominal_of(intrinsics, 1.08) for name, intrinsics in truth.items()}
+    tracks = convert_tracks(simulation.tracks, truth, nominal)
+    reference = calibrate(simulation.tracks, truth, out=folder / "truth", report=False)
+    refined = calibrate(tracks, nominal, out=folder / "refined", report=False, refine_intrinsics="focal,k1,k2")
+    return folder, simulation, truth, nominal, reference, refined
+
+
+def test_refinement_recovers_the_intrinsics_of_every_determined_camera(or_room) -> None:
+    folder, simulation, truth, nominal, reference, refined = or_room
+    document = json.loads((folder / "refined" / FILE_NAME).read_text())
+    results = load_intrinsics_dir(folder / "refined" / "intrinsics")
+    determined = [name for name, report in document["cameras"].items() if "focal" in report["refined"]]
+    assert len(determined) >= len(truth) - 1
+    for name in determined:
+        error = results[name].K[0, 0] / truth[name].K[0, 0] - 1.0
+        assert abs(error) < 0.003, name
+    # A camera whose focal length was held keeps the value given, and says why.
+    for name, report in document["cameras"].items():
+        if "focal" in report["held"]:
+            assert results[name].K[0, 0] == nominal[name].K[0, 0]
+            assert "not determined" in report["held"]["focal"] or "does not improve" in report["held"]["focal"]
+
+
+def test_the_zoomed_camera_is_reported_not_refined(or_room) -> None:
+    folder, *_ = or_room
+    document = json.loads((folder / "refined" / FILE_NAME).read_text())
+    ceiling = document["cameras"]["ceiling"]
+    assert "focal" in ceiling["held"] and ceiling["focal_sigma"] > 0.002 * ceiling["given"]["focal"]
+
+
+def test_tracks_and_evaluation_follow_the_refined_intrinsics(or_room) -> None:
+    from calibproj.evaluation import evaluate
+    from calibproj.tracks import Tracks
+
+    folder, simulation, truth, nominal, reference, refined = or_room
+    given = read_given_intrinsics(folder / "refined" / FILE_NAME)
+    assert set(given) == set(truth)
+    np.testing.assert_allclose(given["far1"].K, nominal["far1"].K)
+    # tracks.json is undistorted with the refined intrinsics: its raw pixels are the input's.
+    written = Tracks.read(folder / "refined" / "tracks.json")
+    results = load_intrinsics_dir(folder / "refined" / "intrinsics")
+    ids, xy = written.observations("far1")
+    _, original = simulation.tracks.observations("far1")
+    np.testing.assert_allclose(results["far1"].distort_points(xy), truth["far1"].distort_points(original), atol=1e-4)
+    # Evaluation tracks given with the nominal intrinsics are converted by evaluate, as
+    # if they had been undistorted with the refined intrinsics.
+    eval_tracks = convert_tracks(simulation.eval_tracks, truth, nominal)
+    converted = evaluate(folder / "refined", eval_tracks)
+    expected = evaluate(folder / "refined", convert_tracks(eval_tracks, nominal, results), results)
+    unconverted = evaluate(folder / "refined", eval_tracks, results)
+    assert converted.cameras["far1"].mean_px == pytest.approx(expected.cameras["far1"].mean_px)
+    assert converted.cameras["far1"].mean_px != pytest.approx(unconverted.cameras["far1"].mean_px)
