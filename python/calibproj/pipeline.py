@@ -160,6 +160,11 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
     result = self_calibrate(tracks, given, calibration, request, options, num_threads=threads)
     refined_tracks = convert_tracks(tracks, given, result.intrinsics)
     calibration = register(refined_tracks, result.intrinsics, registration, left_out=left_out)
+    for name, report in result.reports.items():
+        # Its pose rests on a focal length nobody checked: it must not steer comparisons.
+        if "focal" in report.held and name in calibration.poses and not calibration.metrics[name].weak:
+            calibration.metrics[name].weak = True
+            logger.warning("camera %s is weak: its focal length was not refined (%s)", name, report.held["focal"])
     return calibration, refined_tracks, result.intrinsics, (result, given, options)
 
 
