@@ -184,7 +184,7 @@ def or_room(tmp_path_factory: pytest.TempPathFactory):
     nominal = {name: nominal_of(intrinsics, 1.08) for name, intrinsics in truth.items()}
     tracks = convert_tracks(simulation.tracks, truth, nominal)
     reference = calibrate(simulation.tracks, truth, out=folder / "truth", report=False)
-    refined = calibrate(tracks, nominal, out=folder / "refined", report=False, refine_intrinsics="focal,k1,k2")
+    refined = calibrate(tracks, nominal, out=folder / "refined", report=False, refine_intrinsics="focal,k1,k2,k3,tangential")
     return folder, simulation, truth, nominal, reference, refined
 
 
@@ -209,6 +209,37 @@ def test_the_zoomed_camera_is_reported_not_refined(or_room) -> None:
     document = json.loads((folder / "refined" / FILE_NAME).read_text())
     ceiling = document["cameras"]["ceiling"]
     assert "focal" in ceiling["held"] and ceiling["focal_sigma"] > 0.002 * ceiling["given"]["focal"]
+
+
+def test_refined_relative_rotations_are_as_good_as_with_the_true_intrinsics(or_room) -> None:
+    """Gauge-free: the rotation between every two cameras (not weak) against the truth.
+    (Aligned on the camera centres, every rotation would also carry the centres' error,
+    which follows the focal lengths' few hundredths of a percent.)"""
+    from calibproj.comparison import rotation_angle_deg
+    from calibproj.io.poses import read_poses
+
+    folder, simulation, truth, nominal, reference, refined = or_room
+    true_poses = read_poses(folder / "sim" / "truth.json").poses
+    names = [name for name in truth if not reference.metrics[name].weak and not refined.metrics[name].weak]
+    assert len(names) == len(truth) - 1  # the zoomed camera only
+
+    def pairwise_rms(poses) -> float:
+        errors = [rotation_angle_deg(poses[a][0] @ poses[b][0].T, true_poses[a][0] @ true_poses[b][0].T)
+                  for i, a in enumerate(names) for b in names[i + 1:]]
+        return float(np.sqrt(np.mean(np.square(errors))))
+
+    with_truth = pairwise_rms(read_poses(folder / "truth" / "camera_poses.json").poses)
+    with_refined = pairwise_rms(read_poses(folder / "refined" / "camera_poses.json").poses)
+    assert with_refined < 1.5 * with_truth + 0.001
+
+
+def test_higher_order_terms_need_coverage(or_room) -> None:
+    folder, *_ = or_room
+    document = json.loads((folder / "refined" / FILE_NAME).read_text())
+    for name, report in document["cameras"].items():
+        if report["coverage"] < 0.5 and name != "ceiling":
+            assert "k3" in report["held"] and "image corners" in report["held"]["k3"], name
+    assert "k3" in document["cameras"]["near1"]["refined"]
 
 
 def test_tracks_and_evaluation_follow_the_refined_intrinsics(or_room) -> None:

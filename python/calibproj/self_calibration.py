@@ -54,6 +54,9 @@ GROUPS = ("focal", "principal point", "distortion")
 # robust first; a free principal point, k3 and tangential terms make a partial view's
 # problem ill-conditioned and are tried last.
 STAGES = (("focal", "k1"), ("k2",), ("k3",), ("tangential",), ("pp",))
+# Entries a camera may free only when its observations reach far enough towards the
+# image corners: fitted on a central patch they do not hold in the rest of the image.
+NEEDS_COVERAGE = ("k3", "pp")
 ALL_CAMERAS = "*"
 DISTORTION_ENTRIES = (3, 4, 5, 6, 7)
 
@@ -127,6 +130,9 @@ class SelfCalibrationOptions:
             robust noise, whichever is larger.
         outlier_gate_sigma_factor: see outlier_gate_px.
         lens_solver_iterations: iterations of each Ceres solve.
+        min_coverage: k3, tangential and pp are freed only for a camera whose
+            observations reach at least this share of the way from the principal point
+            to the farthest image corner (95th percentile).
         max_sampled_points: observations per camera where the distortion's uncertainty
             is sampled.
     """
@@ -141,6 +147,7 @@ class SelfCalibrationOptions:
     outlier_gate_sigma_factor: float = 4.0
     lens_solver_iterations: int = 200
     max_sampled_points: int = 500
+    min_coverage: float = 0.5
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -161,6 +168,7 @@ class LensReport:
     principal_point_sigma_px: float | None = None
     distortion_sigma_px: float | None = None  # worst over the image
     noise_px: float | None = None  # RMS of one residual coordinate
+    coverage: float | None = None  # how far towards the image corners the observations reach (0-1)
     observations: int = 0
     given: dict[str, float] = field(default_factory=dict)
     result: dict[str, float] = field(default_factory=dict)
@@ -243,7 +251,8 @@ def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: dict[str, An
     over from where it began. Returns the last solution."""
     before = problem.refine
     start = (problem.poses.copy(), problem.points.copy(), problem.lenses.copy())
-    rejected: set[int] = set()
+    rejected = {c for c in range(len(problem.cameras))
+                if _hold_for_coverage(problem, c, stage, options, reports[problem.cameras[c]])}
     while True:
         problem.refine = problem.stage_entries(stage, before, rejected)
         if problem.refine == before:
@@ -263,6 +272,23 @@ def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: dict[str, An
                 if entry in reports[problem.cameras[c]].requested:
                     reports[problem.cameras[c]].held[entry] = why
         problem.poses, problem.points, problem.lenses = (a.copy() for a in start)
+
+
+def _hold_for_coverage(problem: _Problem, c: int, stage: tuple[str, ...], options: SelfCalibrationOptions,
+                       report: LensReport | None) -> bool:
+    """Whether camera ``c`` may not free the stage's entries because its observations
+    do not reach far enough towards the image corners (recorded in ``report``)."""
+    coverage = problem.coverage(c)
+    if report is not None:
+        report.coverage = coverage
+    asked = [entry for entry in stage if entry in NEEDS_COVERAGE and entry in problem.requested[c]]
+    if not asked or coverage >= options.min_coverage:
+        return False
+    for entry in asked:
+        report.held[entry] = (f"the floor reaches only {coverage:.0%} of the way to the image corners "
+                              f"(at least {options.min_coverage:.0%} needed): fitted there, it would not hold "
+                              "in the rest of the image")
+    return True
 
 
 def _hold_undetermined(problem: _Problem, solution: dict[str, Any], options: SelfCalibrationOptions,
@@ -316,6 +342,7 @@ class _Problem:
     poses: np.ndarray
     points: np.ndarray
     lenses: np.ndarray  # (C, 8) current values
+    image_sizes: list[tuple[float, float]]
     requested: list[tuple[str, ...]]  # per camera, entry names asked for
 
 
@@ -326,6 +353,8 @@ class _Problem:
     @classmethod
     def build(cls, tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
               request: RefineRequest, refused: Mapping[str, str]) -> _Problem:
+        from calibproj.registration import image_size
+
         cameras = [n for n in tracks.camera_names if n in calibration.poses and n in intrinsics]
         kept = tracks.keep_cameras(cameras).with_min_track_length(2) if cameras else Tracks.empty([])
         cameras = list(kept.camera_names)
@@ -341,7 +370,8 @@ class _Problem:
         return cls(cameras, camera_index.astype(np.int32), point_index.astype(np.int32), observed, given,
                    np.array([[i.K[1, 1] / i.K[0, 0], i.K[0, 1] / i.K[0, 0]] for i in map(intrinsics.get, cameras)]
                             ).reshape(-1, 2),
-                   [[] for _ in cameras], poses, points, given.copy(), requested)
+                   [[] for _ in cameras], poses, points, given.copy(), [image_size(intrinsics[n]) for n in cameras],
+                   requested)
 
     def solve(self, **kwargs: Any) -> dict[str, Any]:
         solution = _core.selfcal.self_calibrate(self.camera_index, self.point_index, self.observed, self.lenses,
@@ -368,6 +398,17 @@ class _Problem:
         self.camera_index, self.observed = self.camera_index[keep], self.observed[keep]
         self.point_index = remap[self.point_index[keep]]
         self.points = self.points[used]
+
+    def coverage(self, camera: int) -> float:
+        """How far the camera's observations reach from the principal point towards the
+        farthest image corner (95th percentile of their radius over the corner's)."""
+        rows = self.camera_index == camera
+        centre = self.lenses[camera, 1:3]
+        width, height = self.image_sizes[camera]
+        corners = np.array([[0.0, 0.0], [width - 1, 0.0], [0.0, height - 1], [width - 1, height - 1]])
+        corner = np.linalg.norm(corners - centre, axis=1).max()
+        radius = np.linalg.norm(self.observed[rows] - centre, axis=1)
+        return float(np.percentile(radius, 95) / corner) if len(radius) else 0.0
 
     def seen(self, camera: int, count: int) -> np.ndarray:
         """Normalised coordinates (pinhole) of up to ``count`` of the camera's observations."""
