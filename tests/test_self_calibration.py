@@ -264,3 +264,25 @@ def test_tracks_and_evaluation_follow_the_refined_intrinsics(or_room) -> None:
     unconverted = evaluate(folder / "refined", eval_tracks, results)
     assert converted.cameras["far1"].mean_px == pytest.approx(expected.cameras["far1"].mean_px)
     assert converted.cameras["far1"].mean_px != pytest.approx(unconverted.cameras["far1"].mean_px)
+
+
+def test_report_shows_what_was_refined_and_what_was_held(or_room) -> None:
+    from calibproj.report import write_report
+
+    folder, *_ = or_room
+    page = write_report(folder / "refined").read_text()
+    assert "Intrinsics refined from the projection" in page
+    assert "Camera ceiling is WEAK: its focal length was not refined (not determined by the data" in page
+    assert "the floor reaches only" in page  # k3 held on a far camera
+    # A self_calibration.json edited by hand does not break the report.
+    path = folder / "refined" / FILE_NAME
+    original = path.read_text()
+    try:
+        document = json.loads(original)
+        document["cameras"]["far1"]["focal_sigma"] = "a lot"
+        document["cameras"]["far1"]["held"] = ["not", "a", "dict"]
+        document["cameras"]["far2"] = 7
+        path.write_text(json.dumps(document))
+        assert "Intrinsics refined from the projection" in write_report(folder / "refined").read_text()
+    finally:
+        path.write_text(original)

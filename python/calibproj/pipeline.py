@@ -133,11 +133,11 @@ def calibrate(
                                 intrinsics=intrinsics_source, markers=markers_spec, model=calibration.model,
                                 options=options, scale=scale_source, videos=_video_files(ingest_result))
             with folder.writing() as staging:
-                write_provenance(staging, record)  # first: the report shows it
-                _write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,
-                               ingest_result)
+                write_provenance(staging, record)  # first, as the self-calibration: the report shows them
                 if self_calibration is not None:
                     write_self_calibration(staging / SELF_CALIBRATION_FILE, *self_calibration)
+                _write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,
+                               ingest_result)
             folder.commit()
             logger.info("results written to %s", folder.path)
         if scale_error is not None:

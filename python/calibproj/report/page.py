@@ -7,6 +7,7 @@ import hashlib
 import html
 import json
 import logging
+import math
 import os
 import re
 import shlex
@@ -24,6 +25,7 @@ from calibproj.io.jsonio import atomic_write_bytes, atomic_write_text
 from calibproj.report import figures
 from calibproj.report.data import CameraView, camera_views
 from calibproj.provenance import read_provenance
+from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
 from calibproj.results import DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, intrinsics_source, load_results
 from calibproj.tracks import Tracks
 from calibproj.version import __version__
@@ -99,7 +101,8 @@ def write_report(
     views = camera_views(calibration, tracks, intrinsics)
     inputs = ReportInputs(detect_report=_optional_json(results_dir / DETECT_REPORT_FILE, "sync and detection"),
                           provenance=read_provenance(results_dir),
-                          evaluation=_optional_json(results_dir / EVALUATION_FILE, "evaluation"))
+                          evaluation=_optional_json(results_dir / EVALUATION_FILE, "evaluation"),
+                          self_calibration=_optional_json(results_dir / SELF_CALIBRATION_FILE, "self-calibration"))
     scene, cameras = draw_plots(calibration, views, dpi, _thumbnails(results_dir, inputs.detect_report))
     sync = sync_plots(inputs.detect_report, dpi)
     folder = results_dir / FIGURES_DIR
@@ -118,6 +121,7 @@ class ReportInputs:
     detect_report: dict | None = None
     provenance: dict | None = None
     evaluation: dict | None = None
+    self_calibration: dict | None = None
 
 
 @dataclass(frozen=True, eq=False)  # numpy field
@@ -224,7 +228,7 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         f"<style>{STYLE}</style></head><body>",
         "<h1>Calibration report</h1>",
         _meta_line(inputs.provenance),
-        _warnings(views),
+        _warnings(views, inputs.self_calibration),
         _scroll(_summary(calibration, views, inputs.provenance)),
         "<h2>Cameras</h2>",
         "<p>Fit residual: reprojection error of the observations the calibration was made from "
@@ -236,6 +240,8 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
           if inputs.evaluation else []),
         "<h2>Positions and intrinsics</h2>",
         _scroll(numbers_table(calibration, views)),
+        *(["<h2>Intrinsics refined from the projection</h2>", self_calibration_table(inputs.self_calibration)]
+          if inputs.self_calibration else []),
         *(["<h2>Sync and detection</h2>", _scroll(sync_table(inputs.detect_report)), *map(_figure, sync or [])]
           if inputs.detect_report else []),
         "<h2>Scene</h2>",
@@ -262,11 +268,16 @@ def _meta_line(provenance: dict | None) -> str:
     return f'<p class="meta">Made {created} with calibproj {version}; see Provenance at the end.</p>'
 
 
-def _warnings(views: list[CameraView]) -> str:
+def _warnings(views: list[CameraView], self_calibration: dict | None = None) -> str:
+    held_focal = _held_focal(self_calibration)
     lines = []
     for view in views:
         m = view.metrics
-        if view.registered and m is not None and m.weak:
+        if view.registered and view.name in held_focal:
+            lines.append(f"<p class=\"warning\">Camera {html.escape(view.name)} is WEAK: its focal length was not "
+                         f"refined ({html.escape(held_focal[view.name])}); its pose rests on the focal length "
+                         "given.</p>")
+        elif view.registered and m is not None and m.weak:
             sigma = "unknown" if m.rotation_sigma_deg is None else f"{m.rotation_sigma_deg:.3f} deg"
             lines.append(f"<p class=\"warning\">Camera {html.escape(view.name)} is WEAK: its rotation is known "
                          f"to {sigma} (1 &sigma;) from {m.inliers} observations. Its small fit residual does not "
@@ -275,6 +286,19 @@ def _warnings(views: list[CameraView]) -> str:
             lines.append(f"<p class=\"warning\">Camera {html.escape(view.name)} FAILED: "
                          f"{html.escape(view.failure or 'not registered')}</p>")
     return f'<div class="warnings">{"".join(lines)}</div>' if lines else ""
+
+
+def _held_focal(document: dict | None) -> dict[str, str]:
+    """Cameras of ``self_calibration.json`` whose focal length was asked for but held, with why."""
+    cameras = (document or {}).get("cameras")
+    if not isinstance(cameras, dict):
+        return {}
+    out = {}
+    for name, camera in cameras.items():
+        held = camera.get("held") if isinstance(camera, dict) else None
+        if isinstance(held, dict) and "focal" in held:
+            out[str(name)] = str(held["focal"])
+    return out
 
 
 def _summary(calibration: Calibration, views: list[CameraView], provenance: dict | None) -> str:
@@ -390,6 +414,44 @@ def evaluation_table(document: dict) -> str:
     return intro + _scroll("<table>" + "".join(rows) + "</table>")
 
 
+def self_calibration_table(document: dict) -> str:
+    """``self_calibration.json`` (``--refine-intrinsics``): per camera what was refined,
+    with its uncertainty, and what kept its given value, with why."""
+    rows = ["<tr><th class=\"name\">camera</th><th>focal given &rarr; found [px]</th><th>&sigma; focal</th>"
+            "<th>k1 given &rarr; found</th><th>&sigma; distortion [px]</th><th>coverage</th><th>noise [px]</th>"
+            "<th class=\"name\">refined</th><th class=\"name\">kept as given</th></tr>"]
+    cameras = document.get("cameras") if isinstance(document.get("cameras"), dict) else {}
+    for name, camera in cameras.items():
+        camera = camera if isinstance(camera, dict) else {}
+        given = camera.get("given") if isinstance(camera.get("given"), dict) else {}
+        found = camera.get("result") if isinstance(camera.get("result"), dict) else {}
+        focal_sigma = camera.get("focal_sigma")
+        relative = (f" ({100.0 * focal_sigma / found['focal']:.3f} %)"
+                    if isinstance(focal_sigma, (int, float)) and isinstance(found.get("focal"), (int, float))
+                    and found["focal"] else "")
+        held = camera.get("held") if isinstance(camera.get("held"), dict) else {}
+        refined = camera.get("refined") if isinstance(camera.get("refined"), list) else []
+        rows.append(
+            f'<tr><td class="name">{html.escape(str(name))}</td>'
+            f"<td>{_number(given.get('focal'), 1)} &rarr; {_number(found.get('focal'), 1)}</td>"
+            f"<td>{_number(focal_sigma, 2)}{relative}</td>"
+            f"<td>{_number(given.get('k1'), 4)} &rarr; {_number(found.get('k1'), 4)}</td>"
+            f"<td>{_number(camera.get('distortion_sigma_px'), 3)}</td>"
+            f"<td>{_percent(camera.get('coverage'))}</td><td>{_number(camera.get('noise_px'), 3)}</td>"
+            f'<td class="name">{html.escape(", ".join(map(str, refined)) or "-")}</td>'
+            f'<td class="name">{"<br>".join(html.escape(f"{k}: {v}") for k, v in held.items()) or "-"}</td></tr>')
+    intro = ("<p>Each camera's lens was refined with the poses from the floor points it shares with the "
+             "others, starting from the intrinsics given. An entry kept as given either did not improve "
+             "the fit, or the data do not determine it (its 1 &sigma; is given). Coverage: how far towards "
+             "the image corners the camera saw the floor; beyond that the refined distortion is an "
+             "extrapolation.</p>")
+    return intro + _scroll("<table>" + "".join(rows) + "</table>")
+
+
+def _percent(value: Any) -> str:
+    return f"{100.0 * value:.0f} %" if isinstance(value, (int, float)) and math.isfinite(value) else "-"
+
+
 def provenance_table(provenance: dict) -> str:
     """When, how and from what the results were made (``provenance.json``)."""
     inputs = provenance.get("inputs") or {}
@@ -477,5 +539,9 @@ def _anchor(name: str) -> str:
     return "camera-" + re.sub(r"[^A-Za-z0-9_-]", "_", name) + "-" + hashlib.sha1(name.encode()).hexdigest()[:6]
 
 
-def _number(value: float | None, digits: int) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
+def _number(value: Any, digits: int) -> str:
+    """A number with ``digits`` decimals; "-" for None and anything not a number (the
+    JSON files shown may have been edited by hand)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return "-"
+    return f"{value:.{digits}f}"
