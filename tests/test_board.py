@@ -211,3 +211,41 @@ def test_too_few_views_name_the_source(chessboard_images: Path, tmp_path: Path, 
     (folder / "broken.png").unlink()
     assert main(["intrinsics", str(folder), "--board", "chessboard:9x6:0.03", "--out", str(tmp_path / "c.json")]) == 2
     assert f"{folder}: the board chessboard:9x6:0.03 was found in 2 of 2 images" in capsys.readouterr().err
+
+
+OPENCV_SAMPLES = Path("/usr/share/doc/opencv-doc/examples/data")  # Debian's opencv-doc (tools/install_deps.sh)
+
+
+def test_opencv_sample_chessboards_give_what_opencv_gives(tmp_path: Path, capsys) -> None:
+    """OpenCV's own sample views (left01..14.jpg of its calibration sample, 9x6 inner
+    corners): ``calibproj intrinsics`` with OpenCV's corner finder and every view equals
+    cv2.calibrateCamera on them."""
+    images = tmp_path / "left"
+    images.mkdir()
+    samples = sorted(OPENCV_SAMPLES.glob("left[0-9][0-9].jpg"))
+    assert len(samples) == 13, f"{OPENCV_SAMPLES}: OpenCV's sample images missing (Debian package opencv-doc)"
+    for path in samples:
+        (images / path.name).write_bytes(path.read_bytes())
+    object_points, image_points, size = [], [], None
+    grid = np.zeros((9 * 6, 3), np.float32)
+    grid[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2) * 0.025
+    for path in samples:
+        gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        size = gray.shape[::-1]
+        found, corners = cv2.findChessboardCorners(gray, (9, 6), None)
+        if not found:
+            continue
+        corners = cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1),
+                                   (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.001))
+        object_points.append(grid)
+        image_points.append(corners)
+    rms, K, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None)
+    out = tmp_path / "left.json"
+    assert main(["intrinsics", str(images), "--board", "chessboard:9x6:0.025", "--out", str(out),
+                 "--classic-detector", "--min-sharpness-share", "0", "--json"]) == 0
+    document = json.loads(capsys.readouterr().out)
+    ours = read_intrinsics(out)
+    assert len(object_points) >= 12 and len(document["views"]) == len(object_points)
+    np.testing.assert_allclose(ours.K, K, rtol=1e-7)
+    np.testing.assert_allclose(ours.dist, dist.ravel(), rtol=1e-5, atol=1e-8)
+    assert document["rms_px"] == pytest.approx(rms, rel=1e-7)

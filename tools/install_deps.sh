@@ -12,6 +12,7 @@ packages=(
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev
   nlohmann-json3-dev libcli11-dev
   ffmpeg
+  opencv-doc  # OpenCV's sample images: tests/test_board.py checks calibproj intrinsics on them
 )
 
 missing=()

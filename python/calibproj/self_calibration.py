@@ -130,7 +130,10 @@ class SelfCalibrationOptions:
             robust noise, whichever is larger.
         outlier_gate_sigma_factor: see outlier_gate_px.
         lens_solver_iterations: iterations of each Ceres solve.
-        min_coverage: k3, tangential and pp are freed only for a camera whose
+        rounds: self-calibrations, each followed by a registration with its intrinsics;
+            the second starts where the first left off, from all the observations
+            (the first registration, with the given intrinsics, may have left many out).
+        min_coverage: k3 and pp are freed only for a camera whose
             observations reach at least this share of the way from the principal point
             to the farthest image corner (95th percentile).
         max_sampled_points: observations per camera where the distortion's uncertainty
@@ -147,6 +150,7 @@ class SelfCalibrationOptions:
     outlier_gate_sigma_factor: float = 4.0
     lens_solver_iterations: int = 200
     max_sampled_points: int = 500
+    rounds: int = 2
     min_coverage: float = 0.5
 
     def __post_init__(self) -> None:
@@ -169,6 +173,7 @@ class LensReport:
     distortion_sigma_px: float | None = None  # worst over the image
     noise_px: float | None = None  # RMS of one residual coordinate
     coverage: float | None = None  # how far towards the image corners the observations reach (0-1)
+    left_out: bool = False  # its focal length not determined, its observations left out of the solve
     observations: int = 0
     given: dict[str, float] = field(default_factory=dict)
     result: dict[str, float] = field(default_factory=dict)
@@ -203,15 +208,21 @@ def check_request(request: RefineRequest, intrinsics: Mapping[str, Intrinsics],
 
 def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
                    request: RefineRequest, options: SelfCalibrationOptions | None = None,
-                   num_threads: int = 1) -> SelfCalibration:
+                   num_threads: int = 1, given: Mapping[str, Intrinsics] | None = None,
+                   earlier: Mapping[str, LensReport] | None = None) -> SelfCalibration:
     """Refine the requested lens entries of the registered cameras of ``calibration``.
 
-    ``tracks`` are undistorted with ``intrinsics`` (the nominal values); the result's
-    intrinsics are to be used with tracks converted by ``convert_tracks``.
+    ``tracks`` are undistorted with ``intrinsics``, where the refinement starts; an entry
+    held keeps its value in ``given`` (default: ``intrinsics``). A later round passes the
+    first round's result as ``intrinsics``, the user's values as ``given`` and the first
+    round's reports as ``earlier``: the entries it chose are refined again, from the
+    registration its intrinsics allowed, without choosing anew. The result's intrinsics
+    are to be used with tracks converted by ``convert_tracks``.
     """
     options = options or SelfCalibrationOptions()
-    refused = check_request(request, intrinsics, tracks.camera_names)
-    problem = _Problem.build(tracks, intrinsics, calibration, request, refused)
+    given = intrinsics if given is None else given
+    refused = check_request(request, given, tracks.camera_names)
+    problem = _Problem.build(tracks, intrinsics, calibration, request, refused, given)
     reports = {name: LensReport(name, list(request.of(name)), given=_lens_dict(problem.given[c]))
                for c, name in enumerate(problem.cameras) if request.of(name)}
     for name, reason in refused.items():
@@ -219,29 +230,63 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
     if problem.empty:
         return SelfCalibration(dict(intrinsics), reports)
     solve = {"max_iterations": options.lens_solver_iterations, "num_threads": num_threads}
-    # A first robust solve with the first two stages' entries brings the residuals near the
-    # noise, so that gross outliers can be told apart; the stages then start over.
-    problem.refine = problem.stage_entries(STAGES[0] + STAGES[1], [[] for _ in problem.cameras])
-    problem.gate(problem.solve(loss="cauchy", loss_scale=options.first_loss_scale_px, **solve), options)
-    problem.refine = [[] for _ in problem.cameras]
-    problem.lenses = problem.given.copy()
-    solution = problem.solve(loss="none", loss_scale=1.0, **solve)
-    for stage in STAGES:
-        solution = _run_stage(problem, stage, solution, options, reports, solve)
+    if earlier is not None:
+        solution = _refine_again(problem, earlier, options, reports, solve)
+    else:
+        solution = _choose_and_refine(problem, options, reports, solve)
     solution = _hold_undetermined(problem, solution, options, reports, solve)
-    refined = dict(intrinsics)
+    if problem.hold_at_given():  # a later round held an entry the first one had moved
+        solution = problem.solve(loss="none", loss_scale=1.0, **solve)
+    refined = {name: given[name] if name in problem.dropped else value for name, value in intrinsics.items()}
     for c, name in enumerate(problem.cameras):
         if name not in reports or name in refused:
             continue
         lens = solution["lenses"][c] if problem.refine[c] else problem.given[c]
-        refined[name] = _intrinsics_of(intrinsics[name], lens)
+        refined[name] = _intrinsics_of(given[name], lens)
         report = reports[name]
         report.refined = [name for name in report.requested if name not in report.held]
         report.result = _lens_dict(lens)
         report.noise_px = float(solution["noise_px"][c])
         report.observations = int(np.sum(problem.camera_index == c))
         _log_report(report)
+    for name, observations in problem.dropped.items():
+        reports[name].refined = []
+        reports[name].result = reports[name].given
+        reports[name].observations = observations
+        _log_report(reports[name])
     return SelfCalibration(refined, reports)
+
+
+def _choose_and_refine(problem: _Problem, options: SelfCalibrationOptions, reports: dict[str, LensReport],
+                       solve: dict[str, Any]) -> dict[str, Any]:
+    """Frees the requested entries stage by stage, keeping those that earn their place."""
+    # A first robust solve with the first two stages' entries brings the residuals near the
+    # noise, so that gross outliers can be told apart; the stages then start over.
+    problem.refine = problem.stage_entries(STAGES[0] + STAGES[1], [[] for _ in problem.cameras])
+    problem.gate(problem.solve(loss="cauchy", loss_scale=options.first_loss_scale_px, **solve), options)
+    problem.refine = [[] for _ in problem.cameras]
+    problem.lenses = problem.start.copy()
+    solution = problem.solve(loss="none", loss_scale=1.0, **solve)
+    for stage in STAGES:
+        solution = _run_stage(problem, stage, solution, options, reports, solve)
+    return solution
+
+
+def _refine_again(problem: _Problem, earlier: Mapping[str, LensReport], options: SelfCalibrationOptions,
+                  reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any]:
+    """Refines the entries an earlier round chose, from where it left off."""
+    for c, name in reversed(list(enumerate(problem.cameras))):
+        before = earlier.get(name)
+        if name in reports and before is not None:
+            reports[name].held.update(before.held)
+            reports[name].coverage = before.coverage
+            reports[name].focal_sigma = before.focal_sigma
+            problem.refine[c] = sorted(k for entry in before.refined for k in REFINABLE[entry][0])
+            if before.left_out:
+                reports[name].left_out = True
+                problem.drop_camera(c)
+    problem.gate(problem.solve(loss="cauchy", loss_scale=options.first_loss_scale_px, **solve), options)
+    return problem.solve(loss="none", loss_scale=1.0, **solve)
 
 
 def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: dict[str, Any], options: SelfCalibrationOptions,
@@ -252,7 +297,7 @@ def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: dict[str, An
     before = problem.refine
     start = (problem.poses.copy(), problem.points.copy(), problem.lenses.copy())
     rejected = {c for c in range(len(problem.cameras))
-                if _hold_for_coverage(problem, c, stage, options, reports[problem.cameras[c]])}
+                if _hold_for_coverage(problem, c, stage, options, reports.get(problem.cameras[c]))}
     while True:
         problem.refine = problem.stage_entries(stage, before, rejected)
         if problem.refine == before:
@@ -298,20 +343,27 @@ def _hold_undetermined(problem: _Problem, solution: dict[str, Any], options: Sel
     determined. Returns the last solution."""
     for _ in range(len(GROUPS)):
         held = False
+        undetermined_focal = []
         for c, name in enumerate(problem.cameras):
             if not problem.refine[c]:
                 continue
             why, group = problem.undetermined(c, solution, options, reports[name])
             if group is None:
                 continue
-            entries = [entry for entry in reports[name].requested if REFINABLE[entry][1] == group]
+            if group == "focal":  # nothing of this lens can be trusted: all of it is held
+                undetermined_focal.append(c)
+                reports[name].left_out = True
+            entries = [entry for entry in reports[name].requested
+                       if group == "focal" or REFINABLE[entry][1] == group]
             for entry in entries:
                 reports[name].held.setdefault(entry, why)
             lens_entries = [k for entry in entries for k in REFINABLE[entry][0]]
             problem.refine[c] = [k for k in problem.refine[c] if k not in lens_entries]
             problem.lenses[c, lens_entries] = problem.given[c, lens_entries]
             held = True
-        if not held:
+        for c in reversed(undetermined_focal):
+            problem.drop_camera(c)
+        if not held or not problem.solvable:
             return solution
         solution = problem.solve(loss="none", loss_scale=1.0, **solve)
     return solution
@@ -336,7 +388,8 @@ class _Problem:
     camera_index: np.ndarray
     point_index: np.ndarray
     observed: np.ndarray
-    given: np.ndarray  # (C, 8) lenses as given
+    given: np.ndarray  # (C, 8) lenses as given: where held entries stay
+    start: np.ndarray  # (C, 8) lenses the refinement starts from
     shapes: np.ndarray
     refine: list[list[int]]
     poses: np.ndarray
@@ -344,15 +397,30 @@ class _Problem:
     lenses: np.ndarray  # (C, 8) current values
     image_sizes: list[tuple[float, float]]
     requested: list[tuple[str, ...]]  # per camera, entry names asked for
+    dropped: dict[str, int] = field(default_factory=dict)  # camera -> its observations
 
+
+    @property
+    def solvable(self) -> bool:
+        return len(self.cameras) > 0 and len(self.points) >= 2 and len(self.camera_index) > 0
 
     @property
     def empty(self) -> bool:
         return len(self.camera_index) == 0 or not any(self.requested)
 
+    def hold_at_given(self) -> bool:
+        """Puts every entry not refined back to its given value; True if one moved."""
+        moved = False
+        for c in range(len(self.cameras)):
+            held = ~np.isin(np.arange(8), self.refine[c])
+            if np.any(self.lenses[c, held] != self.given[c, held]):
+                self.lenses[c, held] = self.given[c, held]
+                moved = True
+        return moved
+
     @classmethod
     def build(cls, tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
-              request: RefineRequest, refused: Mapping[str, str]) -> _Problem:
+              request: RefineRequest, refused: Mapping[str, str], given: Mapping[str, Intrinsics]) -> _Problem:
         from calibproj.registration import image_size
 
         cameras = [n for n in tracks.camera_names if n in calibration.poses and n in intrinsics]
@@ -366,11 +434,12 @@ class _Problem:
         poses = np.array([_pose_vector(*calibration.poses[n]) for n in cameras]).reshape(-1, 6)
         points = _floor_points(kept, intrinsics, calibration)
         requested = [() if name in refused else request.of(name) for name in cameras]
-        given = np.array([_lens_of(intrinsics[n]) for n in cameras]).reshape(-1, 8)
-        return cls(cameras, camera_index.astype(np.int32), point_index.astype(np.int32), observed, given,
+        start = np.array([_lens_of(intrinsics[n]) for n in cameras]).reshape(-1, 8)
+        return cls(cameras, camera_index.astype(np.int32), point_index.astype(np.int32), observed,
+                   np.array([_lens_of(given[n]) for n in cameras]).reshape(-1, 8), start,
                    np.array([[i.K[1, 1] / i.K[0, 0], i.K[0, 1] / i.K[0, 0]] for i in map(intrinsics.get, cameras)]
                             ).reshape(-1, 2),
-                   [[] for _ in cameras], poses, points, given.copy(), [image_size(intrinsics[n]) for n in cameras],
+                   [[] for _ in cameras], poses, points, start.copy(), [image_size(intrinsics[n]) for n in cameras],
                    requested)
 
     def solve(self, **kwargs: Any) -> dict[str, Any]:
@@ -390,14 +459,29 @@ class _Problem:
             inliers = error[rows & keep]
             sigma = 1.4826 * np.median(inliers) / np.sqrt(2.0) if len(inliers) else noise[c]
             keep &= ~rows | (error < max(options.outlier_gate_px, options.outlier_gate_sigma_factor * sigma))
+        self._keep(keep)
+
+    def _keep(self, keep: np.ndarray) -> None:
+        """Keeps the observations ``keep`` selects and the points they still show twice."""
         seen = np.bincount(self.point_index[keep], minlength=len(self.points))
-        keep &= seen[self.point_index] >= 2
+        keep = keep & (seen[self.point_index] >= 2)
         used = np.unique(self.point_index[keep])
         remap = np.full(len(self.points), -1, dtype=np.int32)
         remap[used] = np.arange(len(used), dtype=np.int32)
         self.camera_index, self.observed = self.camera_index[keep], self.observed[keep]
         self.point_index = remap[self.point_index[keep]]
         self.points = self.points[used]
+
+    def drop_camera(self, c: int) -> None:
+        """Takes camera ``c`` out of the problem: its focal length is not determined, and
+        with a wrong one its observations would strain the others' lenses."""
+        self.dropped[self.cameras[c]] = int(np.sum(self.camera_index == c))
+        keep = self.camera_index != c
+        self.camera_index = np.where(self.camera_index > c, self.camera_index - 1, self.camera_index).astype(np.int32)
+        self._keep(keep)
+        del self.cameras[c], self.refine[c], self.requested[c], self.image_sizes[c]
+        self.given, self.start, self.lenses, self.shapes, self.poses = (
+            np.delete(a, c, axis=0) for a in (self.given, self.start, self.lenses, self.shapes, self.poses))
 
     def coverage(self, camera: int) -> float:
         """How far the camera's observations reach from the principal point towards the
