@@ -121,8 +121,10 @@ class SelfCalibrationOptions:
         distortion_sigma_noise_ratio: see max_distortion_sigma_px; the noise is the RMS
             of one residual coordinate.
         min_chi2_drop: an entry is kept only if freeing it lowers its camera's sum of
-            squared residuals by at least this many times the camera's noise variance
-            (25: a 5-sigma improvement), so that entries which only fit noise stay held.
+            squared residuals by at least this many times the camera's noise variance, so
+            that entries which only fit noise stay held (10: about the Bayesian information
+            criterion's ln(n) for the few thousand residuals of a camera; at 25 the small
+            tangential terms of wide lenses were left out and biased the poses).
         first_loss_scale_px: Cauchy scale of the first solve, whose start may be far
             off (tens of pixels at the image corners).
         outlier_gate_px: after the first solve an observation is kept when its residual
@@ -144,7 +146,7 @@ class SelfCalibrationOptions:
     max_principal_point_sigma_px: float = 1.0
     max_distortion_sigma_px: float = 0.3
     distortion_sigma_noise_ratio: float = 2.0
-    min_chi2_drop: float = 25.0
+    min_chi2_drop: float = 10.0
     first_loss_scale_px: float = 2.0
     outlier_gate_px: float = 3.0
     outlier_gate_sigma_factor: float = 4.0
