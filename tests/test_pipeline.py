@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 
 from calibproj.cli import EXIT_FAILURE, main
@@ -167,3 +168,54 @@ def test_a_camera_whose_intrinsics_file_is_bad_or_missing_fails_alone(
     assert sorted(errors.missing) == ["far2", "near2"] and len(errors.registered) == 7
     assert errors.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
     assert errors.translation_rmse_pct < MAX_TRANSLATION_RMSE_PCT
+
+
+def test_videos_without_intrinsics_files(room: Path, tmp_path: Path) -> None:
+    """Cameras without an intrinsics file start from a guessed field of view (100 deg;
+    the truth is 93). With one camera calibrated, the floor's metric is known and the
+    two others' focal lengths follow; with none, three cameras do not determine three
+    focal lengths (planar self-calibration needs four), and all are held and reported."""
+    from calibproj.io.intrinsics import load_intrinsics_dir, read_intrinsics
+
+    one_file = tmp_path / "intrinsics"
+    one_file.mkdir()
+    shutil.copy(room / "room" / "intrinsics" / "cam1.json", one_file)
+    guessed = 320.0 / np.tan(np.radians(50.0))
+    for source, results in [(one_file, tmp_path / "one"), (None, tmp_path / "none")]:
+        calibration = calibrate(room / "room" / "videos", source, sequence=room / "sequence" / "sequence.json",
+                                out=results, progress=False, report=False, nominal_fov_deg=100.0,
+                                refine_intrinsics=["focal,k1", "cam1=none"] if source else "focal,k1")
+        assert calibration.failed == {}
+        document = json.loads((results / "self_calibration.json").read_text())
+        refined = load_intrinsics_dir(results / "intrinsics")
+        for name in ("cam2", "cam3"):
+            camera = document["cameras"][name]
+            truth = read_intrinsics(room / "room" / "intrinsics" / f"{name}.json")
+            assert camera["given"]["focal"] == pytest.approx(guessed)
+            if source is not None:
+                assert camera["refined"] == ["focal", "k1"], name
+                assert abs(refined[name].K[0, 0] / truth.K[0, 0] - 1.0) < 0.01, name
+            else:
+                assert camera["refined"] == [] and "not determined" in camera["held"]["focal"], name
+                assert refined[name].K[0, 0] == pytest.approx(guessed)
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--nominal-fov", "100"], "--nominal-fov needs --refine-intrinsics"),
+    (["--nominal-fov", "200", "--refine-intrinsics", "focal"], "must be a horizontal field of view in [10, 170]"),
+    ([], "no intrinsics: give --intrinsics DIR"),
+])
+def test_nominal_field_of_view_misuse_is_one_line(room: Path, tmp_path: Path, capsys, arguments, message) -> None:
+    code = main(["calibrate", str(room / "room" / "videos"), "--sequence", str(room / "sequence" / "sequence.json"),
+                 "--out", str(tmp_path / "out"), *arguments])
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_nominal_field_of_view_needs_videos(room: Path, tmp_path: Path, capsys) -> None:
+    tracks = simulate_tracks("small", tmp_path / "sim", seed=0).tracks
+    tracks.write(tmp_path / "tracks.json")
+    code = main(["calibrate", "--tracks", str(tmp_path / "tracks.json"), "--out", str(tmp_path / "out"),
+                 "--nominal-fov", "90", "--refine-intrinsics", "focal"])
+    assert code == 2 and "--nominal-fov needs videos" in capsys.readouterr().err

@@ -22,14 +22,14 @@ from pathlib import Path
 from typing import Any
 
 from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics, intrinsics_of_cameras, write_intrinsics_dir
+from calibproj.io.intrinsics import Intrinsics, has_intrinsics_file, intrinsics_of_cameras, write_intrinsics_dir
 from calibproj.io.output_folder import OutputFolder
 from calibproj.registration import RegistrationOptions
 from calibproj.registration import calibrate as register
 from calibproj.provenance import provenance, write_provenance
 from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
-from calibproj.self_calibration import (RefineRequest, SelfCalibrationOptions, convert_tracks, self_calibrate,
-                                        write_self_calibration)
+from calibproj.self_calibration import (RefineRequest, SelfCalibrationOptions, convert_tracks, nominal_intrinsics,
+                                        self_calibrate, write_self_calibration)
 from calibproj.results import CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, TRACKS_FILE
 from calibproj.tracks import Tracks
 
@@ -37,7 +37,7 @@ logger = logging.getLogger(__name__)
 
 def calibrate(
     source: Tracks | str | os.PathLike,
-    intrinsics: Mapping[str, Intrinsics] | str | os.PathLike,
+    intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None,
     *,
     sequence: Any = None,
     out: str | os.PathLike | None = None,
@@ -53,6 +53,7 @@ def calibrate(
     command: list[str] | None = None,
     refine_intrinsics: str | Sequence[str] | None = None,
     self_calibration_options: SelfCalibrationOptions | None = None,
+    nominal_fov_deg: float | None = None,
 ) -> Calibration:
     """Calibrate a camera network and, with ``out``, write its results folder.
 
@@ -80,6 +81,10 @@ def calibrate(
             undistorted with them, and ``self_calibration.json`` says, per camera, what was
             refined or held and why. None (default): the intrinsics given are used as they are.
         self_calibration_options: knobs of that refinement (``SelfCalibrationOptions``).
+        nominal_fov_deg: with videos and ``refine_intrinsics``: a camera without an
+            intrinsics file (or every camera, when ``intrinsics`` is None) starts from a
+            pinhole with this horizontal field of view, the principal point at the image
+            centre and no distortion (``calibproj.self_calibration.nominal_intrinsics``).
     """
     from calibproj.export import parse_formats
     from calibproj.scale import check_measurement, parse_scale, scale_factor, scaled
@@ -95,15 +100,22 @@ def calibrate(
                           _projected_markers(sequence, None) if measurement.kind == "marker-size" else None)
     if request is not None and videos is not None:
         request.check_cameras(video_camera_names(videos))
+    _check_nominal_fov(nominal_fov_deg, request, videos, intrinsics)
     folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
         intrinsics_source = intrinsics
         given = source if videos is not None or isinstance(source, Tracks) else Tracks.read(source)
         # Before the ingest: a bad or missing file fails its own camera only (the reason
         # names the file and the problem), a missing or empty folder the whole run.
-        intrinsics, unusable = intrinsics_of_cameras(
-            intrinsics_source, video_camera_names(videos) if videos is not None else given.camera_names)
-        tracks, ingest_failed, ingest_result = _tracks_of(given, sequence, intrinsics_source, ingest_options,
+        if nominal_fov_deg is None:
+            intrinsics, unusable = intrinsics_of_cameras(
+                intrinsics_source, video_camera_names(videos) if videos is not None else given.camera_names)
+        else:
+            intrinsics, unusable = _with_nominal(intrinsics_source, videos, nominal_fov_deg)
+            intrinsics_source = intrinsics if intrinsics_source is None else intrinsics_source
+        tracks, ingest_failed, ingest_result = _tracks_of(given, sequence,
+                                                          intrinsics if nominal_fov_deg is not None else intrinsics_source,
+                                                          ingest_options,
                                                           detector_options, workers, progress)
         left_out = _left_out(ingest_failed, unusable)
         markers = None
@@ -148,6 +160,42 @@ def calibrate(
     return calibration
 
 
+def _check_nominal_fov(fov_deg: float | None, request: RefineRequest | None, videos: Path | None,
+                       intrinsics: Any) -> None:
+    """ValueError unless a nominal field of view, if given, can be used."""
+    if fov_deg is None:
+        if intrinsics is None:
+            raise ValueError("no intrinsics: give --intrinsics DIR, or --nominal-fov DEG with --refine-intrinsics")
+        return
+    if request is None:
+        raise ValueError("--nominal-fov needs --refine-intrinsics: a guessed focal length must be refined")
+    if videos is None:
+        raise ValueError("--nominal-fov needs videos (their frame size); calibrating from tracks needs --intrinsics")
+    if not (isinstance(fov_deg, (int, float)) and 10.0 <= fov_deg <= 170.0):
+        raise ValueError(f"--nominal-fov must be a horizontal field of view in [10, 170] degrees, got {fov_deg!r}")
+
+
+def _with_nominal(source: Any, videos: Path, fov_deg: float) -> tuple[dict[str, Intrinsics], dict[str, str]]:
+    """The intrinsics of the cameras of ``videos``: from their file where there is one
+    (a bad file still fails its camera), else nominal ones from the video's frame size."""
+    from calibproj import _core
+
+    names = video_camera_names(videos)
+    with_file = [name for name in names if source is not None and has_intrinsics_file(source, name)]
+    found, unusable = intrinsics_of_cameras(source, with_file) if with_file else ({}, {})
+    for name in names:
+        if name in with_file:
+            continue
+        try:
+            info = _core.video.probe(str(next(p for p in videos.iterdir() if p.stem == name)))
+        except RuntimeError as error:
+            unusable[name] = str(error)
+            continue
+        found[name] = nominal_intrinsics(name, (int(info["width"]), int(info["height"])), fov_deg)
+        logger.info("camera %s: no intrinsics file; starting from a %g deg field of view", name, fov_deg)
+    return found, unusable
+
+
 def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration: Calibration,
                     request: RefineRequest, options: SelfCalibrationOptions | None,
                     registration: RegistrationOptions | None, left_out: Mapping[str, str]):
@@ -157,15 +205,19 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
     if not calibration.registered:
         return calibration, tracks, given, None
     threads = registration.num_threads if registration is not None else 1
-    result = self_calibrate(tracks, given, calibration, request, options, num_threads=threads)
-    refined_tracks = convert_tracks(tracks, given, result.intrinsics)
-    calibration = register(refined_tracks, result.intrinsics, registration, left_out=left_out)
+    intrinsics, result = given, None
+    for _ in range(options.rounds):  # each round starts from the registration the last one made
+        result = self_calibrate(tracks, intrinsics, calibration, request, options, num_threads=threads, given=given,
+                                earlier=result.reports if result is not None else None)
+        tracks = convert_tracks(tracks, intrinsics, result.intrinsics)
+        intrinsics = result.intrinsics
+        calibration = register(tracks, intrinsics, registration, left_out=left_out)
     for name, report in result.reports.items():
         # Its pose rests on a focal length nobody checked: it must not steer comparisons.
         if "focal" in report.held and name in calibration.poses and not calibration.metrics[name].weak:
             calibration.metrics[name].weak = True
             logger.warning("camera %s is weak: its focal length was not refined (%s)", name, report.held["focal"])
-    return calibration, refined_tracks, result.intrinsics, (result, given, options)
+    return calibration, tracks, intrinsics, (result, given, options)
 
 
 def _videos_folder(source: Tracks | str | os.PathLike) -> Path | None:

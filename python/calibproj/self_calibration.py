@@ -237,18 +237,24 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
     else:
         solution = _choose_and_refine(problem, options, reports, solve)
     solution = _hold_undetermined(problem, solution, options, reports, solve)
-    if problem.hold_at_given():  # a later round held an entry the first one had moved
+    if solution is not None and problem.hold_at_given():  # a later round held an entry the first one had moved
         solution = problem.solve(loss="none", loss_scale=1.0, **solve)
+    if solution is None:  # every other camera left out: nothing to refine these against
+        for name in problem.cameras:
+            for entry in reports[name].requested if name in reports else ():
+                reports[name].held.setdefault(entry, "not determined: the other cameras' lenses are not either, "
+                                                     "and one camera alone does not determine its own")
+            problem.refine[problem.cameras.index(name)] = []
     refined = {name: given[name] if name in problem.dropped else value for name, value in intrinsics.items()}
     for c, name in enumerate(problem.cameras):
         if name not in reports or name in refused:
             continue
-        lens = solution["lenses"][c] if problem.refine[c] else problem.given[c]
+        lens = solution["lenses"][c] if solution is not None and problem.refine[c] else problem.given[c]
         refined[name] = _intrinsics_of(given[name], lens)
         report = reports[name]
         report.refined = [name for name in report.requested if name not in report.held]
         report.result = _lens_dict(lens)
-        report.noise_px = float(solution["noise_px"][c])
+        report.noise_px = float(solution["noise_px"][c]) if solution is not None else None
         report.observations = int(np.sum(problem.camera_index == c))
         _log_report(report)
     for name, observations in problem.dropped.items():
@@ -275,7 +281,7 @@ def _choose_and_refine(problem: _Problem, options: SelfCalibrationOptions, repor
 
 
 def _refine_again(problem: _Problem, earlier: Mapping[str, LensReport], options: SelfCalibrationOptions,
-                  reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any]:
+                  reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any] | None:
     """Refines the entries an earlier round chose, from where it left off."""
     for c, name in reversed(list(enumerate(problem.cameras))):
         before = earlier.get(name)
@@ -287,6 +293,8 @@ def _refine_again(problem: _Problem, earlier: Mapping[str, LensReport], options:
             if before.left_out:
                 reports[name].left_out = True
                 problem.drop_camera(c)
+    if not problem.solvable:
+        return None
     problem.gate(problem.solve(loss="cauchy", loss_scale=options.first_loss_scale_px, **solve), options)
     return problem.solve(loss="none", loss_scale=1.0, **solve)
 
@@ -338,37 +346,45 @@ def _hold_for_coverage(problem: _Problem, c: int, stage: tuple[str, ...], option
     return True
 
 
-def _hold_undetermined(problem: _Problem, solution: dict[str, Any], options: SelfCalibrationOptions,
-                       reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any]:
-    """Holds at their given values, one group per camera and pass, the groups whose
-    uncertainty exceeds their limit, and solves again until every group left is
-    determined. Returns the last solution."""
-    for _ in range(len(GROUPS)):
-        held = False
-        undetermined_focal = []
+def _hold_undetermined(problem: _Problem, solution: dict[str, Any] | None, options: SelfCalibrationOptions,
+                       reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any] | None:
+    """Holds at its given values the group whose uncertainty exceeds its limit the most
+    (over every camera), solves again, and repeats until every group left is determined:
+    one at a time, since holding one may determine the others (three cameras do not
+    determine three focal lengths; with one of them known they do). A camera whose
+    focal length is held is left out of the problem. Returns the last solution."""
+    while solution is not None and problem.solvable:
+        worst = None
         for c, name in enumerate(problem.cameras):
-            if not problem.refine[c]:
-                continue
-            why, group = problem.undetermined(c, solution, options, reports[name])
-            if group is None:
-                continue
-            if group == "focal":  # nothing of this lens can be trusted: all of it is held
-                undetermined_focal.append(c)
-                reports[name].left_out = True
-            entries = [entry for entry in reports[name].requested
-                       if group == "focal" or REFINABLE[entry][1] == group]
-            for entry in entries:
-                reports[name].held.setdefault(entry, why)
-            lens_entries = [k for entry in entries for k in REFINABLE[entry][0]]
-            problem.refine[c] = [k for k in problem.refine[c] if k not in lens_entries]
-            problem.lenses[c, lens_entries] = problem.given[c, lens_entries]
-            held = True
-        for c in reversed(undetermined_focal):
-            problem.drop_camera(c)
-        if not held or not problem.solvable:
+            if problem.refine[c]:
+                why, group, excess = problem.undetermined(c, solution, options, reports[name])
+                if group is not None and (worst is None or excess > worst[3]):
+                    worst = (c, why, group, excess)
+        if worst is None:
             return solution
-        solution = problem.solve(loss="none", loss_scale=1.0, **solve)
+        c, why, group, _ = worst
+        name = problem.cameras[c]
+        entries = [entry for entry in reports[name].requested if group == "focal" or REFINABLE[entry][1] == group]
+        for entry in entries:
+            reports[name].held.setdefault(entry, why)
+        lens_entries = [k for entry in entries for k in REFINABLE[entry][0]]
+        problem.refine[c] = [k for k in problem.refine[c] if k not in lens_entries]
+        problem.lenses[c, lens_entries] = problem.given[c, lens_entries]
+        if group == "focal":  # nothing of this lens can be trusted: all of it is held, and left out
+            reports[name].left_out = True
+            problem.drop_camera(c)
+        solution = problem.solve(loss="none", loss_scale=1.0, **solve) if problem.solvable else None
     return solution
+
+
+def nominal_intrinsics(name: str, resolution: tuple[int, int], fov_deg: float) -> Intrinsics:
+    """A pinhole with the horizontal field of view ``fov_deg``, square pixels, the
+    principal point at the image centre and no distortion: where a camera without any
+    calibration starts."""
+    width, height = resolution
+    focal = 0.5 * width / np.tan(np.radians(fov_deg) / 2.0)
+    K = np.array([[focal, 0.0, (width - 1) / 2.0], [0.0, focal, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+    return Intrinsics(name, (width, height), K, np.zeros(5))
 
 
 def convert_tracks(tracks: Tracks, given: Mapping[str, Intrinsics], refined: Mapping[str, Intrinsics]) -> Tracks:
@@ -529,10 +545,10 @@ class _Problem:
                 f"less than {options.min_chi2_drop:g} per entry")
 
     def undetermined(self, c: int, solution: dict[str, Any], options: SelfCalibrationOptions,
-                     report: LensReport) -> tuple[str, str | None]:
+                     report: LensReport) -> tuple[str, str | None, float]:
         """The group of camera ``c``'s refined lens that the data determine worst, if
-        beyond its limit, with why: ``(why, group)``, or ``("", None)``; records the
-        groups' uncertainties in ``report``."""
+        beyond its limit, with why and by how much: ``(why, group, sigma / limit)``, or
+        ``("", None, 0)``; records the groups' uncertainties in ``report``."""
         lens = solution["lenses"][c]
         sigmas = _group_sigmas(solution["lens_covariances"][c], lens, self.shapes[c],
                                self.seen(c, options.max_sampled_points))
@@ -542,11 +558,11 @@ class _Problem:
         limits = _limits(options, lens[0], float(solution["noise_px"][c]))
         excess = {group: sigma / limits[group] for group, sigma in sigmas.items() if sigma > limits[group]}
         if not excess:
-            return "", None
+            return "", None, 0.0
         group = max(excess, key=excess.get)
         unit = f"px ({sigmas[group] / lens[0]:.2%})" if group == "focal" else "px"
         return (f"not determined by the data: {group} 1 sigma {sigmas[group]:.3g} {unit} "
-                f"exceeds {limits[group]:.3g} px", group)
+                f"exceeds {limits[group]:.3g} px", group, excess[group])
 
 
 def _limits(options: SelfCalibrationOptions, focal: float, noise_px: float) -> dict[str, float]:

@@ -39,7 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("videos", nargs="?", metavar="VIDEOS_DIR", help="folder of camera videos (<camera>.mp4)")
     parser.add_argument("--tracks", metavar="FILE", help="tracks.json to calibrate from, instead of videos")
-    parser.add_argument("--intrinsics", required=True, metavar="DIR", help="folder of per-camera intrinsics files")
+    parser.add_argument("--intrinsics", metavar="DIR",
+                        help="folder of per-camera intrinsics files (may be left out with --nominal-fov)")
     parser.add_argument("--out", required=True, metavar="DIR", help="results folder")
     parser.add_argument("--force", action="store_true", help="replace an existing results folder (the whole folder)")
     parser.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
@@ -57,6 +58,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "intrinsics given: focal, pp, k1, k2, k3, tangential, or none; for every camera "
                              "(focal,k1,k2) or one (ceiling=none); repeatable. Entries the data do not "
                              "determine keep their given values and are reported (see self_calibration.json)")
+    parser.add_argument("--nominal-fov", type=float, metavar="DEG",
+                        help="with videos and --refine-intrinsics: a camera without an intrinsics file starts "
+                             "from a pinhole with this horizontal field of view (centred, no distortion)")
     add_dataclass_arguments(parser, RegistrationOptions, "registration options")
     add_dataclass_arguments(parser, SelfCalibrationOptions, "self-calibration options (with --refine-intrinsics)")
 
@@ -88,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         command=getattr(args, "command_line", None),
         refine_intrinsics=args.refine_intrinsics,
+        nominal_fov_deg=args.nominal_fov,
         self_calibration_options=dataclass_from_args(SelfCalibrationOptions, args),
     )
     rows = calibration_summary(calibration)

@@ -284,6 +284,14 @@ def intrinsics_of_cameras(
     return cameras, unusable
 
 
+def has_intrinsics_file(source: Mapping[str, Intrinsics] | str | os.PathLike, name: str) -> bool:
+    """Whether ``source`` (a mapping or a folder) has intrinsics, good or bad, for ``name``."""
+    if isinstance(source, Mapping):
+        return name in source
+    directory = Path(source)
+    return directory.is_dir() and any((directory / f"{name}{suffix}").is_file() for suffix in INTRINSICS_SUFFIXES)
+
+
 def intrinsics_file(directory: str | os.PathLike, name: str) -> Path:
     """The one intrinsics file of camera ``name`` in ``directory``; FormatError naming
     the folder or the file when there is none, or more than one."""
