@@ -72,8 +72,8 @@ def test_a_mistyped_option_gets_a_suggestion(capsys: pytest.CaptureFixture) -> N
     assert line == "calibproj calibrate: error: unrecognized arguments: --forse (did you mean --force?)"
     assert usage_error(capsys, [*base, "--scael=camera-height:cam1=2"]).endswith("(did you mean --scale?)")
     # A mistyped required option: argparse says it is missing; the hint names the typo.
-    line = usage_error(capsys, ["calibrate", "--tracks", "t.json", "--intrinsisc", "i", "--out", "o"])
-    assert "required: --intrinsics" in line and line.endswith("(--intrinsisc: did you mean --intrinsics?)")
+    line = usage_error(capsys, ["calibrate", "--tracks", "t.json", "--intrinsics", "i", "--otu", "o"])
+    assert "required: --out" in line and line.endswith("(--otu: did you mean --out?)")
     # Options of the program before the subcommand, and of a subcommand after it.
     assert usage_error(capsys, ["--vrebose", "compare", "a", "b"]).endswith("(did you mean --verbose?)")
     assert usage_error(capsys, ["compare", "a", "b", "--jsno"]).endswith("(did you mean --json?)")
