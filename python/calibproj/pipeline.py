@@ -28,8 +28,8 @@ from calibproj.registration import RegistrationOptions
 from calibproj.registration import calibrate as register
 from calibproj.provenance import provenance, write_provenance
 from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
-from calibproj.self_calibration import (RefineRequest, SelfCalibrationOptions, convert_tracks, nominal_intrinsics,
-                                        self_calibrate, write_self_calibration)
+from calibproj.self_calibration import (RefineRequest, SelfCalibrationOptions, closed_form_start, convert_tracks,
+                                        nominal_intrinsics, self_calibrate, write_self_calibration)
 from calibproj.results import CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, TRACKS_FILE
 from calibproj.tracks import Tracks
 
@@ -205,7 +205,10 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
     if not calibration.registered:
         return calibration, tracks, given, None
     threads = registration.num_threads if registration is not None else 1
-    intrinsics, result = given, None
+    intrinsics, result = closed_form_start(tracks, given, calibration, request, options), None
+    if any(intrinsics[name] is not given[name] for name in intrinsics):
+        tracks = convert_tracks(tracks, given, intrinsics)
+        calibration = register(tracks, intrinsics, registration, left_out=left_out)
     for _ in range(options.rounds):  # each round starts from the registration the last one made
         result = self_calibrate(tracks, intrinsics, calibration, request, options, num_threads=threads, given=given,
                                 earlier=result.reports if result is not None else None)

@@ -152,6 +152,7 @@ class SelfCalibrationOptions:
     outlier_gate_sigma_factor: float = 4.0
     lens_solver_iterations: int = 200
     max_sampled_points: int = 500
+    closed_form_min_change: float = 0.1
     rounds: int = 2
     min_coverage: float = 0.5
 
@@ -375,6 +376,47 @@ def _hold_undetermined(problem: _Problem, solution: dict[str, Any] | None, optio
             problem.drop_camera(c)
         solution = problem.solve(loss="none", loss_scale=1.0, **solve) if problem.solvable else None
     return solution
+
+
+def closed_form_start(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
+                      request: RefineRequest, options: SelfCalibrationOptions) -> dict[str, Intrinsics]:
+    """Intrinsics to start the refinement from: the given ones, but for a camera whose
+    focal length is to be refined and disagrees by more than
+    ``options.closed_form_min_change`` with the closed-form planar autocalibration
+    (``calibproj.planar_autocalibration``), that one. Cameras whose focal length is not
+    refined count as known."""
+    from calibproj.planar_autocalibration import MIN_POINTS, focal_lengths
+
+    lookup = {int(i): row for row, i in enumerate(calibration.point_ids)}
+    homographies, known = {}, {}
+    for name in calibration.poses:
+        if name not in intrinsics or name not in tracks.camera_names:
+            continue
+        ids, xy = tracks.observations(name)
+        rows = np.array([lookup.get(int(i), -1) for i in ids], dtype=np.int64)
+        if np.sum(rows >= 0) < MIN_POINTS:
+            continue
+        floor = calibration.points[rows[rows >= 0], :2]
+        centred = xy[rows >= 0] - intrinsics[name].K[:2, 2]
+        H, _ = cv2.findHomography(floor, centred, cv2.RANSAC, 3.0)
+        if H is None:
+            continue
+        homographies[name] = H
+        if "focal" not in request.of(name):
+            known[name] = float(np.sqrt(intrinsics[name].K[0, 0] * intrinsics[name].K[1, 1]))
+    try:
+        found = focal_lengths(homographies, known)
+    except ValueError as error:
+        logger.info("closed-form focal lengths not available (%s); starting from the given ones", error)
+        return dict(intrinsics)
+    start = dict(intrinsics)
+    for name, focal in found.focal.items():
+        given = intrinsics[name].K[0, 0]
+        if abs(focal / given - 1.0) > options.closed_form_min_change:
+            logger.info("camera %s: starting from the closed-form focal length %.1f px (given %.1f px)",
+                        name, focal, given)
+            start[name] = _intrinsics_of(intrinsics[name], np.r_[focal, _lens_of(intrinsics[name])[1:]])
+    return start
 
 
 def nominal_intrinsics(name: str, resolution: tuple[int, int], fov_deg: float) -> Intrinsics:
