@@ -185,7 +185,7 @@ def or_room(tmp_path_factory: pytest.TempPathFactory):
     nominal["far6"] = truth["far6"]  # calibrated with a board: not to be refined
     tracks = convert_tracks(simulation.tracks, truth, nominal)
     reference = calibrate(simulation.tracks, truth, out=folder / "truth", report=False)
-    refined = calibrate(tracks, nominal, out=folder / "refined", report=False,
+    refined = calibrate(tracks, nominal, out=folder / "refined", report=False, exports=["yaml"],
                         refine_intrinsics=["focal,k1,k2,k3,tangential", "far6=none"])
     return folder, simulation, truth, nominal, reference, refined
 
@@ -205,6 +205,21 @@ def test_refinement_recovers_the_intrinsics_of_every_determined_camera(or_room) 
         if "focal" in report["held"]:
             assert results[name].K[0, 0] == nominal[name].K[0, 0]
             assert "not determined" in report["held"]["focal"] or "does not improve" in report["held"]["focal"]
+
+
+def test_exports_carry_the_refined_intrinsics(or_room) -> None:
+    folder, *_ = or_room
+    results = load_intrinsics_dir(folder / "refined" / "intrinsics")
+    storage = cv2.FileStorage(str(folder / "refined" / "calibration_opencv.yaml"), cv2.FILE_STORAGE_READ)
+    try:
+        cameras = storage.getNode("cameras")
+        entries = {cameras.at(i).getNode("name").string(): cameras.at(i) for i in range(cameras.size())}
+        for name in ("far1", "near1"):
+            np.testing.assert_allclose(entries[name].getNode("camera_matrix").mat(), results[name].K)
+            np.testing.assert_allclose(entries[name].getNode("distortion_coefficients").mat().ravel(),
+                                       results[name].dist)
+    finally:
+        storage.release()
 
 
 def test_the_zoomed_camera_is_reported_not_refined(or_room) -> None:
