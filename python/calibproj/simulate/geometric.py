@@ -29,6 +29,7 @@ import numpy as np
 
 from calibproj.sequence.layout import MsmLayout
 from calibproj.io.intrinsics import Intrinsics, write_intrinsics_dir
+from calibproj.simulate import boxes
 from calibproj.simulate.scene import Camera, Scene, load_scene, save_scene
 from calibproj.simulate.truth import truth_document, write_truth
 from calibproj.tracks import Tracks
@@ -81,16 +82,39 @@ def project_points(camera: Camera, points: np.ndarray, min_depth_m: float = DEFA
 
 
 def msm_floor_points(scene: Scene, layout: MsmLayout) -> np.ndarray:
-    """Floor positions of all MSM centres, shape ``(arrays * markers_per_array, 3)``; row = point id."""
-    return scene.projector.pixels_to_floor(layout.centres().reshape(-1, 2))
+    """Where all MSM centres land, shape ``(arrays * markers_per_array, 3)``; row = point
+    id: on the floor, or on a box standing in the projection (``msm_surfaces``)."""
+    return projected_points(scene, layout.centres().reshape(-1, 2))[0]
+
+
+def msm_surfaces(scene: Scene, layout: MsmLayout) -> np.ndarray:
+    """The surface (``calibproj.simulate.boxes``: 0 the floor) each MSM centre lands on."""
+    return projected_points(scene, layout.centres().reshape(-1, 2))[1]
 
 
 def marker_corners_on_floor(scene: Scene, layout: MsmLayout) -> np.ndarray:
-    """Floor positions of the square corners of every MSM at every scale, ``(P, scales, 4, 3)``."""
+    """Where the square corners of every MSM at every scale land, ``(P, scales, 4, 3)``."""
+    return _marker_corners(scene, layout)[0]
+
+
+def _marker_corners(scene: Scene, layout: MsmLayout) -> tuple[np.ndarray, np.ndarray]:
+    """The corners' points ``(P, scales, 4, 3)`` and surfaces ``(P, scales, 4)``."""
     centres = layout.centres().reshape(-1, 2)
     half_sides = 0.5 * layout.marker_px * np.asarray(layout.scales)
     corners = centres[:, None, None, :] + half_sides[None, :, None, None] * SQUARE_CORNERS[None, None]
-    return scene.projector.pixels_to_floor(corners.reshape(-1, 2)).reshape(*corners.shape[:3], 3)
+    points, surfaces = projected_points(scene, corners.reshape(-1, 2))
+    return points.reshape(*corners.shape[:3], 3), surfaces.reshape(corners.shape[:3])
+
+
+def projected_points(scene: Scene, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where projector pixels' rays land: ``(points (N, 3), surfaces (N,))``, the
+    floor unless a box stands in the way (NaN and -1 for rays that land nowhere)."""
+    if not scene.boxes:
+        points = scene.projector.pixels_to_floor(pixels)
+        return points, np.where(np.isfinite(points[:, 0]), boxes.FLOOR, -1)
+    pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    rays = np.linalg.solve(scene.projector.K, np.column_stack([pixels, np.ones(len(pixels))]).T)
+    return boxes.first_hits(scene.projector.center, (scene.projector.R.T @ rays).T, scene.boxes)
 
 
 def decodable_msms(
@@ -99,23 +123,37 @@ def decodable_msms(
     corners: np.ndarray,
     min_marker_px: float = DEFAULT_MIN_MARKER_PX,
     min_depth_m: float = DEFAULT_MIN_DEPTH_M,
+    scene_boxes: tuple = (),
+    surfaces: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Per MSM, whether the camera could decode it at one of its scales at least.
 
     Args:
         camera: the observing camera.
-        centres: floor positions of the MSM centres, ``(P, 3)`` (``msm_floor_points``).
-        corners: floor positions of their square corners, ``(P, scales, 4, 3)``
+        centres: where the MSM centres land, ``(P, 3)`` (``msm_floor_points``).
+        corners: where their square corners land, ``(P, scales, 4, 3)``
             (``marker_corners_on_floor``).
         min_marker_px: shortest side, in image pixels, of a decodable marker.
         min_depth_m: nearest distance in front of the camera at which it sees a point.
+        scene_boxes: boxes that may hide corners and centres from the camera.
+        surfaces: the surfaces of the centres ``(P,)`` and corners ``(P, scales, 4)``:
+            a marker whose corners do not all lie on its centre's surface is folded
+            over an edge and not decoded at that scale.
     """
     seen = project_points(camera, corners.reshape(-1, 3), min_depth_m)
     image = seen.distorted.reshape(*corners.shape[:3], 2)
     sides = np.linalg.norm(image - np.roll(image, -1, axis=2), axis=-1).min(axis=2)
-    inside = seen.visible.reshape(corners.shape[:3]).all(axis=2)
+    visible = seen.visible
+    centre_visible = project_points(camera, centres, min_depth_m).visible
+    if scene_boxes:
+        visible = visible & ~boxes.hidden(camera.center, corners.reshape(-1, 3), scene_boxes)
+        centre_visible = centre_visible & ~boxes.hidden(camera.center, centres, scene_boxes)
+    inside = visible.reshape(corners.shape[:3]).all(axis=2)
     large_enough = inside & (np.nan_to_num(sides, nan=0.0) >= min_marker_px)
-    return large_enough.any(axis=1) & project_points(camera, centres, min_depth_m).visible
+    if surfaces is not None:
+        centre_surface, corner_surfaces = surfaces
+        large_enough &= np.all(corner_surfaces == centre_surface[:, None, None], axis=2)
+    return large_enough.any(axis=1) & centre_visible
 
 
 def sample_eval_points(
@@ -275,10 +313,11 @@ def _check_settings(noise_px: float, outlier_fraction: float, min_marker_px: flo
 def _msm_tracks(scene: Scene, layout: MsmLayout, msm_points: np.ndarray, noise_rng: np.random.Generator,
                 outlier_rng: np.random.Generator, noise_px: float, outlier_fraction: float,
                 min_marker_px: float, min_depth_m: float) -> tuple[Tracks, dict[str, np.ndarray]]:
-    corners = marker_corners_on_floor(scene, layout)
+    corners, corner_surfaces = _marker_corners(scene, layout)
+    surfaces = (msm_surfaces(scene, layout), corner_surfaces)
     cameras, ids, xy = [], [], []
     for index, camera in enumerate(scene.cameras):
-        seen = decodable_msms(camera, msm_points, corners, min_marker_px, min_depth_m)
+        seen = decodable_msms(camera, msm_points, corners, min_marker_px, min_depth_m, scene.boxes, surfaces)
         point_ids = np.flatnonzero(seen)
         pixels = project_points(camera, msm_points[point_ids], min_depth_m).undistorted
         cameras.append(np.full(len(point_ids), index))
@@ -326,7 +365,12 @@ def evaluation_tracks(
 
 def _eval_tracks(scene: Scene, candidates: np.ndarray, noise_rng: np.random.Generator, noise_px: float,
                  min_depth_m: float) -> tuple[np.ndarray, Tracks]:
+    candidates = candidates[~boxes.inside(candidates, scene.boxes)]
     projections = [project_points(camera, candidates, min_depth_m) for camera in scene.cameras]
+    for camera, projection in zip(scene.cameras, projections):
+        if scene.boxes:
+            np.logical_and(projection.visible, ~boxes.hidden(camera.center, candidates, scene.boxes),
+                           out=projection.visible)
     views = np.sum([p.visible for p in projections], axis=0)
     kept = views >= MIN_EVAL_VIEWS
     points = candidates[kept]

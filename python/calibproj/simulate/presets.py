@@ -19,6 +19,9 @@
 - ``or-real``: the demo room as real cameras and a real room record it: 2 % dropped
   frames and 1 ms timing jitter, 15 ms rolling shutters, automatic exposure on two
   cameras, harder compression on two, a tiled floor with stains, some room light.
+- ``or-table``: the demo room with its operating table left in place (top at 0.9 m on
+  a column) and an instrument cart: the projection lands on them too, they shade the
+  floor behind them from the projector and hide parts of it from the cameras.
 
 The projector of every preset hangs at 3 m looking straight down; with fx 1400 its
 1920x1080 image covers about 4.1 x 2.3 m of floor, so a marker of 24 projector pixels
@@ -185,6 +188,21 @@ def or_real(rng: np.random.Generator) -> dict[str, Any]:
     return document
 
 
+# An operating table fixed on its column at the floor centre (top 2.0 x 0.55 m at
+# 0.9 m), and an instrument cart beside it: they stay while the projection plays.
+TABLE_BOXES = [
+    {"centre": [0.0, 0.0], "size_m": [2.0, 0.55, 0.08], "bottom_m": 0.82, "albedo": 0.75},
+    {"centre": [0.0, 0.0], "size_m": [0.35, 0.3, 0.82], "albedo": 0.5},
+    {"centre": [1.3, -0.95], "size_m": [0.6, 0.45, 0.9], "albedo": 0.85},
+]
+
+
+def or_table(rng: np.random.Generator) -> dict[str, Any]:
+    document = demo(rng)
+    document["boxes"] = copy.deepcopy(TABLE_BOXES)
+    return document
+
+
 PRESETS: dict[str, Callable[[np.random.Generator], dict[str, Any]]] = {
     "paper": paper,
     "or-full": or_full,
@@ -194,6 +212,7 @@ PRESETS: dict[str, Callable[[np.random.Generator], dict[str, Any]]] = {
     "small": small,
     "demo": demo,
     "or-real": or_real,
+    "or-table": or_table,
 }
 
 

@@ -166,6 +166,35 @@ class Person:
         return start if length == 0 else start + (end - start) * (walked / length)
 
 
+@dataclass(frozen=True)
+class Box:
+    """Something that stays on the floor during the calibration: an axis-aligned box
+    (an operating table's top or its column, a cart, a cabinet). It receives the
+    projection on its top and sides, casts the projector's shadow on what is behind it
+    and hides that from the cameras (``calibproj.simulate.boxes``).
+
+    Attributes:
+        centre: floor position of its vertical axis (metres).
+        size_m: extent along x and y, and its height (metres).
+        bottom_m: height of its underside (a table top stands on its column: 0.85).
+        albedo: reflectance of its surfaces (the floor's is 1).
+    """
+
+    centre: tuple[float, float]
+    size_m: tuple[float, float, float]
+    bottom_m: float = 0.0
+    albedo: float = 0.8
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([self.centre[0] - self.size_m[0] / 2, self.centre[1] - self.size_m[1] / 2, self.bottom_m])
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([self.centre[0] + self.size_m[0] / 2, self.centre[1] + self.size_m[1] / 2,
+                         self.bottom_m + self.size_m[2]])
+
+
 class LookAtPose:
     """World-to-device pose of a device placed at ``position`` looking at ``look_at``."""
 
@@ -275,6 +304,7 @@ class Scene:
     cameras: tuple[Camera, ...]
     photometric: Photometric = field(default_factory=Photometric)
     people: tuple[Person, ...] = ()
+    boxes: tuple[Box, ...] = ()
 
     @property
     def camera_names(self) -> list[str]:
@@ -289,7 +319,7 @@ class Scene:
     def subset(self, names: list[str]) -> Scene:
         """The same room with only the named cameras, in the given order."""
         return Scene(self.floor, self.projector, tuple(self.camera(name) for name in names), self.photometric,
-                     self.people)
+                     self.people, self.boxes)
 
     def to_json(self) -> dict[str, Any]:
         """Body of ``scene.json`` (without the schema tag)."""
@@ -300,6 +330,7 @@ class Scene:
             "cameras": [_without_none(_plain(asdict(camera))) for camera in self.cameras],
             "photometric": asdict(self.photometric),
             **({"people": [_plain(asdict(person)) for person in self.people]} if self.people else {}),
+            **({"boxes": [_plain(asdict(box)) for box in self.boxes]} if self.boxes else {}),
         }
 
 
@@ -340,7 +371,7 @@ def load_scene(name_or_path: str | os.PathLike, seed: int | None = 0) -> Scene:
 def scene_from_json(document: dict[str, Any], source: str = "scene") -> Scene:
     """Validate a scene document; ``source`` names it in error messages."""
     reader = _FieldReader(source)
-    known = {"schema", "floor", "projector", "cameras", "photometric", "people"}
+    known = {"schema", "floor", "projector", "cameras", "photometric", "people", "boxes"}
     reader.no_unknown_keys(document, known, "")
     floor = _read_floor(reader, reader.required(document, "floor", ""))
     projector = _read_projector(reader, reader.required(document, "projector", ""))
@@ -357,7 +388,11 @@ def scene_from_json(document: dict[str, Any], source: str = "scene") -> Scene:
     if not isinstance(people_json, list):
         raise FormatError(f"{source}: people: expected a list")
     people = tuple(_read_person(reader, entry, f"people[{i}]") for i, entry in enumerate(people_json))
-    scene = Scene(floor, projector, cameras, photometric, people)
+    boxes_json = document.get("boxes", [])
+    if not isinstance(boxes_json, list):
+        raise FormatError(f"{source}: boxes: expected a list")
+    boxes = tuple(_read_box(reader, entry, f"boxes[{i}]") for i, entry in enumerate(boxes_json))
+    scene = Scene(floor, projector, cameras, photometric, people, boxes)
     _check_projector_hits_floor(source, scene.projector)
     return scene
 
@@ -401,6 +436,19 @@ def _read_person(reader: _FieldReader, entry: Any, where: str) -> Person:
     if not 0.0 <= values["albedo"] <= 1.0:
         reader.fail(f"{where}.albedo", f"expected a number in [0, 1], got {values['albedo']}")
     return Person(start, end, **values)
+
+
+def _read_box(reader: _FieldReader, entry: Any, where: str) -> Box:
+    reader.no_unknown_keys(entry, set(Box.__dataclass_fields__), where)
+    centre = tuple(reader.numbers(entry, "centre", where, 2))
+    size = tuple(reader.numbers(entry, "size_m", where, 3, positive=True))
+    bottom = reader.number(entry, "bottom_m", where, default=0.0)
+    albedo = reader.number(entry, "albedo", where, default=Box(centre, size).albedo)
+    if bottom < 0.0:
+        reader.fail(f"{where}.bottom_m", f"expected >= 0, got {bottom}")
+    if not 0.0 <= albedo <= 1.0:
+        reader.fail(f"{where}.albedo", f"expected a number in [0, 1], got {albedo}")
+    return Box(centre, size, bottom, albedo)
 
 
 def _read_record(reader: _FieldReader, entry: Any, defaults: Any, where: str) -> dict[str, float]:

@@ -1,0 +1,81 @@
+"""Boxes in the room (an operating table left in place): rays, shadows, hiding, and the
+geometric simulation of the or-table preset against what the geometry says."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibproj.io.jsonio import FormatError
+from calibproj.simulate import boxes
+from calibproj.simulate.geometric import msm_floor_points, msm_surfaces, simulate_tracks
+from calibproj.simulate.presets import preset_document
+from calibproj.simulate.scene import Box, scene_from_json
+
+TABLE = Box((0.0, 0.0), (2.0, 0.6, 0.1), bottom_m=0.8)  # top at 0.9 m, x in [-1, 1]
+
+
+def test_rays_land_on_the_first_surface_they_meet() -> None:
+    origin = np.array([0.0, 0.0, 3.0])
+    points, surfaces = boxes.first_hits(origin, np.array([[0.0, 0.0, -1.0], [0.5, 0.0, -1.0], [0.0, 0.0, 1.0]]),
+                                        [TABLE])
+    np.testing.assert_allclose(points[0], [0.0, 0.0, 0.9])
+    assert surfaces[0] == boxes.surface_of(0, "top")
+    # Past the top's edge (x = 1.05 at its height) and above its side: the floor.
+    np.testing.assert_allclose(points[1], [1.5, 0.0, 0.0])
+    assert surfaces[1] == boxes.FLOOR
+    assert surfaces[2] == -1 and np.all(np.isnan(points[2]))
+    side, surface = boxes.first_hits(np.array([3.0, 0.1, 0.85]), np.array([[-1.0, 0.0, 0.0]]), [TABLE])
+    np.testing.assert_allclose(side[0], [1.0, 0.1, 0.85])
+    assert surface[0] == boxes.surface_of(0, "+x") and boxes.surface_name(int(surface[0])) == "box 0 +x"
+
+
+def test_shadows_and_hiding() -> None:
+    projector = np.array([0.0, 0.0, 3.0])
+    under, on_top, beside = [0.3, 0.0, 0.0], [0.3, 0.0, 0.9], [1.6, 0.0, 0.0]
+    assert list(boxes.hidden(projector, np.array([under, on_top, beside]), [TABLE])) == [True, False, False]
+    assert list(boxes.inside(np.array([[0.0, 0.0, 0.85], [0.0, 0.0, 0.95]]), [TABLE])) == [True, False]
+
+
+@pytest.mark.parametrize("face, normal, offset", [("top", [0, 0, 1], 0.9), ("bottom", [0, 0, -1], -0.8),
+                                                  ("-x", [-1, 0, 0], 1.0), ("+y", [0, 1, 0], 0.3)])
+def test_surface_planes(face: str, normal: list[float], offset: float) -> None:
+    n, d = boxes.surface_plane([TABLE], boxes.surface_of(0, face))
+    np.testing.assert_allclose(n, normal)
+    assert d == pytest.approx(offset)
+
+
+def test_scene_files_with_boxes_round_trip_and_are_checked() -> None:
+    document = preset_document("or-table")
+    scene = scene_from_json(document)
+    assert len(scene.boxes) == 3 and scene.boxes[0].upper[2] == pytest.approx(0.9)
+    assert scene_from_json(scene.to_json()).boxes == scene.boxes
+    for bad, message in [({"centre": [0, 0]}, "size_m"), ({"centre": [0, 0], "size_m": [1, 1, -1]}, "size_m"),
+                         ({"centre": [0, 0], "size_m": [1, 1, 1], "albedo": 2}, "albedo"),
+                         ({"centre": [0, 0], "size_m": [1, 1, 1], "colour": 1}, "colour")]:
+        with pytest.raises(FormatError, match=message):
+            scene_from_json({**document, "boxes": [bad]})
+
+
+def test_the_or_table_simulation_follows_the_geometry() -> None:
+    simulation = simulate_tracks("or-table", None, seed=0, noise_px=0.0)
+    scene = simulation.scene
+    points = msm_floor_points(scene, simulation.layout)
+    surfaces = msm_surfaces(scene, simulation.layout)
+    seen = np.unique(simulation.tracks.point_ids)
+    on_top = surfaces[seen] == boxes.surface_of(0, "top")
+    assert on_top.sum() > 500 and (surfaces[seen] == boxes.FLOOR).sum() > 1000
+    # Every point lies on the plane of its surface.
+    for surface in np.unique(surfaces[seen]):
+        n, d = boxes.surface_plane(scene.boxes, int(surface))
+        np.testing.assert_allclose(points[seen[surfaces[seen] == surface]] @ n, d, atol=1e-9)
+    # No camera observes a point a box hides from it; the floor under the table top,
+    # in its shadow, gets no MSM at all.
+    for name in scene.camera_names:
+        ids, _ = simulation.tracks.observations(name)
+        assert not boxes.hidden(scene.camera(name).center, points[ids], scene.boxes).any(), name
+    floor_points = points[seen[surfaces[seen] == boxes.FLOOR]]
+    under_top = (np.abs(floor_points[:, 0]) < 1.0) & (np.abs(floor_points[:, 1]) < 0.275)
+    assert not under_top.any()
+    # Evaluation points are never inside a box.
+    assert not boxes.inside(simulation.eval_points, scene.boxes).any()
