@@ -79,3 +79,16 @@ def test_the_or_table_simulation_follows_the_geometry() -> None:
     assert not under_top.any()
     # Evaluation points are never inside a box.
     assert not boxes.inside(simulation.eval_points, scene.boxes).any()
+
+
+def test_truth_gives_each_centre_its_surface(tmp_path) -> None:
+    import json
+
+    simulate_tracks("or-table", tmp_path, seed=0)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    surfaces = np.array(truth["points"]["surface"])
+    xyz = np.array(truth["points"]["xyz"])
+    top = truth["surfaces"][str(boxes.surface_of(0, "top"))]
+    assert top["name"] == "box 0 top" and top["offset"] == pytest.approx(0.9)
+    on_top = surfaces == boxes.surface_of(0, "top")
+    np.testing.assert_allclose(xyz[on_top, 2], 0.9)

@@ -228,10 +228,13 @@ class GeometricSimulation:
         }
         msm_ids = np.arange(len(self.msm_points))
         eval_ids = np.arange(len(self.eval_points))
-        return truth_document(
+        document = truth_document(
             self.scene, (msm_ids, self.msm_points), self.layout.markers_per_array,
             (eval_ids, self.eval_points), extra,
         )
+        if self.scene.boxes:  # which surface each MSM centre lies on (numbers of "surfaces")
+            document["points"]["surface"] = msm_surfaces(self.scene, self.layout).tolist()
+        return document
 
     def write(self, out: str | os.PathLike) -> None:
         """Write tracks.json, eval_tracks.json, intrinsics/<camera>.json, truth.json and scene.json."""

@@ -55,6 +55,8 @@ def truth_document(
     }
     if eval_points is not None:
         body["eval_points"] = _points_json(*eval_points)
+    if scene.boxes:
+        body["surfaces"] = _surfaces_json(scene)
     body.update(extra or {})
     return body
 
@@ -62,6 +64,18 @@ def truth_document(
 def write_truth(path: str | os.PathLike, body: dict[str, Any]) -> None:
     """Write ``truth.json`` atomically from ``truth_document(...)``."""
     write_json(path, TRUTH_KIND, SCHEMA_MAJOR, body)
+
+
+def _surfaces_json(scene: Scene) -> dict[str, Any]:
+    """The planes the projection may land on: surface number -> name and plane."""
+    from calibproj.simulate import boxes
+
+    count = 1 + len(boxes.FACES) * len(scene.boxes)
+    out = {}
+    for surface in range(count):
+        normal, offset = boxes.surface_plane(scene.boxes, surface)
+        out[str(surface)] = {"name": boxes.surface_name(surface), "normal": normal.tolist(), "offset": offset}
+    return out
 
 
 def _points_json(ids: np.ndarray, xyz: np.ndarray) -> dict[str, Any]:
