@@ -485,27 +485,55 @@ bool Reconstruction::InFront(int observation, const std::vector<Eigen::Matrix3d>
   return (rotations[c] * X + PoseTranslation(poses_, c)).z() > 0.0;
 }
 
+bool Reconstruction::PlanePointByConsensus(const std::vector<geometry::View>& views,
+                                           const std::vector<double>& focal, Eigen::Vector3d* X) const {
+  // Every view's ray meets the plane somewhere; the views that agree (each reprojects
+  // the other's plane point within the homography threshold) are averaged. A point seen
+  // once counts too. Seen twice or more with no two views agreeing, it lies off the
+  // plane (on a table left in the projection) or one view is an outlier: not placed.
+  std::vector<Eigen::Vector3d> on_plane;
+  std::vector<size_t> of_view;
+  for (size_t k = 0; k < views.size(); ++k) {
+    Eigen::Vector3d Y;
+    if (geometry::IntersectRayWithPlane(views[k], plane_, &Y)) {
+      on_plane.push_back(Y);
+      of_view.push_back(k);
+    }
+  }
+  if (on_plane.empty()) return false;
+  const auto error_px = [&](const Eigen::Vector3d& Y, size_t k) {
+    const Eigen::Vector3d x_cam = views[k].R * Y + views[k].t;
+    if (!(x_cam.z() > 0.0)) return std::numeric_limits<double>::infinity();
+    return focal[k] * (x_cam.head<2>() / x_cam.z() - views[k].ray).norm();
+  };
+  std::vector<size_t> best;
+  for (size_t a = 0; a < on_plane.size(); ++a) {
+    std::vector<size_t> agreeing;
+    for (size_t b = 0; b < on_plane.size(); ++b) {
+      if (error_px(on_plane[a], of_view[b]) <= options_.homography_threshold_px) agreeing.push_back(b);
+    }
+    if (agreeing.size() > best.size()) best = agreeing;
+  }
+  if (on_plane.size() > 1 && best.size() < 2) return false;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (const size_t b : best) sum += on_plane[b];
+  *X = sum / static_cast<double>(best.size());
+  return true;
+}
+
 bool Reconstruction::ReconstructPoint(int point) {
   std::vector<geometry::View> views;
+  std::vector<double> focal;  // pixels per unit of normalised image coordinates, per view
   for (int i : point_observations_[point]) {
     const int c = camera_index_(i);
     if (!active_[i] || !registered_[c]) continue;
     views.push_back({PoseRotation(poses_, c), PoseTranslation(poses_, c), Ray(i)});
+    focal.push_back(std::sqrt(cameras_[c].K.fx * cameras_[c].K.fy));
   }
   if (views.empty()) return false;
   Eigen::Vector3d X;
   if (options_.model == ba::Model::kCoplanar) {
-    // Back-project every view onto the plane and average: a point seen once counts too.
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    int count = 0;
-    for (const auto& view : views) {
-      if (geometry::IntersectRayWithPlane(view, plane_, &X)) {
-        sum += X;
-        ++count;
-      }
-    }
-    if (count == 0) return false;
-    X = sum / count;
+    if (!PlanePointByConsensus(views, focal, &X)) return false;
   } else {
     if (views.size() < 2) return false;
     X = geometry::TriangulateLinear(views);

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "calibproj/ba/bundle_adjuster.h"
+#include "calibproj/geometry/triangulation.h"
 
 namespace calibproj::registration {
 
@@ -152,6 +153,10 @@ class Reconstruction {
 
  private:
   Eigen::Vector2d Ray(int observation) const;
+  // COPLANAR: the plane point of the views that agree (see the definition); false when
+  // none do.
+  bool PlanePointByConsensus(const std::vector<geometry::View>& views, const std::vector<double>& focal,
+                             Eigen::Vector3d* X) const;
   double Focal(int camera) const;
   std::vector<int> ComponentSizes() const;
   std::vector<int> CommonObservations(int camera1, int camera2, std::vector<int>* second) const;
