@@ -206,3 +206,39 @@ def test_rotation_cache_changes_nothing(rig, model: str) -> None:
     assert cached["iterations"] == plain["iterations"]
     np.testing.assert_array_equal(cached["poses"], plain["poses"])
     np.testing.assert_array_equal(cached["points"], plain["points"])
+
+
+def test_piecewise_planar_recovers_a_table_top_and_free_points() -> None:
+    """COPLANAR with a second plane (a table top 0.9 m up) and some points off both
+    (free 3D points): from perturbed poses, points and planes, noise-free observations
+    give back the truth (the gauge camera's pose and the floor's offset fix the frame)."""
+    from calibproj.synthetic import project
+
+    rig = paper_ring_rig(seed=5, noise_px=0.0, num_points=800)
+    points = rig.points.copy()
+    on_table = (np.abs(points[:, 0]) < 0.8) & (np.abs(points[:, 1]) < 0.4)
+    points[on_table, 2] = 0.9
+    free = np.flatnonzero(~on_table)[::20]
+    points[free, 2] = np.random.default_rng(1).uniform(0.2, 1.5, len(free))
+    point_plane = np.where(on_table, 1, 0)
+    point_plane[free] = -1
+    observed = np.zeros_like(rig.observed)
+    for c in range(len(rig.poses)):
+        rows = rig.camera_index == c
+        observed[rows] = project(rig.K[c], rig.poses[c], points[rig.point_index[rows]])[0]
+    rng = np.random.default_rng(2)
+    poses = perturb_poses(rig.poses, rotation_deg=1.0, translation_m=0.03, rng=rng)
+    poses[0] = rig.poses[0]
+    start = points + rng.normal(0.0, 0.03, points.shape)
+    result = ba.bundle_adjust(rig.camera_index, rig.point_index, observed, rig.K, poses, start, rig.plane,
+                              model="coplanar", more_planes=np.array([[0.02, -0.01, 1.0, 0.93]]),
+                              point_plane=point_plane, max_iterations=200)
+    assert result["usable"] and result["final_cost"] < 1e-12
+    np.testing.assert_allclose(result["more_planes"][0], [0.0, 0.0, 1.0, 0.9], atol=1e-7)
+    np.testing.assert_allclose(result["points"], points, atol=1e-7)
+    np.testing.assert_allclose(result["poses"], rig.poses, atol=1e-7)
+    # Bad plane assignments are one clear error.
+    with pytest.raises(ValueError, match="plane 2 out of range"):
+        ba.bundle_adjust(rig.camera_index, rig.point_index, observed, rig.K, poses, start, rig.plane,
+                         model="coplanar", more_planes=np.array([[0.0, 0.0, 1.0, 0.9]]),
+                         point_plane=np.full(len(points), 2))

@@ -87,6 +87,7 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
                         double parameter_tolerance, int num_threads, const std::string& linear_solver,
                         bool refine_poses, bool refine_points, int gauge_camera, int scale_camera,
                         bool compute_covariance, bool full_report, bool cache_rotations,
+                        const RowMatrix& more_planes, const Eigen::VectorXi& point_plane,
                         const ba::CostFactory& make_cost) {
   ba::Options options;
   options.model = ParseModel(model);
@@ -123,6 +124,8 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
   if (options.model == ba::Model::kCoplanar) {
     if (plane.size() != 4) throw std::invalid_argument("plane: expected 4 values [nx, ny, nz, d]");
     data.plane = plane;
+    data.more_planes = RowsOf<ba::PlaneMatrix>(more_planes, 4, "more_planes");
+    data.point_plane = point_plane;
   }
 
   ba::Result result;
@@ -142,6 +145,7 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
   out["poses"] = result.poses;
   out["points"] = result.points;
   out["plane"] = Eigen::VectorXd(result.plane);
+  out["more_planes"] = RowMatrix(result.more_planes);
   out["residuals"] = result.residuals;
   if (options.compute_covariance) {
     py::array_t<double> covariances({static_cast<py::ssize_t>(result.pose_covariances.size()), py::ssize_t{6}, py::ssize_t{6}});
@@ -190,12 +194,12 @@ void def_bundle_adjust(py::module_& m, const char* name, const ba::CostFactory& 
                   double function_tolerance, double gradient_tolerance, double parameter_tolerance,
                   int num_threads, const std::string& linear_solver, bool refine_poses, bool refine_points,
                   int gauge_camera, int scale_camera, bool compute_covariance, bool full_report,
-                  bool cache_rotations) {
+                  bool cache_rotations, const RowMatrix& more_planes, const Eigen::VectorXi& point_plane) {
         return BundleAdjustPy(camera_index, point_index, observed, intrinsics, poses, points, plane, model, loss,
                               loss_scale, max_iterations, function_tolerance, gradient_tolerance,
                               parameter_tolerance, num_threads, linear_solver, refine_poses, refine_points,
                               gauge_camera, scale_camera, compute_covariance, full_report, cache_rotations,
-                              make_cost);
+                              more_planes, point_plane, make_cost);
       },
       py::arg("camera_index"), py::arg("point_index"), py::arg("observed"), py::arg("intrinsics"), py::arg("poses"),
       py::arg("points"), py::arg("plane") = Eigen::VectorXd(), py::kw_only(), py::arg("model") = "free",
@@ -204,17 +208,20 @@ void def_bundle_adjust(py::module_& m, const char* name, const ba::CostFactory& 
       py::arg("parameter_tolerance") = 1e-12, py::arg("num_threads") = 1, py::arg("linear_solver") = "auto",
       py::arg("refine_poses") = true, py::arg("refine_points") = true, py::arg("gauge_camera") = 0,
       py::arg("scale_camera") = -1, py::arg("compute_covariance") = false, py::arg("full_report") = false,
-      py::arg("cache_rotations") = true,
+      py::arg("cache_rotations") = true, py::arg("more_planes") = RowMatrix(0, 4),
+      py::arg("point_plane") = Eigen::VectorXi(),
       R"doc(Bundle adjustment (Ceres).
 
 Observations: camera_index (N,), point_index (N,), observed (N, 2) undistorted pixels.
 intrinsics (C, 3, 3); poses (C, 6) cam_from_world [angle-axis, t]; points (P, 3);
-plane [nx, ny, nz, d] with n . X = d (COPLANAR only). model: free | coplanar;
+plane [nx, ny, nz, d] with n . X = d (COPLANAR only); COPLANAR made piecewise planar:
+more_planes (K, 4) and point_plane (P,) (0: plane, k: more_planes[k - 1], -1: a free
+3D point; empty: all on plane). model: free | coplanar;
 loss: none | huber | cauchy (scale in pixels); linear_solver: auto | dense_schur |
 sparse_schur | iterative_schur | dense_qr | sparse_normal_cholesky. The gauge camera's
 pose is held fixed, and the scale through the plane offset (COPLANAR) or the distance
 to the scale camera (FREE; -1 picks the farthest). Returns a dict with the refined
-poses, points, plane, per-observation residuals (N, 2), costs, iterations, termination,
+poses, points, plane, more_planes, per-observation residuals (N, 2), costs, iterations, termination,
 solve time and, if compute_covariance, pose_covariances (C, 6, 6) of [dtheta, dt].
 Bad input raises ValueError naming the problem. Releases the GIL while solving.)doc");
 }

@@ -39,6 +39,17 @@ Eigen::Matrix3d PoseRotation(const PoseMatrix& poses, int c) {
   return RotationFromAngleAxis(poses.row(c).head<3>().transpose());
 }
 
+// A plane [n, d] under X' = R X + t, and back.
+Eigen::Vector4d PlaneToGauge(const Eigen::Vector4d& plane, const FrameChange& change) {
+  const Eigen::Vector3d n = change.R * plane.head<3>();
+  return (Eigen::Vector4d() << n, plane(3) + n.dot(change.t)).finished();
+}
+
+Eigen::Vector4d PlaneFromGauge(const Eigen::Vector4d& plane, const FrameChange& change) {
+  const Eigen::Vector3d n_gauge = plane.head<3>();
+  return (Eigen::Vector4d() << change.R.transpose() * n_gauge, plane(3) - n_gauge.dot(change.t)).finished();
+}
+
 // Moves the data into the gauge camera's frame (gauge pose becomes the identity).
 Data ToGaugeFrame(const Data& data, const FrameChange& change) {
   Data out = data;
@@ -51,13 +62,16 @@ Data ToGaugeFrame(const Data& data, const FrameChange& change) {
   for (int p = 0; p < data.points.rows(); ++p) {
     out.points.row(p) = (change.R * data.points.row(p).transpose() + change.t).transpose();
   }
-  const Eigen::Vector3d n = change.R * data.plane.head<3>();
-  out.plane << n, data.plane(3) + n.dot(change.t);
+  out.plane = PlaneToGauge(data.plane, change);
+  for (int k = 0; k < data.more_planes.rows(); ++k) {
+    out.more_planes.row(k) = PlaneToGauge(data.more_planes.row(k).transpose(), change).transpose();
+  }
   return out;
 }
 
-// Inverse of ToGaugeFrame for poses, points and plane.
-void FromGaugeFrame(const FrameChange& change, PoseMatrix* poses, PointMatrix* points, Eigen::Vector4d* plane) {
+// Inverse of ToGaugeFrame for poses, points and planes.
+void FromGaugeFrame(const FrameChange& change, PoseMatrix* poses, PointMatrix* points, Eigen::Vector4d* plane,
+                    PlaneMatrix* more_planes) {
   for (int c = 0; c < poses->rows(); ++c) {
     const Eigen::Matrix3d Rc_gauge = PoseRotation(*poses, c);
     const Eigen::Vector3d tc = poses->row(c).tail<3>().transpose() + Rc_gauge * change.t;
@@ -67,9 +81,10 @@ void FromGaugeFrame(const FrameChange& change, PoseMatrix* poses, PointMatrix* p
   for (int p = 0; p < points->rows(); ++p) {
     points->row(p) = (change.R.transpose() * (points->row(p).transpose() - change.t)).transpose();
   }
-  const Eigen::Vector3d n_gauge = plane->head<3>();
-  const double d = (*plane)(3) - n_gauge.dot(change.t);
-  *plane << change.R.transpose() * n_gauge, d;
+  *plane = PlaneFromGauge(*plane, change);
+  for (int k = 0; k < more_planes->rows(); ++k) {
+    more_planes->row(k) = PlaneFromGauge(more_planes->row(k).transpose(), change).transpose();
+  }
 }
 
 ceres::LinearSolverType CeresLinearSolver(LinearSolver solver, int num_cameras) {
@@ -111,45 +126,57 @@ int FarthestCamera(const PoseMatrix& poses_in_gauge_frame, int gauge_camera) {
 // The parameter blocks the solver works on, in the gauge frame.
 struct Parameters {
   PoseMatrix poses;
-  PointMatrix points;                                                 // FREE
-  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> plane_points;  // COPLANAR
+  PointMatrix points;                                                 // free points
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> plane_points;  // points on a plane
   Eigen::Vector4d plane;
+  PlaneMatrix more_planes;
+  std::vector<int> point_plane;  // per point: 0 plane, k >= 1 more_planes row k - 1, -1 free
+
+  double* Plane(int k) { return k == 0 ? plane.data() : more_planes.row(k - 1).data(); }
+  double* PointBlock(int p) { return point_plane[p] < 0 ? points.row(p).data() : plane_points.row(p).data(); }
 };
+
+// Unit normal; for the main plane pointing away from the gauge camera (d > 0), for the
+// others upwards or sideways (n_z >= 0): either way far from the tangent basis's
+// singular direction -e_z.
+Eigen::Vector4d OrientedPlane(Eigen::Vector4d plane, bool main) {
+  plane /= plane.head<3>().norm();  // unit normal, offset in world units
+  if (main ? plane(3) < 0.0 : plane(2) < 0.0) plane = -plane;
+  return plane;
+}
 
 Parameters InitialParameters(const Data& gauge_data, const Options& options) {
   Parameters params;
   params.poses = gauge_data.poses;
   params.plane = gauge_data.plane;
+  params.points = gauge_data.points;
+  const int num_points = static_cast<int>(gauge_data.points.rows());
   if (options.model == Model::kFree) {
-    params.points = gauge_data.points;
+    params.point_plane.assign(num_points, -1);
     return params;
   }
-  // The plane normal points away from the gauge camera (d > 0), so its tangent
-  // basis stays far from its singular direction -e_z.
-  params.plane /= params.plane.head<3>().norm();  // unit normal, offset in world units
-  if (params.plane(3) < 0.0) params.plane = -params.plane;
-  const Eigen::Vector3d n = params.plane.head<3>();
-  Require(n.z() > kMinSphereZ, "plane: seen edge-on or from behind by the gauge camera");
-  const Eigen::Matrix<double, 3, 2> B = TangentBasis(n);
-  params.plane_points.resize(gauge_data.points.rows(), 2);
-  for (int p = 0; p < gauge_data.points.rows(); ++p) {
+  params.point_plane.assign(num_points, 0);
+  for (int p = 0; p < gauge_data.point_plane.size(); ++p) params.point_plane[p] = gauge_data.point_plane(p);
+  params.plane = OrientedPlane(params.plane, true);
+  Require(params.plane(2) > kMinSphereZ, "plane: seen edge-on or from behind by the gauge camera");
+  params.more_planes = gauge_data.more_planes;
+  for (int k = 0; k < params.more_planes.rows(); ++k) {
+    params.more_planes.row(k) = OrientedPlane(params.more_planes.row(k).transpose(), false).transpose();
+  }
+  params.plane_points.setZero(num_points, 2);
+  for (int p = 0; p < num_points; ++p) {
+    if (params.point_plane[p] < 0) continue;
+    const Eigen::Matrix<double, 3, 2> B = TangentBasis(Eigen::Map<const Eigen::Vector3d>(params.Plane(params.point_plane[p])));
     params.plane_points.row(p) = (B.transpose() * gauge_data.points.row(p).transpose()).transpose();
   }
   return params;
 }
 
-double* PointBlock(Parameters& params, const Options& options, int p) {
-  return options.model == Model::kFree ? params.points.row(p).data() : params.plane_points.row(p).data();
-}
-
-void CopyPointsOut(const Parameters& params, const Options& options, PointMatrix* points) {
-  if (options.model == Model::kFree) {
-    *points = params.points;
-    return;
-  }
-  points->resize(params.plane_points.rows(), 3);
-  for (int p = 0; p < params.plane_points.rows(); ++p) {
-    points->row(p) = PointOnPlane(params.plane.data(), params.plane_points.row(p).data()).transpose();
+void CopyPointsOut(Parameters& params, PointMatrix* points) {
+  *points = params.points;
+  for (int p = 0; p < points->rows(); ++p) {
+    const int k = params.point_plane[p];
+    if (k >= 0) points->row(p) = PointOnPlane(params.Plane(k), params.plane_points.row(p).data()).transpose();
   }
 }
 
@@ -167,10 +194,9 @@ struct Gauge {
 void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, Parameters& params,
                   const CostFactory& make_cost, const RotationCache* rotations, ceres::LossFunction* loss, ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
   const bool coplanar = options.model == Model::kCoplanar;
-  const int point_size = coplanar ? 2 : 3;
   for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
-    problem->AddParameterBlock(PointBlock(params, options, p), point_size);
-    ordering->AddElementToGroup(PointBlock(params, options, p), 0);
+    problem->AddParameterBlock(params.PointBlock(p), params.point_plane[p] < 0 ? 3 : 2);
+    ordering->AddElementToGroup(params.PointBlock(p), 0);
   }
   for (int c = 0; c < params.poses.rows(); ++c) {
     double* pose = params.poses.row(c).data();
@@ -181,21 +207,26 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
     }
     ordering->AddElementToGroup(pose, 1);
   }
-  if (coplanar) {
-    problem->AddParameterBlock(params.plane.data(), 4,
-                               new PlaneManifold(params.plane.head<3>(), /*fix_offset=*/gauge.fixed));
-    ordering->AddElementToGroup(params.plane.data(), 1);
+  const int num_planes = coplanar ? 1 + static_cast<int>(params.more_planes.rows()) : 0;
+  for (int k = 0; k < num_planes; ++k) {
+    double* plane = params.Plane(k);
+    // Only the main plane's offset carries the scale gauge.
+    problem->AddParameterBlock(plane, 4, new PlaneManifold(Eigen::Map<const Eigen::Vector3d>(plane),
+                                                           /*fix_offset=*/k == 0 && gauge.fixed));
+    ordering->AddElementToGroup(plane, 1);
   }
   for (int i = 0; i < data.camera_index.size(); ++i) {
     double* pose = params.poses.row(data.camera_index(i)).data();
-    double* point = PointBlock(params, options, data.point_index(i));
+    const int p = data.point_index(i);
     const int camera = data.camera_index(i);
-    ceres::CostFunction* cost = make_cost(options.model, data.intrinsics[camera], data.observed.row(i).transpose(),
+    const int on_plane = params.point_plane[p];
+    ceres::CostFunction* cost = make_cost(on_plane < 0 ? Model::kFree : Model::kCoplanar, data.intrinsics[camera],
+                                          data.observed.row(i).transpose(),
                                           rotations != nullptr ? rotations->Entry(camera) : nullptr);
-    if (coplanar) {
-      problem->AddResidualBlock(cost, loss, pose, params.plane.data(), point);
+    if (on_plane >= 0) {
+      problem->AddResidualBlock(cost, loss, pose, params.Plane(on_plane), params.PointBlock(p));
     } else {
-      problem->AddResidualBlock(cost, loss, pose, point);
+      problem->AddResidualBlock(cost, loss, pose, params.PointBlock(p));
     }
   }
   if (!options.refine_poses) {
@@ -205,9 +236,9 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
   }
   if (!options.refine_points) {
     for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
-      problem->SetParameterBlockConstant(PointBlock(params, options, p));
+      problem->SetParameterBlockConstant(params.PointBlock(p));
     }
-    if (coplanar) problem->SetParameterBlockConstant(params.plane.data());
+    for (int k = 0; k < num_planes; ++k) problem->SetParameterBlockConstant(params.Plane(k));
   }
 }
 
@@ -333,6 +364,18 @@ void ValidateData(const Data& data, const Options& options) {
   if (options.model == Model::kCoplanar) {
     Require(data.plane.allFinite(), "plane: non-finite value");
     Require(data.plane.head<3>().norm() > 1e-12, "plane: the normal is zero");
+    Require(data.more_planes.allFinite(), "more planes: non-finite value");
+    for (int k = 0; k < data.more_planes.rows(); ++k) {
+      Require(data.more_planes.row(k).head<3>().norm() > 1e-12, "plane " + Str(k + 1) + ": the normal is zero");
+    }
+    Require(data.point_plane.size() == 0 || data.point_plane.size() == num_points,
+            "point planes: " + Str(int(data.point_plane.size())) + " entries for " + Str(num_points) + " points");
+    const int num_planes = 1 + static_cast<int>(data.more_planes.rows());
+    for (int p = 0; p < data.point_plane.size(); ++p) {
+      if (data.point_plane(p) < -1 || data.point_plane(p) >= num_planes) {
+        Fail("point " + Str(p) + ": plane " + Str(data.point_plane(p)) + " out of range [-1, " + Str(num_planes) + ")");
+      }
+    }
   }
   Require(options.gauge_camera >= 0 && options.gauge_camera < num_cameras,
           "options: gauge camera " + Str(options.gauge_camera) + " out of range [0, " + Str(num_cameras) + ")");
@@ -445,17 +488,27 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   }
   result.poses = params.poses;
   result.plane = params.plane;
-  CopyPointsOut(params, options, &result.points);
-  FromGaugeFrame(change, &result.poses, &result.points, &result.plane);
+  result.more_planes = params.more_planes;
+  CopyPointsOut(params, &result.points);
+  FromGaugeFrame(change, &result.poses, &result.points, &result.plane, &result.more_planes);
   // The gauge camera did not move: return its pose bit for bit.
   if (gauge.fixed || !options.refine_poses) {
     result.poses.row(gauge.camera) = data.poses.row(gauge.camera);
   }
   if (!options.refine_poses) result.poses = data.poses;
   if (!options.refine_points) result.points = data.points;
-  if (options.model == Model::kFree) result.plane = data.plane;
+  if (options.model == Model::kFree) {
+    result.plane = data.plane;
+    result.more_planes = data.more_planes;
+  }
+  // Keep the caller's orientation of the normals.
   if (options.model == Model::kCoplanar && result.plane.head<3>().dot(data.plane.head<3>()) < 0.0) {
-    result.plane = -result.plane;  // keep the caller's orientation of the normal
+    result.plane = -result.plane;
+  }
+  for (int k = 0; k < result.more_planes.rows() && options.model == Model::kCoplanar; ++k) {
+    if (result.more_planes.row(k).head<3>().dot(data.more_planes.row(k).head<3>()) < 0.0) {
+      result.more_planes.row(k) = -result.more_planes.row(k);
+    }
   }
 
   Data final_data = data;

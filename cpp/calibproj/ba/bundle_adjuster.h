@@ -58,6 +58,8 @@ struct Options {
   void Check() const;
 };
 
+using PlaneMatrix = Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>;
+
 struct Data {
   Eigen::VectorXi camera_index;   // per observation
   Eigen::VectorXi point_index;    // per observation
@@ -66,6 +68,12 @@ struct Data {
   PoseMatrix poses;               // per camera: cam_from_world [w, t]
   PointMatrix points;             // per point, world coordinates
   Eigen::Vector4d plane = Eigen::Vector4d(0, 0, 1, 0);  // COPLANAR: [n, d], n . X = d
+  // COPLANAR made piecewise planar (a table left in the projection): more planes, and
+  // per point the plane it lies on, 0 for `plane`, k >= 1 for row k - 1 of
+  // `more_planes`, -1 for a point off every plane (a free 3D point). Empty: every
+  // point on `plane`. Only `plane` carries the scale gauge; the others move freely.
+  PlaneMatrix more_planes;
+  Eigen::VectorXi point_plane;
 };
 
 struct Result {
@@ -78,8 +86,9 @@ struct Result {
   int gauge_camera = -1;
   int scale_camera = -1;      // FREE with poses and points refined; -1 otherwise
   PoseMatrix poses;
-  PointMatrix points;         // COPLANAR: exactly on the plane
+  PointMatrix points;         // COPLANAR: exactly on their plane (but the free ones)
   Eigen::Vector4d plane = Eigen::Vector4d::Zero();
+  PlaneMatrix more_planes;    // COPLANAR: the other planes, refined
   PixelMatrix residuals;      // per observation, projected minus observed, pixels
   // Per camera when requested: covariance of [dtheta, dt] with R = Exp(dtheta) R_hat,
   // t = t_hat + dt, in the caller's frame. Zero for the gauge camera.
