@@ -51,6 +51,9 @@ registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
     else if (key == "intermediate_ba_iterations") o.intermediate_ba_iterations = CastTo<int>(value, what);
     else if (key == "final_ba_iterations") o.final_ba_iterations = CastTo<int>(value, what);
     else if (key == "weak_rotation_sigma_deg") o.weak_rotation_sigma_deg = CastTo<double>(value, what);
+    else if (key == "max_planes") o.max_planes = CastTo<int>(value, what);
+    else if (key == "min_plane_points") o.min_plane_points = CastTo<int>(value, what);
+    else if (key == "plane_distance") o.plane_distance = CastTo<double>(value, what);
     else throw std::invalid_argument("registration: unknown option '" + key + "'");
   }
   o.Check();
@@ -122,7 +125,7 @@ py::dict ToDict(const registration::AdjustResult& r) {
 
 py::dict ToDict(const registration::RefineResult& r) {
   py::dict d;
-  d["rounds"] = r.rounds; d["changed"] = r.changed; d["removed"] = r.removed; d["last"] = ToDict(r.last); d["thresholds"] = r.thresholds;
+  d["rounds"] = r.rounds; d["changed"] = r.changed; d["removed"] = r.removed; d["planes_found"] = r.planes_found; d["last"] = ToDict(r.last); d["thresholds"] = r.thresholds;
   return d;
 }
 
@@ -163,6 +166,7 @@ py::dict ToDict(const registration::RegistrationResult& r) {
   d["rotation_sigma_deg"] = rotation_sigma; d["centre_sigma"] = centre_sigma; d["weak"] = BoolArray(weak);
   d["points"] = r.points; d["point_index"] = r.point_index; d["registration_order"] = r.registration_order;
   d["floor_rms"] = r.floor_rms;
+  d["planes"] = RowMatrix(r.planes); d["point_plane"] = r.point_plane;
   d["frame_M"] = r.frame.M; d["frame_origin"] = r.frame.origin; d["frame_scale"] = r.frame.scale;
   return d;
 }

@@ -58,7 +58,10 @@ class Calibration:
     unit: str = "arbitrary"
     model: str = "coplanar"
     registration_order: list[str] = field(default_factory=list)
-    floor_rms: float = 0.0  # RMS distance of the points to the floor, in the output unit
+    floor_rms: float = 0.0  # RMS distance of the floor's points to the floor, in the output unit
+    # Coplanar model: other planes the projection landed on (a table top), each
+    # {"normal": [3], "offset": d, "points": n} with normal . X = d in the floor frame.
+    planes: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def registered(self) -> list[str]:
@@ -113,6 +116,7 @@ class Calibration:
             model=model,
             registration_order=[names[c] for c in summary["registration_order"]],
             floor_rms=float(summary["floor_rms"]),
+            planes=_planes(summary),
         )
 
     @classmethod
@@ -137,6 +141,7 @@ class Calibration:
                 "model": self.model,
                 "registration_order": self.registration_order,
                 "floor_rms": self.floor_rms,
+                "planes": self.planes,
                 "cameras": {name: asdict(m) for name, m in self.metrics.items()},
             },
         )
@@ -171,7 +176,24 @@ def _metrics_of(document: dict[str, Any]) -> tuple[dict[str, CameraMetrics], dic
     if not isinstance(order, list) or not all(type(name) is str for name in order):
         raise ValueError("registration_order: expected a list of camera names")
     floor_rms = number(document.get("floor_rms", 0.0), "floor_rms", minimum=0.0)
-    return metrics, {"model": model, "registration_order": order, "floor_rms": floor_rms}
+    planes = [_plane_entry(f"planes[{k}]", entry) for k, entry in enumerate(_list(document.get("planes", []), "planes"))]
+    return metrics, {"model": model, "registration_order": order, "floor_rms": floor_rms, "planes": planes}
+
+
+def _list(value: Any, where: str) -> list:
+    if not isinstance(value, list):
+        raise ValueError(f"{where}: expected a list")
+    return value
+
+
+def _plane_entry(where: str, entry: Any) -> dict[str, Any]:
+    if not isinstance(entry, dict) or set(entry) != {"normal", "offset", "points"}:
+        raise ValueError(f"{where}: expected an object with normal, offset and points")
+    normal = [number(v, f"{where}.normal") for v in _list(entry["normal"], f"{where}.normal")]
+    if len(normal) != 3:
+        raise ValueError(f"{where}.normal: expected 3 numbers")
+    return {"normal": normal, "offset": number(entry["offset"], f"{where}.offset"),
+            "points": integer(entry["points"], f"{where}.points", minimum=0)}
 
 
 def _camera_metrics(where: str, entry: Any) -> CameraMetrics:
@@ -197,6 +219,16 @@ def _metric_value(name: str, value: Any, where: str) -> Any:
     if name == "failure":
         return text(value, where)
     return number(value, where, minimum=0.0)  # pixels and sigmas
+
+
+def _planes(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """The planes of a registration summary besides the floor, with their point counts."""
+    point_plane = np.asarray(summary.get("point_plane", []), dtype=np.int64)
+    out = []
+    for k, plane in enumerate(np.asarray(summary.get("planes", np.zeros((0, 4)))).reshape(-1, 4)):
+        out.append({"normal": [float(v) for v in plane[:3]], "offset": float(plane[3]),
+                    "points": int(np.sum(point_plane == k + 1))})
+    return out
 
 
 def _finite_or_none(value: float) -> float | None:

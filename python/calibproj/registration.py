@@ -64,6 +64,12 @@ class RegistrationOptions:
         weak_rotation_sigma_deg: a camera whose rotation is known worse than this (1
             sigma along the worst axis, from the final bundle adjustment's covariance)
             is reported as weak: few points, a small or near-affine view.
+        max_planes: coplanar model: points off the floor (a table, a cart left in the
+            projection) are triangulated, and up to this many more planes are found
+            among them (RANSAC) and refined with the rest (0: none).
+        min_plane_points: points a plane needs to be found.
+        plane_distance: a point belongs to a plane within this distance, in units of
+            the first camera's height above the floor.
     """
 
     model: str = "coplanar"
@@ -86,6 +92,9 @@ class RegistrationOptions:
     intermediate_ba_iterations: int = 25
     final_ba_iterations: int = 100
     weak_rotation_sigma_deg: float = 0.05
+    max_planes: int = 3
+    min_plane_points: int = 30
+    plane_distance: float = 0.004
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:

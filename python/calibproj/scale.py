@@ -289,6 +289,7 @@ def scaled(calibration: Calibration, factor: float) -> Calibration:
     return dataclasses.replace(
         calibration, poses=poses, metrics=metrics, points=factor * np.asarray(calibration.points, dtype=float),
         point_ids=calibration.point_ids.copy(), unit="m", floor_rms=factor * calibration.floor_rms,
+        planes=[{**plane, "offset": factor * plane["offset"]} for plane in calibration.planes],
     )
 
 

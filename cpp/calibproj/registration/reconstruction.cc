@@ -1,9 +1,12 @@
 #include "calibproj/registration/reconstruction.h"
 
+#include "calibproj/registration/floor_frame.h"
+
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <map>
 #include <numeric>
 #include <stdexcept>
@@ -95,6 +98,9 @@ void Options::Check() const {
                          "registration: intermediate_ba_iterations");
   limits::RequireInRange(final_ba_iterations, 0, limits::kMaxIterations, "registration: final_ba_iterations");
   Require(weak_rotation_sigma_deg > 0, "registration: weak_rotation_sigma_deg must be positive");
+  limits::RequireInRange(max_planes, 0, 100, "registration: max_planes");
+  limits::RequireInRange(min_plane_points, 3, limits::kMaxPoints, "registration: min_plane_points");
+  limits::RequireInRange(plane_distance, 1e-9, 1.0, "registration: plane_distance");
 }
 
 Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eigen::VectorXi camera_index,
@@ -135,6 +141,8 @@ Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eige
   poses_ = ba::PoseMatrix::Zero(num_cameras(), 6);
   points_ = ba::PointMatrix::Zero(num_points_, 3);
   reconstructed_.assign(num_points_, false);
+  point_plane_.assign(num_points_, -1);
+  single_view_.assign(num_points_, false);
   active_.assign(num_obs, true);
 }
 
@@ -228,6 +236,9 @@ std::vector<PairCandidate> Reconstruction::RankInitialPairs() const {
 void Reconstruction::ResetStructure() {
   std::fill(registered_.begin(), registered_.end(), false);
   std::fill(reconstructed_.begin(), reconstructed_.end(), false);
+  std::fill(point_plane_.begin(), point_plane_.end(), -1);
+  std::fill(single_view_.begin(), single_view_.end(), false);
+  more_planes_.clear();
   order_.clear();
   gauge_camera_ = -1;
 }
@@ -353,6 +364,8 @@ InitialPairResult Reconstruction::Initialize(int camera1, int camera2) {
   ba::PointMatrix best_points;
   Eigen::Vector4d best_plane = Eigen::Vector4d::Zero();
   std::vector<bool> best_reconstructed;
+  std::vector<int> best_point_plane;
+  std::vector<bool> best_single_view;
   for (const auto& motion : motions) {
     SetInitialStructure(camera1, camera2, motion.R, motion.t, motion.n);
     if (motions.size() == 1) break;
@@ -363,6 +376,8 @@ InitialPairResult Reconstruction::Initialize(int camera1, int camera2) {
       best_points = points_;
       best_plane = plane_;
       best_reconstructed = reconstructed_;
+      best_point_plane = point_plane_;
+      best_single_view = single_view_;
     }
   }
   if (motions.size() > 1) {
@@ -370,6 +385,8 @@ InitialPairResult Reconstruction::Initialize(int camera1, int camera2) {
     points_ = best_points;
     plane_ = best_plane;
     reconstructed_ = best_reconstructed;
+    point_plane_ = best_point_plane;
+    single_view_ = best_single_view;
   }
   result.points = static_cast<int>(std::count(reconstructed_.begin(), reconstructed_.end(), true));
   result.success = result.points >= options_.min_pair_points / 2;
@@ -485,39 +502,77 @@ bool Reconstruction::InFront(int observation, const std::vector<Eigen::Matrix3d>
   return (rotations[c] * X + PoseTranslation(poses_, c)).z() > 0.0;
 }
 
+namespace {
+
+// The point of `plane` that best fits the views (least squares on their linearised
+// reprojection equations, in normalised coordinates), and each view's error in pixels.
+bool BestPointOnPlane(const std::vector<geometry::View>& views, const std::vector<double>& focal,
+                      const std::vector<size_t>& used, const Eigen::Vector4d& plane, Eigen::Vector3d* X,
+                      std::vector<double>* error_px) {
+  const Eigen::Vector3d n = plane.head<3>() / plane.head<3>().norm();
+  const double d = plane(3) / plane.head<3>().norm();
+  Eigen::Vector3d u = n.unitOrthogonal();
+  const Eigen::Vector3d v = n.cross(u);
+  const Eigen::Vector3d X0 = d * n;
+  Eigen::MatrixXd A(2 * used.size(), 2);
+  Eigen::VectorXd b(2 * used.size());
+  for (size_t r = 0; r < used.size(); ++r) {
+    const geometry::View& view = views[used[r]];
+    // x_cam = R (X0 + a u + b v) + t; (x - ray_x z) = 0 and (y - ray_y z) = 0, divided by
+    // the depth where the view's ray meets the plane and times its focal: about pixels.
+    Eigen::Vector3d hit;
+    if (!geometry::IntersectRayWithPlane(view, plane, &hit)) return false;
+    const double depth = (view.R * hit + view.t).z();
+    const Eigen::Vector3d c0 = view.R * X0 + view.t, cu = view.R * u, cv = view.R * v;
+    for (int k = 0; k < 2; ++k) {
+      const double w = focal[used[r]] / std::max(depth, 1e-12);
+      A(2 * r + k, 0) = w * (cu(k) - view.ray(k) * cu.z());
+      A(2 * r + k, 1) = w * (cv(k) - view.ray(k) * cv.z());
+      b(2 * r + k) = -w * (c0(k) - view.ray(k) * c0.z());
+    }
+  }
+  const Eigen::Vector2d ab = A.colPivHouseholderQr().solve(b);
+  if (!ab.allFinite()) return false;
+  *X = X0 + ab(0) * u + ab(1) * v;
+  error_px->assign(views.size(), std::numeric_limits<double>::infinity());
+  for (const size_t k : used) {
+    const Eigen::Vector3d x_cam = views[k].R * *X + views[k].t;
+    if (x_cam.z() > 0.0) (*error_px)[k] = focal[k] * (x_cam.head<2>() / x_cam.z() - views[k].ray).norm();
+  }
+  return true;
+}
+
+}  // namespace
+
 bool Reconstruction::PlanePointByConsensus(const std::vector<geometry::View>& views,
-                                           const std::vector<double>& focal, Eigen::Vector3d* X) const {
-  // Every view's ray meets the plane somewhere; the views that agree (each reprojects
-  // the other's plane point within the homography threshold) are averaged. A point seen
-  // once counts too. Seen twice or more with no two views agreeing, it lies off the
-  // plane (on a table left in the projection) or one view is an outlier: not placed.
-  std::vector<Eigen::Vector3d> on_plane;
-  std::vector<size_t> of_view;
-  for (size_t k = 0; k < views.size(); ++k) {
-    Eigen::Vector3d Y;
-    if (geometry::IntersectRayWithPlane(views[k], plane_, &Y)) {
-      on_plane.push_back(Y);
-      of_view.push_back(k);
-    }
+                                           const std::vector<double>& focal, const Eigen::Vector4d& plane,
+                                           Eigen::Vector3d* X) const {
+  // The point of the plane that best fits the views, the worst view left out while
+  // one misses it by more than the homography threshold. A point seen once counts too.
+  // Seen twice or more and fitting no two views, it lies off the plane (on a table
+  // left in the projection) or its views are outliers: not placed.
+  std::vector<size_t> used(views.size());
+  std::iota(used.begin(), used.end(), size_t{0});
+  std::vector<double> error_px;
+  while (!used.empty()) {
+    if (!BestPointOnPlane(views, focal, used, plane, X, &error_px)) return false;
+    const auto worst = std::max_element(used.begin(), used.end(),
+                                        [&](size_t a, size_t b) { return error_px[a] < error_px[b]; });
+    if (error_px[*worst] <= options_.homography_threshold_px) return views.size() == 1 || used.size() >= 2;
+    used.erase(worst);
+    if (used.size() < 2) return false;
   }
-  if (on_plane.empty()) return false;
-  const auto error_px = [&](const Eigen::Vector3d& Y, size_t k) {
-    const Eigen::Vector3d x_cam = views[k].R * Y + views[k].t;
-    if (!(x_cam.z() > 0.0)) return std::numeric_limits<double>::infinity();
-    return focal[k] * (x_cam.head<2>() / x_cam.z() - views[k].ray).norm();
-  };
-  std::vector<size_t> best;
-  for (size_t a = 0; a < on_plane.size(); ++a) {
-    std::vector<size_t> agreeing;
-    for (size_t b = 0; b < on_plane.size(); ++b) {
-      if (error_px(on_plane[a], of_view[b]) <= options_.homography_threshold_px) agreeing.push_back(b);
-    }
-    if (agreeing.size() > best.size()) best = agreeing;
+  return false;
+}
+
+bool Reconstruction::TriangulatePoint(const std::vector<geometry::View>& views, Eigen::Vector3d* X) const {
+  if (views.size() < 2) return false;
+  *X = geometry::TriangulateLinear(views);
+  if (!X->allFinite()) return false;
+  if (geometry::MaxTriangulationAngle(views, *X) < options_.min_triangulation_angle_deg * M_PI / 180.0) return false;
+  for (const auto& view : views) {
+    if ((view.R * *X + view.t).z() <= 0.0) return false;
   }
-  if (on_plane.size() > 1 && best.size() < 2) return false;
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  for (const size_t b : best) sum += on_plane[b];
-  *X = sum / static_cast<double>(best.size());
   return true;
 }
 
@@ -533,17 +588,18 @@ bool Reconstruction::ReconstructPoint(int point) {
   if (views.empty()) return false;
   Eigen::Vector3d X;
   if (options_.model == ba::Model::kCoplanar) {
-    if (!PlanePointByConsensus(views, focal, &X)) return false;
-  } else {
-    if (views.size() < 2) return false;
-    X = geometry::TriangulateLinear(views);
-    if (!X.allFinite()) return false;
-    const double angle = geometry::MaxTriangulationAngle(views, X);
-    if (angle < options_.min_triangulation_angle_deg * M_PI / 180.0) return false;
-    for (const auto& view : views) {
-      const Eigen::Vector3d x_cam = view.R * X + view.t;
-      if (x_cam.z() <= 0.0) return false;
+    // On the main plane, else on another plane found, else off every plane: a point
+    // of a table left in the projection, triangulated when seen twice.
+    int on = -1;
+    for (int k = 0; k <= static_cast<int>(more_planes_.size()) && on < 0; ++k) {
+      const Eigen::Vector4d& plane = k == 0 ? plane_ : more_planes_[k - 1];
+      if ((k == 0 || views.size() > 1) && PlanePointByConsensus(views, focal, plane, &X)) on = k;
     }
+    if (on < 0 && !TriangulatePoint(views, &X)) return false;
+    point_plane_[point] = on;
+    single_view_[point] = views.size() == 1;
+  } else if (!TriangulatePoint(views, &X)) {
+    return false;
   }
   points_.row(point) = X.transpose();
   reconstructed_[point] = true;
@@ -555,7 +611,15 @@ int Reconstruction::AddPoints(int camera) {
   int added = 0;
   for (int i : camera_observations_[camera]) {
     const int p = point_index_(i);
-    if (active_[i] && !reconstructed_[p] && ReconstructPoint(p)) ++added;
+    // A point put on the main plane from one view is placed again now that a second
+    // camera sees it: it may lie on a table, off that plane.
+    const bool again = reconstructed_[p] && single_view_[p];
+    if (!active_[i] || (reconstructed_[p] && !again)) continue;
+    if (ReconstructPoint(p)) {
+      if (!again) ++added;
+    } else if (again) {
+      reconstructed_[p] = false;  // its views disagree and cannot be triangulated
+    }
   }
   return added;
 }
@@ -576,12 +640,13 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
     used.push_back(i);
     ++point_uses[point_index_(i)];
   }
-  const int min_uses = coplanar ? 1 : 2;
+  // A point on a plane is determined by one view, a point off every plane by two.
+  const auto min_uses = [&](int p) { return coplanar && point_plane_[p] >= 0 ? 1 : 2; };
   std::vector<int> camera_map(num_cameras(), -1), point_map(num_points_, -1), cameras, points;
   std::vector<int> kept;
   for (int i : used) {
     const int p = point_index_(i);
-    if (point_uses[p] < min_uses) continue;
+    if (point_uses[p] < min_uses(p)) continue;
     const int c = camera_index_(i);
     if (camera_map[c] < 0) {
       camera_map[c] = static_cast<int>(cameras.size());
@@ -619,6 +684,12 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
     data.observed.row(k) = observed_.row(kept[k]);
   }
   data.plane = plane_;
+  if (coplanar && (!more_planes_.empty() || std::count(point_plane_.begin(), point_plane_.end(), -1) > 0)) {
+    data.more_planes.resize(static_cast<int>(more_planes_.size()), 4);
+    for (size_t k = 0; k < more_planes_.size(); ++k) data.more_planes.row(k) = more_planes_[k].transpose();
+    data.point_plane.resize(static_cast<int>(points.size()));
+    for (size_t k = 0; k < points.size(); ++k) data.point_plane(k) = point_plane_[points[k]];
+  }
   ba::Options ba_options;
   ba_options.model = options_.model;
   ba_options.loss = options_.loss;
@@ -646,7 +717,10 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   if (covariance) StoreCovariances(solved, cameras, static_cast<int>(kept.size()), static_cast<int>(points.size()));
   for (size_t k = 0; k < cameras.size(); ++k) poses_.row(cameras[k]) = solved.poses.row(k);
   for (size_t k = 0; k < points.size(); ++k) points_.row(points[k]) = solved.points.row(k);
-  if (coplanar) plane_ = solved.plane;
+  if (coplanar) {
+    plane_ = solved.plane;
+    for (size_t k = 0; k < more_planes_.size(); ++k) more_planes_[k] = solved.more_planes.row(k).transpose();
+  }
   result.initial_cost = solved.initial_cost;
   result.final_cost = solved.final_cost;
   result.iterations = solved.iterations;
@@ -730,9 +804,81 @@ void Reconstruction::StoreCovariances(const ba::Result& solved, const std::vecto
   for (size_t k = 0; k < cameras.size(); ++k) pose_covariances_[cameras[k]] = variance * solved.pose_covariances[k];
 }
 
+int Reconstruction::FindPlanes() {
+  if (options_.model != ba::Model::kCoplanar) return 0;
+  // Points off every plane, reconstructed from two views at least.
+  std::vector<int> uses(num_points_, 0);
+  for (int i = 0; i < static_cast<int>(active_.size()); ++i) {
+    if (active_[i] && registered_[camera_index_(i)]) ++uses[point_index_(i)];
+  }
+  std::vector<int> candidates;
+  for (int p = 0; p < num_points_; ++p) {
+    if (reconstructed_[p] && point_plane_[p] < 0 && uses[p] >= 2) candidates.push_back(p);
+  }
+  // Distances are in units of the gauge camera's height above the main plane.
+  const double scale = std::abs(plane_(3)) / plane_.head<3>().norm();
+  const double threshold = options_.plane_distance * scale;
+  // First the points that lie on a plane already known (the floor's points whose views
+  // disagreed a little too much, seen at a grazing angle): they go back to it.
+  const auto distance_to = [&](const Eigen::Vector4d& plane, int p) {
+    return (plane.head<3>().dot(points_.row(p).transpose()) - plane(3)) / plane.head<3>().norm();
+  };
+  const auto put_on = [&](const Eigen::Vector4d& plane, int index, int p) {
+    points_.row(p) -= distance_to(plane, p) * plane.head<3>().transpose() / plane.head<3>().norm();
+    point_plane_[p] = index;
+  };
+  std::vector<int> off;
+  for (int p : candidates) {
+    if (std::abs(distance_to(plane_, p)) <= threshold) {
+      put_on(plane_, 0, p);
+    } else {
+      off.push_back(p);
+    }
+  }
+  candidates = off;
+  std::mt19937_64 rng(options_.seed);
+  int found = 0;
+  while (static_cast<int>(more_planes_.size()) < options_.max_planes &&
+         static_cast<int>(candidates.size()) >= options_.min_plane_points) {
+    std::uniform_int_distribution<size_t> pick(0, candidates.size() - 1);
+    std::vector<int> best;
+    for (int iteration = 0; iteration < options_.ransac_max_iterations; ++iteration) {
+      const Eigen::Vector3d a = points_.row(candidates[pick(rng)]).transpose();
+      const Eigen::Vector3d b = points_.row(candidates[pick(rng)]).transpose();
+      const Eigen::Vector3d c = points_.row(candidates[pick(rng)]).transpose();
+      Eigen::Vector3d n = (b - a).cross(c - a);
+      if (n.norm() < 1e-12) continue;
+      n.normalize();
+      std::vector<int> inliers;
+      for (int p : candidates) {
+        if (std::abs(n.dot(points_.row(p).transpose() - a)) <= threshold) inliers.push_back(p);
+      }
+      if (inliers.size() > best.size()) best = inliers;
+    }
+    if (static_cast<int>(best.size()) < options_.min_plane_points) break;
+    ba::PointMatrix on_plane(best.size(), 3);
+    for (size_t k = 0; k < best.size(); ++k) on_plane.row(k) = points_.row(best[k]);
+    const Eigen::Vector4d plane = FitPlaneRobust(on_plane);
+    more_planes_.push_back(plane);
+    const int index = static_cast<int>(more_planes_.size());
+    std::vector<int> rest;
+    for (int p : candidates) {
+      if (std::abs(distance_to(plane, p)) <= threshold) {
+        put_on(plane, index, p);
+      } else {
+        rest.push_back(p);
+      }
+    }
+    candidates = rest;
+    ++found;
+  }
+  return found;
+}
+
 RefineResult Reconstruction::Refine() {
   RefineResult result;
   pose_covariances_.clear();
+  result.planes_found = FindPlanes();
   for (int round = 0; round < options_.max_refine_rounds; ++round) {
     result.last = Adjust(true, round + 1 == options_.max_refine_rounds);
     ++result.rounds;

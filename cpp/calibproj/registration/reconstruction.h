@@ -41,6 +41,13 @@ struct Options {
   // A camera whose rotation is known worse than this (1 sigma, from the final bundle
   // adjustment's covariance) is reported as weak.
   double weak_rotation_sigma_deg = 0.05;
+  // COPLANAR: points off the main plane (a table, a cart left in the projection) are
+  // triangulated; at the end, planes are found among them (RANSAC), up to `max_planes`
+  // more, each with `min_plane_points` points within `plane_distance` (in units of the
+  // first camera's height above the main plane) at least.
+  int max_planes = 3;
+  int min_plane_points = 30;
+  double plane_distance = 0.004;
 
   void Check() const;
 };
@@ -94,6 +101,7 @@ struct RefineResult {
   int rounds = 0;
   int changed = 0;  // observations whose inlier status changed, over all rounds
   int removed = 0;  // inactive observations at the end
+  int planes_found = 0;  // COPLANAR: planes found besides the main one (FindPlanes)
   AdjustResult last;
   std::vector<double> thresholds;  // per camera, pixels
 };
@@ -120,6 +128,9 @@ class Reconstruction {
   // many changed status.
   int FilterOutliers();
   int FilterOutliers(const std::vector<double>& thresholds);
+  // COPLANAR: planes among the points off the main plane (see Options); returns how
+  // many were found. Refine() calls it first.
+  int FindPlanes();
   // Bundle adjustment and outlier filtering rounds, then the poses' covariance.
   RefineResult Refine();
   void FailUnregistered();
@@ -135,6 +146,10 @@ class Reconstruction {
   const std::vector<bool>& reconstructed() const { return reconstructed_; }
   const std::vector<bool>& active() const { return active_; }
   const Eigen::Vector4d& plane() const { return plane_; }
+  // COPLANAR: the other planes found, and per point its plane (0 the main one, k >= 1
+  // more_planes()[k - 1], -1 off every plane).
+  const std::vector<Eigen::Vector4d>& more_planes() const { return more_planes_; }
+  const std::vector<int>& point_plane() const { return point_plane_; }
   int gauge_camera() const { return gauge_camera_; }
   const Eigen::VectorXi& camera_index() const { return camera_index_; }
   const Eigen::VectorXi& point_index() const { return point_index_; }
@@ -156,7 +171,8 @@ class Reconstruction {
   // COPLANAR: the plane point of the views that agree (see the definition); false when
   // none do.
   bool PlanePointByConsensus(const std::vector<geometry::View>& views, const std::vector<double>& focal,
-                             Eigen::Vector3d* X) const;
+                             const Eigen::Vector4d& plane, Eigen::Vector3d* X) const;
+  bool TriangulatePoint(const std::vector<geometry::View>& views, Eigen::Vector3d* X) const;
   double Focal(int camera) const;
   std::vector<int> ComponentSizes() const;
   std::vector<int> CommonObservations(int camera1, int camera2, std::vector<int>* second) const;
@@ -183,6 +199,9 @@ class Reconstruction {
   std::vector<bool> reconstructed_;
   std::vector<bool> active_;
   Eigen::Vector4d plane_ = Eigen::Vector4d(0, 0, 1, 1);
+  std::vector<Eigen::Vector4d> more_planes_;
+  std::vector<int> point_plane_;
+  std::vector<bool> single_view_;  // COPLANAR: placed on the main plane from one view
   int gauge_camera_ = -1;
   std::vector<int> order_;
   std::vector<ba::Matrix6d> pose_covariances_;

@@ -73,8 +73,11 @@ RegistrationResult Summarize(const Reconstruction& rec) {
     if (rec.registered(c)) registered.push_back(c);
   }
   FillMetrics(rec, &result.cameras);
+  const bool coplanar = rec.options().model == ba::Model::kCoplanar;
   for (int p = 0; p < rec.num_points(); ++p) {
-    if (rec.reconstructed()[p]) result.point_index.push_back(p);
+    if (!rec.reconstructed()[p]) continue;
+    result.point_index.push_back(p);
+    result.point_plane.push_back(coplanar ? rec.point_plane()[p] : -1);
   }
   if (registered.empty()) return result;
 
@@ -106,12 +109,26 @@ RegistrationResult Summarize(const Reconstruction& rec) {
     }
   }
   double sum_sq = 0.0;
+  int on_floor = 0;
   for (int p = 0; p < result.points.rows(); ++p) {
     result.points.row(p) =
         (result.frame.scale * result.frame.M * (result.points.row(p).transpose() - result.frame.origin)).transpose();
+    if (coplanar && result.point_plane[p] != 0) continue;
     sum_sq += result.points(p, 2) * result.points(p, 2);
+    ++on_floor;
   }
-  if (result.points.rows() > 0) result.floor_rms = std::sqrt(sum_sq / result.points.rows());
+  if (on_floor > 0) result.floor_rms = std::sqrt(sum_sq / on_floor);
+  // The other planes in the floor frame: n . X = d becomes (M n) . X_f = s (d - n . o).
+  result.planes.resize(static_cast<int>(rec.more_planes().size()), 4);
+  for (size_t k = 0; k < rec.more_planes().size(); ++k) {
+    const Eigen::Vector4d& plane = rec.more_planes()[k];
+    const double norm = plane.head<3>().norm();
+    Eigen::Vector4d floor_plane;
+    floor_plane << result.frame.M * plane.head<3>() / norm,
+        result.frame.scale * (plane(3) - plane.head<3>().dot(result.frame.origin)) / norm;
+    if (floor_plane(2) < 0.0) floor_plane = -floor_plane;
+    result.planes.row(static_cast<int>(k)) = floor_plane.transpose();
+  }
   return result;
 }
 

@@ -35,7 +35,12 @@ struct RegistrationResult {
   std::vector<int> point_index;     // their indices in the tracks
   std::vector<int> registration_order;
   FloorFrame frame;                 // reconstruction frame -> floor frame
-  double floor_rms = 0.0;           // RMS height of the points above the floor
+  double floor_rms = 0.0;           // RMS height of the floor's points above the floor
+  // COPLANAR: the planes found besides the floor, [n, d] with n . X = d in the floor
+  // frame (n_z >= 0: a table top has n = e_z and d its height), and per point of
+  // `points` its plane (0 the floor, k >= 1 planes[k - 1], -1 off every plane).
+  ba::PlaneMatrix planes;
+  std::vector<int> point_plane;
 };
 
 // Floor frame (plane of the COPLANAR model, or a robust plane fit to the FREE points),
