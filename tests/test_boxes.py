@@ -92,3 +92,79 @@ def test_truth_gives_each_centre_its_surface(tmp_path) -> None:
     assert top["name"] == "box 0 top" and top["offset"] == pytest.approx(0.9)
     on_top = surfaces == boxes.surface_of(0, "top")
     np.testing.assert_allclose(xyz[on_top, 2], 0.9)
+
+
+def _rotation_rmse_not_weak(calibration, truth_file) -> float:
+    from calibproj.comparison import compare
+
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as folder:
+        calibration.save(folder)
+        errors = compare(Path(folder) / "camera_poses.json", truth_file)
+    strong = [name for name in errors.cameras if not calibration.metrics[name].weak]
+    return float(np.sqrt(np.mean([errors.cameras[name].rotation_deg ** 2 for name in strong])))
+
+
+@pytest.fixture(scope="module")
+def table_room(tmp_path_factory):
+    """The demo room with and without its table, calibrated (coplanar model)."""
+    from calibproj.registration import calibrate
+
+    folder = tmp_path_factory.mktemp("table")
+    out = {}
+    for preset in ("demo", "or-table"):
+        simulation = simulate_tracks(preset, folder / preset, seed=0, noise_px=0.1)
+        out[preset] = (simulation, calibrate(simulation.tracks, simulation.intrinsics), folder / preset / "truth.json")
+    return out
+
+
+def test_the_table_left_in_place_costs_no_accuracy(table_room) -> None:
+    simulation, calibration, truth = table_room["or-table"]
+    assert calibration.failed == {} and set(calibration.registered) == set(simulation.scene.camera_names)
+    with_table = _rotation_rmse_not_weak(calibration, truth)
+    without = _rotation_rmse_not_weak(table_room["demo"][1], table_room["demo"][2])
+    assert with_table <= 1.2 * without + 0.001
+    # Every observation of the table top is kept: it lies on a plane of its own.
+    assert all(m.inliers >= 0.99 * m.observations for m in calibration.metrics.values())
+
+
+def test_the_table_top_is_found_at_its_height(table_room) -> None:
+    from calibproj.comparison import align_centers
+    from calibproj.scale import ScaleMeasurement, scale_factor, scaled, parse_scale
+
+    simulation, calibration, _ = table_room["or-table"]
+    assert len(calibration.planes) == 1
+    # In metres, from the true height of one camera (as a user measures it).
+    far1 = simulation.scene.camera("far1")
+    metric = scaled(calibration, scale_factor(calibration, parse_scale(f"camera-height:far1={far1.center[2]}"), None))
+    top = metric.planes[0]
+    assert top["normal"][2] > 0.9999
+    assert abs(top["offset"] - 0.9) < 0.002
+    # Its points seen twice (one seen once lies wherever its ray meets the floor), brought
+    # onto the truth's frame, lie within a millimetre of the true top.
+    names = metric.registered
+    scale, R, t = align_centers(np.array([metric.center(n) for n in names]),
+                                np.array([simulation.scene.camera(n).center for n in names]))
+    ids = metric.point_ids
+    surfaces = msm_surfaces(simulation.scene, simulation.layout)[ids]
+    lengths = dict(zip(simulation.tracks.point_ids.tolist(), simulation.tracks.track_lengths().tolist()))
+    on_top = (surfaces == boxes.surface_of(0, "top")) & (np.array([lengths[int(i)] for i in ids]) >= 2)
+    in_truth = scale * metric.points[on_top] @ R.T + t
+    assert on_top.sum() > 500 and np.abs(in_truth[:, 2] - 0.9).max() < 0.001
+
+
+def test_the_table_is_in_the_results_and_the_report(tmp_path, capsys) -> None:
+    from calibproj.calibration import Calibration
+    from calibproj.cli import main
+
+    simulate_tracks("or-table", tmp_path / "sim", seed=0, noise_px=0.1)
+    code = main(["calibrate", "--tracks", str(tmp_path / "sim" / "tracks.json"), "--intrinsics",
+                 str(tmp_path / "sim" / "intrinsics"), "--out", str(tmp_path / "out"),
+                 "--scale", "camera-height:far1=2.7"])
+    assert code == 0
+    assert "plane 1 besides the floor: 0.90" in capsys.readouterr().out
+    loaded = Calibration.load(tmp_path / "out")
+    assert len(loaded.planes) == 1 and abs(loaded.planes[0]["offset"] - 0.9) < 0.002
+    assert "plane 1 besides the floor" in (tmp_path / "out" / "report.html").read_text()

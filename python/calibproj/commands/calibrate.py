@@ -100,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(rows, indent=1))
     else:
         print(format_summary(rows))
+        from calibproj.report.page import plane_text
+
+        for k, plane in enumerate(calibration.planes):
+            print(f"plane {k + 1} besides the floor: {plane_text(plane, calibration.unit)}")
         print(f"results in {args.out} (unit: {calibration.unit})")
     if calibration.failed:
         failures = "; ".join(f"{name}: {reason}" for name, reason in calibration.failed.items())

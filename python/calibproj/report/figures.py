@@ -74,6 +74,28 @@ def floor_outline(points: np.ndarray) -> np.ndarray:
     return hull.reshape(-1, 2).astype(float)
 
 
+def plane_outlines(calibration: Calibration, extent: float) -> list[np.ndarray]:
+    """Per plane besides the floor (``Calibration.planes``), the convex hull of the points
+    within 1 % of the scene's extent of it, as a 3D polygon (empty when too few)."""
+    import cv2
+
+    out = []
+    for plane in calibration.planes:
+        n = np.asarray(plane["normal"], dtype=float)
+        n /= np.linalg.norm(n)
+        near = np.abs(calibration.points @ n - plane["offset"]) < 0.01 * extent
+        if near.sum() < 3:
+            out.append(np.zeros((0, 3)))
+            continue
+        u = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(n, u)
+        flat = np.column_stack([calibration.points[near] @ u, calibration.points[near] @ v]).astype(np.float32)
+        hull = cv2.convexHull(flat).reshape(-1, 2).astype(float)
+        out.append(plane["offset"] * n + hull[:, :1] * u + hull[:, 1:] * v)
+    return out
+
+
 def _subsampled(points: np.ndarray) -> np.ndarray:
     step = max(1, int(np.ceil(len(points) / MAX_SCENE_POINTS)))
     return points[::step]
@@ -92,9 +114,14 @@ def scene_3d(calibration: Calibration, views: Sequence[CameraView], dpi: int = D
     everything, extent = _scene_extent(calibration)
     points = _subsampled(calibration.points)
     if len(points) >= 3:
-        outline = floor_outline(calibration.points)
+        on_floor = np.abs(calibration.points[:, 2]) < 0.01 * extent
+        outline = floor_outline(calibration.points[on_floor] if on_floor.sum() >= 3 else calibration.points)
         floor = np.column_stack([outline, np.zeros(len(outline))])
         axes.add_collection3d(Poly3DCollection([floor], facecolor="#d9d9d9", edgecolor="#999999", alpha=0.35))
+    for k, outline in enumerate(plane_outlines(calibration, extent)):
+        if len(outline) >= 3:
+            axes.add_collection3d(Poly3DCollection([outline], facecolor="#9ecae1", edgecolor="#3182bd", alpha=0.5))
+            axes.text(*outline.mean(axis=0), f" plane {k + 1}", color="#3182bd", fontsize=8)
     if len(points):
         axes.scatter(points[:, 0], points[:, 1], points[:, 2], s=0.5, c="#666666", alpha=0.5, linewidths=0,
                      depthshade=False)
@@ -167,6 +194,12 @@ def scene_views(calibration: Calibration, views: Sequence[CameraView], dpi: int 
     top.text(0.01, 0.01, f"circles: camera centre 3 sigma (worst axis) x {magnification:.0f}; dashed: weak",
              transform=top.transAxes, fontsize=8, color="#444444")
     side.axhline(0.0, color="#999999", linewidth=1)
+    for k, outline in enumerate(plane_outlines(calibration, extent)):
+        if len(outline) >= 3:
+            closed = np.vstack([outline, outline[:1]])
+            top.plot(closed[:, 0], closed[:, 1], color="#3182bd", linewidth=1.2)
+            side.plot(closed[:, 0], closed[:, 2], color="#3182bd", linewidth=1.2)
+            top.annotate(f"plane {k + 1}", closed[0, :2], fontsize=8, color="#3182bd")
     figure.subplots_adjust(left=0.06, right=0.98, bottom=0.11, top=0.93, wspace=0.18)
     return png_bytes(figure, dpi)
 

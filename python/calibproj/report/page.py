@@ -305,7 +305,7 @@ def _summary(calibration: Calibration, views: list[CameraView], provenance: dict
     registered = sum(1 for v in views if v.registered)
     unit = "metres" if calibration.unit == "m" else "arbitrary (first camera at height 1)"
     if calibration.model == "coplanar":
-        floor = "0 by construction (the coplanar model puts every point on the floor plane)"
+        floor = "0 by construction (the coplanar model puts the floor's points on the floor plane)"
     else:
         floor = f"{calibration.floor_rms:.4g}" + (" m" if calibration.unit == "m" else "")
     rows = [
@@ -315,10 +315,22 @@ def _summary(calibration: Calibration, views: list[CameraView], provenance: dict
         ("scale from", _scale_source(calibration, provenance)),
         ("points", str(len(calibration.points))),
         ("points' RMS distance to the floor", floor),
+        *((f"plane {k + 1} besides the floor", plane_text(plane, calibration.unit))
+          for k, plane in enumerate(calibration.planes)),
         ("registration order", ", ".join(calibration.registration_order) or "-"),
     ]
     body = "".join(f"<tr><th class=\"name\">{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
     return f'<table class="summary">{body}</table>'
+
+
+def plane_text(plane: dict, unit: str) -> str:
+    """A plane the projection landed on besides the floor (a table top), in words."""
+    normal = np.asarray(plane.get("normal", [0.0, 0.0, 1.0]), dtype=float)
+    tilt = float(np.degrees(np.arccos(np.clip(abs(normal[2]) / max(np.linalg.norm(normal), 1e-12), -1.0, 1.0))))
+    suffix = " m" if unit == "m" else " units"
+    where = (f"{plane.get('offset', 0.0):.4f}{suffix} above the floor" if tilt < 5.0
+             else f"tilted {tilt:.1f} deg from the floor")
+    return f"{where}, {plane.get('points', 0)} points (e.g. a table left in the projection)"
 
 
 def _scale_source(calibration: Calibration, provenance: dict | None) -> str:
