@@ -168,3 +168,32 @@ def test_the_table_is_in_the_results_and_the_report(tmp_path, capsys) -> None:
     loaded = Calibration.load(tmp_path / "out")
     assert len(loaded.planes) == 1 and abs(loaded.planes[0]["offset"] - 0.9) < 0.002
     assert "plane 1 besides the floor" in (tmp_path / "out" / "report.html").read_text()
+
+
+def test_the_renderer_sees_the_table_and_its_shadow() -> None:
+    """Each camera sample sees the first surface on its ray: where it meets the table
+    top, its projector coordinates are those of that point (computed here directly),
+    and floor points the table hides from the projector get no projected light."""
+    from calibproj.simulate.warp import floor_view
+
+    scene = scene_from_json(preset_document("or-table"))
+    camera = scene.camera("near1")
+    view = floor_view(camera, scene.projector, scene.floor, 1, scene.boxes)
+    top = view.surface == boxes.surface_of(0, "top")
+    assert top.sum() > 1000
+    rows, columns = np.nonzero(top)
+    pick = np.linspace(0, len(rows) - 1, 25).astype(int)
+    pixels = np.column_stack([columns[pick], rows[pick]]).astype(float)
+    rays = np.column_stack([camera.intrinsics.normalize(camera.intrinsics.undistort_points(pixels)),
+                            np.ones(len(pixels))]) @ camera.R
+    depth = (0.9 - camera.center[2]) / rays[:, 2]  # the table top's plane z = 0.9
+    points = camera.center + depth[:, None] * rays
+    in_projector = (points @ scene.projector.R.T + scene.projector.t) @ scene.projector.K.T
+    expected = in_projector[:, :2] / in_projector[:, 2:]
+    np.testing.assert_allclose(np.column_stack([view.projector_x[rows[pick], columns[pick]],
+                                                view.projector_y[rows[pick], columns[pick]]]), expected, atol=1e-6)
+    assert np.allclose(view.reflectance[top], scene.boxes[0].albedo)  # a horizontal top: the floor's light
+    # The floor under the table top (its shadow) is seen by the camera but not lit.
+    floor = view.surface == boxes.FLOOR
+    under = floor & (np.abs(view.floor_x) < 0.9) & (np.abs(view.floor_y) < 0.2)
+    assert under.sum() > 100 and not view.in_image[under].any()

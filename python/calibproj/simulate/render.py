@@ -315,7 +315,7 @@ def _clock(camera: Camera, index: int, timeline: ProjectionTimeline, tail_s: flo
 def _floor_views(scene: Scene, scene_source: str, options: RenderOptions) -> dict[str, FloorView]:
     """Trace every camera (in threads); a camera that sees no floor is an error."""
     def trace(camera: Camera) -> FloorView:
-        return floor_view(camera, scene.projector, scene.floor, options.supersample)
+        return floor_view(camera, scene.projector, scene.floor, options.supersample, scene.boxes)
 
     with ThreadPoolExecutor(max_workers=_worker_count(options, len(scene.cameras))) as pool:
         views = dict(zip(scene.camera_names, pool.map(trace, scene.cameras)))
@@ -449,12 +449,21 @@ def _camera_model(
 
 
 def _albedo(floor: Floor, view: FloorView, camera: Camera) -> np.ndarray | None:
-    """The floor's albedo per camera pixel (samples averaged), or None for a plain floor."""
+    """The albedo per camera pixel (samples averaged): the floor's texture, and the
+    boxes' reflectance where they stand; None for a plain floor without boxes."""
     import cv2
 
-    if floor.texture is None:
+    from calibproj.simulate.boxes import FLOOR
+
+    if floor.texture is None and view.reflectance is None:
         return None
-    albedo = floor_albedo(floor.texture, view.floor_x, view.floor_y, view.floor_footprint)
+    albedo = np.ones(view.floor_x.shape, dtype=np.float32)
+    if floor.texture is not None:
+        textured = floor_albedo(floor.texture, view.floor_x, view.floor_y, view.floor_footprint)
+        albedo = textured if view.surface is None else np.where(view.surface == FLOOR, textured, 1.0)
+    if view.reflectance is not None:
+        albedo = albedo * view.reflectance
+    albedo = np.asarray(albedo, dtype=np.float32)
     if albedo.shape[::-1] != tuple(camera.resolution):
         albedo = cv2.resize(albedo, camera.resolution, interpolation=cv2.INTER_AREA)
     return albedo

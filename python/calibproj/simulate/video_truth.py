@@ -32,10 +32,12 @@ CLOCK_DESCRIPTION = (
 
 
 def msm_floor_points(scene: Scene, sequence: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Point ids (``array * markers_per_array + marker``) and floor positions of every
-    MSM centre of a sequence."""
+    """Point ids (``array * markers_per_array + marker``) and positions of every MSM
+    centre of a sequence: on the floor, or on a box standing in the projection."""
+    from calibproj.simulate.geometric import projected_points
+
     centres = np.asarray(sequence.centres, dtype=float).reshape(-1, 2)
-    return np.arange(len(centres)), scene.projector.pixels_to_floor(centres)
+    return np.arange(len(centres)), projected_points(scene, centres)[0]
 
 
 def timing_json(timeline: ProjectionTimeline, clocks: dict[str, CameraClock],
@@ -61,11 +63,16 @@ def timing_json(timeline: ProjectionTimeline, clocks: dict[str, CameraClock],
 
 
 def image_points_json(scene: Scene, ids: np.ndarray, xyz: np.ndarray) -> dict[str, Any]:
-    """Per camera, the MSM centres inside its image: ids, distorted and undistorted pixels."""
+    """Per camera, the MSM centres inside its image (and not hidden by a box): ids,
+    distorted and undistorted pixels."""
+    from calibproj.simulate import boxes
+
     out = {}
     for camera in scene.cameras:
         seen = project_points(camera, xyz)
         visible = seen.visible
+        if scene.boxes:
+            visible = visible & ~boxes.hidden(camera.center, np.nan_to_num(xyz), scene.boxes)
         out[camera.name] = {
             "ids": ids[visible].tolist(),
             "distorted": seen.distorted[visible].tolist(),

@@ -63,6 +63,10 @@ class FloorView:
             per sample along the most compressed direction; NaN off the floor.
         floor_x, floor_y: the floor point each sample sees (metres), NaN off the floor.
         floor_footprint: side of the floor square (metres) one sample covers, NaN off it.
+        surface: per sample the surface it sees (``calibproj.simulate.boxes``: 0 the
+            floor, -1 none), or None in a room without boxes.
+        reflectance: per sample the box's albedo times how much more or less projector
+            light its face receives than the floor would (1 on the floor), or None.
     """
 
     projector_x: np.ndarray
@@ -74,6 +78,8 @@ class FloorView:
     floor_x: np.ndarray
     floor_y: np.ndarray
     floor_footprint: np.ndarray
+    surface: np.ndarray | None = None
+    reflectance: np.ndarray | None = None
 
     def prefilter_variance(self, blur_samples: float) -> np.ndarray:
         """Per-axis variance (projector pixels squared) of the blur each sample needs:
@@ -92,8 +98,12 @@ def sample_grid(resolution: tuple[int, int], supersample: int) -> tuple[np.ndarr
     return np.meshgrid(xs, ys)
 
 
-def floor_view(camera: Camera, projector: Projector, floor: Floor, supersample: int = 1) -> FloorView:
-    """Trace every sample of ``camera`` to the floor and into the projector image."""
+def floor_view(camera: Camera, projector: Projector, floor: Floor, supersample: int = 1,
+               scene_boxes: tuple = ()) -> FloorView:
+    """Trace every sample of ``camera`` to the floor (or a box standing on it) and into
+    the projector image."""
+    if scene_boxes:
+        return _view_with_boxes(camera, projector, floor, supersample, scene_boxes)
     grid_x, grid_y = sample_grid(camera.resolution, supersample)
     pixels = np.column_stack([grid_x.ravel(), grid_y.ravel()])
     intrinsics = camera.intrinsics
@@ -119,6 +129,47 @@ def floor_view(camera: Camera, projector: Projector, floor: Floor, supersample: 
     footprint = np.sqrt(_area_and_stretch(floor_x, floor_y)[0])
     return FloorView(x, y, on_floor.reshape(shape), _inside(x, y, projector), *_area_and_stretch(x, y),
                      floor_x, floor_y, footprint)
+
+
+def _view_with_boxes(camera: Camera, projector: Projector, floor: Floor, supersample: int,
+                     scene_boxes: tuple) -> FloorView:
+    """``floor_view`` in a room with boxes: each sample sees the first surface its ray
+    meets; a point the boxes hide from the projector is in shadow (no projected light)."""
+    from calibproj.simulate import boxes
+
+    grid_x, grid_y = sample_grid(camera.resolution, supersample)
+    shape = grid_x.shape
+    pixels = np.column_stack([grid_x.ravel(), grid_y.ravel()])
+    intrinsics = camera.intrinsics
+    undistorted = intrinsics.undistort_points(pixels)
+    modelled = np.linalg.norm(intrinsics.distort_points(undistorted) - pixels, axis=1) < LENS_MODEL_TOLERANCE_PX
+    rays = np.column_stack([intrinsics.normalize(undistorted), np.ones(len(pixels))]) @ camera.R
+    points, surface = boxes.first_hits(camera.center, rays, scene_boxes)
+    half_size = 0.5 * np.asarray(floor.size_m)
+    with np.errstate(invalid="ignore"):
+        seen = modelled & (surface >= 0) & ((surface != boxes.FLOOR) | np.all(np.abs(points[:, :2]) <= half_size, axis=1))
+    in_projector = points @ projector.R.T + projector.t
+    with np.errstate(divide="ignore", invalid="ignore"):
+        projector_xy = (in_projector @ projector.K.T)[:, :2] / in_projector[:, 2:]
+    seen &= in_projector[:, 2] > 0
+    lit = seen & ~boxes.hidden(projector.center, np.nan_to_num(points), scene_boxes)
+    reflectance = np.ones(len(points))
+    toward = projector.center - points
+    toward /= np.maximum(np.linalg.norm(toward, axis=1, keepdims=True), 1e-12)
+    for surface_id in np.unique(surface[seen & (surface != boxes.FLOOR)]):
+        chosen = seen & (surface == surface_id)
+        normal, _ = boxes.surface_plane(scene_boxes, int(surface_id))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            incidence = np.clip((toward[chosen] @ normal) / np.maximum(toward[chosen, 2], 1e-6), 0.0, 2.0)
+        reflectance[chosen] = scene_boxes[(int(surface_id) - 1) // len(boxes.FACES)].albedo * incidence
+    projector_xy[~seen] = np.nan
+    points[~seen] = np.nan
+    x, y = projector_xy[:, 0].reshape(shape), projector_xy[:, 1].reshape(shape)
+    floor_x, floor_y = points[:, 0].reshape(shape), points[:, 1].reshape(shape)
+    footprint = np.sqrt(_area_and_stretch(floor_x, floor_y)[0])
+    in_image = _inside(x, y, projector) & lit.reshape(shape)
+    return FloorView(x, y, seen.reshape(shape), in_image, *_area_and_stretch(x, y), floor_x, floor_y, footprint,
+                     surface.reshape(shape), reflectance.reshape(shape))
 
 
 def _inside(x: np.ndarray, y: np.ndarray, projector: Projector) -> np.ndarray:
