@@ -196,4 +196,12 @@ def test_the_renderer_sees_the_table_and_its_shadow() -> None:
     # The floor under the table top (its shadow) is seen by the camera but not lit.
     floor = view.surface == boxes.FLOOR
     under = floor & (np.abs(view.floor_x) < 0.9) & (np.abs(view.floor_y) < 0.2)
-    assert under.sum() > 100 and not view.in_image[under].any()
+    assert under.sum() > 100 and not view.in_image[under].any() and view.shadow[under].all()
+    # ... and the sampler reads no projector light there.
+    from calibproj.simulate.atlas import AtlasLayout
+    from calibproj.simulate.warp import CameraSampler
+
+    layout = AtlasLayout.for_projector(scene.projector.resolution, 4)
+    sampler = CameraSampler.from_view(view, layout, camera.resolution, 1, 0.5)
+    light = sampler.sample(np.ones(layout.shape, dtype=np.float32))
+    assert light[under].max() == 0.0 and np.median(light[top]) > 0.99

@@ -67,6 +67,8 @@ class FloorView:
             floor, -1 none), or None in a room without boxes.
         reflectance: per sample the box's albedo times how much more or less projector
             light its face receives than the floor would (1 on the floor), or None.
+        shadow: per sample whether a box hides the point it sees from the projector
+            (it gets room light only), or None.
     """
 
     projector_x: np.ndarray
@@ -80,6 +82,7 @@ class FloorView:
     floor_footprint: np.ndarray
     surface: np.ndarray | None = None
     reflectance: np.ndarray | None = None
+    shadow: np.ndarray | None = None
 
     def prefilter_variance(self, blur_samples: float) -> np.ndarray:
         """Per-axis variance (projector pixels squared) of the blur each sample needs:
@@ -169,7 +172,7 @@ def _view_with_boxes(camera: Camera, projector: Projector, floor: Floor, supersa
     footprint = np.sqrt(_area_and_stretch(floor_x, floor_y)[0])
     in_image = _inside(x, y, projector) & lit.reshape(shape)
     return FloorView(x, y, seen.reshape(shape), in_image, *_area_and_stretch(x, y), floor_x, floor_y, footprint,
-                     surface.reshape(shape), reflectance.reshape(shape))
+                     surface.reshape(shape), reflectance.reshape(shape), (seen & ~lit).reshape(shape))
 
 
 def _inside(x: np.ndarray, y: np.ndarray, projector: Projector) -> np.ndarray:
@@ -278,13 +281,14 @@ def _levels(variance: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _fixed_maps(layout: AtlasLayout, level: np.ndarray, view: FloorView) -> tuple[np.ndarray, np.ndarray]:
     """Atlas coordinates of every sample at its ``level``, as remap's fixed-point maps;
-    samples off the floor read outside the atlas (black)."""
+    samples off the floor or in a box's shadow read outside the atlas (black)."""
     import cv2
 
     map_x = np.full(level.shape, OUTSIDE, dtype=np.float64)
     map_y = np.full(level.shape, OUTSIDE, dtype=np.float64)
-    for index in np.unique(level[view.on_floor]):
-        chosen = view.on_floor & (level == index)
+    receives = view.on_floor if view.shadow is None else view.on_floor & ~view.shadow
+    for index in np.unique(level[receives]):
+        chosen = receives & (level == index)
         map_x[chosen], map_y[chosen] = layout.atlas_coordinates(
             int(index), view.projector_x[chosen], view.projector_y[chosen])
     return cv2.convertMaps(map_x.astype(np.float32), map_y.astype(np.float32), cv2.CV_16SC2)
