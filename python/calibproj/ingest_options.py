@@ -143,9 +143,14 @@ class IngestOptions:
             its prediction (a wrong id, a frame of another pattern) are dropped.
         consistency_min_share: when fewer than this share of the detections agree on
             one homography, none of them is kept.
-        consistency_min_positions: the agreeing detections must cover this many marker
-            positions (grid cells), else none is kept: a homography fits any few, so a
-            stain decoded as one marker in every array would pass unchecked.
+        consistency_min_positions: the agreeing detections must cover this many places
+            (marker positions, or image points 4 consistency_px apart, whichever count is
+            larger), else none is kept: a homography fits any few, so a stain decoded as
+            one marker in every array would pass unchecked.
+        consistency_max_surfaces: surfaces whose detections are kept, one homography
+            each: the floor, then among the detections left the largest group that
+            agrees on another homography (a table top, a cart left in the projection),
+            if it has enough detections at enough places.
         max_deviation_px: scales of an MSM farther than this from their median are
             rejected.
         min_scales: scales an MSM needs (after rejection) to give a centre.
@@ -251,6 +256,7 @@ class IngestOptions:
     consistency_px: float = 3.0
     consistency_min_share: float = 0.3
     consistency_min_positions: int = 3
+    consistency_max_surfaces: int = 3
     max_deviation_px: float = 0.5
     min_scales: int = 1
     readout_bands: int = 16

@@ -1,12 +1,16 @@
 #pragma once
-// The detections of one camera checked against one homography of the floor.
+// The detections of one camera checked against the homographies of the surfaces the
+// projection lands on.
 //
-// Every MSM centre lies on the floor, so the projector-to-image homography maps each
-// marker's projector centre to its undistorted image centre. A marker decoded with a
-// wrong id (bits lost to saturation, a stain or compression) or taken from a frame of
-// another pattern lands far from where the homography of all the others puts it. A
-// RANSAC homography over every detection keeps those within threshold_px; when too few
-// agree, none of the camera's detections can be trusted.
+// Every MSM centre lies on the floor, or on a table or cart left in the projection, so
+// a projector-to-image homography per surface maps each marker's projector centre to
+// its undistorted image centre. A marker decoded with a wrong id (bits lost to
+// saturation, a stain or compression) or taken from a frame of another pattern lands
+// far from where the homography of the others puts it. A RANSAC homography over every
+// detection (the dominant surface) keeps those within threshold_px; then, among the
+// rest, up to max_surfaces - 1 more homographies (other surfaces) keep theirs, each
+// with min_points detections at min_positions distinct image places at least. When too
+// few agree with the first, none of the camera's detections can be trusted.
 
 #include <opencv2/core.hpp>
 
@@ -20,10 +24,12 @@ struct ConsistencyOptions {
   double threshold_px = 3.0;  // largest distance from the homography's prediction
   int min_points = 8;         // detections needed for a check (fewer: kept unchecked)
   double min_share = 0.3;     // share that must agree, else every detection is dropped
-  // Distinct marker positions (grid cells) the agreeing detections must cover: a
-  // homography fits any few positions, so a static pattern of the floor decoded as one
-  // marker in every array would pass unchecked.
+  // Distinct places the agreeing detections must cover (image points farther apart than
+  // 4 threshold_px, or marker positions: whichever count is larger): a homography fits
+  // any few places, so a static pattern of the floor decoded as one marker in every
+  // array would pass unchecked.
   int min_positions = 3;
+  int max_surfaces = 3;  // the floor and up to this many - 1 other surfaces
   std::uint64_t seed = 0;
 
   // Throws std::invalid_argument naming the first bad field.

@@ -9,6 +9,7 @@
 #include <map>
 #include <memory>
 #include <stdexcept>
+#include <unordered_set>
 #include <utility>
 
 #include "calibproj/common/limits.h"
@@ -456,11 +457,18 @@ class CameraIngest {
     for (const DetectionOutput& output : outputs) {
       result_.seconds_detection += output.seconds;
       result_.detections_rejected += output.rejected;
+      const PatternSpec& pattern = sequence_.patterns[output.pattern];
       for (const detect::MarkerPrediction& marker : output.searched) {
         const auto& ids = output.detections.ids;
-        resolution_.Record(marker.module_px, std::find(ids.begin(), ids.end(), marker.id) != ids.end());
+        const bool found = std::find(ids.begin(), ids.end(), marker.id) != ids.end();
+        // A miss says the size is too small only for an MSM seen at another scale: one
+        // hidden by a table, in its shadow or moved onto it is missed at every size.
+        const long long key = static_cast<long long>(pattern.array) * sequence_.markers_per_array + marker.id;
+        if (found || found_msms_.count(key) > 0) resolution_.Record(marker.module_px, found);
       }
-      const PatternSpec& pattern = sequence_.patterns[output.pattern];
+      for (const int id : output.detections.ids) {
+        found_msms_.insert(static_cast<long long>(pattern.array) * sequence_.markers_per_array + id);
+      }
       for (std::size_t k = 0; k < output.detections.size(); ++k) {
         const detect::Quad& quad = output.detections.corners[k];
         const cv::Point2d centre = detect::DiagonalIntersection(output.undistorted[k]);
@@ -561,6 +569,7 @@ class CameraIngest {
   int last_search_ = std::numeric_limits<int>::min() / 2;
   detect::ProjectorHomography homography_;
   detect::ResolutionLimit resolution_;
+  std::unordered_set<long long> found_msms_;  // array * markers_per_array + marker, at any scale
   // Smallest image side over projector side of the markers found so far.
   double min_magnification_ = std::numeric_limits<double>::infinity();
   DetectionPipeline pipeline_;

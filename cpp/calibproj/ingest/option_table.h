@@ -85,6 +85,8 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("consistency_min_share", o.consistency.min_share, "share that must agree, else all are dropped");
   visit("consistency_min_positions", o.consistency.min_positions,
         "marker positions the agreeing detections must cover, else all are dropped");
+  visit("consistency_max_surfaces", o.consistency.max_surfaces,
+        "surfaces (floor, table top, ...) whose detections are kept, one homography each");
   visit("max_deviation_px", o.merge.max_deviation_px, "scales farther than this from their median are rejected");
   visit("min_scales", o.merge.min_scales, "scales an MSM needs to give a centre");
   visit("readout_bands", o.readout_bands, "image bands measuring a rolling shutter's readout (0: none)");
