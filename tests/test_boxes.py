@@ -132,7 +132,7 @@ def test_the_table_left_in_place_costs_no_accuracy(table_room) -> None:
 
 def test_the_table_top_is_found_at_its_height(table_room) -> None:
     from calibproj.comparison import align_centers
-    from calibproj.scale import ScaleMeasurement, scale_factor, scaled, parse_scale
+    from calibproj.scale import parse_scale, scale_factor, scaled
 
     simulation, calibration, _ = table_room["or-table"]
     assert len(calibration.planes) == 1

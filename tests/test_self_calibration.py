@@ -14,7 +14,7 @@ from calibproj import _core
 from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir
 from calibproj.pipeline import calibrate
 from calibproj.self_calibration import (FILE_NAME, RefineRequest, SelfCalibrationOptions, check_request,
-                                        convert_tracks, read_given_intrinsics, self_calibrate)
+                                        convert_tracks, read_given_intrinsics)
 from calibproj.simulate.geometric import simulate_tracks
 
 selfcal = _core.selfcal

@@ -240,12 +240,19 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
     solution = _hold_undetermined(problem, solution, options, reports, solve)
     if solution is not None and problem.hold_at_given():  # a later round held an entry the first one had moved
         solution = problem.solve(loss="none", loss_scale=1.0, **solve)
+    return SelfCalibration(_refined_intrinsics(problem, solution, intrinsics, given, reports, refused), reports)
+
+
+def _refined_intrinsics(problem: _Problem, solution: dict[str, Any] | None, intrinsics: Mapping[str, Intrinsics],
+                        given: Mapping[str, Intrinsics], reports: dict[str, LensReport],
+                        refused: Mapping[str, str]) -> dict[str, Intrinsics]:
+    """Every camera's intrinsics after the refinement, the reports completed."""
     if solution is None:  # every other camera left out: nothing to refine these against
-        for name in problem.cameras:
+        for c, name in enumerate(problem.cameras):
             for entry in reports[name].requested if name in reports else ():
                 reports[name].held.setdefault(entry, "not determined: the other cameras' lenses are not either, "
                                                      "and one camera alone does not determine its own")
-            problem.refine[problem.cameras.index(name)] = []
+            problem.refine[c] = []
     refined = {name: given[name] if name in problem.dropped else value for name, value in intrinsics.items()}
     for c, name in enumerate(problem.cameras):
         if name not in reports or name in refused:
@@ -253,7 +260,7 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
         lens = solution["lenses"][c] if solution is not None and problem.refine[c] else problem.given[c]
         refined[name] = _intrinsics_of(given[name], lens)
         report = reports[name]
-        report.refined = [name for name in report.requested if name not in report.held]
+        report.refined = [entry for entry in report.requested if entry not in report.held]
         report.result = _lens_dict(lens)
         report.noise_px = float(solution["noise_px"][c]) if solution is not None else None
         report.observations = int(np.sum(problem.camera_index == c))
@@ -263,7 +270,7 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
         reports[name].result = reports[name].given
         reports[name].observations = observations
         _log_report(reports[name])
-    return SelfCalibration(refined, reports)
+    return refined
 
 
 def _choose_and_refine(problem: _Problem, options: SelfCalibrationOptions, reports: dict[str, LensReport],
