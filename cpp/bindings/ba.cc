@@ -20,8 +20,6 @@ namespace calibproj::bindings {
 
 namespace {
 
-using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
 // Intrinsics from an array (C, 3, 3) of upper-triangular camera matrices.
 std::vector<ba::Intrinsics> IntrinsicsFromArray(const py::array_t<double, py::array::c_style | py::array::forcecast>& K) {
   if (K.ndim() != 3 || K.shape(1) != 3 || K.shape(2) != 3) {
@@ -32,17 +30,6 @@ std::vector<ba::Intrinsics> IntrinsicsFromArray(const py::array_t<double, py::ar
   for (py::ssize_t c = 0; c < K.shape(0); ++c) {
     out[c] = {k(c, 0, 0), k(c, 1, 1), k(c, 0, 2), k(c, 1, 2), k(c, 0, 1)};
   }
-  return out;
-}
-
-template <typename Matrix>
-Matrix RowsOf(const RowMatrix& array, int cols, const std::string& what) {
-  if (array.cols() != cols && array.size() > 0) {
-    throw std::invalid_argument(what + ": expected shape (N, " + std::to_string(cols) + "), got (" +
-                                std::to_string(array.rows()) + ", " + std::to_string(array.cols()) + ")");
-  }
-  Matrix out(array.rows(), cols);
-  if (array.size() > 0) out = array;
   return out;
 }
 

@@ -1,5 +1,6 @@
 #pragma once
-// Conversions shared by the binding files: option strings to enums.
+// Conversions shared by the binding files: option strings to enums, numpy rows to
+// fixed-width Eigen matrices.
 
 #include <map>
 #include <stdexcept>
@@ -20,6 +21,21 @@ Enum ParseChoice(const std::string& what, const std::string& value, const std::m
 
 inline ba::Model ParseModel(const std::string& value) {
   return ParseChoice<ba::Model>("model", value, {{"free", ba::Model::kFree}, {"coplanar", ba::Model::kCoplanar}});
+}
+
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// `array` as a matrix of `cols` columns; std::invalid_argument naming `what` otherwise
+// (an empty array gives an empty matrix whatever its shape).
+template <typename Matrix>
+Matrix RowsOf(const RowMatrix& array, int cols, const std::string& what) {
+  if (array.cols() != cols && array.size() > 0) {
+    throw std::invalid_argument(what + ": expected shape (N, " + std::to_string(cols) + "), got (" +
+                                std::to_string(array.rows()) + ", " + std::to_string(array.cols()) + ")");
+  }
+  Matrix out(array.rows(), cols);
+  if (array.size() > 0) out = array;
+  return out;
 }
 
 inline ba::Loss ParseLoss(const std::string& value) {

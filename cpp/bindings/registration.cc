@@ -23,7 +23,6 @@ namespace calibproj::bindings {
 namespace {
 
 using registration::Reconstruction;
-using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
 registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
   registration::Options o;

@@ -20,21 +20,8 @@ namespace calibproj::bindings {
 
 namespace {
 
-using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-template <typename Matrix>
-Matrix Rows(const RowMatrix& array, int cols, const std::string& what) {
-  if (array.cols() != cols && array.size() > 0) {
-    throw std::invalid_argument(what + ": expected shape (N, " + std::to_string(cols) + "), got (" +
-                                std::to_string(array.rows()) + ", " + std::to_string(array.cols()) + ")");
-  }
-  Matrix out(array.rows(), cols);
-  if (array.size() > 0) out = array;
-  return out;
-}
-
 std::vector<selfcal::LensShape> Shapes(const RowMatrix& shapes) {
-  const auto rows = Rows<Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>>(shapes, 2, "shapes");
+  const auto rows = RowsOf<Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>>(shapes, 2, "shapes");
   std::vector<selfcal::LensShape> out(rows.rows());
   for (int c = 0; c < rows.rows(); ++c) out[c] = {rows(c, 0), rows(c, 1)};
   return out;
@@ -54,12 +41,12 @@ py::dict SelfCalibratePy(const Eigen::VectorXi& camera_index, const Eigen::Vecto
   selfcal::Data data;
   data.camera_index = camera_index;
   data.point_index = point_index;
-  data.observed = Rows<ba::PixelMatrix>(observed, 2, "observed");
-  data.lenses = Rows<selfcal::LensMatrix>(lenses, selfcal::kLensSize, "lenses");
+  data.observed = RowsOf<ba::PixelMatrix>(observed, 2, "observed");
+  data.lenses = RowsOf<selfcal::LensMatrix>(lenses, selfcal::kLensSize, "lenses");
   data.shapes = Shapes(shapes);
   data.refine = refine;
-  data.poses = Rows<ba::PoseMatrix>(poses, 6, "poses");
-  data.points = Rows<selfcal::FloorMatrix>(points, 2, "points");
+  data.poses = RowsOf<ba::PoseMatrix>(poses, 6, "poses");
+  data.points = RowsOf<selfcal::FloorMatrix>(points, 2, "points");
   selfcal::Result result;
   {
     py::gil_scoped_release release;

@@ -101,15 +101,6 @@ ceres::LinearSolverType CeresLinearSolver(LinearSolver solver, int num_cameras) 
   return num_cameras <= 60 ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
 }
 
-std::unique_ptr<ceres::LossFunction> MakeLoss(const Options& options) {
-  switch (options.loss) {
-    case Loss::kHuber: return std::make_unique<ceres::HuberLoss>(options.loss_scale_px);
-    case Loss::kCauchy: return std::make_unique<ceres::CauchyLoss>(options.loss_scale_px);
-    case Loss::kNone: break;
-  }
-  return nullptr;
-}
-
 int FarthestCamera(const PoseMatrix& poses_in_gauge_frame, int gauge_camera) {
   int best = -1;
   double best_distance = 0.0;
@@ -304,6 +295,15 @@ const char* ModelName(Model model) { return model == Model::kFree ? "free" : "co
 
 }  // namespace
 
+std::unique_ptr<ceres::LossFunction> MakeLoss(Loss loss, double scale_px) {
+  switch (loss) {
+    case Loss::kHuber: return std::make_unique<ceres::HuberLoss>(scale_px);
+    case Loss::kCauchy: return std::make_unique<ceres::CauchyLoss>(scale_px);
+    case Loss::kNone: break;
+  }
+  return nullptr;
+}
+
 void Options::Check() const {
   Require(loss_scale_px > 0.0 && std::isfinite(loss_scale_px),
           "options: loss scale must be a positive number of pixels, got " + Str(loss_scale_px));
@@ -449,7 +449,7 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   }
 
   Parameters params = InitialParameters(gauge_data, options);
-  const std::unique_ptr<ceres::LossFunction> loss = MakeLoss(options);
+  const std::unique_ptr<ceres::LossFunction> loss = MakeLoss(options.loss, options.loss_scale_px);
   std::unique_ptr<RotationCache> rotations;
   if (options.cache_rotations) {
     std::vector<const double*> pose_blocks;

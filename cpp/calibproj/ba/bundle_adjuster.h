@@ -16,6 +16,7 @@
 
 #include <Eigen/Core>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,7 @@
 
 namespace ceres {
 class CostFunction;
+class LossFunction;
 }  // namespace ceres
 
 namespace calibproj::ba {
@@ -95,6 +97,9 @@ struct Result {
   std::vector<Matrix6d> pose_covariances;
   std::string report;         // Ceres FullReport when requested, else BriefReport
 };
+
+// The Ceres robust loss of `loss` at `scale_px` pixels; null for Loss::kNone.
+std::unique_ptr<ceres::LossFunction> MakeLoss(Loss loss, double scale_px);
 
 // Throws std::invalid_argument with a message naming the problem: sizes that do not
 // match, indices out of range, non-finite values, an empty problem, a camera or a

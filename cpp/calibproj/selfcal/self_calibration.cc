@@ -26,15 +26,6 @@ void Require(bool condition, const std::string& message) {
 // matrix is inverted: directions below it are not determined by the data.
 constexpr double kRelativeEigenvalueFloor = 1e-12;
 
-std::unique_ptr<ceres::LossFunction> MakeLoss(const Options& options) {
-  switch (options.loss) {
-    case ba::Loss::kHuber: return std::make_unique<ceres::HuberLoss>(options.loss_scale_px);
-    case ba::Loss::kCauchy: return std::make_unique<ceres::CauchyLoss>(options.loss_scale_px);
-    case ba::Loss::kNone: break;
-  }
-  return nullptr;
-}
-
 // The most observed point, and the point farthest from it among those observed at
 // least half as often (they fix the floor's similarity gauge).
 Eigen::Vector2i GaugePoints(const Data& data) {
@@ -228,7 +219,7 @@ Result SelfCalibrate(const Data& data, const Options& options) {
   result.gauge_points = GaugePoints(data);
   Require(result.gauge_points(1) >= 0, "self-calibration: no second point to fix the floor's gauge");
 
-  const std::unique_ptr<ceres::LossFunction> loss = MakeLoss(options);
+  const std::unique_ptr<ceres::LossFunction> loss = ba::MakeLoss(options.loss, options.loss_scale_px);
   ceres::Problem::Options problem_options;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
