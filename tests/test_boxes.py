@@ -1,7 +1,10 @@
 """Boxes in the room (an operating table left in place): rays, shadows, hiding, and the
-geometric simulation of the or-table preset against what the geometry says."""
+geometric simulation of the or-table preset against what the geometry says, and the
+ingest of rendered videos of a room with a table."""
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pytest
@@ -205,3 +208,59 @@ def test_the_renderer_sees_the_table_and_its_shadow() -> None:
     sampler = CameraSampler.from_view(view, layout, camera.resolution, 1, 0.5)
     light = sampler.sample(np.ones(layout.shape, dtype=np.float32))
     assert light[under].max() == 0.0 and np.median(light[top]) > 0.99
+
+
+@pytest.fixture(scope="module")
+def small_table_videos(tmp_path_factory):
+    """Videos of the small room with a table (top 1.6 x 0.9 m at 0.9 m) in the projection."""
+    from calibproj.sequence import build_sequence
+    from calibproj.simulate.render import simulate_videos
+
+    document = preset_document("small")
+    document["boxes"] = [{"centre": [0.0, 0.0], "size_m": [1.6, 0.9, 0.08], "bottom_m": 0.82, "albedo": 0.75}]
+    out = tmp_path_factory.mktemp("small-table")
+    sequence = build_sequence(markers="aruco:4X4_50", arrays=8, scales=(1.0, 1.5, 2.0), marker_px=80.0,
+                              code_degree=4, reference_frames=8)
+    simulate_videos(scene_from_json(document), sequence, out, seed=7)
+    return out, sequence, json.loads((out / "truth.json").read_text())
+
+
+def _table_top_centres(result, truth) -> tuple[int, int, float]:
+    """MSMs on the table top kept over all cameras, those the truth shows, and the largest
+    error of any kept centre (px)."""
+    xyz = np.asarray(truth["points"]["xyz"])
+    per_array = truth["points"]["markers_per_array"]
+    kept = shown = 0
+    worst = 0.0
+    for name, camera in result.cameras.items():
+        assert camera.ok, camera.error
+        seen = truth["image_points"][name]
+        true_xy = dict(zip(seen["ids"], np.asarray(seen["undistorted"]).reshape(-1, 2)))
+        shown += int((xyz[seen["ids"], 2] > 0.5).sum())
+        centres = camera.raw["centres"]
+        ids = np.asarray(centres["array"]) * per_array + np.asarray(centres["marker"])
+        kept += int((xyz[ids, 2] > 0.5).sum())
+        worst = max(worst, max(float(np.linalg.norm(xy - true_xy[int(i)])) for i, xy in zip(ids, centres["xy"])))
+    return kept, shown, worst
+
+
+def test_the_ingest_finds_the_markers_on_the_table_top(small_table_videos) -> None:
+    """Markers on the table top are not where the floor's homography puts them: whole
+    frames explored now and then find them, the table's own homography then plans them,
+    and markers folded over its edge are not searched or kept."""
+    from calibproj.ingest import ingest
+    from calibproj.ingest_options import IngestOptions
+
+    out, sequence, truth = small_table_videos
+    explored = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(), progress=False)
+    kept, shown, worst = _table_top_centres(explored, truth)
+    assert kept >= 0.25 * shown and worst < 1.0
+    for camera in explored.cameras.values():
+        assert camera.raw["patterns_in_regions"] > 0
+        assert sum(scale["folded"] for scale in camera.raw["scales"]) > 0
+    report = explored.report()["cameras"]
+    assert all("folded" in scale for camera in report.values() for scale in camera["scales"])
+    # Planned with the floor's homography alone, the table top's markers are never found.
+    on_floor_only = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(explore_interval=0),
+                           progress=False)
+    assert _table_top_centres(on_floor_only, truth)[0] == 0

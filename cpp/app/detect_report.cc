@@ -39,6 +39,7 @@ ordered_json ScalesSummary(const std::vector<ingest::ScaleStats>& stats, const s
                    {"searched", s.searched},
                    {"too_small", s.too_small},
                    {"outside", s.outside},
+                   {"folded", s.folded},
                    {"detected", s.detected},
                    {"kept", s.kept}});
   }

@@ -181,7 +181,8 @@ void RegisterFamilies(py::module_& m) {
       "check_floor_consistency",
       [](const py::array_t<double, py::array::c_style | py::array::forcecast>& projector,
          const py::array_t<double, py::array::c_style | py::array::forcecast>& image, double threshold_px,
-         int min_points, double min_share, const std::optional<std::vector<int>>& positions, int min_positions) {
+         int min_points, double min_share, const std::optional<std::vector<int>>& positions, int min_positions,
+         int max_surfaces, int local_neighbours, double local_sigmas, double min_local_px) {
         const auto points = [](const py::array_t<double, py::array::c_style | py::array::forcecast>& a,
                                const char* name) {
           RequireShape(a, {-1, 2}, name);
@@ -194,6 +195,10 @@ void RegisterFamilies(py::module_& m) {
         options.min_points = min_points;
         options.min_share = min_share;
         options.min_positions = min_positions;
+        options.max_surfaces = max_surfaces;
+        options.local_neighbours = local_neighbours;
+        options.local_sigmas = local_sigmas;
+        options.min_local_px = min_local_px;
         const std::vector<cv::Point2d> image_points = points(image, "image");
         // Without positions every detection counts as a marker position of its own.
         std::vector<int> position(image_points.size());
@@ -207,10 +212,15 @@ void RegisterFamilies(py::module_& m) {
       },
       py::arg("projector"), py::arg("image"), py::arg("threshold_px") = 3.0, py::arg("min_points") = 8,
       py::arg("min_share") = 0.3, py::arg("positions") = py::none(), py::arg("min_positions") = 3,
+      py::arg("max_surfaces") = 3, py::arg("local_neighbours") = 8, py::arg("local_sigmas") = 5.0,
+      py::arg("min_local_px") = 0.5,
       "(keep (N,) bool, checked, problem): detections (projector centre -> undistorted image centre) "
-      "that agree with one RANSAC homography of the floor; all dropped, with the problem, when too "
-      "few agree or they cover fewer than min_positions marker positions (positions: per detection, "
-      "its marker's grid cell; None: all distinct); all kept unchecked below min_points.");
+      "that agree with one RANSAC homography of the floor (or of one of max_surfaces surfaces); all "
+      "dropped, with the problem, when too few agree with the first or they cover fewer than "
+      "min_positions marker positions (positions: per detection, its marker's grid cell; None: all "
+      "distinct); all kept unchecked below min_points. Then each kept one whose residual differs "
+      "from the median residual of its local_neighbours nearest other markers by more than "
+      "local_sigmas robust sigmas and min_local_px is dropped (local_neighbours 0: not).");
 }
 
 }  // namespace

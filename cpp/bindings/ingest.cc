@@ -173,6 +173,7 @@ py::list ScalesList(const std::vector<ingest::ScaleStats>& scales) {
     d["searched"] = s.searched;
     d["too_small"] = s.too_small;
     d["outside"] = s.outside;
+    d["folded"] = s.folded;
     d["unresolvable"] = s.unresolvable;
     d["redundant"] = s.redundant;
     d["detected"] = s.detected;

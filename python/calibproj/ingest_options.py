@@ -72,6 +72,13 @@ class IngestOptions:
             clear while decoding, before the end code is seen.
         use_roi: detect in predicted regions once the projector-to-image homography is
             known (false: whole frames at full resolution, for verification).
+        explore_interval: one scale of every n-th array is searched in whole frames
+            (shrunk as its markers allow) and its markers kept wherever they are found,
+            so that markers moved by a surface whose homography is not known yet (a
+            table top, planned where the floor would have put them) are found, and that
+            surface plans the later patterns (0: never).
+        explore_scales: the explored arrays take this many of the largest scales in
+            turn: the largest are found from afar, smaller ones fit on a narrow table.
         bootstrap_downscale: whole frames searched before the homography is known are
             shrunk by this factor (libapriltag takes ~300 ms on a full 1080p frame);
             markers too small to survive it are found once regions take over.
@@ -150,7 +157,18 @@ class IngestOptions:
         consistency_max_surfaces: surfaces whose detections are kept, one homography
             each: the floor, then among the detections left the largest group that
             agrees on another homography (a table top, a cart left in the projection),
-            if it has enough detections at enough places.
+            if it has enough detections at enough places. The same surfaces plan the
+            regions searched: each marker where the surface its projector centre lands
+            on puts it.
+        consistency_local_neighbours: the threshold above leaves room for lenses known
+            only roughly, whose residuals vary slowly over the image; a marker partly
+            hidden by a table or cut by its shadow decodes with its centre a pixel or
+            two off and stands out against its neighbours: each detection's residual is
+            compared with the median residual of this many nearest detections of other
+            markers on its surface (0: no such check).
+        consistency_local_sigmas: ... and dropped when the difference exceeds this many
+            robust standard deviations of all such differences,
+        consistency_min_local_px: ... and this many pixels.
         max_deviation_px: scales of an MSM farther than this from their median are
             rejected.
         min_scales: scales an MSM needs (after rejection) to give a centre.
@@ -216,6 +234,8 @@ class IngestOptions:
     spare_frames: int = 2
     max_clock_drift: float = 2e-4
     use_roi: bool = True
+    explore_interval: int = 1
+    explore_scales: int = 3
     bootstrap_downscale: int = 1
     adaptive_bootstrap: bool = True
     refine_undistorted: bool = True
@@ -257,6 +277,9 @@ class IngestOptions:
     consistency_min_share: float = 0.3
     consistency_min_positions: int = 3
     consistency_max_surfaces: int = 3
+    consistency_local_neighbours: int = 8
+    consistency_local_sigmas: float = 5.0
+    consistency_min_local_px: float = 0.5
     max_deviation_px: float = 0.5
     min_scales: int = 1
     readout_bands: int = 16

@@ -23,6 +23,7 @@ from typing import Any
 
 from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics, has_intrinsics_file, intrinsics_of_cameras, write_intrinsics_dir
+from calibproj.ingest_options import IngestOptions
 from calibproj.io.output_folder import OutputFolder
 from calibproj.registration import RegistrationOptions
 from calibproj.registration import calibrate as register
@@ -72,7 +73,11 @@ def calibrate(
         force: replace an existing results folder ``out`` (the whole folder: nothing
             of the earlier run remains); without it an existing folder is an error.
         ingest_options, detector_options, workers, progress: passed to
-            ``calibproj.ingest.ingest`` when ``source`` is videos.
+            ``calibproj.ingest.ingest`` when ``source`` is videos. With
+            ``refine_intrinsics`` and no ``ingest_options``, the ingest's local check
+            (``consistency_local_neighbours``) is off: it compares each centre with its
+            neighbours to a fraction of a pixel, which a lens still to be refined does
+            not allow.
         command: the command line to record in ``provenance.json`` (None: a Python call).
         refine_intrinsics: lens entries to refine from the projection itself
             (``calibproj.self_calibration``), e.g. ``"focal,k1,k2"`` for every camera or
@@ -91,6 +96,8 @@ def calibrate(
 
     formats = parse_formats(",".join(exports)) if exports else []
     request = RefineRequest.parse(refine_intrinsics) if refine_intrinsics else None
+    if request is not None and ingest_options is None:
+        ingest_options = IngestOptions(consistency_local_neighbours=0)
     measurement = parse_scale(scale) if scale else None
     if measurement is not None and measurement.kind == "marker-size" and sequence is None:
         raise ValueError(f"--scale {scale}: marker-size needs --sequence (the projection's sequence.json)")

@@ -1,8 +1,10 @@
 #include "calibproj/detect/floor_consistency.h"
 
 #include <opencv2/calib3d.hpp>
+#include <opencv2/flann.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 #include <set>
 #include <stdexcept>
@@ -16,16 +18,32 @@ void ConsistencyOptions::Check() const {
   if (!(min_share > 0.0 && min_share <= 1.0)) throw std::invalid_argument("consistency: min_share must be in (0, 1]");
   if (min_positions < 1) throw std::invalid_argument("consistency: min_positions must be at least 1");
   if (max_surfaces < 1 || max_surfaces > 100) throw std::invalid_argument("consistency: max_surfaces must be in [1, 100]");
+  if (local_neighbours < 0 || local_neighbours > 64) {
+    throw std::invalid_argument("consistency: local_neighbours must be in [0, 64]");
+  }
+  if (!(local_sigmas > 0.0)) throw std::invalid_argument("consistency: local_sigmas must be positive");
+  if (!(min_local_px >= 0.0)) throw std::invalid_argument("consistency: min_local_px must be non-negative");
 }
 
 namespace {
 
+struct SurfaceAgreement {
+  cv::Matx33d H = cv::Matx33d::eye();
+  std::vector<int> agreeing;
+};
+
+cv::Point2d Apply(const cv::Matx33d& H, const cv::Point2d& p) {
+  const cv::Vec3d q = H * cv::Vec3d(p.x, p.y, 1.0);
+  return {q[0] / q[2], q[1] / q[2]};
+}
+
 // The detections (among `candidates`) within threshold of a RANSAC homography of theirs;
-// empty when none is found.
-std::vector<int> AgreeingWithOneHomography(const std::vector<cv::Point2d>& projector,
+// none when no homography is found.
+SurfaceAgreement AgreeingWithOneHomography(const std::vector<cv::Point2d>& projector,
                                            const std::vector<cv::Point2d>& image, const std::vector<int>& candidates,
                                            double threshold_px) {
-  if (candidates.size() < 4) return {};
+  SurfaceAgreement result;
+  if (candidates.size() < 4) return result;
   std::vector<cv::Point2d> from, to;
   for (int i : candidates) {
     from.push_back(projector[i]);
@@ -33,16 +51,97 @@ std::vector<int> AgreeingWithOneHomography(const std::vector<cv::Point2d>& proje
   }
   cv::Mat inliers;
   const cv::Mat H = cv::findHomography(from, to, cv::RANSAC, threshold_px, inliers, 5000, 0.9999);
-  if (H.empty()) return {};
-  const cv::Matx33d h(H);
-  std::vector<int> agreeing;
+  if (H.empty()) return result;
+  result.H = cv::Matx33d(H);
   for (int i : candidates) {
-    const cv::Vec3d p = h * cv::Vec3d(projector[i].x, projector[i].y, 1.0);
-    if (p[2] != 0.0 && cv::norm(cv::Point2d(p[0] / p[2], p[1] / p[2]) - image[i]) <= threshold_px) {
-      agreeing.push_back(i);
+    const cv::Point2d predicted = Apply(result.H, projector[i]);
+    if (std::isfinite(predicted.x) && cv::norm(predicted - image[i]) <= threshold_px) result.agreeing.push_back(i);
+  }
+  return result;
+}
+
+// Median of each coordinate.
+cv::Point2d CoordinateMedian(const std::vector<cv::Point2d>& points) {
+  std::vector<double> xs, ys;
+  for (const cv::Point2d& p : points) {
+    xs.push_back(p.x);
+    ys.push_back(p.y);
+  }
+  std::nth_element(xs.begin(), xs.begin() + xs.size() / 2, xs.end());
+  std::nth_element(ys.begin(), ys.begin() + ys.size() / 2, ys.end());
+  return {xs[xs.size() / 2], ys[ys.size() / 2]};
+}
+
+// The local check of one surface's detections `members` (residual[i]: image minus the
+// surface's prediction): how far each residual is from the median of its neighbours'
+// (other markers; a lens known roughly leaves residuals that vary slowly over the image,
+// while markers displaced by a table's edge or shadow come a few together, which a
+// median of neighbours shrugs off better than a fit of them).
+// Negative where too few neighbours are known.
+std::vector<double> LocalDeviations(const std::vector<int>& members, const std::vector<cv::Point2d>& projector,
+                                    const std::vector<cv::Point2d>& image, const std::vector<cv::Point2d>& residual,
+                                    int neighbours) {
+  std::vector<double> deviation(members.size(), -1.0);
+  // Scales of one marker share its projector centre and count once: at most this many
+  // detections per marker are looked through.
+  constexpr int kScalesPerMarker = 12;
+  const int wanted = std::min<int>(static_cast<int>(members.size()), (neighbours + 1) * kScalesPerMarker);
+  if (static_cast<int>(members.size()) <= neighbours) return deviation;
+  cv::Mat points(static_cast<int>(members.size()), 2, CV_32F);
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    points.at<float>(static_cast<int>(k), 0) = static_cast<float>(image[members[k]].x);
+    points.at<float>(static_cast<int>(k), 1) = static_cast<float>(image[members[k]].y);
+  }
+  cv::flann::Index index(points, cv::flann::KDTreeIndexParams(4));
+  cv::Mat nearest, distances;
+  index.knnSearch(points, nearest, distances, wanted, cv::flann::SearchParams(128));
+  for (std::size_t k = 0; k < members.size(); ++k) {
+    std::vector<cv::Point2d> around, markers = {projector[members[k]]};
+    for (int j = 0; j < wanted && static_cast<int>(around.size()) < neighbours; ++j) {
+      const int other = nearest.at<int>(static_cast<int>(k), j);
+      if (other < 0 || std::find(markers.begin(), markers.end(), projector[members[other]]) != markers.end()) {
+        continue;
+      }
+      markers.push_back(projector[members[other]]);
+      around.push_back(residual[members[other]]);
+    }
+    if (static_cast<int>(around.size()) == neighbours) {
+      deviation[k] = cv::norm(residual[members[k]] - CoordinateMedian(around));
     }
   }
-  return agreeing;
+  return deviation;
+}
+
+// Drops (in `keep`) the kept detections that stand out against their neighbours on
+// their surface; returns how many.
+int RejectLocally(const std::vector<SurfaceAgreement>& surfaces, const std::vector<cv::Point2d>& projector,
+                  const std::vector<cv::Point2d>& image, const ConsistencyOptions& options, std::vector<bool>* keep) {
+  if (options.local_neighbours <= 0) return 0;
+  std::vector<cv::Point2d> residual(image.size());
+  std::vector<std::pair<int, double>> deviations;  // detection, deviation
+  for (const SurfaceAgreement& surface : surfaces) {
+    for (int i : surface.agreeing) residual[i] = image[i] - Apply(surface.H, projector[i]);
+    const std::vector<double> deviation =
+        LocalDeviations(surface.agreeing, projector, image, residual, options.local_neighbours);
+    for (std::size_t k = 0; k < deviation.size(); ++k) {
+      if (deviation[k] >= 0.0) deviations.emplace_back(surface.agreeing[k], deviation[k]);
+    }
+  }
+  if (deviations.empty()) return 0;
+  std::vector<double> values;
+  for (const auto& [i, value] : deviations) values.push_back(value);
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  // The distance of a 2D Gaussian error from its centre has median sigma sqrt(2 ln 2).
+  const double sigma = values[values.size() / 2] / std::sqrt(2.0 * std::log(2.0));
+  const double limit = std::max(options.min_local_px, options.local_sigmas * sigma);
+  int rejected = 0;
+  for (const auto& [i, value] : deviations) {
+    if (value > limit && (*keep)[i]) {
+      (*keep)[i] = false;
+      ++rejected;
+    }
+  }
+  return rejected;
 }
 
 // How many distinct places the detections cover: marker positions (grid cells), or
@@ -83,7 +182,8 @@ ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projecto
   const double separation_px = 4.0 * options.threshold_px;
   std::vector<int> all(n);
   std::iota(all.begin(), all.end(), 0);
-  const std::vector<int> floor = AgreeingWithOneHomography(projector, image, all, options.threshold_px);
+  std::vector<SurfaceAgreement> surfaces = {AgreeingWithOneHomography(projector, image, all, options.threshold_px)};
+  const std::vector<int> floor = surfaces[0].agreeing;
   const int agreeing = static_cast<int>(floor.size());
   if (agreeing < options.min_points || agreeing < options.min_share * n) {
     result.keep.assign(n, false);
@@ -109,13 +209,15 @@ ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projecto
     for (int i = 0; i < n; ++i) {
       if (!result.keep[i]) rest.push_back(i);
     }
-    const std::vector<int> more = AgreeingWithOneHomography(projector, image, rest, options.threshold_px);
-    if (static_cast<int>(more.size()) < options.min_points ||
-        Places(more, image, position, separation_px) < options.min_positions) {
+    SurfaceAgreement more = AgreeingWithOneHomography(projector, image, rest, options.threshold_px);
+    if (static_cast<int>(more.agreeing.size()) < options.min_points ||
+        Places(more.agreeing, image, position, separation_px) < options.min_positions) {
       break;
     }
-    for (int i : more) result.keep[i] = true;
+    for (int i : more.agreeing) result.keep[i] = true;
+    surfaces.push_back(std::move(more));
   }
+  result.rejected_locally = RejectLocally(surfaces, projector, image, options, &result.keep);
   const int kept = static_cast<int>(std::count(result.keep.begin(), result.keep.end(), true));
   result.rejected = n - kept;
   return result;

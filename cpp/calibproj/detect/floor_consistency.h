@@ -11,6 +11,12 @@
 // rest, up to max_surfaces - 1 more homographies (other surfaces) keep theirs, each
 // with min_points detections at min_positions distinct image places at least. When too
 // few agree with the first, none of the camera's detections can be trusted.
+//
+// The threshold leaves room for lenses known only roughly, whose residuals vary slowly
+// over the image. A marker partly hidden by a table, or cut by its shadow, still decodes
+// but with its centre displaced by a pixel or two: it stands out against its neighbours.
+// So each detection's residual is compared with the median residual of its nearest
+// detections of other markers on its surface.
 
 #include <opencv2/core.hpp>
 
@@ -30,6 +36,13 @@ struct ConsistencyOptions {
   // array would pass unchecked.
   int min_positions = 3;
   int max_surfaces = 3;  // the floor and up to this many - 1 other surfaces
+  // Local check: a detection whose residual differs from the median of those of its
+  // local_neighbours nearest other markers (image pixels) by more than local_sigmas robust
+  // standard deviations of all such differences, and by more than min_local_px, is
+  // dropped (local_neighbours 0: no local check).
+  int local_neighbours = 8;
+  double local_sigmas = 5.0;
+  double min_local_px = 0.5;
   std::uint64_t seed = 0;
 
   // Throws std::invalid_argument naming the first bad field.
@@ -40,6 +53,7 @@ struct ConsistencyResult {
   std::vector<bool> keep;  // per detection
   bool checked = false;    // enough detections for a check
   int rejected = 0;
+  int rejected_locally = 0;  // of those, by the local check
   std::string problem;     // set when every detection was dropped
 };
 

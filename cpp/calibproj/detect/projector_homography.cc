@@ -2,7 +2,11 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <iterator>
+#include <limits>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 
@@ -33,6 +37,62 @@ double Spread(const std::vector<cv::Point2d>& points) {
   return std::sqrt(std::max(0.0, half_trace - root));
 }
 
+struct SurfaceFit {
+  cv::Matx33d H = cv::Matx33d::eye();
+  std::vector<int> inliers;  // within the threshold; empty when no fit was found
+  double rms_px = 0.0;       // over the inliers
+};
+
+// A RANSAC homography of the correspondences `chosen` and those of them it explains.
+SurfaceFit FitSurface(const std::vector<cv::Point2d>& projector, const std::vector<cv::Point2d>& image,
+                      const std::vector<int>& chosen, double threshold_px) {
+  SurfaceFit fit;
+  if (chosen.size() < 4) return fit;
+  std::vector<cv::Point2d> from, to;
+  for (int i : chosen) {
+    from.push_back(projector[i]);
+    to.push_back(image[i]);
+  }
+  std::vector<unsigned char> ransac_inlier;
+  const cv::Mat H = cv::findHomography(from, to, cv::RANSAC, threshold_px, ransac_inlier);
+  if (H.empty()) return fit;
+  fit.H = cv::Matx33d(H);
+  double squares = 0.0;
+  for (std::size_t k = 0; k < chosen.size(); ++k) {
+    if (!ransac_inlier[k]) continue;
+    const int i = chosen[k];
+    const cv::Vec3d q = fit.H * cv::Vec3d(projector[i].x, projector[i].y, 1.0);
+    if (!(std::abs(q[2]) > 0.0)) continue;
+    const cv::Point2d d = cv::Point2d(q[0] / q[2], q[1] / q[2]) - image[i];
+    if (d.dot(d) > threshold_px * threshold_px) continue;
+    squares += d.dot(d);
+    fit.inliers.push_back(i);
+  }
+  fit.rms_px = std::sqrt(squares / std::max<std::size_t>(fit.inliers.size(), 1));
+  return fit;
+}
+
+std::vector<int> Without(const std::vector<int>& from, const std::vector<int>& removed) {
+  std::vector<int> rest;
+  std::set_difference(from.begin(), from.end(), removed.begin(), removed.end(), std::back_inserter(rest));
+  return rest;
+}
+
+// True unless the image points lie along a line (one row of markers on a table's edge
+// fits many homographies): their spread across is at least a tenth of that along.
+bool Extended(const std::vector<cv::Point2d>& image, const std::vector<int>& chosen) {
+  std::vector<cv::Point2d> points;
+  for (int i : chosen) points.push_back(image[i]);
+  const double across = Spread(points);
+  cv::Point2d mean(0, 0);
+  for (const auto& p : points) mean += p;
+  mean *= 1.0 / static_cast<double>(points.size());
+  double total = 0.0;
+  for (const auto& p : points) total += (p - mean).dot(p - mean);
+  const double along = std::sqrt(std::max(0.0, total / points.size() - across * across));
+  return across >= 0.1 * along && across > 0.0;
+}
+
 }  // namespace
 
 void HomographyOptions::Check() const {
@@ -41,6 +101,7 @@ void HomographyOptions::Check() const {
   Require(ransac_threshold_px > 0.0, "ransac_threshold_px must be positive");
   Require(min_inlier_share > 0.0 && min_inlier_share <= 1.0, "min_inlier_share must be in (0, 1]");
   Require(max_rms_px > 0.0, "max_rms_px must be positive");
+  Require(max_surfaces >= 1 && max_surfaces <= 100, "max_surfaces must be in [1, 100]");
 }
 
 ProjectorHomography::ProjectorHomography(cv::Size image_size, HomographyOptions options)
@@ -66,6 +127,25 @@ bool ProjectorHomography::Update() {
   return valid_;
 }
 
+bool ProjectorHomography::Refit() {
+  if (point_count() >= options_.min_points && point_count() > 0) {
+    fitted_count_ = point_count();
+    valid_ = Fit() || valid_;
+  }
+  return valid_;
+}
+
+bool ProjectorHomography::CrossesSurfaces(const cv::Point2d& centre, double side) const {
+  if (surface_count() < 2) return false;
+  const int surface = SurfaceIndexAt(centre);
+  const double h = 0.5 * side;
+  for (const cv::Point2d corner : {centre + cv::Point2d(-h, -h), centre + cv::Point2d(h, -h),
+                                   centre + cv::Point2d(h, h), centre + cv::Point2d(-h, h)}) {
+    if (SurfaceIndexAt(corner) != surface) return true;
+  }
+  return false;
+}
+
 bool ProjectorHomography::Fit() {
   std::vector<cv::Point2d> projector, image;
   for (const auto& [key, point] : points_) {
@@ -74,24 +154,76 @@ bool ProjectorHomography::Fit() {
   }
   const double diagonal = std::hypot(image_size_.width, image_size_.height);
   if (Spread(image) < options_.min_spread * diagonal) return false;
-  std::vector<unsigned char> inlier_mask;
-  const cv::Mat H = cv::findHomography(projector, image, cv::RANSAC, options_.ransac_threshold_px, inlier_mask);
-  if (H.empty()) return false;
-  const cv::Matx33d candidate(H);
-  int inliers = 0;
-  double squares = 0.0;
-  for (std::size_t i = 0; i < projector.size(); ++i) {
-    if (!inlier_mask[i]) continue;
-    const cv::Vec3d q = candidate * cv::Vec3d(projector[i].x, projector[i].y, 1.0);
-    const cv::Point2d d = cv::Point2d(q[0] / q[2], q[1] / q[2]) - image[i];
-    squares += d.dot(d);
-    ++inliers;
+  std::vector<int> all(projector.size());
+  std::iota(all.begin(), all.end(), 0);
+  const SurfaceFit dominant = FitSurface(projector, image, all, options_.ransac_threshold_px);
+  if (dominant.inliers.empty() || dominant.rms_px > options_.max_rms_px) return false;
+  std::vector<SurfaceFit> more;
+  // Points along a line (one row of a table's markers found so far) agree with many
+  // homographies: they count as explained, but plan nothing until the rest of their
+  // surface is found.
+  std::vector<int> unexplained = Without(all, dominant.inliers);
+  std::vector<int> searched = unexplained;
+  int along_lines = 0;
+  for (int attempt = 0; attempt < 2 * options_.max_surfaces && static_cast<int>(more.size()) + 1 < options_.max_surfaces;
+       ++attempt) {
+    if (static_cast<int>(searched.size()) < options_.min_points) break;
+    SurfaceFit surface = FitSurface(projector, image, searched, options_.ransac_threshold_px);
+    if (static_cast<int>(surface.inliers.size()) < options_.min_points || surface.rms_px > options_.max_rms_px) break;
+    searched = Without(searched, surface.inliers);
+    if (Extended(image, surface.inliers)) {
+      unexplained = Without(unexplained, surface.inliers);
+      more.push_back(std::move(surface));
+    } else {
+      along_lines += static_cast<int>(surface.inliers.size());
+    }
   }
-  const double rms = std::sqrt(squares / std::max(inliers, 1));
-  if (inliers < options_.min_inlier_share * point_count() || rms > options_.max_rms_px) return false;
-  H_ = candidate;
-  rms_px_ = rms;
+  const int explained = static_cast<int>(projector.size() - unexplained.size()) + along_lines;
+
+  if (explained < options_.min_inlier_share * point_count()) return false;
+  H_ = dominant.H;
+  rms_px_ = dominant.rms_px;
+  more_.clear();
+  labelled_.clear();
+  label_.clear();
+  surface_cache_.clear();
+  for (int i : dominant.inliers) {
+    labelled_.push_back(projector[i]);
+    label_.push_back(0);
+  }
+  for (std::size_t k = 0; k < more.size(); ++k) {
+    more_.push_back(more[k].H);
+    for (int i : more[k].inliers) {
+      labelled_.push_back(projector[i]);
+      label_.push_back(static_cast<int>(k) + 1);
+    }
+  }
   return true;
+}
+
+int ProjectorHomography::SurfaceIndexAt(const cv::Point2d& projector) const {
+  if (more_.empty()) return 0;
+  const auto key = std::make_pair(projector.x, projector.y);
+  auto cached = surface_cache_.find(key);
+  if (cached == surface_cache_.end()) {
+    int nearest = 0;
+    double best = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < labelled_.size(); ++i) {
+      const cv::Point2d d = labelled_[i] - projector;
+      const double squared = d.dot(d);
+      if (squared < best) {
+        best = squared;
+        nearest = label_[i];
+      }
+    }
+    cached = surface_cache_.emplace(key, nearest).first;
+  }
+  return cached->second;
+}
+
+const cv::Matx33d& ProjectorHomography::SurfaceAt(const cv::Point2d& projector) const {
+  const int surface = SurfaceIndexAt(projector);
+  return surface == 0 ? H_ : more_[surface - 1];
 }
 
 cv::Point2d ProjectorHomography::Map(const cv::Point2d& projector) const {

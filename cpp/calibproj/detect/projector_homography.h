@@ -1,7 +1,12 @@
 #pragma once
-// The homography from projector pixels to a camera's undistorted pixels, learnt from
-// the camera's first marker detections. The floor is a plane, so this one homography
-// predicts where, and how large, every later marker appears in the image.
+// The homographies from projector pixels to a camera's undistorted pixels, learnt from
+// the camera's marker detections. The floor is a plane, so one homography predicts
+// where, and how large, every later marker on it appears in the image. A table or cart
+// left in the projection is another plane with its own homography: the dominant one
+// (most correspondences) is fitted first, then further ones among the correspondences
+// it does not explain. The projector pixels that land on a surface are the same for
+// every camera, so a marker is predicted with the surface of the nearest projector
+// point whose surface is known.
 
 #include <opencv2/core.hpp>
 
@@ -22,6 +27,9 @@ struct HomographyOptions {
   double ransac_threshold_px = 2.0;
   double min_inlier_share = 0.8;
   double max_rms_px = 1.0;
+  // Surfaces fitted at most (the dominant one and max_surfaces - 1 more); a further
+  // surface needs min_points correspondences of its own.
+  int max_surfaces = 3;
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;
@@ -39,6 +47,9 @@ class ProjectorHomography {
   // Refits from every correspondence when enough new ones arrived since the last fit;
   // returns valid().
   bool Update();
+  // Refits from every correspondence now (the last word before the results); returns
+  // valid().
+  bool Refit();
 
   bool valid() const { return valid_; }
   const cv::Matx33d& H() const { return H_; }
@@ -46,11 +57,26 @@ class ProjectorHomography {
   int point_count() const { return static_cast<int>(points_.size()); }
   double rms_px() const { return rms_px_; }
 
-  // Undistorted image position of a projector pixel (needs valid()).
+  // Undistorted image position of a projector pixel on the dominant surface (needs
+  // valid()).
   cv::Point2d Map(const cv::Point2d& projector) const;
+
+  // The homography of the surface a marker centred on `projector` lands on: that of
+  // the nearest correspondence fitted by one, the dominant one when none is.
+  const cv::Matx33d& SurfaceAt(const cv::Point2d& projector) const;
+  // Which surface that is: 0 the dominant one, k the k-th further one.
+  int SurfaceIndexAt(const cv::Point2d& projector) const;
+  // True when a corner of the square of side `side` centred on `centre` lands on
+  // another surface than its centre: a marker folded over the edge of a table, which
+  // cannot be decoded, or only with a displaced centre.
+  bool CrossesSurfaces(const cv::Point2d& centre, double side) const;
+  // Surfaces found (1 with the dominant one alone; 0 before valid()).
+  int surface_count() const { return valid_ ? 1 + static_cast<int>(more_.size()) : 0; }
 
  private:
   bool Fit();
+  void FitMoreSurfaces(const std::vector<cv::Point2d>& projector, const std::vector<cv::Point2d>& image,
+                       std::vector<int> unexplained);
 
   cv::Size image_size_;
   HomographyOptions options_;
@@ -63,6 +89,11 @@ class ProjectorHomography {
   bool valid_ = false;
   cv::Matx33d H_ = cv::Matx33d::eye();
   double rms_px_ = 0.0;
+  std::vector<cv::Matx33d> more_;        // further surfaces
+  std::vector<cv::Point2d> labelled_;    // projector points explained by a surface
+  std::vector<int> label_;               // 0: the dominant surface, k: more_[k - 1]
+  // Surface of each projector point asked for since the last fit.
+  mutable std::map<std::pair<double, double>, int> surface_cache_;
 };
 
 }  // namespace calibproj::detect

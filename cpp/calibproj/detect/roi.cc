@@ -23,20 +23,26 @@ int AlignDown(int value, int alignment) {
   return static_cast<int>(std::floor(static_cast<double>(value) / alignment)) * alignment;
 }
 
+cv::Point2d MapPoint(const cv::Matx33d& H, const cv::Point2d& p) {
+  const cv::Vec3d q = H * cv::Vec3d(p.x, p.y, 1.0);
+  return {q[0] / q[2], q[1] / q[2]};
+}
+
 // Points along the edges of the square of side `side` centred on `centre`, mapped to
-// distorted image pixels; the first four are the corners (top-left, top-right,
-// bottom-right, bottom-left).
+// distorted image pixels with the homography of the surface the centre lands on; the
+// first four are the corners (top-left, top-right, bottom-right, bottom-left).
 std::vector<cv::Point2d> SquareOutline(const ProjectorHomography& homography, const LensModel& lens,
                                        const cv::Point2d& centre, double side, int edge_points) {
+  const cv::Matx33d& H = homography.SurfaceAt(centre);
   const double h = 0.5 * side;
   const cv::Point2d corners[4] = {centre + cv::Point2d(-h, -h), centre + cv::Point2d(h, -h),
                                   centre + cv::Point2d(h, h), centre + cv::Point2d(-h, h)};
   std::vector<cv::Point2d> undistorted;
-  for (const auto& corner : corners) undistorted.push_back(homography.Map(corner));
+  for (const auto& corner : corners) undistorted.push_back(MapPoint(H, corner));
   for (int edge = 0; edge < 4; ++edge) {
     for (int k = 1; k < edge_points; ++k) {
       const double s = static_cast<double>(k) / edge_points;
-      undistorted.push_back(homography.Map(corners[edge] * (1.0 - s) + corners[(edge + 1) % 4] * s));
+      undistorted.push_back(MapPoint(H, corners[edge] * (1.0 - s) + corners[(edge + 1) % 4] * s));
     }
   }
   return DistortPixels(lens, undistorted);
@@ -90,7 +96,7 @@ const MarkerPrediction* PatternPlan::Find(int id) const {
 
 namespace {
 
-enum class Verdict { kSearch, kOutside, kTooSmall, kUnresolvable };
+enum class Verdict { kSearch, kOutside, kFolded, kTooSmall, kUnresolvable };
 
 struct Assessment {
   Verdict verdict = Verdict::kSearch;
@@ -109,6 +115,8 @@ Assessment Assess(const ProjectorHomography& homography, const LensModel& lens, 
   if (!(a.box.x >= inner.x && a.box.y >= inner.y && a.box.x + a.box.width <= inner.x + inner.width &&
         a.box.y + a.box.height <= inner.y + inner.height)) {
     a.verdict = Verdict::kOutside;
+  } else if (homography.CrossesSurfaces(centre, side)) {
+    a.verdict = Verdict::kFolded;
   } else if (a.side_px / grid_cells < options.min_module_px) {
     a.verdict = Verdict::kTooSmall;
   } else if (limit != nullptr && limit->Hopeless(a.side_px / grid_cells)) {
@@ -149,6 +157,7 @@ PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& 
     const Assessment a = Assess(homography, lens, inner, markers.centres[i], markers.side_px, markers.grid_cells,
                                 options, limit);
     if (a.verdict == Verdict::kOutside) ++plan.outside;
+    if (a.verdict == Verdict::kFolded) ++plan.folded;
     if (a.verdict == Verdict::kTooSmall) ++plan.too_small;
     if (a.verdict == Verdict::kUnresolvable) ++plan.unresolvable;
     if (a.verdict != Verdict::kSearch) continue;
@@ -161,7 +170,8 @@ PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& 
     prediction.id = markers.ids[i];
     prediction.side_px = a.side_px;
     prediction.module_px = a.side_px / markers.grid_cells;
-    prediction.centre = DistortPixels(lens, {homography.Map(markers.centres[i])})[0];
+    prediction.centre =
+        DistortPixels(lens, {MapPoint(homography.SurfaceAt(markers.centres[i]), markers.centres[i])})[0];
     if (options.target_module_px > 0.0) {
       const int factor = static_cast<int>(std::floor(prediction.module_px / options.target_module_px));
       prediction.downscale = std::clamp(factor, 1, options.max_downscale);

@@ -78,6 +78,7 @@ struct PatternPlan {
   std::vector<MarkerPrediction> markers;  // those worth searching
   int too_small = 0;                      // predicted too small to decode
   int outside = 0;                        // not wholly inside the image
+  int folded = 0;                         // over the edge between two surfaces
   int unresolvable = 0;                   // of a size this camera has not been decoding
   int redundant = 0;                      // left to larger scales of the same MSM
   bool whole_frame = false;               // one whole-frame detection is cheaper

@@ -135,6 +135,8 @@ class CameraIngest {
       options.detector.apriltag.refinement.method = detect::CornerRefinement::kNone;
     }
     if (options.exposure_s > 0.0) options.sync.fit.fixed_exposure = options.exposure_s * video_fps;
+    // One knob for the surfaces: those planned with and those kept by the check.
+    options.homography.max_surfaces = options.consistency.max_surfaces;
     options.Check();
     return options;
   }
@@ -333,21 +335,25 @@ class CameraIngest {
     const detect::ScaleSelection selection = Selection(index);
     job.plan = detect::PlanPattern(homography_, camera_.lens, whole.size(), markers, options_.roi,
                                    options_.learn_resolution ? &resolution_ : nullptr, &selection);
+
     stats.too_small += job.plan.too_small;
     stats.outside += job.plan.outside;
+    stats.folded += job.plan.folded;
     stats.unresolvable += job.plan.unresolvable;
     stats.redundant += job.plan.redundant;
-    if (job.plan.markers.empty()) {
+    job.explore = Explores(index);
+    if (job.plan.markers.empty() && !job.explore) {
       pending_.skip = true;
       status_[index] = PatternStatus::kSkipped;
       ++stats.skipped_patterns;
       return;
     }
     stats.searched += static_cast<int>(job.plan.markers.size());
-    job.whole_frame = !options_.use_roi || job.plan.whole_frame;
+    job.whole_frame = !options_.use_roi || job.plan.whole_frame || job.explore;
     if (options_.use_roi && job.whole_frame) {
-      // Too many large markers for regions: the whole frame, shrunk for the smallest.
-      int factor = options_.roi.max_downscale;
+      // Too many large markers for regions: the whole frame, shrunk for the smallest
+      // (exploring where none is expected: shrunk as before the homography).
+      int factor = job.plan.markers.empty() ? BootstrapDownscale(sequence_.patterns[index]) : options_.roi.max_downscale;
       for (const auto& marker : job.plan.markers) factor = std::min(factor, marker.downscale);
       job.downscale = factor;
     }
@@ -356,6 +362,22 @@ class CameraIngest {
     } else {
       for (const auto& marker : job.plan.markers) pending_.rects.push_back(marker.region);
     }
+  }
+
+  // True for one scale of every explore_interval-th array: its whole frame is searched
+  // and every marker found kept wherever it is, so that markers on a surface not yet
+  // known (a table top, planned where the floor would have put them) are found. The
+  // explored arrays take the explore_scales largest scales in turn: the largest are
+  // found from afar, smaller ones fit on a narrow table.
+  bool Explores(int index) const {
+    if (options_.explore_interval <= 0) return false;
+    const PatternSpec& pattern = sequence_.patterns[index];
+    if (pattern.array % options_.explore_interval != 0) return false;
+    int larger = 0;
+    for (const PatternSpec& other : sequence_.patterns) {
+      if (other.array == pattern.array && other.marker_side_px > pattern.marker_side_px) ++larger;
+    }
+    return larger == (pattern.array / options_.explore_interval) % options_.explore_scales;
   }
 
   // Shrinking of a whole frame searched before the homography (adaptive_bootstrap).
@@ -486,7 +508,9 @@ class CameraIngest {
         record.frame_count = output.frame_count;
         record.in_region = !output.whole_frame;
         result_.records.push_back(record);
-        homography_.Add(sequence_.centres[pattern.array * sequence_.markers_per_array + record.marker], centre);
+        // A marker over a surface edge has a displaced centre: it would bend the fits.
+        const cv::Point2d& projector = sequence_.centres[pattern.array * sequence_.markers_per_array + record.marker];
+        if (!homography_.CrossesSurfaces(projector, pattern.marker_side_px)) homography_.Add(projector, centre);
       }
     }
   }
@@ -513,9 +537,17 @@ class CameraIngest {
                   records.end());
   }
 
-  // Drops detections that disagree with the floor homography of all the others.
+  // Drops detections that disagree with the homographies of all the others, and those
+  // over the edge between two surfaces (as the surfaces are known in the end).
   void RejectInconsistentRecords() {
     auto& records = result_.records;
+    homography_.Refit();
+    const auto folded = std::remove_if(records.begin(), records.end(), [&](const detect::ScaleRecord& r) {
+      return homography_.CrossesSurfaces(sequence_.centres[r.array * sequence_.markers_per_array + r.marker],
+                                         sequence_.patterns[r.pattern].marker_side_px);
+    });
+    const int crossing = static_cast<int>(records.end() - folded);
+    records.erase(folded, records.end());
     std::vector<cv::Point2d> projector, image;
     std::vector<int> position;
     for (const detect::ScaleRecord& r : records) {
@@ -525,7 +557,7 @@ class CameraIngest {
     }
     const detect::ConsistencyResult check =
         detect::CheckFloorConsistency(projector, image, position, options_.consistency);
-    result_.detections_inconsistent = check.rejected;
+    result_.detections_inconsistent = check.rejected + crossing;
     result_.consistency_problem = check.problem;
     std::size_t next = 0;
     for (std::size_t i = 0; i < records.size(); ++i) {
@@ -544,7 +576,6 @@ class CameraIngest {
       ++result_.scales[r.scale_index].detected;
       if (r.kept) ++result_.scales[r.scale_index].kept;
     }
-    homography_.Update();
     result_.homography_valid = homography_.valid();
     result_.homography = homography_.H();
     result_.homography_rms_px = homography_.rms_px();
@@ -623,6 +654,8 @@ void IngestOptions::Check() const {
   Require(thumbnail_width >= 0 && thumbnail_width <= 4096, "thumbnail_width must be in [0, 4096]");
   Require(max_scales_per_msm >= 0, "max_scales_per_msm must be non-negative (0: every scale)");
   Require(bootstrap_downscale >= 1 && bootstrap_downscale <= 8, "bootstrap_downscale must be in [1, 8]");
+  Require(explore_interval >= 0, "explore_interval must be non-negative (0: never)");
+  Require(explore_scales >= 1, "explore_scales must be at least 1");
   edges.Check();
   consistency.Check();
   Require(edge_gap_share > 0.0 && edge_gap_share <= 1.0, "edge_gap_share must be in (0, 1]");

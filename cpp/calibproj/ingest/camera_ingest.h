@@ -55,6 +55,13 @@ struct IngestOptions {
   // Detect in regions of interest once the homography is known (false: whole frames
   // at full resolution, with the same filtering; for verification).
   bool use_roi = true;
+  // One scale of every explore_interval-th array is searched in the whole frame (shrunk
+  // as its markers allow) and its markers kept wherever they are found: markers moved
+  // by a surface whose homography is not known yet (a table top) are found there, and
+  // that surface's homography then plans the later patterns (0: never). The explored
+  // arrays take the explore_scales largest scales in turn.
+  int explore_interval = 1;
+  int explore_scales = 3;
   // Whole frames searched before the homography is known are shrunk by this factor
   // (libapriltag takes ~300 ms on a full 1080p frame); markers too small to survive
   // the shrinking are then only found once regions of interest take over.
@@ -124,6 +131,7 @@ struct ScaleStats {
   int searched = 0;          // markers searched (planned, or all on whole frames)
   int too_small = 0;
   int outside = 0;
+  int folded = 0;            // over the edge between two surfaces (a table's)
   int unresolvable = 0;      // of a size the camera was not decoding
   int redundant = 0;         // left to larger scales of their MSM
   int detected = 0;          // markers found
@@ -144,7 +152,7 @@ struct CameraIngestResult {
   int patterns_dropped = 0;    // frames not clean under the final frame map
   int patterns_missing = 0;    // not recorded (before the video starts or after it ends)
   int detections_rejected = 0; // unexpected id, duplicate, or off the prediction
-  int detections_inconsistent = 0;  // off the floor homography of the others
+  int detections_inconsistent = 0;  // off the homographies of the others, or over a surface edge
   std::string consistency_problem;  // set when no detection could be trusted
   std::vector<ScaleStats> scales;
   std::vector<detect::ScaleRecord> records;

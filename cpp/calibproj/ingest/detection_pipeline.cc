@@ -133,8 +133,9 @@ DetectionOutput DetectionPipeline::Run(const detect::MarkerDetector& detector, c
   if (job.has_plan) output.searched = job.plan.markers;
   if (job.whole_frame) {
     const detect::Detections found = detect::DetectDownscaled(detector, job.regions.at(0).gray, job.downscale);
-    output.detections = detect::FilterDetections(found, job.ids, job.has_plan ? &job.plan : nullptr, roi_options_,
-                                                 &output.rejected);
+    const bool predicted = job.has_plan && !job.explore;
+    output.detections =
+        detect::FilterDetections(found, job.ids, predicted ? &job.plan : nullptr, roi_options_, &output.rejected);
   } else {
     output.detections = detect::DetectInRegions(detector, job.plan, job.regions, roi_options_);
   }

@@ -29,6 +29,7 @@ struct DetectionJob {
   bool whole_frame = true;            // regions[0] is the whole frame
   int downscale = 1;                  // the whole frame is detected shrunk by this factor
   bool has_plan = false;              // plan holds predictions (the homography was known)
+  bool explore = false;               // keep markers found far from their prediction
   detect::PatternPlan plan;
   std::vector<detect::RegionImage> regions;
   int first_frame = -1;

@@ -44,6 +44,9 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("spare_frames", o.pick.spare_frames, "later clean frames standing in for dropped ones");
   visit("max_clock_drift", o.pick.max_clock_drift, "largest relative camera clock drift");
   visit("use_roi", o.use_roi, "detect in regions of interest once the homography is known");
+  visit("explore_interval", o.explore_interval,
+        "one scale of every n-th array is searched in whole frames for markers on other surfaces (0: never)");
+  visit("explore_scales", o.explore_scales, "... taking this many of the largest scales in turn");
   visit("bootstrap_downscale", o.bootstrap_downscale, "whole frames before the homography are shrunk this much");
   visit("adaptive_bootstrap", o.adaptive_bootstrap, "... and further, as far as the markers found so far allow");
   visit("refine_undistorted", o.refine_undistorted, "corners from straight edge lines in undistorted pixels");
@@ -86,7 +89,12 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
   visit("consistency_min_positions", o.consistency.min_positions,
         "marker positions the agreeing detections must cover, else all are dropped");
   visit("consistency_max_surfaces", o.consistency.max_surfaces,
-        "surfaces (floor, table top, ...) whose detections are kept, one homography each");
+        "surfaces (floor, table top, ...) planned with and kept, one homography each");
+  visit("consistency_local_neighbours", o.consistency.local_neighbours,
+        "a detection is checked against this many neighbours on its surface (0: not)");
+  visit("consistency_local_sigmas", o.consistency.local_sigmas,
+        "... and dropped beyond this many robust sigmas of such differences");
+  visit("consistency_min_local_px", o.consistency.min_local_px, "... and beyond this many pixels");
   visit("max_deviation_px", o.merge.max_deviation_px, "scales farther than this from their median are rejected");
   visit("min_scales", o.merge.min_scales, "scales an MSM needs to give a centre");
   visit("readout_bands", o.readout_bands, "image bands measuring a rolling shutter's readout (0: none)");
