@@ -93,6 +93,31 @@ bool Extended(const std::vector<cv::Point2d>& image, const std::vector<int>& cho
   return across >= 0.1 * along && across > 0.0;
 }
 
+struct FurtherSurfaces {
+  std::vector<SurfaceFit> surfaces;
+  int unexplained = 0;  // correspondences no surface explains
+};
+
+// Surfaces besides the dominant one among the correspondences it leaves (`rest`), the
+// largest first. Points along a line (one row of a table's markers found so far) agree
+// with many homographies: they count as explained, but plan nothing until the rest of
+// their surface is found.
+FurtherSurfaces FitFurtherSurfaces(const std::vector<cv::Point2d>& projector, const std::vector<cv::Point2d>& image,
+                                   std::vector<int> rest, const HomographyOptions& options) {
+  FurtherSurfaces further;
+  further.unexplained = static_cast<int>(rest.size());
+  for (int attempt = 0; attempt < 2 * options.max_surfaces; ++attempt) {
+    if (static_cast<int>(further.surfaces.size()) + 1 >= options.max_surfaces) break;
+    if (static_cast<int>(rest.size()) < options.min_points) break;
+    SurfaceFit surface = FitSurface(projector, image, rest, options.ransac_threshold_px);
+    if (static_cast<int>(surface.inliers.size()) < options.min_points || surface.rms_px > options.max_rms_px) break;
+    rest = Without(rest, surface.inliers);
+    further.unexplained -= static_cast<int>(surface.inliers.size());
+    if (Extended(image, surface.inliers)) further.surfaces.push_back(std::move(surface));
+  }
+  return further;
+}
+
 }  // namespace
 
 void HomographyOptions::Check() const {
@@ -128,7 +153,7 @@ bool ProjectorHomography::Update() {
 }
 
 bool ProjectorHomography::Refit() {
-  if (point_count() >= options_.min_points && point_count() > 0) {
+  if (point_count() >= options_.min_points) {
     fitted_count_ = point_count();
     valid_ = Fit() || valid_;
   }
@@ -158,28 +183,10 @@ bool ProjectorHomography::Fit() {
   std::iota(all.begin(), all.end(), 0);
   const SurfaceFit dominant = FitSurface(projector, image, all, options_.ransac_threshold_px);
   if (dominant.inliers.empty() || dominant.rms_px > options_.max_rms_px) return false;
-  std::vector<SurfaceFit> more;
-  // Points along a line (one row of a table's markers found so far) agree with many
-  // homographies: they count as explained, but plan nothing until the rest of their
-  // surface is found.
-  std::vector<int> unexplained = Without(all, dominant.inliers);
-  std::vector<int> searched = unexplained;
-  int along_lines = 0;
-  for (int attempt = 0; attempt < 2 * options_.max_surfaces && static_cast<int>(more.size()) + 1 < options_.max_surfaces;
-       ++attempt) {
-    if (static_cast<int>(searched.size()) < options_.min_points) break;
-    SurfaceFit surface = FitSurface(projector, image, searched, options_.ransac_threshold_px);
-    if (static_cast<int>(surface.inliers.size()) < options_.min_points || surface.rms_px > options_.max_rms_px) break;
-    searched = Without(searched, surface.inliers);
-    if (Extended(image, surface.inliers)) {
-      unexplained = Without(unexplained, surface.inliers);
-      more.push_back(std::move(surface));
-    } else {
-      along_lines += static_cast<int>(surface.inliers.size());
-    }
-  }
-  const int explained = static_cast<int>(projector.size() - unexplained.size()) + along_lines;
-
+  const FurtherSurfaces further = FitFurtherSurfaces(projector, image, Without(all, dominant.inliers), options_);
+  // Another surface's points are not outliers of the dominant one: the share is of all
+  // the points some surface explains.
+  const int explained = static_cast<int>(projector.size()) - further.unexplained;
   if (explained < options_.min_inlier_share * point_count()) return false;
   H_ = dominant.H;
   rms_px_ = dominant.rms_px;
@@ -191,9 +198,9 @@ bool ProjectorHomography::Fit() {
     labelled_.push_back(projector[i]);
     label_.push_back(0);
   }
-  for (std::size_t k = 0; k < more.size(); ++k) {
-    more_.push_back(more[k].H);
-    for (int i : more[k].inliers) {
+  for (std::size_t k = 0; k < further.surfaces.size(); ++k) {
+    more_.push_back(further.surfaces[k].H);
+    for (int i : further.surfaces[k].inliers) {
       labelled_.push_back(projector[i]);
       label_.push_back(static_cast<int>(k) + 1);
     }

@@ -75,8 +75,6 @@ class ProjectorHomography {
 
  private:
   bool Fit();
-  void FitMoreSurfaces(const std::vector<cv::Point2d>& projector, const std::vector<cv::Point2d>& image,
-                       std::vector<int> unexplained);
 
   cv::Size image_size_;
   HomographyOptions options_;

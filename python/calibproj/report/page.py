@@ -502,7 +502,7 @@ def sync_table(detect_report: dict) -> str:
     header = ("<tr><th class=\"name\">camera</th><th>offset [s] &plusmn; 1&sigma;</th><th>drift [ppm]</th>"
               "<th>exposure [frames]</th><th>readout [ms] &plusmn; 1&sigma;</th>"
               "<th>frames decoded / dropped / duplicated</th><th>patterns used / dropped / missing</th>"
-              "<th>markers kept per scale</th><th>detections off the floor homography</th></tr>")
+              "<th>markers kept per scale</th><th>detections dropped as inconsistent</th></tr>")
     rows = [header]
     for name, camera in detect_report.get("cameras", {}).items():
         cell = f'<td class="name">{html.escape(str(name))}</td>'
