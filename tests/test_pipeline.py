@@ -93,6 +93,33 @@ def one_error_line(result: subprocess.CompletedProcess) -> str:
 
 
 @pytest.mark.parametrize("room", ["aruco:4X4_50"], indirect=True)
+def test_a_terminated_run_stops_as_an_interrupted_one(room: Path, tmp_path: Path) -> None:
+    """SIGTERM (``kill``, a service manager stopping a job) while the videos are read: the
+    run stops as on Ctrl-C, with status 130 and one line, and leaves no results folder
+    and no staging folder behind."""
+    import signal
+    import time
+
+    out = tmp_path / "results"
+    process = subprocess.Popen([sys.executable, "-m", "calibproj", "calibrate", str(room / "room" / "videos"),
+                                "--sequence", str(room / "sequence" / "sequence.json"),
+                                "--intrinsics", str(room / "room" / "intrinsics"), "--out", str(out),
+                                "--no-progress"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        while not list(tmp_path.glob(".results.tmp-*")):  # opened before the ingest starts
+            assert process.poll() is None and time.monotonic() < deadline
+            time.sleep(0.01)
+        process.send_signal(signal.SIGTERM)
+        _, stderr = process.communicate(timeout=60.0)
+    finally:
+        process.kill()
+    assert process.returncode == 130, stderr
+    assert stderr.splitlines()[-1] == "calibproj calibrate: interrupted"
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("room", ["aruco:4X4_50"], indirect=True)
 def test_bad_invocations_exit_non_zero_with_one_clear_line(room: Path, tmp_path: Path) -> None:
     videos, intrinsics = room / "room" / "videos", room / "room" / "intrinsics"
     sequence = room / "sequence" / "sequence.json"

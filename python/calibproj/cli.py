@@ -11,7 +11,8 @@ written), reported in one line naming the file; ``EXIT_FAILURE`` 1 for any other
 failure: a run that finished without every camera (the commands return it), another
 run writing the same output or an external program that failed (``RuntimeError``, one
 line), or an internal error (any other exception, reported with its traceback);
-``EXIT_INTERRUPTED`` 130 on Ctrl-C.
+``EXIT_INTERRUPTED`` 130 on Ctrl-C, and on SIGTERM (``kill``, a service manager), which
+ends a run the same way: outputs are left as they were before it.
 """
 
 from __future__ import annotations
@@ -19,8 +20,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import signal
 import sys
+import threading
 import traceback
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 from calibproj.commands.parser import SuggestingArgumentParser
 from calibproj.version import __version__
@@ -85,6 +90,24 @@ def parse_arguments(parser: SuggestingArgumentParser, argv: list[str] | None) ->
     return args
 
 
+def _raise_interrupt(signal_number: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+@contextmanager
+def _terminate_interrupts() -> Iterator[None]:
+    """SIGTERM raises KeyboardInterrupt while the block runs (signal handlers can only be
+    set from the main thread; elsewhere nothing changes)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parse_arguments(parser, argv)
@@ -97,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
         from tqdm.contrib.logging import logging_redirect_tqdm
 
         # Log lines go through tqdm.write while bars are open: never in the middle of a bar.
-        with logging_redirect_tqdm():
+        with _terminate_interrupts(), logging_redirect_tqdm():
             return int(args.run(args) or EXIT_OK)
     except KeyboardInterrupt:
         print(f"{prefix}: interrupted", file=sys.stderr)
