@@ -2,7 +2,8 @@
 (tests/fuzz_inputs.py) fed through ``calibproj calibrate --tracks`` (tracks.json and
 intrinsics files) and ``calibproj detect`` (sequence.json and intrinsics files, two tiny
 videos), and mutated results through ``calibproj evaluate`` (its evaluation tracks, a
-results folder's metrics.json) and ``calibproj compare`` (a camera_poses.json).
+results folder's metrics.json and points.ply) and ``calibproj compare`` (a
+camera_poses.json).
 
 Every run must end by itself within RUN_TIMEOUT_S with exit status 0, 1 or 2, without a
 traceback or an "internal error"; status 2 (a bad input) with exactly one error line
@@ -49,7 +50,7 @@ STARTUP_TIMEOUT_S = 60.0
 WORKERS = 2
 # Mutated files per input format.
 BUDGET = {"tracks": 200, "calibrate_intrinsics": 120, "sequence": 200, "detect_intrinsics": 80,
-          "eval_tracks": 80, "evaluate_intrinsics": 60, "camera_poses": 100, "metrics": 80}
+          "eval_tracks": 80, "evaluate_intrinsics": 60, "camera_poses": 100, "metrics": 80, "points": 60}
 MIN_FILES = 500
 MAX_ERROR_LINE = 1000  # characters: one line a person reads
 # A camera's own file: a bad one fails that camera, not the run.
@@ -187,7 +188,62 @@ def results_mutations(results: Path, rng: np.random.Generator) -> dict[str, list
             "evaluate_intrinsics": intrinsics_mutations(read("intrinsics/cam1.json"), rng,
                                                         BUDGET["evaluate_intrinsics"]),
             "camera_poses": poses_mutations(read("camera_poses.json"), rng, BUDGET["camera_poses"]),
-            "metrics": metrics_mutations(read("metrics.json"), rng, BUDGET["metrics"])}
+            "metrics": metrics_mutations(read("metrics.json"), rng, BUDGET["metrics"]),
+            "points": points_mutations((results / "points.ply").read_bytes(), rng, BUDGET["points"])}
+
+
+def points_mutations(data: bytes, rng: np.random.Generator, budget: int) -> list[Mutation]:
+    """A results folder's points.ply: its header and vertices broken on purpose, then
+    truncations (refused when a whole vertex is lost), byte flips and deletions."""
+    text = data.decode()
+    header, _, body = text.partition("end_header\n")
+    rows = body.splitlines()
+    first = rows[0].split()
+
+    def with_rows(new_rows: list[str], new_header: str = header) -> bytes:
+        return (new_header + "end_header\n" + "\n".join(new_rows) + "\n").encode()
+
+    targeted = [
+        Mutation("empty file", b"", True),
+        Mutation("binary garbage", rng.integers(0, 256, 2000, np.uint8).tobytes(), True),
+        Mutation("latin-1 byte in a vertex", with_rows([rows[0] + " \xe9", *rows[1:]]).replace(b"\xc3\xa9", b"\xe9"),
+                 True),
+        Mutation("no end_header", header.encode() + body.encode(), True),
+        Mutation("no element vertex", with_rows(rows, header.replace("element vertex", "element face")), True),
+        Mutation("vertex count a word", with_rows(rows, header.replace(f"element vertex {len(rows)}",
+                                                                          "element vertex many")), True),
+        Mutation("vertex count -1", with_rows(rows, header.replace(f"element vertex {len(rows)}",
+                                                                      "element vertex -1")), True),
+        Mutation("one vertex more declared",
+                 with_rows(rows, header.replace(f"element vertex {len(rows)}", f"element vertex {len(rows) + 1}")),
+                 True),
+        Mutation("a vertex of 3 numbers", with_rows([" ".join(first[:3]), *rows[1:]]), True),
+        Mutation("a vertex of 5 numbers", with_rows([rows[0] + " 7", *rows[1:]]), True),
+        Mutation("a coordinate a word", with_rows([" ".join(["x", *first[1:]]), *rows[1:]]), True),
+        Mutation("a coordinate NaN", with_rows([" ".join(["nan", *first[1:]]), *rows[1:]]), True),
+        Mutation("a coordinate inf", with_rows([" ".join([*first[:2], "inf", first[3]]), *rows[1:]]), True),
+        Mutation("an id 1.5", with_rows([" ".join([*first[:3], "1.5"]), *rows[1:]]), True),
+        Mutation("an id -3", with_rows([" ".join([*first[:3], "-3"]), *rows[1:]]), True),
+        Mutation("an id 1e300", with_rows([" ".join([*first[:3], "1e300"]), *rows[1:]]), True),
+        Mutation("an id twice", with_rows([rows[0], rows[0], *rows[2:]]), True),
+        Mutation("schema of another file", data.replace(b"comment schema ", b"comment schema x"), True),
+    ]
+    last_row = len(data) - len(rows[-1]) - 1
+    out = list(targeted)
+    while len(out) < budget:
+        kind = rng.integers(3)
+        if kind == 0:
+            cut = int(rng.integers(1, len(data) - 1))
+            out.append(Mutation(f"truncated at byte {cut}", data[:cut], cut < last_row))
+        elif kind == 1:
+            flipped = bytearray(data)
+            for _ in range(int(rng.integers(1, 9))):
+                flipped[rng.integers(len(flipped))] ^= 1 << int(rng.integers(8))
+            out.append(Mutation("byte flips", bytes(flipped), False))
+        else:
+            at = int(rng.integers(len(data) - 10))
+            out.append(Mutation(f"bytes deleted at {at}", data[:at] + data[at + int(rng.integers(1, 10)):], False))
+    return out
 
 
 def poses_mutations(document: dict, rng: np.random.Generator, budget: int) -> list[Mutation]:
@@ -253,7 +309,8 @@ def metrics_mutations(document: dict, rng: np.random.Generator, budget: int) -> 
 
 def prepare_results_run(root: Path, results: Path, fmt: str, index: int, mutation: Mutation) -> Run:
     """evaluate (mutated evaluation tracks, a copy of the results' intrinsics with one
-    file mutated, or a copy of the results folder with a mutated metrics.json) or compare
+    file mutated, or a copy of the results folder with a mutated metrics.json or
+    points.ply) or compare
     (a mutated camera_poses.json with the valid one)."""
     folder = root / f"{fmt}-{index:03d}"
     folder.mkdir(parents=True)
@@ -264,10 +321,10 @@ def prepare_results_run(root: Path, results: Path, fmt: str, index: int, mutatio
         target.write_bytes(mutation.data)
         return Run(fmt, mutation, target, ["evaluate", str(results), "--tracks", str(results / "tracks.json"),
                                            "--intrinsics", str(intrinsics)])
-    if fmt == "metrics":
+    if fmt in ("metrics", "points"):
         copy = folder / "results"
         shutil.copytree(results, copy)
-        target = copy / "metrics.json"
+        target = copy / ("metrics.json" if fmt == "metrics" else "points.ply")
         target.write_bytes(mutation.data)
         return Run(fmt, mutation, target, ["evaluate", str(copy), "--tracks", str(results / "tracks.json")])
     target = folder / ("eval_tracks.json" if fmt == "eval_tracks" else "camera_poses.json")

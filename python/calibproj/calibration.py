@@ -254,21 +254,37 @@ def write_ply(path: str | os.PathLike, points: np.ndarray, point_ids: np.ndarray
 
 
 def read_ply(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """The points (P, 3) and their ids (P,) of a ``points.ply`` as ``write_ply`` writes
+    it; FormatError naming the file and the problem."""
     path = Path(path)
     if not path.is_file():
         raise FormatError(f"{path}: no such file")
-    lines = path.read_text(encoding="utf-8").splitlines()
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError:
+        raise FormatError(f"{path}: not a calibproj points file ({PLY_SCHEMA}): not UTF-8 text") from None
     if not lines or lines[0] != "ply" or f"comment schema {PLY_SCHEMA}" not in lines[:4]:
         raise FormatError(f"{path}: not a calibproj points file ({PLY_SCHEMA})")
     try:
         end = lines.index("end_header")
         count = int(next(line.split()[2] for line in lines[:end] if line.startswith("element vertex")))
-        data = np.array([line.split() for line in lines[end + 1 : end + 1 + count]], dtype=float).reshape(-1, 4)
-    except (ValueError, StopIteration) as error:
-        raise FormatError(f"{path}: malformed PLY ({error})") from None
-    if len(data) != count:
-        raise FormatError(f"{path}: {count} vertices declared, {len(data)} found")
-    return data[:, :3], data[:, 3].astype(np.int64)
+    except (ValueError, IndexError, StopIteration):
+        raise FormatError(f"{path}: malformed PLY header (no 'element vertex N' before 'end_header')") from None
+    rows = lines[end + 1:]
+    if count < 0 or len(rows) != count:
+        raise FormatError(f"{path}: {count} vertices declared, {len(rows)} found")
+    try:
+        data = np.array([[float(value) for value in row.split()] for row in rows], dtype=float).reshape(count, 4)
+    except ValueError:
+        raise FormatError(f"{path}: malformed vertex (expected 4 numbers: x y z id)") from None
+    if not np.isfinite(data).all():
+        raise FormatError(f"{path}: a vertex is not finite")
+    ids = data[:, 3]
+    if not (np.all(ids == np.round(ids)) and np.all(ids >= 0) and np.all(ids < 2 ** 53)):
+        raise FormatError(f"{path}: point ids must be non-negative integers")
+    if len(np.unique(ids)) != len(ids):
+        raise FormatError(f"{path}: a point id appears twice")
+    return data[:, :3], ids.astype(np.int64)
 
 
 def calibration_summary(calibration: Calibration) -> list[dict[str, Any]]:
