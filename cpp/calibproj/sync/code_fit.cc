@@ -140,12 +140,13 @@ class SampleCost : public ceres::SizedCostFunction<1, 3, 4> {
     const double duration = exposure / rate;
     const double w = timeline_.Average(t, duration);
     residual[0] = a + b * w - sample_.value;
-    // A step that moves the exposure onto frames of unknown light: Ceres rejects it.
-    if (!std::isfinite(residual[0])) return false;
+    // A step that moves the exposure onto frames of unknown light: Ceres rejects it. The
+    // ends of the exposure are checked with the cost alone too: a step accepted on its
+    // cost whose Jacobian then fails ends the solve (with an error on stderr).
+    const double level_start = timeline_.LevelAt(t), level_end = timeline_.LevelAt(t + duration);
+    if (!std::isfinite(residual[0]) || !std::isfinite(level_start) || !std::isfinite(level_end)) return false;
     if (jacobians == nullptr) return true;
     if (jacobians[0] != nullptr) {
-      const double level_start = timeline_.LevelAt(t), level_end = timeline_.LevelAt(t + duration);
-      if (!std::isfinite(level_start) || !std::isfinite(level_end)) return false;
       const double dw_dt = (level_end - level_start) / duration;
       const double dw_dduration = (level_end - w) / duration;
       jacobians[0][0] = b * dw_dt * (-1.0 / rate);
