@@ -102,6 +102,22 @@ def check_accuracy(results, truth):
         assert rms < MAX_RMS_PX, (camera, rms)
 
 
+def test_the_centres_repeatability_is_reported_per_scale(aruco, aruco_results):
+    """detect_report.json gives, per scale, how far its centres lie from their MSM's
+    merged centre (RMS, MSMs kept at two scales or more): about the centres' own error,
+    measured without the truth."""
+    result = aruco_results[True]
+    report = result.report()["cameras"]
+    for camera in result.cameras:
+        errors, sides = centre_errors(result, aruco[2], camera)
+        truth_rms = float(np.sqrt(np.mean(errors[sides >= MIN_SIDE_PX] ** 2)))
+        spreads = [scale for scale in report[camera]["scales"] if scale["spread_count"] > 0]
+        assert spreads, camera
+        for scale in spreads:
+            assert 0.0 < scale["spread_px"] < 3.0 * truth_rms + 0.05, (camera, scale, truth_rms)
+        assert all(scale["spread_px"] is None for scale in report[camera]["scales"] if scale["spread_count"] == 0)
+
+
 def test_aruco_centres_match_the_truth(aruco, aruco_results):
     check_accuracy(aruco_results, aruco[2])
 

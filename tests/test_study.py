@@ -100,7 +100,8 @@ def test_recordings_of_one_room_with_two_families_are_compared(tmp_path: Path) -
         results = tmp_path / f"results{seed}"
         assert main(["calibrate", "--tracks", str(sim / "tracks.json"), "--intrinsics", str(sim / "intrinsics"),
                      "--out", str(results), "--no-report"]) == 0
-        cameras = {name: {"status": "ok", "msms_kept": 100 + seed, "scales": [{"scale": 1.0, "kept": 100 + seed}]}
+        cameras = {name: {"status": "ok", "msms_kept": 100 + seed,
+                          "scales": [{"scale": 1.0, "kept": 100 + seed, "spread_px": 0.05 + seed / 100}]}
                    for name in ("cam1", "cam2", "cam3")}
         (results / "detect_report.json").write_text(json.dumps({"schema": "calibproj.detect_report/1",
                                                                 "markers": family, "cameras": cameras}))
@@ -111,6 +112,7 @@ def test_recordings_of_one_room_with_two_families_are_compared(tmp_path: Path) -
     agreement = document["agreement"][0]
     assert 0 < agreement["rotation_rmse_deg"] < 0.1  # the same room: the two agree closely
     text = page.read_text(encoding="utf-8")
-    assert "101 (1.0x 101)" in text and "Agreement of the calibrations" in text
+    assert "101 (1.0x 101) / 1.0x 0.060" in text and "Agreement of the calibrations" in text
+    assert document["runs"][1]["cameras"]["cam1"]["centre_spread_px"] == {"1.0": pytest.approx(0.06)}
     with pytest.raises(ValueError, match="no detect_report.json"):
         study_recordings(tmp_path / "study2", [folders[0], tmp_path / "sim0"])

@@ -41,7 +41,9 @@ ordered_json ScalesSummary(const std::vector<ingest::ScaleStats>& stats, const s
                    {"outside", s.outside},
                    {"folded", s.folded},
                    {"detected", s.detected},
-                   {"kept", s.kept}});
+                   {"kept", s.kept},
+                   {"spread_px", s.spread_count > 0 ? ordered_json(s.spread_px) : ordered_json(nullptr)},
+                   {"spread_count", s.spread_count}});
   }
   return out;
 }

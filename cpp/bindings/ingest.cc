@@ -178,6 +178,8 @@ py::list ScalesList(const std::vector<ingest::ScaleStats>& scales) {
     d["redundant"] = s.redundant;
     d["detected"] = s.detected;
     d["kept"] = s.kept;
+    d["spread_px"] = s.spread_count > 0 ? py::object(py::float_(s.spread_px)) : py::object(py::none());
+    d["spread_count"] = s.spread_count;
     out.append(d);
   }
   return out;

@@ -576,9 +576,36 @@ class CameraIngest {
       ++result_.scales[r.scale_index].detected;
       if (r.kept) ++result_.scales[r.scale_index].kept;
     }
+    MeasureSpread();
     result_.homography_valid = homography_.valid();
     result_.homography = homography_.H();
     result_.homography_rms_px = homography_.rms_px();
+  }
+
+  // Per scale, how far its kept detections lie from their MSM's merged centre (records
+  // and centres are both sorted by array and marker).
+  void MeasureSpread() {
+    std::vector<double> squares(result_.scales.size(), 0.0);
+    std::size_t next = 0;
+    for (const detect::MergedCentre& centre : result_.centres) {
+      while (next < result_.records.size() &&
+             std::tie(result_.records[next].array, result_.records[next].marker) < std::tie(centre.array, centre.marker)) {
+        ++next;
+      }
+      for (std::size_t k = next; k < result_.records.size() && result_.records[k].array == centre.array &&
+                                 result_.records[k].marker == centre.marker;
+           ++k) {
+        const detect::ScaleRecord& r = result_.records[k];
+        if (!r.kept || centre.scales_kept < 2) continue;
+        const cv::Point2d d = r.centre - centre.centre;
+        squares[r.scale_index] += d.dot(d);
+        ++result_.scales[r.scale_index].spread_count;
+      }
+    }
+    for (std::size_t s = 0; s < squares.size(); ++s) {
+      ScaleStats& stats = result_.scales[s];
+      if (stats.spread_count > 0) stats.spread_px = std::sqrt(squares[s] / stats.spread_count);
+    }
   }
 
   std::string path_;

@@ -136,6 +136,11 @@ struct ScaleStats {
   int redundant = 0;         // left to larger scales of their MSM
   int detected = 0;          // markers found
   int kept = 0;              // used in merged centres
+  // Repeatability of the centres: RMS distance (undistorted px) of the kept detections
+  // of this scale from their MSM's merged centre, over MSMs kept at two scales or more;
+  // spread_count such detections (0: none, and spread_px means nothing).
+  double spread_px = 0.0;
+  int spread_count = 0;
 };
 
 struct CameraIngestResult {

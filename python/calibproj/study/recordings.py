@@ -1,6 +1,7 @@
 """The marker study on a user's own recordings: the same room calibrated twice, once
 with each family's sequence (two results folders of ``calibproj calibrate``), compared
-camera by camera: markers kept per scale, fit residuals, and how far the two
+camera by camera: markers kept per scale, how far each scale's centres lie from their
+MSM's merged centre (the centres' repeatability), fit residuals, and how far the two
 calibrations agree after Sim(3) alignment."""
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ def compare_recordings(folders: list[Path]) -> dict[str, Any]:
                 "status": camera.get("status"),
                 "msms_kept": camera.get("msms_kept"),
                 "kept_per_scale": {str(s.get("scale")): s.get("kept") for s in camera.get("scales", [])},
+                # Repeatability: RMS distance of a scale's centres from their MSM's merged centre.
+                "centre_spread_px": {str(s.get("scale")): s.get("spread_px") for s in camera.get("scales", [])
+                                     if s.get("spread_px") is not None},
                 "fit_residual_px": None if metrics is None else metrics.mean_px,
                 "registered": name in calibration.poses,
             }

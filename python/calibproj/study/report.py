@@ -275,7 +275,8 @@ def write_recordings(out: Path, comparison: dict[str, Any]) -> Path:
     runs = comparison["runs"]
     names = list(dict.fromkeys(n for run in runs for n in run["cameras"]))
     header = "<tr><th class=\"name\">camera</th>" + "".join(
-        f"<th>{html.escape(str(run['markers']))}: MSMs (per scale) / fit residual [px]</th>" for run in runs) + "</tr>"
+        f"<th>{html.escape(str(run['markers']))}: MSMs (per scale) / centre spread per scale / fit residual [px]</th>"
+        for run in runs) + "</tr>"
     rows = [header]
     for name in names:
         cells = []
@@ -285,8 +286,9 @@ def write_recordings(out: Path, comparison: dict[str, Any]) -> Path:
                 cells.append("failed" if camera else "-")
                 continue
             scales = ", ".join(f"{k}x {v}" for k, v in camera["kept_per_scale"].items())
+            spread = ", ".join(f"{k}x {v:.3f}" for k, v in camera.get("centre_spread_px", {}).items()) or "-"
             residual = _cell(camera["fit_residual_px"], "{:.3f}")
-            cells.append(f"{camera['msms_kept']} ({html.escape(scales)}) / {residual}")
+            cells.append(f"{camera['msms_kept']} ({html.escape(scales)}) / {html.escape(spread)} / {residual}")
         rows.append(f'<tr><td class="name">{html.escape(name)}</td>'
                     + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     agreement = []
