@@ -113,10 +113,10 @@ std::vector<double> LocalDeviations(const std::vector<int>& members, const std::
 }
 
 // Drops (in `keep`) the kept detections that stand out against their neighbours on
-// their surface; returns how many.
-int RejectLocally(const std::vector<SurfaceAgreement>& surfaces, const std::vector<cv::Point2d>& projector,
+// their surface.
+void RejectLocally(const std::vector<SurfaceAgreement>& surfaces, const std::vector<cv::Point2d>& projector,
                   const std::vector<cv::Point2d>& image, const ConsistencyOptions& options, std::vector<bool>* keep) {
-  if (options.local_neighbours <= 0) return 0;
+  if (options.local_neighbours <= 0) return;
   std::vector<cv::Point2d> residual(image.size());
   std::vector<std::pair<int, double>> deviations;  // detection, deviation
   for (const SurfaceAgreement& surface : surfaces) {
@@ -127,21 +127,16 @@ int RejectLocally(const std::vector<SurfaceAgreement>& surfaces, const std::vect
       if (deviation[k] >= 0.0) deviations.emplace_back(surface.agreeing[k], deviation[k]);
     }
   }
-  if (deviations.empty()) return 0;
+  if (deviations.empty()) return;
   std::vector<double> values;
   for (const auto& [i, value] : deviations) values.push_back(value);
   std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
   // The distance of a 2D Gaussian error from its centre has median sigma sqrt(2 ln 2).
   const double sigma = values[values.size() / 2] / std::sqrt(2.0 * std::log(2.0));
   const double limit = std::max(options.min_local_px, options.local_sigmas * sigma);
-  int rejected = 0;
   for (const auto& [i, value] : deviations) {
-    if (value > limit && (*keep)[i]) {
-      (*keep)[i] = false;
-      ++rejected;
-    }
+    if (value > limit) (*keep)[i] = false;
   }
-  return rejected;
 }
 
 // How many distinct places the detections cover: marker positions (grid cells), or
@@ -217,7 +212,7 @@ ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projecto
     for (int i : more.agreeing) result.keep[i] = true;
     surfaces.push_back(std::move(more));
   }
-  result.rejected_locally = RejectLocally(surfaces, projector, image, options, &result.keep);
+  RejectLocally(surfaces, projector, image, options, &result.keep);
   const int kept = static_cast<int>(std::count(result.keep.begin(), result.keep.end(), true));
   result.rejected = n - kept;
   return result;

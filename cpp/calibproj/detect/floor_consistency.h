@@ -53,7 +53,6 @@ struct ConsistencyResult {
   std::vector<bool> keep;  // per detection
   bool checked = false;    // enough detections for a check
   int rejected = 0;
-  int rejected_locally = 0;  // of those, by the local check
   std::string problem;     // set when every detection was dropped
 };
 

@@ -335,7 +335,6 @@ class CameraIngest {
     const detect::ScaleSelection selection = Selection(index);
     job.plan = detect::PlanPattern(homography_, camera_.lens, whole.size(), markers, options_.roi,
                                    options_.learn_resolution ? &resolution_ : nullptr, &selection);
-
     stats.too_small += job.plan.too_small;
     stats.outside += job.plan.outside;
     stats.folded += job.plan.folded;
@@ -353,7 +352,8 @@ class CameraIngest {
     if (options_.use_roi && job.whole_frame) {
       // Too many large markers for regions: the whole frame, shrunk for the smallest
       // (exploring where none is expected: shrunk as before the homography).
-      int factor = job.plan.markers.empty() ? BootstrapDownscale(sequence_.patterns[index]) : options_.roi.max_downscale;
+      int factor =
+          job.plan.markers.empty() ? BootstrapDownscale(sequence_.patterns[index]) : options_.roi.max_downscale;
       for (const auto& marker : job.plan.markers) factor = std::min(factor, marker.downscale);
       job.downscale = factor;
     }
@@ -586,16 +586,13 @@ class CameraIngest {
   // and centres are both sorted by array and marker).
   void MeasureSpread() {
     std::vector<double> squares(result_.scales.size(), 0.0);
+    const auto& records = result_.records;
     std::size_t next = 0;
     for (const detect::MergedCentre& centre : result_.centres) {
-      while (next < result_.records.size() &&
-             std::tie(result_.records[next].array, result_.records[next].marker) < std::tie(centre.array, centre.marker)) {
-        ++next;
-      }
-      for (std::size_t k = next; k < result_.records.size() && result_.records[k].array == centre.array &&
-                                 result_.records[k].marker == centre.marker;
-           ++k) {
-        const detect::ScaleRecord& r = result_.records[k];
+      const auto msm = std::tie(centre.array, centre.marker);
+      while (next < records.size() && std::tie(records[next].array, records[next].marker) < msm) ++next;
+      for (std::size_t k = next; k < records.size() && std::tie(records[k].array, records[k].marker) == msm; ++k) {
+        const detect::ScaleRecord& r = records[k];
         if (!r.kept || centre.scales_kept < 2) continue;
         const cv::Point2d d = r.centre - centre.centre;
         squares[r.scale_index] += d.dot(d);
