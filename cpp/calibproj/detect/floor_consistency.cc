@@ -72,6 +72,27 @@ cv::Point2d CoordinateMedian(const std::vector<cv::Point2d>& points) {
   return {xs[xs.size() / 2], ys[ys.size() / 2]};
 }
 
+// The `count` nearest rows of `points` (N x 2, CV_32F) to each of its rows, as indices
+// (N x count, CV_32S). A k-d tree for many points; an exhaustive search for few, and
+// wherever the tree's search comes back short (it asserts on some sets with many
+// coincident points, as the scales of one marker are).
+cv::Mat NearestNeighbours(const cv::Mat& points, int count) {
+  constexpr int kExhaustiveBelow = 2000;
+  cv::Mat nearest, distances;
+  if (points.rows >= kExhaustiveBelow) {
+    try {
+      cv::flann::Index tree(points, cv::flann::KDTreeIndexParams(4));
+      tree.knnSearch(points, nearest, distances, count, cv::flann::SearchParams(128));
+      return nearest;
+    } catch (const cv::Exception&) {
+      // Short: the exhaustive search below.
+    }
+  }
+  cv::flann::Index exhaustive(points, cv::flann::LinearIndexParams());
+  exhaustive.knnSearch(points, nearest, distances, count, cv::flann::SearchParams());
+  return nearest;
+}
+
 // The local check of one surface's detections `members` (residual[i]: image minus the
 // surface's prediction): how far each residual is from the median of its neighbours'
 // (other markers; a lens known roughly leaves residuals that vary slowly over the image,
@@ -92,9 +113,7 @@ std::vector<double> LocalDeviations(const std::vector<int>& members, const std::
     points.at<float>(static_cast<int>(k), 0) = static_cast<float>(image[members[k]].x);
     points.at<float>(static_cast<int>(k), 1) = static_cast<float>(image[members[k]].y);
   }
-  cv::flann::Index index(points, cv::flann::KDTreeIndexParams(4));
-  cv::Mat nearest, distances;
-  index.knnSearch(points, nearest, distances, wanted, cv::flann::SearchParams(128));
+  const cv::Mat nearest = NearestNeighbours(points, wanted);
   for (std::size_t k = 0; k < members.size(); ++k) {
     std::vector<cv::Point2d> around, markers = {projector[members[k]]};
     for (int j = 0; j < wanted && static_cast<int>(around.size()) < neighbours; ++j) {
