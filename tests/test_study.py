@@ -20,9 +20,11 @@ FAMILIES = ("aruco:4X4_50", "apriltag:tag36h11")
 
 @pytest.mark.parametrize("family", FAMILIES)
 def test_large_markers_are_all_found_where_they_are(family: str) -> None:
+    """At 30 px every marker is found, and its centre, as the ingest refines it, is
+    within 0.05 px of the truth (RMS; both families)."""
     row = measure_image(ImageCondition(family, "side", 30.0))
     assert row["visible"] == 32 and row["found"] == 32 and row["false"] == 0
-    assert row["centre_rms_px"] < 0.1 and row["ms"] > 0
+    assert row["centre_rms_px"] < 0.05 and row["ms"] > 0
 
 
 @pytest.mark.parametrize("family", FAMILIES)
