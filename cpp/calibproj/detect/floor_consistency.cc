@@ -1,6 +1,5 @@
 #include "calibproj/detect/floor_consistency.h"
 
-#include <opencv2/calib3d.hpp>
 #include <opencv2/flann.hpp>
 
 #include <algorithm>
@@ -9,6 +8,8 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+
+#include "calibproj/detect/surface_fit.h"
 
 namespace calibproj::detect {
 
@@ -27,37 +28,15 @@ void ConsistencyOptions::Check() const {
 
 namespace {
 
-struct SurfaceAgreement {
-  cv::Matx33d H = cv::Matx33d::eye();
-  std::vector<int> agreeing;
-};
-
-cv::Point2d Apply(const cv::Matx33d& H, const cv::Point2d& p) {
-  const cv::Vec3d q = H * cv::Vec3d(p.x, p.y, 1.0);
-  return {q[0] / q[2], q[1] / q[2]};
-}
-
-// The detections (among `candidates`) within threshold of a RANSAC homography of theirs;
-// none when no homography is found.
-SurfaceAgreement AgreeingWithOneHomography(const std::vector<cv::Point2d>& projector,
-                                           const std::vector<cv::Point2d>& image, const std::vector<int>& candidates,
-                                           double threshold_px) {
-  SurfaceAgreement result;
-  if (candidates.size() < 4) return result;
-  std::vector<cv::Point2d> from, to;
-  for (int i : candidates) {
-    from.push_back(projector[i]);
-    to.push_back(image[i]);
-  }
-  cv::Mat inliers;
-  const cv::Mat H = cv::findHomography(from, to, cv::RANSAC, threshold_px, inliers, 5000, 0.9999);
-  if (H.empty()) return result;
-  result.H = cv::Matx33d(H);
-  for (int i : candidates) {
-    const cv::Point2d predicted = Apply(result.H, projector[i]);
-    if (std::isfinite(predicted.x) && cv::norm(predicted - image[i]) <= threshold_px) result.agreeing.push_back(i);
-  }
-  return result;
+// The detections (among `candidates`) within threshold of a RANSAC homography of theirs.
+SurfaceFit AgreeingWithOneHomography(const std::vector<cv::Point2d>& projector,
+                                     const std::vector<cv::Point2d>& image, const std::vector<int>& candidates,
+                                     double threshold_px) {
+  SurfaceFitOptions options;
+  options.threshold_px = threshold_px;
+  options.max_iterations = 5000;
+  options.confidence = 0.9999;
+  return FitSurface(projector, image, candidates, options);
 }
 
 // Median of each coordinate.
@@ -133,17 +112,17 @@ std::vector<double> LocalDeviations(const std::vector<int>& members, const std::
 
 // Drops (in `keep`) the kept detections that stand out against their neighbours on
 // their surface.
-void RejectLocally(const std::vector<SurfaceAgreement>& surfaces, const std::vector<cv::Point2d>& projector,
+void RejectLocally(const std::vector<SurfaceFit>& surfaces, const std::vector<cv::Point2d>& projector,
                   const std::vector<cv::Point2d>& image, const ConsistencyOptions& options, std::vector<bool>* keep) {
   if (options.local_neighbours <= 0) return;
   std::vector<cv::Point2d> residual(image.size());
   std::vector<std::pair<int, double>> deviations;  // detection, deviation
-  for (const SurfaceAgreement& surface : surfaces) {
-    for (int i : surface.agreeing) residual[i] = image[i] - Apply(surface.H, projector[i]);
+  for (const SurfaceFit& surface : surfaces) {
+    for (int i : surface.inliers) residual[i] = image[i] - ApplyHomography(surface.H, projector[i]);
     const std::vector<double> deviation =
-        LocalDeviations(surface.agreeing, projector, image, residual, options.local_neighbours);
+        LocalDeviations(surface.inliers, projector, image, residual, options.local_neighbours);
     for (std::size_t k = 0; k < deviation.size(); ++k) {
-      if (deviation[k] >= 0.0) deviations.emplace_back(surface.agreeing[k], deviation[k]);
+      if (deviation[k] >= 0.0) deviations.emplace_back(surface.inliers[k], deviation[k]);
     }
   }
   if (deviations.empty()) return;
@@ -196,8 +175,8 @@ ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projecto
   const double separation_px = 4.0 * options.threshold_px;
   std::vector<int> all(n);
   std::iota(all.begin(), all.end(), 0);
-  std::vector<SurfaceAgreement> surfaces = {AgreeingWithOneHomography(projector, image, all, options.threshold_px)};
-  const std::vector<int> floor = surfaces[0].agreeing;
+  std::vector<SurfaceFit> surfaces = {AgreeingWithOneHomography(projector, image, all, options.threshold_px)};
+  const std::vector<int> floor = surfaces[0].inliers;
   const int agreeing = static_cast<int>(floor.size());
   if (agreeing < options.min_points || agreeing < options.min_share * n) {
     result.keep.assign(n, false);
@@ -223,12 +202,12 @@ ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projecto
     for (int i = 0; i < n; ++i) {
       if (!result.keep[i]) rest.push_back(i);
     }
-    SurfaceAgreement more = AgreeingWithOneHomography(projector, image, rest, options.threshold_px);
-    if (static_cast<int>(more.agreeing.size()) < options.min_points ||
-        Places(more.agreeing, image, position, separation_px) < options.min_positions) {
+    SurfaceFit more = AgreeingWithOneHomography(projector, image, rest, options.threshold_px);
+    if (static_cast<int>(more.inliers.size()) < options.min_points ||
+        Places(more.inliers, image, position, separation_px) < options.min_positions) {
       break;
     }
-    for (int i : more.agreeing) result.keep[i] = true;
+    for (int i : more.inliers) result.keep[i] = true;
     surfaces.push_back(std::move(more));
   }
   RejectLocally(surfaces, projector, image, options, &result.keep);

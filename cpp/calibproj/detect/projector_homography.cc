@@ -1,6 +1,5 @@
 #include "calibproj/detect/projector_homography.h"
 
-#include <opencv2/calib3d.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -37,38 +36,10 @@ double Spread(const std::vector<cv::Point2d>& points) {
   return std::sqrt(std::max(0.0, half_trace - root));
 }
 
-struct SurfaceFit {
-  cv::Matx33d H = cv::Matx33d::eye();
-  std::vector<int> inliers;  // within the threshold; empty when no fit was found
-  double rms_px = 0.0;       // over the inliers
-};
-
-// A RANSAC homography of the correspondences `chosen` and those of them it explains.
-SurfaceFit FitSurface(const std::vector<cv::Point2d>& projector, const std::vector<cv::Point2d>& image,
-                      const std::vector<int>& chosen, double threshold_px) {
-  SurfaceFit fit;
-  if (chosen.size() < 4) return fit;
-  std::vector<cv::Point2d> from, to;
-  for (int i : chosen) {
-    from.push_back(projector[i]);
-    to.push_back(image[i]);
-  }
-  std::vector<unsigned char> ransac_inlier;
-  const cv::Mat H = cv::findHomography(from, to, cv::RANSAC, threshold_px, ransac_inlier);
-  if (H.empty()) return fit;
-  fit.H = cv::Matx33d(H);
-  double squares = 0.0;
-  for (std::size_t k = 0; k < chosen.size(); ++k) {
-    if (!ransac_inlier[k]) continue;
-    const int i = chosen[k];
-    const cv::Vec3d q = fit.H * cv::Vec3d(projector[i].x, projector[i].y, 1.0);
-    if (!(std::abs(q[2]) > 0.0)) continue;
-    const cv::Point2d d = cv::Point2d(q[0] / q[2], q[1] / q[2]) - image[i];
-    if (d.dot(d) > threshold_px * threshold_px) continue;
-    squares += d.dot(d);
-    fit.inliers.push_back(i);
-  }
-  fit.rms_px = std::sqrt(squares / std::max<std::size_t>(fit.inliers.size(), 1));
+SurfaceFitOptions FitOptions(const HomographyOptions& options) {
+  SurfaceFitOptions fit;
+  fit.threshold_px = options.ransac_threshold_px;
+  fit.within_ransac_inliers = true;
   return fit;
 }
 
@@ -109,7 +80,7 @@ FurtherSurfaces FitFurtherSurfaces(const std::vector<cv::Point2d>& projector, co
   for (int attempt = 0; attempt < 2 * options.max_surfaces; ++attempt) {
     if (static_cast<int>(further.surfaces.size()) + 1 >= options.max_surfaces) break;
     if (static_cast<int>(rest.size()) < options.min_points) break;
-    SurfaceFit surface = FitSurface(projector, image, rest, options.ransac_threshold_px);
+    SurfaceFit surface = FitSurface(projector, image, rest, FitOptions(options));
     if (static_cast<int>(surface.inliers.size()) < options.min_points || surface.rms_px > options.max_rms_px) break;
     rest = Without(rest, surface.inliers);
     further.unexplained -= static_cast<int>(surface.inliers.size());
@@ -181,7 +152,7 @@ bool ProjectorHomography::Fit() {
   if (Spread(image) < options_.min_spread * diagonal) return false;
   std::vector<int> all(projector.size());
   std::iota(all.begin(), all.end(), 0);
-  const SurfaceFit dominant = FitSurface(projector, image, all, options_.ransac_threshold_px);
+  const SurfaceFit dominant = FitSurface(projector, image, all, FitOptions(options_));
   if (dominant.inliers.empty() || dominant.rms_px > options_.max_rms_px) return false;
   const FurtherSurfaces further = FitFurtherSurfaces(projector, image, Without(all, dominant.inliers), options_);
   // Another surface's points are not outliers of the dominant one: the share is of all
@@ -233,9 +204,6 @@ const cv::Matx33d& ProjectorHomography::SurfaceAt(const cv::Point2d& projector) 
   return surface == 0 ? H_ : more_[surface - 1];
 }
 
-cv::Point2d ProjectorHomography::Map(const cv::Point2d& projector) const {
-  const cv::Vec3d q = H_ * cv::Vec3d(projector.x, projector.y, 1.0);
-  return {q[0] / q[2], q[1] / q[2]};
-}
+cv::Point2d ProjectorHomography::Map(const cv::Point2d& projector) const { return ApplyHomography(H_, projector); }
 
 }  // namespace calibproj::detect

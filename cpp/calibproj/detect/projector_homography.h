@@ -14,6 +14,8 @@
 #include <utility>
 #include <vector>
 
+#include "calibproj/detect/surface_fit.h"
+
 namespace calibproj::detect {
 
 struct HomographyOptions {

@@ -23,11 +23,6 @@ int AlignDown(int value, int alignment) {
   return static_cast<int>(std::floor(static_cast<double>(value) / alignment)) * alignment;
 }
 
-cv::Point2d MapPoint(const cv::Matx33d& H, const cv::Point2d& p) {
-  const cv::Vec3d q = H * cv::Vec3d(p.x, p.y, 1.0);
-  return {q[0] / q[2], q[1] / q[2]};
-}
-
 // Points along the edges of the square of side `side` centred on `centre`, mapped to
 // distorted image pixels with the homography of the surface the centre lands on; the
 // first four are the corners (top-left, top-right, bottom-right, bottom-left).
@@ -38,11 +33,11 @@ std::vector<cv::Point2d> SquareOutline(const ProjectorHomography& homography, co
   const cv::Point2d corners[4] = {centre + cv::Point2d(-h, -h), centre + cv::Point2d(h, -h),
                                   centre + cv::Point2d(h, h), centre + cv::Point2d(-h, h)};
   std::vector<cv::Point2d> undistorted;
-  for (const auto& corner : corners) undistorted.push_back(MapPoint(H, corner));
+  for (const auto& corner : corners) undistorted.push_back(ApplyHomography(H, corner));
   for (int edge = 0; edge < 4; ++edge) {
     for (int k = 1; k < edge_points; ++k) {
       const double s = static_cast<double>(k) / edge_points;
-      undistorted.push_back(MapPoint(H, corners[edge] * (1.0 - s) + corners[(edge + 1) % 4] * s));
+      undistorted.push_back(ApplyHomography(H, corners[edge] * (1.0 - s) + corners[(edge + 1) % 4] * s));
     }
   }
   return DistortPixels(lens, undistorted);
@@ -171,7 +166,7 @@ PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& 
     prediction.side_px = a.side_px;
     prediction.module_px = a.side_px / markers.grid_cells;
     prediction.centre =
-        DistortPixels(lens, {MapPoint(homography.SurfaceAt(markers.centres[i]), markers.centres[i])})[0];
+        DistortPixels(lens, {ApplyHomography(homography.SurfaceAt(markers.centres[i]), markers.centres[i])})[0];
     if (options.target_module_px > 0.0) {
       const int factor = static_cast<int>(std::floor(prediction.module_px / options.target_module_px));
       prediction.downscale = std::clamp(factor, 1, options.max_downscale);
