@@ -3,15 +3,24 @@
 #include <filesystem>
 #include <iostream>
 
-#include "files.h"
-#include "intrinsics_file.h"
+#include "calibproj/formats/files.h"
+#include "calibproj/formats/intrinsics_file.h"
 #include "output_folder.h"
-#include "results_file.h"
+#include "calibproj/formats/results_file.h"
 #include "calibproj/registration/incremental.h"
 #include "calibproj/registration/result.h"
-#include "tracks_file.h"
+#include "calibproj/formats/tracks_file.h"
 
 namespace calibproj::app {
+
+using formats::CameraIntrinsics;
+using formats::IntrinsicsDir;
+using formats::LoadIntrinsicsDir;
+using formats::ReadTracks;
+using formats::ResultFiles;
+using formats::Tracks;
+using formats::WriteResults;
+using formats::kResultFiles;
 
 namespace fs = std::filesystem;
 

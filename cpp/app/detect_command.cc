@@ -12,14 +12,27 @@
 
 #include "calibproj/detect/option_table.h"
 #include "calibproj/ingest/option_table.h"
-#include "detect_report.h"
-#include "files.h"
-#include "intrinsics_file.h"
+#include "calibproj/formats/detect_report.h"
+#include "calibproj/formats/files.h"
+#include "calibproj/formats/intrinsics_file.h"
 #include "output_folder.h"
-#include "sequence_file.h"
-#include "tracks_file.h"
+#include "calibproj/formats/sequence_file.h"
+#include "calibproj/formats/tracks_file.h"
 
 namespace calibproj::app {
+
+using formats::AtomicWrite;
+using formats::CameraOutcome;
+using formats::CameraIntrinsics;
+using formats::DetectReport;
+using formats::DumpSchemaJson;
+using formats::FormatDetectReport;
+using formats::InputError;
+using formats::MakeTracks;
+using formats::ReadIntrinsics;
+using formats::ReadSequence;
+using formats::Tracks;
+using formats::WriteTracks;
 
 namespace fs = std::filesystem;
 

@@ -11,7 +11,7 @@
 
 #include "calibrate_command.h"
 #include "detect_command.h"
-#include "files.h"
+#include "calibproj/formats/files.h"
 #include "interrupts.h"
 #include "output_folder.h"
 

@@ -14,6 +14,8 @@
 
 namespace calibproj::app {
 
+using formats::WriteFully;
+
 namespace fs = std::filesystem;
 
 namespace {

@@ -26,10 +26,12 @@
 #include <string>
 #include <vector>
 
-#include "files.h"
+#include "calibproj/formats/files.h"
 #include "interrupts.h"
 
 namespace calibproj::app {
+
+using formats::InputError;
 
 // An output that cannot be written, named in the message: exit status 2.
 class OutputError : public InputError {

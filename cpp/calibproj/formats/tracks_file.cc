@@ -1,13 +1,13 @@
-#include "tracks_file.h"
+#include "calibproj/formats/tracks_file.h"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numeric>
 
-#include "files.h"
+#include "calibproj/formats/files.h"
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 namespace fs = std::filesystem;
 
@@ -165,4 +165,4 @@ void WriteTracks(const fs::path& path, const Tracks& tracks) {
   AtomicWrite(path, text);
 }
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

@@ -1,8 +1,8 @@
-#include "detect_report.h"
+#include "calibproj/formats/detect_report.h"
 
 #include <cstdio>
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 namespace {
 
@@ -130,4 +130,4 @@ std::string FormatDetectReport(const ordered_json& report) {
   return text;
 }
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

@@ -8,7 +8,7 @@
 
 #include "calibproj/ingest/camera_ingest.h"
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 // What the ingest of one camera gave, or why it failed.
 struct CameraOutcome {
@@ -28,4 +28,4 @@ nlohmann::ordered_json DetectReport(const std::vector<CameraOutcome>& cameras, c
 // Per camera: sync, frames, markers per scale, MSMs kept (or the error).
 std::string FormatDetectReport(const nlohmann::ordered_json& report);
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

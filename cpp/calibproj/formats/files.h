@@ -9,7 +9,7 @@
 #include <string_view>
 #include <vector>
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 // A bad input file or argument: printed as one line, exit status 2.
 class InputError : public std::runtime_error {
@@ -54,4 +54,4 @@ std::string PythonFloat(double value);
 // The document with its schema tag first, indented like the Python writer.
 std::string DumpSchemaJson(const std::string& kind, int major, const nlohmann::ordered_json& body);
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

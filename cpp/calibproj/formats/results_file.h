@@ -10,7 +10,7 @@
 
 #include "calibproj/registration/result.h"
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 struct ResultFiles {
   std::vector<std::string> cameras;         // names of the registration's cameras
@@ -25,4 +25,4 @@ extern const std::vector<std::string> kResultFiles;
 void WriteResults(const std::filesystem::path& out, const registration::RegistrationResult& result,
                   const ResultFiles& names);
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

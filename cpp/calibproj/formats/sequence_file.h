@@ -6,10 +6,10 @@
 
 #include "calibproj/ingest/sequence_description.h"
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 // InputError naming the file for another kind of file, a newer schema, a missing or
 // mistyped field or an inconsistent sequence.
 ingest::SequenceDescription ReadSequence(const std::filesystem::path& path);
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

@@ -1,13 +1,13 @@
-#include "results_file.h"
+#include "calibproj/formats/results_file.h"
 
 #include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "files.h"
+#include "calibproj/formats/files.h"
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 namespace fs = std::filesystem;
 using ordered_json = nlohmann::ordered_json;
@@ -112,4 +112,4 @@ void WriteResults(const fs::path& out, const registration::RegistrationResult& r
   AtomicWrite(out / "points.ply", PointsPly(result, names));
 }
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

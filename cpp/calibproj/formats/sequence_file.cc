@@ -1,12 +1,12 @@
-#include "sequence_file.h"
+#include "calibproj/formats/sequence_file.h"
 
 #include <stdexcept>
 #include <string>
 #include <vector>
 
-#include "files.h"
+#include "calibproj/formats/files.h"
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 namespace {
 
@@ -98,4 +98,4 @@ ingest::SequenceDescription ReadSequence(const std::filesystem::path& path) {
   }
 }
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

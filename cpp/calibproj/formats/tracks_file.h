@@ -12,7 +12,7 @@
 
 #include "calibproj/ba/bundle_adjuster.h"
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 struct Tracks {
   std::vector<std::string> cameras;
@@ -37,4 +37,4 @@ void WriteTracks(const std::filesystem::path& path, const Tracks& tracks);
 Tracks MakeTracks(std::vector<std::string> cameras, const std::vector<int>& camera, const std::vector<std::int64_t>& ids,
                   const std::vector<Eigen::Vector2d>& xy, std::optional<int> markers_per_array);
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

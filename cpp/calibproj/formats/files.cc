@@ -1,4 +1,4 @@
-#include "files.h"
+#include "calibproj/formats/files.h"
 
 #include <fcntl.h>
 #include <unistd.h>
@@ -13,7 +13,7 @@
 #include <random>
 #include <sstream>
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 std::string PythonFloat(double value) {
   char buffer[64];
@@ -209,4 +209,4 @@ std::string DumpSchemaJson(const std::string& kind, int major, const nlohmann::o
   return document.dump(1, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
 }
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

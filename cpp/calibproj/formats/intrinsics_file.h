@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 struct CameraIntrinsics {
   std::string name;
@@ -34,4 +34,4 @@ struct IntrinsicsDir {
 // Throws InputError when the folder does not exist or holds no intrinsics file at all.
 IntrinsicsDir LoadIntrinsicsDir(const std::filesystem::path& directory);
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

@@ -1,4 +1,4 @@
-#include "intrinsics_file.h"
+#include "calibproj/formats/intrinsics_file.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,9 +6,9 @@
 #include <opencv2/core/eigen.hpp>
 
 #include "calibproj/common/limits.h"
-#include "files.h"
+#include "calibproj/formats/files.h"
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
 namespace fs = std::filesystem;
 
@@ -214,4 +214,4 @@ IntrinsicsDir LoadIntrinsicsDir(const fs::path& directory) {
   return out;
 }
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats
