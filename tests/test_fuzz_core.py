@@ -6,8 +6,8 @@ Each callable has a valid baseline call; the bad calls replace one argument at a
 non-contiguous arrays, missing dictionary keys, absurd option values, ...), chosen from
 a fixed seed within a fixed budget. They run in a child process, which reports each
 call before and after making it, so that a segfault, an abort or a hang names the call
-instead of killing pytest. Every call must return or raise ValueError, TypeError or
-RuntimeError with a message.
+instead of killing pytest. Every call must return or raise ValueError, TypeError,
+RuntimeError or (for files) OSError with a message.
 
 Run alone (with -s for the summary line):
     PYTHONPATH=python python -m pytest tests/test_fuzz_core.py -q -s
@@ -15,6 +15,7 @@ Run alone (with -s for the summary line):
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
@@ -41,7 +42,9 @@ MAX_CALLS_PER_CALLABLE = 90
 MIN_TOTAL_CALLS = 1400
 CALL_TIMEOUT_S = 20.0
 CHILD_ADDRESS_SPACE_BYTES = 6 << 30  # an allocation without limit fails instead of swapping
-ALLOWED_OUTCOMES = {"ok", "ValueError", "TypeError", "RuntimeError"}
+# OSError: a file the system refuses (a name too long, a folder that cannot be made),
+# raised as open() raises it.
+ALLOWED_OUTCOMES = {"ok", "ValueError", "TypeError", "RuntimeError", "OSError"}
 MODULES = {"_core": _core, "_bench": _bench}
 # Where every keyword option meets every absurd value (the others sample them).
 EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "_core.sync.synchronise",
@@ -190,6 +193,18 @@ def bad_dicts(d: dict, rng: np.random.Generator) -> list[Mutation]:
     return out
 
 
+def bad_dataclasses(value: Any, rng: np.random.Generator) -> list[Mutation]:
+    """A dataclass (a Calibration, an Intrinsics, ...) with one field replaced by a bad
+    value, set past its own checks: the binding must refuse what the class would."""
+    out: list[Mutation] = list(BAD_TYPES)
+    for field in dataclasses.fields(value):
+        for label, bad in bad_values(getattr(value, field.name), rng)[:8]:
+            mutated = copy.copy(value)
+            object.__setattr__(mutated, field.name, bad)
+            out.append((f"{field.name}={label}", mutated))
+    return out
+
+
 def dict_paths(value: Any, prefix: tuple = ()) -> list[tuple]:
     """Paths to every entry of nested dicts, and to the first item of every list."""
     paths = []
@@ -235,10 +250,14 @@ def bad_values(value: Any, rng: np.random.Generator) -> list[Mutation]:
         return list(BAD_STRINGS)
     if isinstance(value, dict):
         return bad_dicts(value, rng)
-    if isinstance(value, (list, tuple)):
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return bad_dataclasses(value, rng)
+    if isinstance(value, (list, tuple)) and value:
         return [("empty", type(value)()), ("one item", value[:1]), ("one item more", [*value, value[-1]]),
                 ("NaN items", [math.nan] * len(value)), ("huge items", [2**31] * len(value)),
                 ("strings", ["a"] * len(value)), ("deeply nested", deep_list(3000)), *BAD_TYPES]
+    if isinstance(value, (list, tuple)):
+        return [("one item", [1.0]), ("deeply nested", deep_list(3000)), *BAD_TYPES]
     return list(BAD_TYPES)
 
 
@@ -465,11 +484,47 @@ class Baselines:
             "_core.ingest.refine_undistorted_corners": Spec([
                 ("image", self.image), ("corners", marker_corners), ("K", self.K), ("dist", self.dist),
                 ("cells", 6), ("outward_fraction", 0.45), ("passes", 6)]),
+            **self.format_specs(),
             "_core.ingest.ingest_camera": Spec(
                 [("video", f["tiny.mkv"]), ("sequence", sequence), ("K", self.K), ("dist", self.dist),
                  ("resolution", (64, 48)), ("source", "cam"), ("aruco", _core.detect.ArucoOptions()),
                  ("apriltag", _core.detect.AprilTagOptions()), ("progress", lambda decoded, total: None)],
                 options=ingest_options),
+        }
+
+    def format_specs(self) -> dict[str, Spec]:
+        """The results files, the metric scale and the exports (_core.formats)."""
+        from calibproj.calibration import CameraMetrics, Calibration
+        from calibproj.io.intrinsics import Intrinsics
+        from calibproj.scale import ProjectedMarkers, parse_scale
+        from calibproj.tracks import Tracks
+
+        centres = np.stack(np.meshgrid(np.arange(6) * 10.0, np.arange(3) * 10.0), -1).reshape(2, 9, 2)
+        points = np.column_stack([centres.reshape(-1, 2) / 100.0, np.zeros(18)])
+        poses = {"a": (np.eye(3), np.array([0.0, 0.0, 2.0])), "b": (np.eye(3), np.array([1.0, 0.0, 2.0]))}
+        metrics = {name: CameraMetrics(0.3, 0.1, 18, 18, 18, 100, rotation_sigma_deg=0.01, centre_sigma=0.001)
+                   for name in poses}
+        calibration = Calibration(poses, {}, metrics, points, np.arange(18), registration_order=["a", "b"],
+                                  planes=[{"normal": [0.0, 0.0, 1.0], "offset": 0.5, "points": 0}])
+        markers = ProjectedMarkers(centres, 4.0, (60, 30))
+        intrinsics = {name: Intrinsics(name, (64, 48), self.K, self.dist) for name in poses}
+        observed = np.tile(centres.reshape(-1, 2), (2, 1))
+        tracks = Tracks.from_observations(["a", "b"], np.repeat([0, 1], 18), np.tile(np.arange(18), 2), observed)
+        folder = Path(self.files["tiny.mkv"]).parent / "formats"
+        return {
+            "_core.formats.write_calibration": Spec([("directory", folder), ("calibration", calibration)]),
+            "_core.formats.scaled_lengths": Spec([("calibration", calibration), ("factor", 2.0)]),
+            "_core.formats.parse_scale": Spec([("text", "distance:a,b=2.0")]),
+            "_core.formats.check_measurement": Spec([("measurement", parse_scale("marker-size:1/4=0.1")),
+                                                    ("camera_names", ["a", "b"]), ("markers", markers)]),
+            "_core.formats.scale_factor": Spec([("calibration", calibration),
+                                               ("measurement", parse_scale("marker-size:1/4=0.1")),
+                                               ("markers", markers), ("radius_sides", 30.0)]),
+            "_core.formats.parse_export_formats": Spec([("text", "yaml,colmap")]),
+            "_core.formats.colmap_camera": Spec([("intrinsics", intrinsics["a"])]),
+            "_core.formats.quaternion_wxyz": Spec([("R", np.eye(3))]),
+            "_core.formats.export": Spec([("calibration", calibration), ("format", "colmap"), ("directory", folder),
+                                         ("intrinsics", intrinsics), ("tracks", tracks)]),
         }
 
     def receivers(self) -> dict[str, dict[str, Callable[[], Any]]]:

@@ -2,11 +2,16 @@
 
 #include <filesystem>
 #include <iostream>
+#include <map>
+#include <optional>
 
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/intrinsics_file.h"
 #include "output_folder.h"
-#include "calibproj/formats/results_file.h"
+#include "calibproj/formats/calibration.h"
+#include "calibproj/formats/export.h"
+#include "calibproj/formats/scale.h"
+#include "calibproj/formats/sequence_file.h"
 #include "calibproj/registration/incremental.h"
 #include "calibproj/registration/result.h"
 #include "calibproj/formats/tracks_file.h"
@@ -14,13 +19,11 @@
 namespace calibproj::app {
 
 using formats::CameraIntrinsics;
+using formats::InputError;
 using formats::IntrinsicsDir;
 using formats::LoadIntrinsicsDir;
 using formats::ReadTracks;
-using formats::ResultFiles;
 using formats::Tracks;
-using formats::WriteResults;
-using formats::kResultFiles;
 
 namespace fs = std::filesystem;
 
@@ -34,6 +37,12 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   cmd->add_option("--intrinsics", args->intrinsics, "folder of per-camera intrinsics files")->required();
   cmd->add_option("--out", args->out, "results folder")->required();
   cmd->add_flag("--force", args->force, "overwrite the results of an earlier run in --out");
+  cmd->add_option("--scale", args->scale,
+                  "metric scale from one measurement: camera-height:NAME=METRES, distance:CAM_A,CAM_B=METRES or "
+                  "marker-size:[ARRAY/MARKER=]METRES (default: arbitrary unit)");
+  cmd->add_option("--sequence", args->sequence, "sequence.json of the projection (needed by --scale marker-size)");
+  cmd->add_option("--export", args->exports,
+                  "also write the calibration as yaml, colmap and/or anipose (comma-separated)");
   registration::Options& o = args->options;
   const auto option = [cmd](const std::string& name, auto& value, const std::string& help) {
     cmd->add_option(name, value, help)->capture_default_str();
@@ -69,36 +78,44 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
 
 namespace {
 
-// The results written into the staging folder, then moved into place.
-void SaveResults(OutputFolder& folder, const registration::RegistrationResult& result, const ResultFiles& names) {
-  folder.Write([&](const fs::path& staging) { WriteResults(staging, result, names); });
+// The results and exports written into the staging folder, then moved into place.
+void SaveResults(OutputFolder& folder, const formats::Calibration& calibration,
+                 const std::map<std::string, CameraIntrinsics>& intrinsics, const Tracks& tracks,
+                 const std::vector<std::string>& exports) {
+  folder.Write([&](const fs::path& staging) {
+    formats::WriteCalibration(staging, calibration);
+    std::vector<std::string> warnings;
+    for (const auto& format : exports) {
+      if (calibration.poses.empty()) break;  // nothing to export; the failures say why
+      formats::Export(calibration, format, staging, intrinsics, &tracks, &warnings);
+    }
+    for (const auto& warning : warnings) std::cerr << warning << "\n";
+  });
   folder.Commit();
 }
 
-}  // namespace
-
-int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
-  // Checked and locked before the inputs are read, as the Python command does.
-  OutputFolder out(arguments.out, arguments.force, kResultFiles, interrupts);
-  out.Open();
-  Tracks tracks = ReadTracks(arguments.tracks);
-  const IntrinsicsDir folder = LoadIntrinsicsDir(arguments.intrinsics);
-  const auto& intrinsics = folder.cameras;
-
-  ResultFiles names;
-  names.model = arguments.model;
-  std::vector<std::string> missing;
-  for (const auto& camera : tracks.cameras) {
-    if (intrinsics.count(camera)) continue;
-    // A camera whose file is bad fails alone, with the file and its problem.
-    const auto bad = folder.unusable.find(camera);
-    const std::string reason = bad != folder.unusable.end() ? bad->second : "no intrinsics for this camera";
-    missing.push_back(camera);
-    names.left_out.emplace_back(camera, reason);
-    std::cerr << "camera " << camera << ": " << reason << ", left out\n";
+// The MSM geometry of sequence.json, checked against the tracks it should belong to.
+formats::ProjectedMarkers MarkersOf(const std::string& sequence, std::optional<int> markers_per_array) {
+  formats::ProjectedMarkers markers = formats::ProjectedMarkers::FromSequence(formats::ReadSequence(sequence));
+  if (markers_per_array && *markers_per_array != markers.markers_per_array) {
+    throw InputError(sequence + ": " + std::to_string(markers.markers_per_array) +
+                     " markers per array, but the tracks have " + std::to_string(*markers_per_array) +
+                     "; is it the sequence of these tracks?");
   }
-  if (!missing.empty()) tracks = tracks.WithoutCameras(missing);
+  return markers;
+}
 
+void CheckScale(const formats::ScaleMeasurement& measurement, const std::vector<std::string>& cameras,
+                const formats::ProjectedMarkers* markers) {
+  try {
+    formats::CheckMeasurement(measurement, cameras, markers);
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
+  }
+}
+
+registration::RegistrationResult Register(const Tracks& tracks, const std::map<std::string, CameraIntrinsics>& intrinsics,
+                                          const CalibrateArguments& arguments) {
   std::vector<registration::Camera> cameras;
   for (const auto& name : tracks.cameras) {
     const CameraIntrinsics& in = intrinsics.at(name);
@@ -108,13 +125,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
     camera.height = in.ImageHeight();
     cameras.push_back(camera);
   }
-  names.cameras = tracks.cameras;
-  names.point_ids = tracks.point_ids;
-  if (cameras.empty()) {  // every camera failed before registration
-    SaveResults(out, registration::RegistrationResult{}, names);
-    for (const auto& [name, reason] : names.left_out) std::cout << name << ": FAILED " << reason << "\n";
-    return 1;
-  }
+  if (cameras.empty()) return {};  // every camera failed before registration
   registration::Options options = arguments.options;
   options.model = arguments.model == "free" ? ba::Model::kFree : ba::Model::kCoplanar;
   options.loss = arguments.loss == "huber" ? ba::Loss::kHuber : arguments.loss == "cauchy" ? ba::Loss::kCauchy
@@ -123,24 +134,75 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
                                               tracks.point_index, tracks.xy, options);
   registration::Run(
       reconstruction, [](const std::string& message) { std::cerr << message << "\n"; }, tracks.cameras);
-  const registration::RegistrationResult result = registration::Summarize(reconstruction);
+  return registration::Summarize(reconstruction);
+}
 
-  SaveResults(out, result, names);
-  int registered = 0;
-  for (size_t c = 0; c < result.cameras.size(); ++c) {
-    const auto& camera = result.cameras[c];
-    registered += camera.registered;
-    if (camera.registered) {
-      std::cout << tracks.cameras[c] << ": registered, mean " << camera.mean_px << " px, " << camera.inliers
-                << " inliers\n";
+void PrintSummary(const formats::Calibration& calibration, const std::string& out) {
+  for (const auto& [name, metrics] : calibration.metrics) {
+    if (calibration.PoseOf(name)) {
+      std::cout << name << ": registered, mean " << *metrics.mean_px << " px, " << metrics.inliers << " inliers\n";
     } else {
-      std::cout << tracks.cameras[c] << ": FAILED " << camera.failure << "\n";
+      std::cout << name << ": FAILED " << metrics.failure.value_or("") << "\n";
     }
   }
-  for (const auto& [name, reason] : names.left_out) std::cout << name << ": FAILED " << reason << "\n";
-  std::cout << "results in " << arguments.out << " (unit: arbitrary)\n";
-  const bool all_calibrated = registered == static_cast<int>(result.cameras.size()) && names.left_out.empty();
-  return all_calibrated ? 0 : 1;
+  std::cout << "results in " << out << " (unit: " << calibration.unit << ")\n";
+}
+
+}  // namespace
+
+int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
+  const std::vector<std::string> exports =
+      arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
+  std::optional<formats::ScaleMeasurement> measurement;
+  if (!arguments.scale.empty()) measurement = formats::ParseScale(arguments.scale);
+  if (measurement && measurement->kind == "marker-size" && arguments.sequence.empty()) {
+    throw InputError("--scale " + arguments.scale + ": marker-size needs --sequence (the projection's sequence.json)");
+  }
+  // Checked and locked before the inputs are read, as the Python command does.
+  OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
+  out.Open();
+  Tracks tracks = ReadTracks(arguments.tracks);
+  const IntrinsicsDir folder = LoadIntrinsicsDir(arguments.intrinsics);
+  const auto& intrinsics = folder.cameras;
+  std::optional<formats::ProjectedMarkers> markers;
+  if (measurement) {
+    if (!arguments.sequence.empty()) markers = MarkersOf(arguments.sequence, tracks.markers_per_array);
+    CheckScale(*measurement, tracks.cameras, markers ? &*markers : nullptr);
+  }
+
+  std::vector<formats::NamedText> left_out;
+  std::vector<std::string> missing;
+  for (const auto& camera : tracks.cameras) {
+    if (intrinsics.count(camera)) continue;
+    // A camera whose file is bad fails alone, with the file and its problem.
+    const auto bad = folder.unusable.find(camera);
+    const std::string reason = bad != folder.unusable.end() ? bad->second : "no intrinsics for this camera";
+    missing.push_back(camera);
+    left_out.emplace_back(camera, reason);
+    std::cerr << "camera " << camera << ": " << reason << ", left out\n";
+  }
+  if (!missing.empty()) tracks = tracks.WithoutCameras(missing);
+
+  formats::Calibration calibration =
+      formats::FromRegistration(Register(tracks, intrinsics, arguments), tracks.cameras, tracks.point_ids, left_out,
+                                arguments.model);
+  std::string scale_error;
+  if (measurement && !calibration.poses.empty()) {
+    try {
+      const formats::ScaleFit fit =
+          formats::ScaleFactor(calibration, *measurement, markers ? &*markers : nullptr);
+      std::cerr << "scale from " << measurement->Label() << ": " << fit.metres_per_unit << " m per unit\n";
+      calibration = formats::Scaled(calibration, fit.metres_per_unit);
+    } catch (const std::invalid_argument& error) {
+      scale_error = error.what();
+    }
+  }
+  SaveResults(out, calibration, intrinsics, tracks, exports);
+  PrintSummary(calibration, arguments.out);
+  if (!scale_error.empty()) {
+    throw InputError(scale_error + "; results written to " + arguments.out + " in arbitrary units");
+  }
+  return calibration.failed.empty() ? 0 : 1;
 }
 
 }  // namespace calibproj::app

@@ -1,7 +1,8 @@
 #pragma once
 // `calibproj-native calibrate`: tracks + intrinsics -> camera_poses.json, metrics.json,
-// points.ply, with the same registration steps (calibproj::registration::Run) and
-// options as `calibproj calibrate --tracks`.
+// points.ply and the exports, with the same registration steps
+// (calibproj::registration::Run), options, metric scale and file writers as
+// `calibproj calibrate --tracks`.
 
 #include <CLI/CLI.hpp>
 #include <memory>
@@ -14,6 +15,9 @@ namespace calibproj::app {
 
 struct CalibrateArguments {
   std::string tracks, intrinsics, out;
+  std::string scale;     // one metric measurement (formats/scale.h); empty: arbitrary unit
+  std::string sequence;  // sequence.json, for a marker-size measurement
+  std::string exports;   // comma-separated export formats (formats/export.h)
   bool force = false;
   std::string model = "coplanar";
   std::string loss = "none";

@@ -53,6 +53,7 @@ ingest::SequenceDescription SequenceFromDict(const py::dict& d) {
   s.projector_height = resolution[1];
   s.fps = DictItem<double>(projector, "fps", "sequence['projector']");
   s.scales = DictItem<std::vector<double>>(layout, "scales", "sequence['layout']");
+  s.marker_px = DictItem<double>(layout, "marker_px", "sequence['layout']");
   const auto centres = DictItem<std::vector<std::vector<std::vector<double>>>>(d, "centres", "sequence");
   s.arrays = static_cast<int>(centres.size());
   s.markers_per_array = centres.empty() ? 0 : static_cast<int>(centres[0].size());

@@ -12,15 +12,15 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import MISSING, asdict, dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from calibproj.io.json_values import boolean, describe, integer, number, text
-from calibproj.io.jsonio import FormatError, atomic_write_text, read_json, write_json
-from calibproj.io.poses import read_poses, write_camera_poses
+from calibproj.io.jsonio import FormatError, read_json
+from calibproj.io.poses import read_poses
 
 METRICS_KIND = "metrics"
 MODELS = ("free", "coplanar")  # of the registration (calibproj.registration)
@@ -126,26 +126,11 @@ class Calibration:
         return cls({}, dict(failed), metrics, np.zeros((0, 3)), np.zeros(0, dtype=np.int64), model=model)
 
     def save(self, directory: str | os.PathLike) -> None:
-        """Write camera_poses.json, metrics.json and points.ply into ``directory``."""
-        directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        uncertainty = {name: {"rotation_sigma_deg": m.rotation_sigma_deg, "centre_sigma": m.centre_sigma, "weak": m.weak}
-                       for name, m in self.metrics.items() if name in self.poses}
-        write_camera_poses(directory / "camera_poses.json", self.poses, self.unit, self.failed, uncertainty)
-        write_json(
-            directory / "metrics.json",
-            METRICS_KIND,
-            SCHEMA_MAJOR,
-            {
-                "unit": self.unit,
-                "model": self.model,
-                "registration_order": self.registration_order,
-                "floor_rms": self.floor_rms,
-                "planes": self.planes,
-                "cameras": {name: asdict(m) for name, m in self.metrics.items()},
-            },
-        )
-        write_ply(directory / "points.ply", self.points, self.point_ids)
+        """Write camera_poses.json, metrics.json and points.ply into ``directory``, each
+        atomically (by the C++ core, as ``calibproj-native`` writes them)."""
+        from calibproj import _core
+
+        _core.formats.write_calibration(Path(directory), self)
 
     @classmethod
     def load(cls, directory: str | os.PathLike) -> Calibration:
@@ -236,26 +221,9 @@ def _finite_or_none(value: float) -> float | None:
     return value if np.isfinite(value) else None
 
 
-def write_ply(path: str | os.PathLike, points: np.ndarray, point_ids: np.ndarray) -> None:
-    """ASCII PLY of the points with their ids, written atomically."""
-    header = [
-        "ply",
-        "format ascii 1.0",
-        f"comment schema {PLY_SCHEMA}",
-        f"element vertex {len(points)}",
-        "property double x",
-        "property double y",
-        "property double z",
-        "property int id",
-        "end_header",
-    ]
-    rows = [f"{x:.9g} {y:.9g} {z:.9g} {int(i)}" for (x, y, z), i in zip(points, point_ids)]
-    atomic_write_text(path, "\n".join(header + rows) + "\n")
-
-
 def read_ply(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """The points (P, 3) and their ids (P,) of a ``points.ply`` as ``write_ply`` writes
-    it; FormatError naming the file and the problem."""
+    """The points (P, 3) and their ids (P,) of a ``points.ply`` as ``Calibration.save``
+    writes it; FormatError naming the file and the problem."""
     path = Path(path)
     if not path.is_file():
         raise FormatError(f"{path}: no such file")

@@ -115,16 +115,21 @@ int FarthestCamera(const PoseMatrix& poses_in_gauge_frame, int gauge_camera) {
 }
 
 // The parameter blocks the solver works on, in the gauge frame.
+//
+// Every point's block is a row of one matrix: a free point its 3 coordinates, a point
+// on a plane its 2 coordinates in the plane's tangent basis (the third entry unused).
+// Ceres orders the blocks of one elimination group by address, so blocks of one array
+// are ordered the same in every run, and results repeat to the last bit whatever the
+// heap layout.
 struct Parameters {
   PoseMatrix poses;
-  PointMatrix points;                                                 // free points
-  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> plane_points;  // points on a plane
+  PointMatrix points;
   Eigen::Vector4d plane;
   PlaneMatrix more_planes;
   std::vector<int> point_plane;  // per point: 0 plane, k >= 1 more_planes row k - 1, -1 free
 
   double* Plane(int k) { return k == 0 ? plane.data() : more_planes.row(k - 1).data(); }
-  double* PointBlock(int p) { return point_plane[p] < 0 ? points.row(p).data() : plane_points.row(p).data(); }
+  double* PointBlock(int p) { return points.row(p).data(); }
 };
 
 // Unit normal; for the main plane pointing away from the gauge camera (d > 0), for the
@@ -154,11 +159,10 @@ Parameters InitialParameters(const Data& gauge_data, const Options& options) {
   for (int k = 0; k < params.more_planes.rows(); ++k) {
     params.more_planes.row(k) = OrientedPlane(params.more_planes.row(k).transpose(), false).transpose();
   }
-  params.plane_points.setZero(num_points, 2);
   for (int p = 0; p < num_points; ++p) {
     if (params.point_plane[p] < 0) continue;
     const Eigen::Matrix<double, 3, 2> B = TangentBasis(Eigen::Map<const Eigen::Vector3d>(params.Plane(params.point_plane[p])));
-    params.plane_points.row(p) = (B.transpose() * gauge_data.points.row(p).transpose()).transpose();
+    params.points.row(p) << (B.transpose() * gauge_data.points.row(p).transpose()).transpose(), 0.0;
   }
   return params;
 }
@@ -167,7 +171,7 @@ void CopyPointsOut(Parameters& params, PointMatrix* points) {
   *points = params.points;
   for (int p = 0; p < points->rows(); ++p) {
     const int k = params.point_plane[p];
-    if (k >= 0) points->row(p) = PointOnPlane(params.Plane(k), params.plane_points.row(p).data()).transpose();
+    if (k >= 0) points->row(p) = PointOnPlane(params.Plane(k), params.points.row(p).data()).transpose();
   }
 }
 
@@ -204,7 +208,7 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
     // Only the main plane's offset carries the scale gauge.
     problem->AddParameterBlock(plane, 4, new PlaneManifold(Eigen::Map<const Eigen::Vector3d>(plane),
                                                            /*fix_offset=*/k == 0 && gauge.fixed));
-    ordering->AddElementToGroup(plane, 1);
+    ordering->AddElementToGroup(plane, 2 + k);  // a group each: the planes lie in different arrays
   }
   for (int i = 0; i < data.camera_index.size(); ++i) {
     double* pose = params.poses.row(data.camera_index(i)).data();

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
@@ -16,6 +17,8 @@
 namespace calibproj::formats {
 
 std::string PythonFloat(double value) {
+  if (std::isnan(value)) return "nan";
+  if (std::isinf(value)) return value > 0 ? "inf" : "-inf";
   char buffer[64];
   const auto [end, error] = std::to_chars(buffer, buffer + sizeof(buffer), value, std::chars_format::scientific);
   if (error != std::errc()) throw std::runtime_error("cannot format a number");
@@ -41,6 +44,30 @@ std::string PythonFloat(double value) {
   return out + digits.substr(0, exponent + 1) + "." + digits.substr(exponent + 1);
 }
 
+std::string PythonRepr(const std::string& text) {
+  const bool double_quotes = text.find('\'') != std::string::npos && text.find('"') == std::string::npos;
+  const char quote = double_quotes ? '"' : '\'';
+  std::string out(1, quote);
+  for (const unsigned char c : text) {
+    if (c == '\\' || c == quote) {
+      out += '\\';
+      out += static_cast<char>(c);
+    } else if (c == '\n') {
+      out += "\\n";
+    } else if (c == '\r') {
+      out += "\\r";
+    } else if (c == '\t') {
+      out += "\\t";
+    } else if (c < 0x20 || c == 0x7f) {
+      char hex[8];
+      std::snprintf(hex, sizeof(hex), "\\x%02x", c);
+      out += hex;
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  return out + quote;
+}
 
 namespace fs = std::filesystem;
 
@@ -200,13 +227,65 @@ void AtomicWrite(const fs::path& path, const std::string& text) {
   }
 }
 
+namespace {
+
+void AppendPythonJson(std::string& out, const nlohmann::ordered_json& value, int depth) {
+  using value_t = nlohmann::ordered_json::value_t;
+  const auto newline = [&out](int level) { out += "\n" + std::string(level, ' '); };
+  switch (value.type()) {
+    case value_t::number_float: {
+      const double number = value.get<double>();
+      // Python's json.dumps(allow_nan=False) refuses these as well.
+      if (!std::isfinite(number)) throw std::invalid_argument("Out of range float values are not JSON compliant");
+      out += PythonFloat(number);
+      return;
+    }
+    case value_t::string:
+      // ensure_ascii as Python's default; bytes that are not UTF-8 (a reason quoting a
+      // malformed input file) become U+FFFD instead of making the file unwritable.
+      out += value.dump(-1, ' ', true, nlohmann::ordered_json::error_handler_t::replace);
+      return;
+    case value_t::array:
+    case value_t::object: {
+      const bool object = value.is_object();
+      if (value.empty()) {
+        out += object ? "{}" : "[]";
+        return;
+      }
+      out += object ? "{" : "[";
+      bool first = true;
+      for (auto item = value.begin(); item != value.end(); ++item) {
+        if (!first) out += ",";
+        first = false;
+        newline(depth + 1);
+        if (object) {
+          out += nlohmann::ordered_json(item.key()).dump(-1, ' ', true, nlohmann::ordered_json::error_handler_t::replace);
+          out += ": ";
+        }
+        AppendPythonJson(out, item.value(), depth + 1);
+      }
+      newline(depth);
+      out += object ? "}" : "]";
+      return;
+    }
+    default:
+      out += value.dump();
+  }
+}
+
+}  // namespace
+
+std::string PythonJson(const nlohmann::ordered_json& value) {
+  std::string out;
+  AppendPythonJson(out, value, 0);
+  return out;
+}
+
 std::string DumpSchemaJson(const std::string& kind, int major, const nlohmann::ordered_json& body) {
   nlohmann::ordered_json document;
   document["schema"] = "calibproj." + kind + "/" + std::to_string(major);
   for (const auto& [key, value] : body.items()) document[key] = value;
-  // A reason may quote a malformed input file: bytes that are not UTF-8 become U+FFFD
-  // instead of making the whole results file unwritable.
-  return document.dump(1, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
+  return PythonJson(document) + "\n";
 }
 
 }  // namespace calibproj::formats

@@ -46,12 +46,20 @@ void AtomicWrite(const std::filesystem::path& path, const std::string& text);
 // set when a write fails.
 bool WriteFully(int fd, std::string_view data);
 
-// A finite double as Python's repr() writes it (shortest digits that read back to the
+// A double as Python's repr() writes it (shortest digits that read back to the
 // same value; fixed notation for exponents -4..15, with ".0" when integral), so that a
 // file written here is byte for byte the one the Python package writes.
 std::string PythonFloat(double value);
 
-// The document with its schema tag first, indented like the Python writer.
+// JSON text as Python's json.dumps(value, indent=1) writes it: floats as repr() writes
+// them, non-ASCII characters escaped. std::invalid_argument for a non-finite float.
+std::string PythonJson(const nlohmann::ordered_json& value);
+
+// A string as Python's repr() writes it ('text', or "text" when it holds a ' and no "),
+// for messages that quote what the user wrote as the Python package quotes it.
+std::string PythonRepr(const std::string& text);
+
+// The document with its schema tag first, as the Python writer writes it (PythonJson).
 std::string DumpSchemaJson(const std::string& kind, int major, const nlohmann::ordered_json& body);
 
 }  // namespace calibproj::formats

@@ -69,6 +69,7 @@ ingest::SequenceDescription SequenceFromJson(const json& document) {
   s.projector_height = resolution[1];
   s.fps = NumberValue(projector.at("fps"), "projector.fps");
   s.scales = NumberList(document.at("layout").at("scales"), "layout.scales");
+  s.marker_px = NumberValue(document.at("layout").at("marker_px"), "layout.marker_px");
   ReadCentres(document, &s);
   for (const json& p : ListAt(document, "patterns")) {
     s.patterns.push_back(PatternFromJson(p, "patterns[" + std::to_string(s.patterns.size()) + "]"));

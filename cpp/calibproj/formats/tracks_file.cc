@@ -43,6 +43,19 @@ Tracks MakeTracks(std::vector<std::string> cameras, const std::vector<int>& came
   return tracks;
 }
 
+void Tracks::Check() const {
+  const Eigen::Index count = camera_index.size();
+  if (point_index.size() != count || xy.rows() != count) {
+    throw std::invalid_argument("tracks: camera_index, point_index and xy differ in length");
+  }
+  for (Eigen::Index i = 0; i < count; ++i) {
+    if (camera_index[i] < 0 || camera_index[i] >= static_cast<int>(cameras.size()) || point_index[i] < 0 ||
+        point_index[i] >= static_cast<int>(point_ids.size())) {
+      throw std::invalid_argument("tracks: observation " + std::to_string(i) + " has no camera or point");
+    }
+  }
+}
+
 Tracks Tracks::WithoutCameras(const std::vector<std::string>& names) const {
   std::vector<std::string> kept;
   std::vector<int> remap(cameras.size(), -1);

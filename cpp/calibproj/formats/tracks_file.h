@@ -22,6 +22,9 @@ struct Tracks {
   ba::PixelMatrix xy;                   // per observation
   std::optional<int> markers_per_array;
 
+  // std::invalid_argument unless every observation has a camera, a point and a pixel.
+  void Check() const;
+
   // The same tracks without the named cameras; points nobody sees any more are dropped.
   Tracks WithoutCameras(const std::vector<std::string>& names) const;
 };

@@ -41,6 +41,7 @@ struct SequenceDescription {
   double fps = 0.0;
   int arrays = 0;
   int markers_per_array = 0;
+  double marker_px = 0.0;  // side of a marker at scale 1, border included
   std::vector<cv::Point2d> centres;
   std::vector<double> scales;
   std::vector<PatternSpec> patterns;

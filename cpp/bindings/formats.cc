@@ -1,0 +1,261 @@
+// calibproj._core.formats: the results files, the metric scale and the exports, written
+// by the same C++ as calibproj-native. Conversions from the Python objects only.
+
+#include <pybind11/eigen.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <filesystem>
+
+#include "calibproj/formats/calibration.h"
+#include "calibproj/formats/export.h"
+#include "calibproj/formats/scale.h"
+#include "convert.h"
+#include "registry.h"
+
+namespace py = pybind11;
+
+namespace calibproj::bindings {
+
+namespace {
+
+using formats::Calibration;
+
+// The Python object converted by `convert`; a missing attribute or key, or a value of
+// the wrong type, becomes a TypeError naming `what`.
+template <typename Convert>
+auto Converted(const std::string& what, Convert&& convert) {
+  try {
+    return convert();
+  } catch (py::error_already_set& error) {
+    if (!error.matches(PyExc_AttributeError) && !error.matches(PyExc_KeyError) && !error.matches(PyExc_IndexError) &&
+        !error.matches(PyExc_TypeError) && !error.matches(PyExc_ValueError)) {
+      throw;
+    }
+    throw py::type_error(what + ": " + error.what());
+  } catch (const py::cast_error& error) {
+    throw py::type_error(what + ": " + error.what());
+  }
+}
+
+template <typename T>
+std::optional<T> OptionalOf(const py::handle& value) {
+  return value.is_none() ? std::nullopt : std::optional<T>(value.cast<T>());
+}
+
+formats::CameraMetrics MetricsFrom(const py::handle& m) {
+  formats::CameraMetrics metrics;
+  metrics.mean_px = OptionalOf<double>(m.attr("mean_px"));
+  metrics.std_px = OptionalOf<double>(m.attr("std_px"));
+  metrics.observations = m.attr("observations").cast<std::int64_t>();
+  metrics.inliers = m.attr("inliers").cast<std::int64_t>();
+  metrics.track2_observations = m.attr("track2_observations").cast<std::int64_t>();
+  metrics.view_score = m.attr("view_score").cast<std::int64_t>();
+  metrics.failure = OptionalOf<std::string>(m.attr("failure"));
+  metrics.rotation_sigma_deg = OptionalOf<double>(m.attr("rotation_sigma_deg"));
+  metrics.centre_sigma = OptionalOf<double>(m.attr("centre_sigma"));
+  metrics.weak = m.attr("weak").cast<bool>();
+  return metrics;
+}
+
+// From a calibproj.calibration.Calibration.
+Calibration CalibrationFrom(const py::object& c) {
+  Calibration calibration;
+  for (const auto& [name, pose] : c.attr("poses").cast<py::dict>()) {
+    const auto R_t = pose.cast<py::tuple>();
+    calibration.poses.push_back({name.cast<std::string>(), R_t[0].cast<Eigen::Matrix3d>(),
+                                 R_t[1].cast<Eigen::Vector3d>()});
+  }
+  for (const auto& [name, reason] : c.attr("failed").cast<py::dict>()) {
+    calibration.failed.emplace_back(name.cast<std::string>(), reason.cast<std::string>());
+  }
+  for (const auto& [name, metrics] : c.attr("metrics").cast<py::dict>()) {
+    calibration.metrics.emplace_back(name.cast<std::string>(), MetricsFrom(metrics));
+  }
+  calibration.points = RowsOf<formats::PointRows>(c.attr("points").cast<RowMatrix>(), 3, "points");
+  calibration.point_ids = c.attr("point_ids").cast<std::vector<std::int64_t>>();
+  calibration.unit = c.attr("unit").cast<std::string>();
+  calibration.model = c.attr("model").cast<std::string>();
+  calibration.registration_order = c.attr("registration_order").cast<std::vector<std::string>>();
+  calibration.floor_rms = c.attr("floor_rms").cast<double>();
+  for (const auto& plane : c.attr("planes").cast<py::list>()) {
+    calibration.planes.push_back({plane["normal"].cast<Eigen::Vector3d>(), plane["offset"].cast<double>(),
+                                  plane["points"].cast<std::int64_t>()});
+  }
+  return calibration;
+}
+
+// The lengths of a calibration as Calibration's fields (what scaling changes).
+py::dict LengthsOf(const Calibration& calibration) {
+  py::dict poses, centre_sigma;
+  for (const auto& pose : calibration.poses) poses[py::str(pose.name)] = py::make_tuple(pose.R, pose.t);
+  for (const auto& [name, metrics] : calibration.metrics) {
+    centre_sigma[py::str(name)] = metrics.centre_sigma ? py::cast(*metrics.centre_sigma) : py::none();
+  }
+  py::list planes;
+  for (const auto& plane : calibration.planes) {
+    py::dict entry;
+    entry["normal"] = std::vector<double>{plane.normal.x(), plane.normal.y(), plane.normal.z()};
+    entry["offset"] = plane.offset;
+    entry["points"] = plane.points;
+    planes.append(entry);
+  }
+  py::dict out;
+  out["poses"] = poses;
+  out["centre_sigma"] = centre_sigma;
+  out["points"] = Eigen::MatrixXd(calibration.points);
+  out["unit"] = calibration.unit;
+  out["floor_rms"] = calibration.floor_rms;
+  out["planes"] = planes;
+  return out;
+}
+
+formats::ScaleMeasurement MeasurementFrom(const py::object& m) {
+  formats::ScaleMeasurement measurement;
+  measurement.kind = m.attr("kind").cast<std::string>();
+  measurement.metres = m.attr("metres").cast<double>();
+  measurement.cameras = m.attr("cameras").cast<std::vector<std::string>>();
+  measurement.marker = OptionalOf<std::pair<long long, long long>>(m.attr("marker"));
+  measurement.text = m.attr("text").cast<std::string>();
+  return measurement;
+}
+
+py::dict MeasurementDict(const formats::ScaleMeasurement& measurement) {
+  py::dict out;
+  out["kind"] = measurement.kind;
+  out["metres"] = measurement.metres;
+  out["cameras"] = py::tuple(py::cast(measurement.cameras));
+  out["marker"] = measurement.marker ? py::cast(*measurement.marker) : py::none();
+  out["text"] = measurement.text;
+  return out;
+}
+
+// From a calibproj.scale.ProjectedMarkers (None: no sequence given).
+std::optional<formats::ProjectedMarkers> MarkersFrom(const py::object& m) {
+  if (m.is_none()) return std::nullopt;
+  formats::ProjectedMarkers markers;
+  const py::tuple shape = m.attr("centres_px").attr("shape");
+  markers.arrays = shape[0].cast<int>();
+  markers.markers_per_array = shape[1].cast<int>();
+  const auto flat = m.attr("centres_px").attr("reshape")(-1).cast<std::vector<double>>();
+  for (size_t k = 0; k + 1 < flat.size(); k += 2) markers.centres.emplace_back(flat[k], flat[k + 1]);
+  markers.marker_side_px = m.attr("marker_side_px").cast<double>();
+  const auto projector = m.attr("projector").cast<std::pair<int, int>>();
+  markers.projector_width = projector.first;
+  markers.projector_height = projector.second;
+  markers.Check();
+  return markers;
+}
+
+// From a calibproj.io.intrinsics.Intrinsics.
+formats::CameraIntrinsics CameraIntrinsicsFrom(const py::handle& camera) {
+  formats::CameraIntrinsics in;
+  in.name = camera.attr("name").cast<std::string>();
+  in.K = camera.attr("K").cast<Eigen::Matrix3d>();
+  in.dist = camera.attr("dist").attr("ravel")().cast<std::vector<double>>();
+  const py::object resolution = camera.attr("resolution");
+  in.has_resolution = !resolution.is_none();
+  if (in.has_resolution) std::tie(in.width, in.height) = resolution.cast<std::pair<double, double>>();
+  return in;
+}
+
+std::map<std::string, formats::CameraIntrinsics> IntrinsicsFrom(const py::dict& cameras) {
+  std::map<std::string, formats::CameraIntrinsics> out;
+  for (const auto& [name, camera] : cameras) out[name.cast<std::string>()] = CameraIntrinsicsFrom(camera);
+  return out;
+}
+
+std::optional<formats::Tracks> TracksFrom(const py::object& t) {
+  if (t.is_none()) return std::nullopt;
+  formats::Tracks tracks;
+  tracks.cameras = t.attr("camera_names").cast<std::vector<std::string>>();
+  tracks.point_ids = t.attr("point_ids").cast<std::vector<std::int64_t>>();
+  tracks.camera_index = t.attr("camera_index").attr("astype")("int32").cast<Eigen::VectorXi>();
+  tracks.point_index = t.attr("point_index").attr("astype")("int32").cast<Eigen::VectorXi>();
+  tracks.xy = RowsOf<ba::PixelMatrix>(t.attr("xy").cast<RowMatrix>(), 2, "xy");
+  return tracks;
+}
+
+}  // namespace
+
+void register_formats(py::module_& m) {
+  py::register_exception_translator([](std::exception_ptr error) {
+    try {
+      if (error) std::rethrow_exception(error);
+    } catch (const std::filesystem::filesystem_error& e) {  // OSError(errno, message, file), as open() raises
+      const py::object os_error = py::reinterpret_borrow<py::object>(PyExc_OSError);
+      PyErr_SetObject(PyExc_OSError, os_error(e.code().value(), e.code().message(), e.path1().string()).ptr());
+    }
+  });
+  m.attr("calibration_files") = formats::kCalibrationFiles;
+  m.attr("export_formats") = formats::kExportFormats;
+  m.attr("default_marker_radius_sides") = formats::kDefaultMarkerRadiusSides;
+  m.attr("min_marker_neighbours") = formats::kMinMarkerNeighbours;
+  m.def(
+      "write_calibration",
+      [](const std::filesystem::path& directory, const py::object& calibration) {
+        formats::WriteCalibration(directory, Converted("calibration", [&] { return CalibrationFrom(calibration); }));
+      },
+      py::arg("directory"), py::arg("calibration"),
+      "camera_poses.json, metrics.json and points.ply of a Calibration, each written atomically");
+  m.def(
+      "scaled_lengths",
+      [](const py::object& calibration, double factor) {
+        return LengthsOf(formats::Scaled(Converted("calibration", [&] { return CalibrationFrom(calibration); }), factor));
+      },
+      py::arg("calibration"), py::arg("factor"),
+      "The Calibration's fields that scaling changes, every length multiplied by factor, unit 'm'");
+  m.def(
+      "parse_scale", [](const std::string& text) { return MeasurementDict(formats::ParseScale(text)); },
+      py::arg("text"), "A --scale value as the fields of a ScaleMeasurement");
+  m.def(
+      "check_measurement",
+      [](const py::object& measurement, const std::vector<std::string>& names, const py::object& markers) {
+        const auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
+        formats::CheckMeasurement(Converted("measurement", [&] { return MeasurementFrom(measurement); }), names,
+                                  projected ? &*projected : nullptr);
+      },
+      py::arg("measurement"), py::arg("camera_names"), py::arg("markers"));
+  m.def(
+      "scale_factor",
+      [](const py::object& calibration, const py::object& measurement, const py::object& markers,
+         double radius_sides) {
+        const auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
+        const formats::ScaleFit fit = formats::ScaleFactor(
+            Converted("calibration", [&] { return CalibrationFrom(calibration); }),
+            Converted("measurement", [&] { return MeasurementFrom(measurement); }), projected ? &*projected : nullptr,
+            radius_sides);
+        py::dict out;
+        out["metres_per_unit"] = fit.metres_per_unit;
+        out["length"] = fit.length;
+        out["fitted_centres"] = fit.fitted_centres;
+        out["fit_rms"] = fit.fit_rms;
+        return out;
+      },
+      py::arg("calibration"), py::arg("measurement"), py::arg("markers"), py::arg("radius_sides"));
+  m.def("parse_export_formats", &formats::ParseExportFormats, py::arg("text"));
+  m.def(
+      "colmap_camera",
+      [](const py::object& intrinsics) {
+        return formats::ColmapCamera(Converted("intrinsics", [&] { return CameraIntrinsicsFrom(intrinsics); }));
+      },
+      py::arg("intrinsics"), "(COLMAP model, parameters) of an Intrinsics");
+  m.def("quaternion_wxyz", &formats::QuaternionWxyz, py::arg("R"), "Unit quaternion (w, x, y, z), w >= 0");
+  m.def(
+      "export",
+      [](const py::object& calibration, const std::string& format, const std::filesystem::path& directory,
+         const py::dict& intrinsics, const py::object& tracks) {
+        const auto given = Converted("tracks", [&] { return TracksFrom(tracks); });
+        std::vector<std::string> warnings;
+        const auto files = formats::Export(Converted("calibration", [&] { return CalibrationFrom(calibration); }),
+                                           format, directory,
+                                           Converted("intrinsics", [&] { return IntrinsicsFrom(intrinsics); }),
+                                           given ? &*given : nullptr, &warnings);
+        return py::make_tuple(files, warnings);
+      },
+      py::arg("calibration"), py::arg("format"), py::arg("directory"), py::arg("intrinsics"), py::arg("tracks"),
+      "(files written, warnings)");
+}
+
+}  // namespace calibproj::bindings
