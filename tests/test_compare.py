@@ -9,7 +9,8 @@ import pytest
 
 from calibproj.cli import main
 from calibproj.comparison import compare
-from calibproj.io.poses import CameraPoses, read_poses, write_camera_poses
+from calibproj.calibration import Calibration
+from calibproj.io.poses import CameraPoses, read_poses
 from calibproj.simulate.geometric import simulate_tracks
 from calibproj.simulate.scene import load_scene
 from calibproj.simulate.truth import truth_document, write_truth
@@ -113,6 +114,13 @@ def test_centres_that_cannot_be_aligned_name_the_estimate(truth):
     far = {**truth.poses, "far1": (truth.poses["far1"][0], np.array([-1e30, 0.0, 0.0]))}
     with pytest.raises(ValueError, match=r"^estimate.json: cannot be aligned on truth \(cameras far1, .*\): "):
         compare(CameraPoses(far, "m", source="estimate.json"), truth)
+
+
+def write_camera_poses(path, poses, unit, failed=None) -> None:
+    """camera_poses.json of these poses alone, as a calibration writes it."""
+    assert path.name == "camera_poses.json"
+    calibration = Calibration(poses, dict(failed or {}), {}, np.zeros((0, 3)), np.zeros(0, dtype=np.int64), unit=unit)
+    calibration.save(path.parent)
 
 
 def test_pose_files_refuse_booleans_and_strings_as_numbers(tmp_path, truth):

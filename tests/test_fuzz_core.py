@@ -513,6 +513,7 @@ class Baselines:
         folder = Path(self.files["tiny.mkv"]).parent / "formats"
         return {
             "_core.formats.write_calibration": Spec([("directory", folder), ("calibration", calibration)]),
+            "_core.formats.write_tracks": Spec([("out", folder / "tracks.json"), ("tracks", tracks)]),
             "_core.formats.scaled_lengths": Spec([("calibration", calibration), ("factor", 2.0)]),
             "_core.formats.parse_scale": Spec([("text", "distance:a,b=2.0")]),
             "_core.formats.check_measurement": Spec([("measurement", parse_scale("marker-size:1/4=0.1")),
@@ -703,7 +704,9 @@ def child_main(folder: str, start: int, stride: int) -> None:
             calls[index].run()
             outcome, message = "ok", ""
         except BaseException as error:  # noqa: BLE001 (every outcome is reported)
-            outcome, message = type(error).__name__, str(error)
+            # IsADirectoryError and its kin are OSErrors: a file the system refuses.
+            outcome = "OSError" if isinstance(error, OSError) else type(error).__name__
+            message = str(error)
         report.write(json.dumps({"index": index, "outcome": outcome, "message": message[:300]}) + "\n")
     report.write("end\n")
 
@@ -757,12 +760,13 @@ class Shard:
             self.spawn()
 
     def spawn(self) -> None:
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+        # In the scratch folder: a bad path given as a plain name ("12") is written there.
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(os.path.abspath(p) for p in sys.path)}
         self.log_offset = self.log.stat().st_size if self.log.exists() else 0
         with open(self.log, "ab") as stderr:
             self.process = subprocess.Popen(
                 [sys.executable, "-c", CHILD, str(Path(__file__).parent), str(self.folder), str(self.next),
-                 str(SHARDS)], stdout=subprocess.PIPE, stderr=stderr, env=env)
+                 str(SHARDS)], stdout=subprocess.PIPE, stderr=stderr, env=env, cwd=self.folder)
         self.reader = LineReader(self.process)
         self.current = None
         self.deadline = time.monotonic() + 120.0  # generating the calls comes first

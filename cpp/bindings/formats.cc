@@ -174,6 +174,7 @@ std::optional<formats::Tracks> TracksFrom(const py::object& t) {
   tracks.camera_index = t.attr("camera_index").attr("astype")("int32").cast<Eigen::VectorXi>();
   tracks.point_index = t.attr("point_index").attr("astype")("int32").cast<Eigen::VectorXi>();
   tracks.xy = RowsOf<ba::PixelMatrix>(t.attr("xy").cast<RowMatrix>(), 2, "xy");
+  tracks.markers_per_array = OptionalOf<int>(t.attr("markers_per_array"));
   return tracks;
 }
 
@@ -199,6 +200,15 @@ void register_formats(py::module_& m) {
       },
       py::arg("directory"), py::arg("calibration"),
       "camera_poses.json, metrics.json and points.ply of a Calibration, each written atomically");
+  m.def(
+      "write_tracks",
+      [](const std::filesystem::path& out, const py::object& tracks) {
+        const auto given = Converted("tracks", [&] { return TracksFrom(tracks); });
+        if (!given) throw py::type_error("tracks: expected a Tracks, got None");
+        given->Check();
+        formats::WriteTracks(out, *given);
+      },
+      py::arg("out"), py::arg("tracks"), "tracks.json of a Tracks, written atomically");
   m.def(
       "scaled_lengths",
       [](const py::object& calibration, double factor) {

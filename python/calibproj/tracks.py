@@ -19,16 +19,16 @@ File format (``calibproj.tracks/1``)::
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from calibproj.io.json_values import boolean, describe, integer_array, number_array
-from calibproj.io.jsonio import FormatError, atomic_write_text, read_json, schema_tag
+from calibproj.io.jsonio import FormatError, read_json
 
 SCHEMA_KIND = "tracks"
 SCHEMA_MAJOR = 1
@@ -212,24 +212,11 @@ class Tracks:
     # -- files --------------------------------------------------------------------------
 
     def write(self, path: str | os.PathLike) -> None:
-        """Write ``tracks.json`` atomically; each camera's arrays sit on one line each."""
-        header = json.dumps(
-            {
-                "schema": schema_tag(SCHEMA_KIND, SCHEMA_MAJOR),
-                "markers_per_array": self.markers_per_array,
-                "undistorted": True,
-                "cameras": list(self.camera_names),
-            },
-            indent=1,
-        )
-        blocks = []
-        for name in self.camera_names:
-            ids, xy = self.observations(name)
-            ids_text = json.dumps(ids.tolist(), separators=(",", ":"))
-            xy_text = json.dumps(xy.tolist(), separators=(",", ":"), allow_nan=False)
-            blocks.append(f'  {json.dumps(name)}: {{\n   "point_ids": {ids_text},\n   "xy": {xy_text}\n  }}')
-        body = ",\n".join(blocks)
-        atomic_write_text(path, f'{header[:-2]},\n "observations": {{\n{body}\n }}\n}}\n')
+        """Write ``tracks.json`` atomically; each camera's arrays sit on one line each
+        (by the C++ core, as ``calibproj-native detect`` writes it)."""
+        from calibproj import _core
+
+        _core.formats.write_tracks(Path(path), self)
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> Tracks:

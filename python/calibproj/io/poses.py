@@ -11,6 +11,8 @@ serves both::
 ``truth.json`` (``calibproj.truth/1``, unit ``"m"``) adds per camera ``K``, ``dist``,
 ``resolution``, ``fps`` and ``start_offset_s``, and the plane, projector and true 3D
 points (see ``calibproj.simulate.truth``); this module reads only the poses.
+``camera_poses.json`` is written with the rest of a calibration by the C++ core
+(``Calibration.save``), as ``calibproj-native`` writes it.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from calibproj.io.json_values import boolean, describe, number, number_array, text
-from calibproj.io.jsonio import FormatError, check_schema, read_json_object, write_json
+from calibproj.io.jsonio import FormatError, check_schema, read_json_object
 
 POSES_KIND = "camera_poses"
 TRUTH_KIND = "truth"
@@ -74,27 +76,6 @@ def pose_json(R: np.ndarray, t: np.ndarray) -> dict[str, Any]:
     R = np.asarray(R, dtype=float).reshape(3, 3)
     t = np.asarray(t, dtype=float).reshape(3)
     return {"R": R.tolist(), "t": t.tolist(), "center": (-R.T @ t).tolist()}
-
-
-def write_camera_poses(
-    path: str | os.PathLike,
-    poses: dict[str, tuple[np.ndarray, np.ndarray]],
-    unit: str,
-    failed: dict[str, str] | None = None,
-    uncertainty: dict[str, dict[str, Any]] | None = None,
-) -> None:
-    """Write ``camera_poses.json`` atomically (floor frame). ``uncertainty`` adds to a
-    camera's entry its ``rotation_sigma_deg``, ``centre_sigma`` and ``weak``."""
-    if unit not in UNITS:
-        raise ValueError(f"unit must be one of {UNITS}, got {unit!r}")
-    uncertainty = uncertainty or {}
-    body = {
-        "unit": unit,
-        "frame": "floor",
-        "cameras": {name: {**pose_json(R, t), **uncertainty.get(name, {})} for name, (R, t) in poses.items()},
-        "failed": dict(failed or {}),
-    }
-    write_json(path, POSES_KIND, SCHEMA_MAJOR, body)
 
 
 def read_poses(path: str | os.PathLike) -> CameraPoses:

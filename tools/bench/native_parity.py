@@ -1,0 +1,89 @@
+"""calibproj-native against the Python command on a finished demo: the same bytes?
+
+Takes the folder of `calibproj demo --out DEMO` and repeats its calibration with the
+standalone executable: `calibproj-native detect` on DEMO/room/videos, then
+`calibproj-native calibrate` from those tracks with the demo's metric scale (read from
+DEMO/results/provenance.json), its model and every export. Then compares, byte for
+byte, each file that both commands write (tracks.json, camera_poses.json,
+metrics.json, points.ply and the exports) and prints one line per file, then
+
+  native-parity: identical=K/N
+
+Run:
+  calibproj demo --out DEMO
+  python tools/bench/native_parity.py DEMO [--native PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+COMMON_FILES = ["tracks.json", "camera_poses.json", "metrics.json", "points.ply", "calibration_opencv.yaml",
+                "calibration.toml", "colmap/cameras.txt", "colmap/images.txt", "colmap/points3D.txt"]
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("demo", help="folder written by `calibproj demo --out DEMO`")
+    parser.add_argument("--native", help="calibproj-native executable (default: next to this Python, else PATH)")
+    parser.add_argument("--workers", type=int, default=2, help="cameras processed at once by detect (default 2)")
+    return parser.parse_args()
+
+
+def find_native(given: str | None) -> str:
+    candidates = [given] if given else [str(Path(sys.executable).parent / "calibproj-native"),
+                                        shutil.which("calibproj-native") or ""]
+    for candidate in candidates:
+        if candidate and os.access(candidate, os.X_OK):
+            return candidate
+    sys.exit(f"calibproj-native not found (tried {candidates}); give --native")
+
+
+def run(command: list[str]) -> None:
+    result = subprocess.run(command, capture_output=True, text=True)
+    if result.returncode not in (0, 1):  # 1: a camera failed, the others are written
+        sys.exit(f"{' '.join(command)} failed ({result.returncode}):\n{result.stderr[-2000:]}")
+
+
+def demo_settings(results: Path) -> tuple[str, str]:
+    """The scale measurement and the registration model the demo calibrated with."""
+    provenance = json.loads((results / "provenance.json").read_text())
+    scale = (provenance.get("scale") or {}).get("measurement")
+    model = json.loads((results / "metrics.json").read_text())["model"]
+    if not scale:
+        sys.exit(f"{results}: the demo's provenance records no scale measurement")
+    return scale, model
+
+
+def main() -> None:
+    args = parse_args()
+    demo = Path(args.demo)
+    results = demo / "results"
+    native = find_native(args.native)
+    scale, model = demo_settings(results)
+    sequence, intrinsics = demo / "sequence" / "sequence.json", demo / "room" / "intrinsics"
+    with tempfile.TemporaryDirectory() as scratch:
+        out = Path(scratch) / "native"
+        tracks = Path(scratch) / "tracks.json"
+        run([native, "detect", str(demo / "room" / "videos"), "--sequence", str(sequence), "--intrinsics",
+             str(intrinsics), "--out", str(tracks), "--workers", str(args.workers), "--no-progress"])
+        run([native, "calibrate", "--tracks", str(tracks), "--intrinsics", str(intrinsics), "--out", str(out),
+             "--model", model, "--sequence", str(sequence), "--scale", scale, "--export", "yaml,colmap,anipose"])
+        shutil.copy(tracks, out / "tracks.json")
+        identical = 0
+        for name in COMMON_FILES:
+            same = (out / name).read_bytes() == (results / name).read_bytes()
+            identical += same
+            print(f"{name:<26} {'identical' if same else 'DIFFERENT'}")
+    print(f"native-parity: identical={identical}/{len(COMMON_FILES)}")
+
+
+if __name__ == "__main__":
+    main()
