@@ -82,6 +82,8 @@ def public_callables() -> list[str]:
             qualified = f"{prefix}.{name}"
             if isinstance(value, types.ModuleType):
                 walk(value, qualified)
+            elif isinstance(value, type) and issubclass(value, BaseException):
+                continue  # an exception the bindings raise (_core.formats.InputError)
             elif isinstance(value, type):
                 names.append(qualified)
                 for attribute, member in sorted(vars(value).items()):
@@ -511,8 +513,10 @@ class Baselines:
         observed = np.tile(centres.reshape(-1, 2), (2, 1))
         tracks = Tracks.from_observations(["a", "b"], np.repeat([0, 1], 18), np.tile(np.arange(18), 2), observed)
         folder = Path(self.files["tiny.mkv"]).parent / "formats"
+        tracks.write(folder / "valid_tracks.json")
         return {
             "_core.formats.write_calibration": Spec([("directory", folder), ("calibration", calibration)]),
+            "_core.formats.read_tracks": Spec([("path", str(folder / "valid_tracks.json"))]),
             "_core.formats.write_tracks": Spec([("out", folder / "tracks.json"), ("tracks", tracks)]),
             "_core.formats.scaled_lengths": Spec([("calibration", calibration), ("factor", 2.0)]),
             "_core.formats.parse_scale": Spec([("text", "distance:a,b=2.0")]),
@@ -704,8 +708,10 @@ def child_main(folder: str, start: int, stride: int) -> None:
             calls[index].run()
             outcome, message = "ok", ""
         except BaseException as error:  # noqa: BLE001 (every outcome is reported)
-            # IsADirectoryError and its kin are OSErrors: a file the system refuses.
-            outcome = "OSError" if isinstance(error, OSError) else type(error).__name__
+            # Subclasses count as their base: IsADirectoryError is an OSError, the
+            # bindings' InputError a ValueError.
+            bases = (OSError, ValueError, TypeError, RuntimeError)
+            outcome = next((b.__name__ for b in bases if isinstance(error, b)), type(error).__name__)
             message = str(error)
         report.write(json.dumps({"index": index, "outcome": outcome, "message": message[:300]}) + "\n")
     report.write("end\n")

@@ -2,6 +2,7 @@
 // by the same C++ as calibproj-native. Conversions from the Python objects only.
 
 #include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
@@ -10,6 +11,7 @@
 
 #include "calibproj/formats/calibration.h"
 #include "calibproj/formats/export.h"
+#include "calibproj/formats/files.h"
 #include "calibproj/formats/scale.h"
 #include "convert.h"
 #include "registry.h"
@@ -178,9 +180,22 @@ std::optional<formats::Tracks> TracksFrom(const py::object& t) {
   return tracks;
 }
 
+py::dict TracksDict(const formats::Tracks& tracks) {
+  py::dict out;
+  out["camera_names"] = py::tuple(py::cast(tracks.cameras));
+  out["point_ids"] = py::array_t<std::int64_t>(tracks.point_ids.size(), tracks.point_ids.data());
+  out["camera_index"] = py::array_t<std::int32_t>(tracks.camera_index.size(), tracks.camera_index.data());
+  out["point_index"] = py::array_t<std::int32_t>(tracks.point_index.size(), tracks.point_index.data());
+  out["xy"] = Eigen::MatrixXd(tracks.xy);
+  out["markers_per_array"] = tracks.markers_per_array ? py::cast(*tracks.markers_per_array) : py::none();
+  return out;
+}
+
 }  // namespace
 
 void register_formats(py::module_& m) {
+  // A bad input file: the message names the file and the problem.
+  py::register_exception<formats::InputError>(m, "InputError", PyExc_ValueError);
   py::register_exception_translator([](std::exception_ptr error) {
     try {
       if (error) std::rethrow_exception(error);
@@ -200,6 +215,9 @@ void register_formats(py::module_& m) {
       },
       py::arg("directory"), py::arg("calibration"),
       "camera_poses.json, metrics.json and points.ply of a Calibration, each written atomically");
+  m.def(
+      "read_tracks", [](const std::filesystem::path& path) { return TracksDict(formats::ReadTracks(path)); },
+      py::arg("path"), "The fields of a Tracks from tracks.json; InputError naming the file and the problem");
   m.def(
       "write_tracks",
       [](const std::filesystem::path& out, const py::object& tracks) {

@@ -27,12 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.io.json_values import boolean, describe, integer_array, number_array
-from calibproj.io.jsonio import FormatError, read_json
+from calibproj.io.json_values import describe
+from calibproj.io.jsonio import FormatError
 
-SCHEMA_KIND = "tracks"
-SCHEMA_MAJOR = 1
-MAX_POINT_ID = 2**63 - 1  # point ids are int64
 MAX_INT32 = 2**31 - 1  # markers_per_array is an int in the C++ core
 
 
@@ -220,49 +217,14 @@ class Tracks:
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> Tracks:
-        """Read ``tracks.json``; errors name the file and the problem."""
-        document = read_json(path, SCHEMA_KIND, SCHEMA_MAJOR)
+        """Read ``tracks.json`` (by the C++ core, as ``calibproj-native`` reads it); errors
+        name the file and the problem."""
+        from calibproj import _core
+
         try:
-            return cls._from_document(document)
-        except ValueError as error:
-            raise FormatError(f"{path}: {error}") from None
-
-    @classmethod
-    def _from_document(cls, document: dict[str, Any]) -> Tracks:
-        names = document.get("cameras")
-        observations = document.get("observations")
-        if not isinstance(names, list) or not all(type(n) is str for n in names):
-            raise ValueError("cameras: expected a list of names")
-        if not isinstance(observations, dict):
-            raise ValueError("observations: expected an object {camera: {point_ids, xy}}")
-        unknown = set(observations) - set(names)
-        if unknown:
-            raise ValueError(f"observations of camera(s) {sorted(unknown)} not listed in cameras")
-        if boolean(document.get("undistorted", True), "undistorted") is not True:
-            raise ValueError("only undistorted observations are supported")
-        cameras, ids, xy = [], [], []
-        for index, name in enumerate(names):
-            camera_ids, camera_xy = _camera_observations(observations.get(name), f"observations.{name}")
-            cameras.append(np.full(len(camera_ids), index, dtype=np.int32))
-            ids.append(camera_ids)
-            xy.append(camera_xy)
-        return cls.from_observations(
-            names, _concatenate(cameras, np.int32), _concatenate(ids, np.int64),
-            np.concatenate(xy) if xy else np.zeros((0, 2)), document.get("markers_per_array"),
-        )
-
-
-def _camera_observations(entry: Any, where: str) -> tuple[np.ndarray, np.ndarray]:
-    """Point ids and pixels of one camera's entry (none when the camera has no entry)."""
-    if entry is None:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-    if not isinstance(entry, dict) or "point_ids" not in entry or "xy" not in entry:
-        raise ValueError(f"{where}: expected an object {{point_ids, xy}}")
-    camera_ids = integer_array(entry["point_ids"], f"{where}.point_ids", 0, MAX_POINT_ID)
-    camera_xy = number_array(entry["xy"], f"{where}.xy", (None, 2))
-    if len(camera_ids) != len(camera_xy):
-        raise ValueError(f"{where}: {len(camera_ids)} point_ids but {len(camera_xy)} xy")
-    return camera_ids, camera_xy
+            return cls(**_core.formats.read_tracks(Path(path)))
+        except _core.formats.InputError as error:
+            raise FormatError(str(error)) from None
 
 
 def msm_point_ids(arrays: np.ndarray, markers: np.ndarray, markers_per_array: int) -> np.ndarray:

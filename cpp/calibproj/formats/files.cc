@@ -8,10 +8,13 @@
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
+#include <iterator>
 #include <limits>
 
 #include <fstream>
 #include <random>
+#include <regex>
 #include <sstream>
 
 namespace calibproj::formats {
@@ -71,9 +74,77 @@ std::string PythonRepr(const std::string& text) {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// Where the bytes stop being UTF-8, or npos.
+size_t InvalidUtf8At(const std::string& text) {
+  size_t i = 0;
+  while (i < text.size()) {
+    const unsigned char c = text[i];
+    const int length = c < 0x80 ? 1 : (c >> 5) == 0x6 ? 2 : (c >> 4) == 0xE ? 3 : (c >> 3) == 0x1E ? 4 : 0;
+    if (length == 0 || i + length > text.size()) return i;
+    for (int k = 1; k < length; ++k) {
+      if ((static_cast<unsigned char>(text[i + k]) >> 6) != 0x2) return i;
+    }
+    i += length;
+  }
+  return std::string::npos;
+}
+
+// The first NaN, Infinity or -Infinity outside strings (Python's json writes them, but
+// they are not JSON), with its offset; empty when there is none.
+std::pair<std::string, size_t> NonJsonConstant(const std::string& text) {
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      if (c == '\\') ++i;
+      else if (c == '"') in_string = false;
+      continue;
+    }
+    if (c == '"') {
+      in_string = true;
+      continue;
+    }
+    for (const char* name : {"NaN", "Infinity", "-Infinity"}) {
+      if (text.compare(i, std::strlen(name), name) == 0) return {name, i};
+    }
+  }
+  return {"", std::string::npos};
+}
+
+std::string Shortened(const std::string& text, size_t limit = 40) {
+  return text.size() <= limit ? text
+                              : text.substr(0, limit) + "... (" + std::to_string(text.size()) + " characters)";
+}
+
+// The problem of text that nlohmann refused, worded as the Python reader words it.
+std::string JsonProblem(const std::string& text, const nlohmann::json::exception& error, size_t byte) {
+  const auto [constant, at] = NonJsonConstant(text);
+  if (!constant.empty() && at < byte) return constant + " is not a JSON number";
+  std::string what = error.what();
+  const std::string overflow = "number overflow parsing '";
+  if (const size_t found = what.find(overflow); found != std::string::npos) {
+    const std::string number = what.substr(found + overflow.size(), what.rfind('\'') - found - overflow.size());
+    return "number " + Shortened(number) + " is beyond the range of a double";
+  }
+  if (what.rfind("[json.exception.", 0) == 0) what = what.substr(what.find("] ") + 2);
+  // What the lexer read last quotes the file's bytes (control characters as <U+000A>).
+  return std::regex_replace(what, std::regex("; last read: '.*?'(?=;|$)"), "");
+}
+
+}  // namespace
+
 nlohmann::json ReadJson(const fs::path& path) {
   if (!fs::is_regular_file(path)) throw InputError(path.string() + ": no such file");
-  std::ifstream in(path);
+  std::ifstream in(path, std::ios::binary);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (const size_t bad = InvalidUtf8At(text); bad != std::string::npos) {
+    char byte[8];
+    std::snprintf(byte, sizeof(byte), "0x%02x", static_cast<unsigned char>(text[bad]));
+    throw InputError(path.string() + ": not valid JSON (not UTF-8: 'utf-8' codec can't decode byte " + byte +
+                     " in position " + std::to_string(bad) + ")");
+  }
   // Refused while parsing: freeing a much deeper document would overflow the stack.
   const auto limit_depth = [&path](int depth, nlohmann::json::parse_event_t, nlohmann::json&) {
     if (depth > kMaxJsonDepth) {
@@ -83,9 +154,11 @@ nlohmann::json ReadJson(const fs::path& path) {
     return true;
   };
   try {
-    return nlohmann::json::parse(in, limit_depth);
+    return nlohmann::json::parse(text, limit_depth);
+  } catch (const nlohmann::json::parse_error& error) {
+    throw InputError(path.string() + ": not valid JSON (" + JsonProblem(text, error, error.byte) + ")");
   } catch (const nlohmann::json::exception& error) {
-    throw InputError(path.string() + ": not valid JSON (" + error.what() + ")");
+    throw InputError(path.string() + ": not valid JSON (" + JsonProblem(text, error, text.size()) + ")");
   }
 }
 
@@ -161,8 +234,13 @@ nlohmann::json ReadSchemaJson(const fs::path& path, const std::string& kind, int
   const std::string prefix = "calibproj.";
   const auto slash = tag.find('/');
   if (tag.rfind(prefix, 0) != 0 || slash == std::string::npos) {
-    throw InputError(path.string() + ": not a calibproj " + kind + " file (schema " +
-                     (tag.empty() ? std::string("None") : "'" + tag + "'") + ", expected '" + expected + "')");
+    const std::string found = tag_it == document.end() ? "None"
+                              : tag_it->is_string() ? PythonRepr(tag)
+                              : tag_it->is_null()   ? "None"
+                              : tag_it->is_boolean() ? (tag_it->get<bool>() ? "True" : "False")
+                                                     : tag_it->dump();
+    throw InputError(path.string() + ": not a calibproj " + kind + " file (schema " + found + ", expected '" +
+                     expected + "')");
   }
   const std::string found_kind = tag.substr(prefix.size(), slash - prefix.size());
   const std::string found_major = tag.substr(slash + 1);

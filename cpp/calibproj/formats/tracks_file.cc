@@ -6,6 +6,7 @@
 #include <numeric>
 
 #include "calibproj/formats/files.h"
+#include "calibproj/formats/json_values.h"
 
 namespace calibproj::formats {
 
@@ -32,7 +33,7 @@ Tracks MakeTracks(std::vector<std::string> cameras, const std::vector<int>& came
   for (int k = 0; k < n; ++k) {
     const size_t i = order[k];
     if (k > 0 && camera[i] == camera[order[k - 1]] && ids[i] == ids[order[k - 1]]) {
-      throw std::invalid_argument("camera '" + tracks.cameras[camera[i]] + "' observes point " +
+      throw std::invalid_argument("camera " + PythonRepr(tracks.cameras[camera[i]]) + " observes point " +
                                   std::to_string(ids[i]) + " twice");
     }
     tracks.camera_index(k) = camera[i];
@@ -77,66 +78,91 @@ Tracks Tracks::WithoutCameras(const std::vector<std::string>& names) const {
   return MakeTracks(kept, camera, ids, pixels, markers_per_array);
 }
 
+namespace {
+
+constexpr std::int64_t kMaxPointId = std::numeric_limits<std::int64_t>::max();
+constexpr long long kMaxMarkersPerArray = std::numeric_limits<std::int32_t>::max();
+
+// One camera's point ids and pixels (none when the camera has no entry).
+void CameraObservations(const nlohmann::json& observations, const std::string& name, int camera,
+                        std::vector<int>* cameras, std::vector<std::int64_t>* ids,
+                        std::vector<Eigen::Vector2d>* pixels) {
+  const auto entry = observations.find(name);
+  if (entry == observations.end() || entry->is_null()) return;
+  const std::string where = "observations." + name;
+  if (!entry->is_object() || !entry->contains("point_ids") || !entry->contains("xy")) {
+    throw std::invalid_argument(where + ": expected an object {point_ids, xy}");
+  }
+  const std::vector<std::int64_t> camera_ids = IntegerListOf(entry->at("point_ids"), where + ".point_ids", 0, kMaxPointId);
+  const NumberArray xy = NumberArrayOf(entry->at("xy"), where + ".xy", 2);
+  if (camera_ids.size() != xy.shape[0]) {
+    throw std::invalid_argument(where + ": " + std::to_string(camera_ids.size()) + " point_ids but " +
+                                std::to_string(xy.shape[0]) + " xy");
+  }
+  for (size_t k = 0; k < camera_ids.size(); ++k) {
+    cameras->push_back(camera);
+    ids->push_back(camera_ids[k]);
+    pixels->emplace_back(xy.values[2 * k], xy.values[2 * k + 1]);
+  }
+}
+
+std::optional<int> MarkersPerArray(const nlohmann::json& document) {
+  const auto value = document.find("markers_per_array");
+  if (value == document.end() || value->is_null()) return std::nullopt;
+  const bool integer = value->is_number_integer() || value->is_number_unsigned();
+  if (!integer || !(value->get<double>() > 0 && value->get<double>() <= kMaxMarkersPerArray)) {
+    throw std::invalid_argument("markers_per_array must be a positive integer or null, got " + Describe(*value));
+  }
+  return value->get<int>();
+}
+
+Tracks TracksFromDocument(const nlohmann::json& document) {
+  const auto names_json = document.find("cameras");
+  const auto observations = document.find("observations");
+  std::vector<std::string> names;
+  if (names_json == document.end() || !names_json->is_array()) throw std::invalid_argument("cameras: expected a list of names");
+  for (const auto& name : *names_json) {
+    if (!name.is_string()) throw std::invalid_argument("cameras: expected a list of names");
+    names.push_back(name.get<std::string>());
+  }
+  if (observations == document.end() || !observations->is_object()) {
+    throw std::invalid_argument("observations: expected an object {camera: {point_ids, xy}}");
+  }
+  std::vector<std::string> unknown;
+  for (const auto& [name, entry] : observations->items()) {
+    if (std::find(names.begin(), names.end(), name) == names.end()) unknown.push_back(name);
+  }
+  std::sort(unknown.begin(), unknown.end());
+  if (!unknown.empty()) {
+    throw std::invalid_argument("observations of camera(s) " + PythonList(unknown) + " not listed in cameras");
+  }
+  const auto undistorted = document.find("undistorted");
+  if (undistorted != document.end() && !BooleanOf(*undistorted, "undistorted")) {
+    throw std::invalid_argument("only undistorted observations are supported");
+  }
+  std::vector<int> cameras;
+  std::vector<std::int64_t> ids;
+  std::vector<Eigen::Vector2d> pixels;
+  for (size_t c = 0; c < names.size(); ++c) {
+    CameraObservations(*observations, names[c], static_cast<int>(c), &cameras, &ids, &pixels);
+  }
+  // Observations are keyed by name: a second camera of one name would get the first's.
+  std::vector<std::string> sorted = names;
+  std::sort(sorted.begin(), sorted.end());
+  if (std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end()) {
+    throw std::invalid_argument("duplicate camera names in " + PythonList(names));
+  }
+  Tracks tracks = MakeTracks(names, cameras, ids, pixels, std::nullopt);
+  tracks.markers_per_array = MarkersPerArray(document);
+  return tracks;
+}
+
+}  // namespace
+
 Tracks ReadTracks(const fs::path& path) {
   const nlohmann::json document = ReadSchemaJson(path, "tracks", 1);
   try {
-    const auto& names_json = document.at("cameras");
-    const auto& observations = document.at("observations");
-    if (!names_json.is_array()) throw std::invalid_argument("cameras: expected a list of names");
-    if (!observations.is_object()) throw std::invalid_argument("observations: expected an object {camera: {point_ids, xy}}");
-    if (document.contains("undistorted") && !BoolValue(document.at("undistorted"), "undistorted")) {
-      throw std::invalid_argument("only undistorted observations are supported");
-    }
-    std::vector<std::string> names;
-    for (const auto& name : names_json) names.push_back(StringValue(name, "cameras"));
-    // Observations are keyed by name: a second camera of one name would get the first's.
-    std::vector<std::string> sorted = names;
-    std::sort(sorted.begin(), sorted.end());
-    if (std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end()) {
-      std::string listed;
-      for (const auto& name : names) listed += (listed.empty() ? "'" : ", '") + name + "'";
-      throw std::invalid_argument("duplicate camera names in [" + listed + "]");
-    }
-    std::vector<int> camera;
-    std::vector<std::int64_t> ids;
-    std::vector<Eigen::Vector2d> pixels;
-    for (const auto& [name, entry] : observations.items()) {
-      if (std::find(names.begin(), names.end(), name) == names.end()) {
-        throw std::invalid_argument("observations of camera(s) ['" + name + "'] not listed in cameras");
-      }
-    }
-    for (size_t c = 0; c < names.size(); ++c) {
-      if (!observations.contains(names[c])) continue;
-      const auto& entry = observations.at(names[c]);
-      const std::string where = "observations." + names[c];
-      const auto& ids_json = entry.at("point_ids");
-      const auto& xy_json = entry.at("xy");
-      if (!ids_json.is_array() || !xy_json.is_array()) {
-        throw std::invalid_argument(where + ": point_ids and xy must be lists");
-      }
-      if (ids_json.size() != xy_json.size()) {
-        throw std::invalid_argument(where + ": " + std::to_string(ids_json.size()) + " point_ids but " +
-                                    std::to_string(xy_json.size()) + " xy");
-      }
-      for (size_t k = 0; k < ids_json.size(); ++k) {
-        const std::vector<double> xy = NumberList(xy_json[k], where + ".xy");
-        if (xy.size() != 2) throw std::invalid_argument("observations must be finite pixel pairs");
-        const long long id = IntegerValue(ids_json[k], where + ".point_ids", std::numeric_limits<std::int64_t>::min(),
-                                          std::numeric_limits<std::int64_t>::max());
-        if (id < 0) throw std::invalid_argument("point ids must be non-negative");
-        camera.push_back(static_cast<int>(c));
-        ids.push_back(id);
-        pixels.emplace_back(xy[0], xy[1]);
-      }
-    }
-    std::optional<int> markers;
-    if (document.contains("markers_per_array") && !document.at("markers_per_array").is_null()) {
-      markers = static_cast<int>(IntegerValue(document.at("markers_per_array"), "markers_per_array", 1,
-                                              std::numeric_limits<int>::max()));
-    }
-    return MakeTracks(names, camera, ids, pixels, markers);
-  } catch (const nlohmann::json::exception& error) {
-    throw InputError(path.string() + ": " + error.what());
+    return TracksFromDocument(document);
   } catch (const std::invalid_argument& error) {
     throw InputError(path.string() + ": " + error.what());
   }

@@ -1,12 +1,12 @@
 """Studies on the simulator: `calibproj study markers` compares marker families.
 
-For each family (--families, default aruco:4X4_50,apriltag:tag36h11) it renders one
+For each family (--families, default aruco:4X4_50,apriltag:tag25h9,apriltag:tag36h11) it renders one
 array of markers through a camera straight down at the floor and sweeps the marker side
 in pixels, blur, sensor noise and room light; measures markers found, centre error
 against the truth, false detections and detection time per frame; and calibrates a
 rendered room with each family's sequence (clean, room light, rolling shutter) against
 its truth. Writes OUT/study.html (plots, a recommendation table) and OUT/study.json.
---quick takes about 2 minutes on 2 cores, the full study about 7. With
+--quick takes about 2 minutes on 2 cores, the full study about 10. With
 --recordings A,B it compares instead two calibrations of your own room, one per family
 (results folders of calibproj calibrate from videos). The
 measurements run on local processes (--workers), or on a Ray or Dask cluster (--cluster
@@ -20,8 +20,10 @@ import argparse
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("what", choices=["markers"], help="what to study")
-    parser.add_argument("--families", default="aruco:4X4_50,apriltag:tag36h11",
-                        help="comma-separated marker families (default aruco:4X4_50,apriltag:tag36h11)")
+    from calibproj.study.plan import DEFAULT_FAMILIES
+
+    families = ",".join(DEFAULT_FAMILIES)
+    parser.add_argument("--families", default=families, help=f"comma-separated marker families (default {families})")
     parser.add_argument("--out", required=True, metavar="DIR", help="study folder to write")
     parser.add_argument("--recordings", metavar="A,B",
                         help="instead of the simulator: results folders of calibproj calibrate of one room, one per "

@@ -7,7 +7,10 @@ from dataclasses import dataclass
 
 from calibproj.study.images import ImageCondition
 
-DEFAULT_FAMILIES = ("aruco:4X4_50", "apriltag:tag36h11")
+# The project's default ArUco dictionary, and two AprilTag families: tag25h9 draws 7
+# cells across where ArUco 4x4 draws 6 and tag36h11 8, so the three show what the
+# detector and what the cell size each change at small sizes.
+DEFAULT_FAMILIES = ("aruco:4X4_50", "apriltag:tag25h9", "apriltag:tag36h11")
 # Every sweep but "side" keeps markers at this side, pixels.
 SWEEP_SIDE_PX = 20.0
 
