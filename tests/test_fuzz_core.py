@@ -497,7 +497,7 @@ class Baselines:
     def format_specs(self) -> dict[str, Spec]:
         """The results files, the metric scale and the exports (_core.formats)."""
         from calibproj.calibration import CameraMetrics, Calibration
-        from calibproj.io.intrinsics import Intrinsics
+        from calibproj.io.intrinsics import Intrinsics, write_intrinsics
         from calibproj.scale import ProjectedMarkers, parse_scale
         from calibproj.tracks import Tracks
 
@@ -514,8 +514,12 @@ class Baselines:
         tracks = Tracks.from_observations(["a", "b"], np.repeat([0, 1], 18), np.tile(np.arange(18), 2), observed)
         folder = Path(self.files["tiny.mkv"]).parent / "formats"
         tracks.write(folder / "valid_tracks.json")
+        write_intrinsics(folder / "a.json", intrinsics["a"])
         return {
             "_core.formats.write_calibration": Spec([("directory", folder), ("calibration", calibration)]),
+            "_core.formats.read_intrinsics": Spec([("path", str(folder / "a.json")), ("name", "a")]),
+            "_core.formats.intrinsics_from_json": Spec([("text", json.dumps(intrinsics["a"].to_json())),
+                                                       ("name", "a")]),
             "_core.formats.read_tracks": Spec([("path", str(folder / "valid_tracks.json"))]),
             "_core.formats.write_tracks": Spec([("out", folder / "tracks.json"), ("tracks", tracks)]),
             "_core.formats.scaled_lengths": Spec([("calibration", calibration), ("factor", 2.0)]),

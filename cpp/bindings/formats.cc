@@ -12,6 +12,7 @@
 #include "calibproj/formats/calibration.h"
 #include "calibproj/formats/export.h"
 #include "calibproj/formats/files.h"
+#include "calibproj/formats/intrinsics_file.h"
 #include "calibproj/formats/scale.h"
 #include "convert.h"
 #include "registry.h"
@@ -180,6 +181,17 @@ std::optional<formats::Tracks> TracksFrom(const py::object& t) {
   return tracks;
 }
 
+py::dict IntrinsicsDict(const formats::CameraIntrinsics& in) {
+  py::dict out;
+  out["name"] = in.name;
+  out["resolution"] = in.has_resolution ? py::cast(std::make_pair(static_cast<std::int64_t>(in.width),
+                                                                  static_cast<std::int64_t>(in.height)))
+                                        : py::none();
+  out["K"] = in.K;
+  out["dist"] = in.dist;
+  return out;
+}
+
 py::dict TracksDict(const formats::Tracks& tracks) {
   py::dict out;
   out["camera_names"] = py::tuple(py::cast(tracks.cameras));
@@ -215,6 +227,23 @@ void register_formats(py::module_& m) {
       },
       py::arg("directory"), py::arg("calibration"),
       "camera_poses.json, metrics.json and points.ply of a Calibration, each written atomically");
+  m.def(
+      "read_intrinsics",
+      [](const std::filesystem::path& path, const std::string& name) {
+        return IntrinsicsDict(formats::ReadIntrinsics(path, name));
+      },
+      py::arg("path"), py::arg("name") = "",
+      "The fields of an Intrinsics from a file in any supported format (name: the file stem when empty); "
+      "InputError naming the file and the problem");
+  m.def(
+      "intrinsics_from_json",
+      [](const std::string& text, const std::string& name) {
+        const nlohmann::json document = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+        if (document.is_discarded()) throw py::value_error("not valid JSON");
+        return IntrinsicsDict(formats::IntrinsicsFromDocument(document, name));
+      },
+      py::arg("text"), py::arg("name"),
+      "The fields of an Intrinsics from the JSON text of our format's body; ValueError with the problem");
   m.def(
       "read_tracks", [](const std::filesystem::path& path) { return TracksDict(formats::ReadTracks(path)); },
       py::arg("path"), "The fields of a Tracks from tracks.json; InputError naming the file and the problem");

@@ -2,11 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <optional>
+#include <stdexcept>
 #include <opencv2/core.hpp>
 #include <opencv2/core/eigen.hpp>
 
 #include "calibproj/common/limits.h"
 #include "calibproj/formats/files.h"
+#include "calibproj/formats/json_values.h"
 
 namespace calibproj::formats {
 
@@ -22,167 +26,173 @@ std::string Lower(std::string text) {
   return text;
 }
 
-void Check(const fs::path& path, const CameraIntrinsics& in) {
+std::string PythonMatrix(const Eigen::Matrix3d& K) {
+  std::string out = "[";
+  for (int r = 0; r < 3; ++r) {
+    out += r ? ", [" : "[";
+    for (int c = 0; c < 3; ++c) out += (c ? ", " : "") + PythonFloat(K(r, c));
+    out += "]";
+  }
+  return out + "]";
+}
+
+std::string General(double value) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof(buffer), "%g", value);
+  return buffer;
+}
+
+// What is wrong with these values (the Python Intrinsics' own checks), or "".
+std::string Problem(const CameraIntrinsics& in) {
   const Eigen::Matrix3d& K = in.K;
   bool finite = K.allFinite();
   for (double d : in.dist) finite = finite && std::isfinite(d);
-  std::string problem;
-  if (!finite) {
-    problem = "K and dist must be finite numbers";
-  } else if (K(0, 0) <= 0 || K(1, 1) <= 0) {
-    problem = "focal lengths must be positive";
-  } else if (K(0, 1) != 0 || K(1, 0) != 0 || K(2, 0) != 0 || K(2, 1) != 0 || K(2, 2) != 1) {
-    problem = "K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]";
-  } else if (std::find(kDistortionLengths.begin(), kDistortionLengths.end(), in.dist.size()) ==
-             kDistortionLengths.end()) {
-    problem = "dist must have 4, 5, 8, 12, 14 coefficients, got " + std::to_string(in.dist.size());
-  } else if (in.has_resolution && (in.width <= 0 || in.height <= 0 || in.width != std::floor(in.width) ||
-                                   in.height != std::floor(in.height))) {
-    problem = "resolution must be two positive integers [width, height]";
-  } else if (!(in.ImageWidth() > 0 && in.ImageWidth() <= limits::kMaxImageSide && in.ImageHeight() > 0 &&
-               in.ImageHeight() <= limits::kMaxImageSide)) {
-    // Without a resolution the principal point gives the image size.
-    problem = "image size must be at most " + std::to_string(limits::kMaxImageSide) + " pixels per side";
+  if (!finite) return "K and dist must be finite numbers";
+  if (K(0, 0) <= 0 || K(1, 1) <= 0) {
+    return "focal lengths must be positive, got fx=" + PythonFloat(K(0, 0)) + ", fy=" + PythonFloat(K(1, 1));
   }
-  if (!problem.empty()) throw InputError(path.string() + ": intrinsics of '" + in.name + "': " + problem);
+  if (K(0, 1) != 0 || K(1, 0) != 0 || K(2, 0) != 0 || K(2, 1) != 0 || K(2, 2) != 1) {
+    // OpenCV's distortion functions ignore a skew term, so none is accepted.
+    return "K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got " + PythonMatrix(K);
+  }
+  if (std::find(kDistortionLengths.begin(), kDistortionLengths.end(), in.dist.size()) == kDistortionLengths.end()) {
+    return "dist must have 4, 5, 8, 12, 14 coefficients, got " + std::to_string(in.dist.size());
+  }
+  // Without a resolution the principal point gives the image size.
+  const double width = in.ImageWidth(), height = in.ImageHeight();
+  if (!(width > 0 && width <= limits::kMaxImageSide && height > 0 && height <= limits::kMaxImageSide)) {
+    return "image size must be at most " + std::to_string(limits::kMaxImageSide) + " pixels per side, got " +
+           General(width) + "x" + General(height);
+  }
+  return "";
 }
 
-Eigen::Matrix3d MatrixFromJson(const fs::path& path, const nlohmann::json& value) {
-  std::vector<double> flat;
-  const auto append = [&](const nlohmann::json& v) {
-    if (!v.is_number()) throw InputError(path.string() + ": K and dist must be numbers");
-    flat.push_back(v.get<double>());
-  };
-  if (!value.is_array()) throw InputError(path.string() + ": K and dist must be numbers");
-  for (const auto& row : value) {
-    if (row.is_array()) {
-      for (const auto& v : row) append(v);
-    } else {
-      append(row);
-    }
+// [width, height]: two positive integral numbers.
+void SetResolution(const nlohmann::json& value, CameraIntrinsics* in) {
+  bool valid = value.is_array() && value.size() == 2;
+  for (size_t k = 0; valid && k < 2; ++k) {
+    const nlohmann::json& side = value[k];
+    valid = side.is_number() && std::isfinite(side.get<double>()) && side.get<double>() > 0 &&
+            side.get<double>() == std::floor(side.get<double>());
   }
-  if (flat.size() != 9) throw InputError(path.string() + ": K must have 9 values (3x3), got " + std::to_string(flat.size()));
-  Eigen::Matrix3d K;
-  for (int i = 0; i < 9; ++i) K(i / 3, i % 3) = flat[i];
-  return K;
+  if (!valid) {
+    throw std::invalid_argument("resolution must be two positive integers [width, height], got " + Describe(value));
+  }
+  in->has_resolution = true;
+  in->width = value[0].get<double>();
+  in->height = value[1].get<double>();
 }
 
-std::vector<double> VectorFromJson(const fs::path& path, const nlohmann::json& value, const std::string& what) {
-  std::vector<double> out;
-  if (value.is_null()) return out;
-  if (!value.is_array()) throw InputError(path.string() + ": " + what + " must be numbers");
-  for (const auto& v : value) {
-    if (v.is_array()) {
-      for (const auto& w : v) {
-        if (!w.is_number()) throw InputError(path.string() + ": " + what + " must be numbers");
-        out.push_back(w.get<double>());
-      }
-    } else if (v.is_number()) {
-      out.push_back(v.get<double>());
-    } else {
-      throw InputError(path.string() + ": " + what + " must be numbers");
-    }
-  }
-  return out;
-}
-
-CameraIntrinsics FromJson(const fs::path& path) {
-  const nlohmann::json document = ReadJson(path);
+// The values of a file, checked here for every format ("K: expected numbers, ...").
+CameraIntrinsics Build(const std::string& name, const nlohmann::json& K, const nlohmann::json& dist,
+                       const nlohmann::json* resolution) {
   CameraIntrinsics in;
-  in.name = path.stem().string();
-  if (document.is_object() && document.contains("sensors")) {
-    try {
-      const auto& rgb = document.at("sensors").at("RGB");
-      in.K = MatrixFromJson(path, rgb.at("intrinsics").at("data"));
-      in.dist = VectorFromJson(path, rgb.at("distortionCoefficients").at("data"), "K and dist");
-    } catch (const nlohmann::json::exception&) {
-      throw InputError(path.string() +
-                       ": expected sensors.RGB.intrinsics.data and sensors.RGB.distortionCoefficients.data");
-    }
-    return in;
+  in.name = name;
+  const NumberArray K_values = NumbersOf(K, "K");
+  if (!dist.is_null()) in.dist = NumbersOf(dist, "dist").values;
+  if (K_values.values.size() != 9) {
+    throw std::invalid_argument("K must have 9 values (3x3), got " + std::to_string(K_values.values.size()));
   }
-  const nlohmann::json ours = ReadSchemaJson(path, "intrinsics", 1);
-  for (const char* key : {"resolution", "K"}) {
-    if (!ours.contains(key)) throw InputError(path.string() + ": missing field '" + key + "'");
+  for (int i = 0; i < 9; ++i) in.K(i / 3, i % 3) = K_values.values[i];
+  if (resolution) SetResolution(*resolution, &in);
+  if (in.dist.empty()) in.dist.assign(5, 0.0);
+  if (const std::string problem = Problem(in); !problem.empty()) {
+    throw std::invalid_argument("intrinsics of " + PythonRepr(name) + ": " + problem);
   }
-  in.K = MatrixFromJson(path, ours.at("K"));
-  in.dist = VectorFromJson(path, ours.contains("dist") ? ours.at("dist") : nlohmann::json::array(), "K and dist");
-  const std::vector<double> resolution = VectorFromJson(path, ours.at("resolution"), "resolution");
-  if (resolution.size() != 2) throw InputError(path.string() + ": resolution must be [width, height]");
-  in.has_resolution = true;
-  in.width = resolution[0];
-  in.height = resolution[1];
   return in;
 }
 
-cv::Mat FirstMatrix(const cv::FileStorage& storage, const std::vector<std::string>& keys) {
+CameraIntrinsics FromReferenceJson(const nlohmann::json& document, const std::string& name) {
+  const auto member = [](const nlohmann::json* node, const char* key) -> const nlohmann::json* {
+    if (node == nullptr || !node->is_object() || !node->contains(key)) return nullptr;
+    return &node->at(key);
+  };
+  const nlohmann::json* rgb = member(member(&document, "sensors"), "RGB");
+  const nlohmann::json* K = member(member(rgb, "intrinsics"), "data");
+  const nlohmann::json* dist = member(member(rgb, "distortionCoefficients"), "data");
+  if (!K || !dist) {
+    throw std::invalid_argument("expected sensors.RGB.intrinsics.data and sensors.RGB.distortionCoefficients.data");
+  }
+  return Build(name, *K, *dist, nullptr);
+}
+
+}  // namespace
+
+CameraIntrinsics IntrinsicsFromDocument(const nlohmann::json& document, const std::string& name) {
+  if (!document.is_object()) throw std::invalid_argument("expected an object with resolution, K and dist");
+  for (const char* key : {"resolution", "K"}) {
+    if (!document.contains(key)) throw std::invalid_argument(std::string("missing field '") + key + "'");
+  }
+  return Build(name, document.at("K"), document.contains("dist") ? document.at("dist") : nlohmann::json::array(),
+               &document.at("resolution"));
+}
+
+namespace {
+
+CameraIntrinsics FromOurJson(const fs::path& path, const std::string& name) {
+  return IntrinsicsFromDocument(ReadSchemaJson(path, "intrinsics", 1), name);
+}
+
+// The first of `keys` in the file: an opencv-matrix, or a plain sequence of numbers.
+std::optional<nlohmann::json> FirstMatrix(const cv::FileStorage& storage, const std::vector<std::string>& keys) {
   for (const auto& key : keys) {
     const cv::FileNode node = storage[key];
     if (node.empty()) continue;
-    cv::Mat matrix;
+    nlohmann::json values = nlohmann::json::array();
     if (node.isMap()) {
+      cv::Mat matrix, doubles;
       node >> matrix;
+      matrix.reshape(1, 1).convertTo(doubles, CV_64F);
+      for (int i = 0; i < doubles.cols; ++i) values.push_back(doubles.at<double>(0, i));
     } else {
-      std::vector<double> values;
-      node >> values;
-      matrix = cv::Mat(values, true);
+      for (const auto& item : node) values.push_back(item.real());
     }
-    return matrix;
+    return values;
   }
-  return {};
+  return std::nullopt;
 }
 
-CameraIntrinsics FromOpenCvStorage(const fs::path& path) {
+CameraIntrinsics FromOpenCvStorage(const fs::path& path, const std::string& name) {
   cv::FileStorage storage;
   try {
     storage.open(path.string(), cv::FileStorage::READ);
   } catch (const cv::Exception&) {
   }
-  if (!storage.isOpened()) throw InputError(path.string() + ": not a readable OpenCV YAML/XML file");
-  CameraIntrinsics in;
-  in.name = path.stem().string();
-  const cv::Mat K = FirstMatrix(storage, {"camera_matrix", "K", "cameraMatrix"});
-  const cv::Mat dist = FirstMatrix(storage, {"distortion_coefficients", "D", "dist_coeffs", "distCoeffs"});
-  if (K.empty()) throw InputError(path.string() + ": missing camera_matrix (or K)");
-  if (dist.empty()) throw InputError(path.string() + ": missing distortion_coefficients (or D)");
-  if (K.total() != 9) throw InputError(path.string() + ": K must have 9 values (3x3), got " + std::to_string(K.total()));
-  cv::Mat K64, dist64;
-  K.reshape(1, 3).convertTo(K64, CV_64F);
-  dist.reshape(1, 1).convertTo(dist64, CV_64F);
-  cv::cv2eigen(K64, in.K);
-  in.dist.assign(dist64.begin<double>(), dist64.end<double>());
+  if (!storage.isOpened()) throw std::invalid_argument("not a readable OpenCV YAML/XML file");
+  const auto K = FirstMatrix(storage, {"camera_matrix", "K", "cameraMatrix"});
+  const auto dist = FirstMatrix(storage, {"distortion_coefficients", "D", "dist_coeffs", "distCoeffs"});
   const cv::FileNode width = storage["image_width"], height = storage["image_height"];
-  if (!width.empty() && !height.empty()) {
-    in.has_resolution = true;
-    in.width = width.real();
-    in.height = height.real();
-  }
-  return in;
+  const bool sized = !width.empty() && !height.empty();
+  const nlohmann::json resolution = sized ? nlohmann::json{width.real(), height.real()} : nlohmann::json();
+  if (!K) throw std::invalid_argument("missing camera_matrix (or K)");
+  if (!dist) throw std::invalid_argument("missing distortion_coefficients (or D)");
+  return Build(name, *K, *dist, sized ? &resolution : nullptr);
 }
 
 }  // namespace
 
-CameraIntrinsics ReadIntrinsics(const fs::path& path) {
+CameraIntrinsics ReadIntrinsics(const fs::path& path, const std::string& name) {
   if (!fs::is_regular_file(path)) throw InputError(path.string() + ": no such intrinsics file");
   const std::string suffix = Lower(path.extension().string());
-  CameraIntrinsics in;
+  const std::string camera = name.empty() ? path.stem().string() : name;
   // Whatever the readers throw names the file.
   try {
     if (std::find(kYamlSuffixes.begin(), kYamlSuffixes.end(), suffix) != kYamlSuffixes.end()) {
-      in = FromOpenCvStorage(path);
-    } else if (suffix == ".json") {
-      in = FromJson(path);
-    } else {
-      throw InputError(path.string() + ": unknown intrinsics format (expected .json, .yaml, .yml or .xml)");
+      return FromOpenCvStorage(path, camera);
     }
+    if (suffix != ".json") {
+      throw std::invalid_argument("unknown intrinsics format (expected .json, .yaml, .yml or .xml)");
+    }
+    const nlohmann::json document = ReadJson(path);
+    if (document.is_object() && document.contains("sensors")) return FromReferenceJson(document, camera);
+    return FromOurJson(path, camera);
   } catch (const InputError&) {
     throw;
+  } catch (const std::invalid_argument& error) {
+    throw InputError(path.string() + ": " + error.what());
   } catch (const std::exception& error) {
     throw InputError(path.string() + ": not a readable intrinsics file (" + error.what() + ")");
   }
-  if (in.dist.empty()) in.dist.assign(5, 0.0);
-  Check(path, in);
-  return in;
 }
 
 IntrinsicsDir LoadIntrinsicsDir(const fs::path& directory) {

@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <map>
 #include <string>
 #include <vector>
@@ -22,7 +23,12 @@ struct CameraIntrinsics {
   double ImageHeight() const { return has_resolution ? height : 2.0 * K(1, 2) + 1.0; }
 };
 
-CameraIntrinsics ReadIntrinsics(const std::filesystem::path& path);
+// One intrinsics file in any supported format, named `name` (empty: the file stem);
+// InputError naming the file and the problem, with the Python reader's messages.
+CameraIntrinsics ReadIntrinsics(const std::filesystem::path& path, const std::string& name = "");
+
+// The body of our format ({resolution, K, dist}); std::invalid_argument with the problem.
+CameraIntrinsics IntrinsicsFromDocument(const nlohmann::json& document, const std::string& name);
 
 // The intrinsics files of a folder, keyed by camera name (the file stem). A file that
 // cannot be used (malformed, or a second file for one camera) fails its own camera only.

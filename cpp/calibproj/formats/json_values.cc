@@ -127,7 +127,7 @@ bool BooleanOf(const json& value, const std::string& where) {
   return value.get<bool>();
 }
 
-NumberArray NumberArrayOf(const json& value, const std::string& where, size_t columns) {
+NumberArray NumbersOf(const json& value, const std::string& where) {
   std::vector<const json*> leaves;
   NumberArray out;
   Flatten(value, where, &leaves, &out.shape);
@@ -137,6 +137,11 @@ NumberArray NumberArrayOf(const json& value, const std::string& where, size_t co
     if (!std::isfinite(number)) throw std::invalid_argument(where + ": numbers must be finite");
     out.values.push_back(number);
   }
+  return out;
+}
+
+NumberArray NumberArrayOf(const json& value, const std::string& where, size_t columns) {
+  NumberArray out = NumbersOf(value, where);
   if (out.shape == std::vector<size_t>{0}) {  // an empty list: no rows
     out.shape = {0, columns};
     return out;

@@ -26,6 +26,9 @@ struct NumberArray {
   std::vector<size_t> shape;
 };
 
+// Nested lists of numbers of any shape (or one number), finite, row-major.
+NumberArray NumbersOf(const nlohmann::json& value, const std::string& where);
+
 // `columns` > 0: a list of rows of that many numbers ("expected Nx2 numbers, ...");
 // an empty list is no rows.
 NumberArray NumberArrayOf(const nlohmann::json& value, const std::string& where, size_t columns);

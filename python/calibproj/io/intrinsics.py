@@ -8,12 +8,15 @@ Three formats are read (see docs/conventions.md):
 - the reference code's JSON (``sensors.RGB.intrinsics.data`` and
   ``sensors.RGB.distortionCoefficients.data``), which carries no resolution.
 
-Only ours is written. OpenCV is imported inside the functions that need it so
-that importing this module stays cheap.
+Only ours is written. The files are read by the C++ core
+(``cpp/calibproj/formats/intrinsics_file.cc``), as ``calibproj-native`` reads them.
+OpenCV is imported inside the functions that need it so that importing this module
+stays cheap.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from collections.abc import Iterable, Mapping
@@ -23,8 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.io.json_values import describe, is_number, number_array
-from calibproj.io.jsonio import FormatError, read_json, read_json_value, write_json
+from calibproj.io.jsonio import FormatError, write_json
 
 SCHEMA_KIND = "intrinsics"
 SCHEMA_MAJOR = 1
@@ -220,20 +222,15 @@ def _intrinsics_problem(K: np.ndarray, dist: np.ndarray, resolution: Any) -> str
 
 
 def read_intrinsics(path: str | os.PathLike, name: str | None = None) -> Intrinsics:
-    """Read one intrinsics file in any supported format; the name defaults to the file stem."""
-    path = Path(path)
-    name = name or path.stem
-    if not path.is_file():
-        raise FormatError(f"{path}: no such intrinsics file")
-    suffix = path.suffix.lower()
-    if suffix in YAML_SUFFIXES:
-        return _read_opencv_storage(path, name)
-    if suffix != ".json":
-        raise FormatError(f"{path}: unknown intrinsics format (expected .json, .yaml, .yml or .xml)")
-    document = read_json_value(path)
-    if isinstance(document, dict) and "sensors" in document:
-        return _from_reference_json(path, document, name)
-    return _from_our_json(path, name)
+    """Read one intrinsics file in any supported format (by the C++ core, as
+    ``calibproj-native`` reads it); the name defaults to the file stem."""
+    from calibproj import _core
+
+    try:
+        fields = _core.formats.read_intrinsics(Path(path), name or "")
+    except _core.formats.InputError as error:
+        raise FormatError(str(error)) from None
+    return _from_fields(fields)
 
 
 def write_intrinsics(path: str | os.PathLike, intrinsics: Intrinsics) -> None:
@@ -323,87 +320,17 @@ def _only_file(directory: Path, name: str, paths: list[Path]) -> Path:
                       f"(also looked for {others})")
 
 
-def _from_our_json(path: Path, name: str) -> Intrinsics:
-    return intrinsics_from_json(read_json(path, SCHEMA_KIND, SCHEMA_MAJOR), name, path)
-
-
 def intrinsics_from_json(document: Any, name: str, where: str | os.PathLike) -> Intrinsics:
-    """The intrinsics of the body of our format (``Intrinsics.to_json``); FormatError
-    naming ``where`` and the problem."""
-    if not isinstance(document, dict):
-        raise FormatError(f"{where}: expected an object with resolution, K and dist")
-    for key in ("resolution", "K"):
-        if key not in document:
-            raise FormatError(f"{where}: missing field {key!r}")
-    return _build(Path(where), name, document["K"], document.get("dist", []), document["resolution"])
-
-
-def _from_reference_json(path: Path, document: dict[str, Any], name: str) -> Intrinsics:
-    try:
-        rgb = document["sensors"]["RGB"]
-        K = rgb["intrinsics"]["data"]
-        dist = rgb["distortionCoefficients"]["data"]
-    except (KeyError, TypeError):
-        raise FormatError(
-            f"{path}: expected sensors.RGB.intrinsics.data and sensors.RGB.distortionCoefficients.data"
-        ) from None
-    return _build(path, name, K, dist, None)
-
-
-def _read_opencv_storage(path: Path, name: str) -> Intrinsics:
-    import cv2
+    """The intrinsics of the body of our format (``Intrinsics.to_json``), checked by the
+    C++ core as a file is; FormatError naming ``where`` and the problem."""
+    from calibproj import _core
 
     try:
-        storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except (cv2.error, SystemError):  # the binding reports some parse errors as SystemError
-        storage = None
-    if storage is None or not storage.isOpened():
-        raise FormatError(f"{path}: not a readable OpenCV YAML/XML file")
-    try:
-        K = _first_matrix(storage, ("camera_matrix", "K", "cameraMatrix"))
-        dist = _first_matrix(storage, ("distortion_coefficients", "D", "dist_coeffs", "distCoeffs"))
-        width, height = storage.getNode("image_width"), storage.getNode("image_height")
-        resolution = None if width.empty() or height.empty() else (width.real(), height.real())
-    finally:
-        storage.release()
-    if K is None:
-        raise FormatError(f"{path}: missing camera_matrix (or K)")
-    if dist is None:
-        raise FormatError(f"{path}: missing distortion_coefficients (or D)")
-    return _build(path, name, K, dist, resolution)
+        fields = _core.formats.intrinsics_from_json(json.dumps(document), name)
+    except (TypeError, ValueError) as error:
+        raise FormatError(f"{where}: {error}") from None
+    return _from_fields(fields)
 
 
-def _first_matrix(storage: Any, keys: tuple[str, ...]) -> np.ndarray | None:
-    for key in keys:
-        node = storage.getNode(key)
-        if node.empty():
-            continue
-        matrix = node.mat()
-        if matrix is None:  # written as a plain sequence rather than an opencv-matrix
-            matrix = np.array([node.at(i).real() for i in range(node.size())])
-        return np.asarray(matrix, dtype=float)
-    return None
-
-
-def _build(path: Path, name: str, K: Any, dist: Any, resolution: Any) -> Intrinsics:
-    """The intrinsics of a file's values, checked here for every format."""
-    try:
-        K_array = number_array(K, "K")
-        dist_array = number_array(dist, "dist").ravel() if dist is not None else np.zeros(0)
-        if K_array.size != 9:
-            raise ValueError(f"K must have 9 values (3x3), got {K_array.size}")
-        if resolution is not None:
-            resolution = _resolution(resolution)
-        return Intrinsics(name, resolution, K_array.reshape(3, 3), dist_array)
-    except ValueError as error:
-        raise FormatError(f"{path}: {error}") from None
-
-
-def _resolution(value: Any) -> tuple[int, int]:
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    sides = value if isinstance(value, (list, tuple)) else ()
-    if len(sides) != 2 or not all(is_number(side) and math.isfinite(side) and side == int(side) and side > 0
-                                  for side in sides):
-        raise ValueError(f"resolution must be two positive integers [width, height], got {describe(value)}")
-    return int(sides[0]), int(sides[1])
+def _from_fields(fields: dict[str, Any]) -> Intrinsics:
+    return Intrinsics(fields["name"], fields["resolution"], np.asarray(fields["K"]), np.asarray(fields["dist"]))
