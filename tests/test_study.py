@@ -34,6 +34,15 @@ def test_markers_too_small_or_too_blurred_are_not_found_and_not_misread(family: 
     assert blurred["found"] == 0 and blurred["false"] == 0
 
 
+def test_at_15_px_tag25h9_finds_most_markers_and_aruco_4x4_a_minority() -> None:
+    """The study's small-marker fact on one seed: tag25h9 (7 cells across) decodes 15 px
+    markers that ArUco 4x4 (6 cells, larger ones) mostly misses."""
+    apriltag = measure_image(ImageCondition("apriltag:tag25h9", "side", 15.0))
+    aruco = measure_image(ImageCondition("aruco:4X4_50", "side", 15.0))
+    assert apriltag["found"] >= 0.8 * apriltag["visible"] and apriltag["false"] == 0
+    assert aruco["found"] <= 0.6 * aruco["visible"]
+
+
 def square(value: int) -> int:
     return value * value
 

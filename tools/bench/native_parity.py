@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from native_speed import find_native  # this folder is on sys.path when run as a script
 
 COMMON_FILES = ["tracks.json", "camera_poses.json", "metrics.json", "points.ply", "calibration_opencv.yaml",
                 "calibration.toml", "colmap/cameras.txt", "colmap/images.txt", "colmap/points3D.txt"]
@@ -35,15 +36,6 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--native", help="calibproj-native executable (default: next to this Python, else PATH)")
     parser.add_argument("--workers", type=int, default=2, help="cameras processed at once by detect (default 2)")
     return parser.parse_args()
-
-
-def find_native(given: str | None) -> str:
-    candidates = [given] if given else [str(Path(sys.executable).parent / "calibproj-native"),
-                                        shutil.which("calibproj-native") or ""]
-    for candidate in candidates:
-        if candidate and os.access(candidate, os.X_OK):
-            return candidate
-    sys.exit(f"calibproj-native not found (tried {candidates}); give --native")
 
 
 def run(command: list[str]) -> None:

@@ -6,7 +6,7 @@ in pixels, blur, sensor noise and room light; measures markers found, centre err
 against the truth, false detections and detection time per frame; and calibrates a
 rendered room with each family's sequence (clean, room light, rolling shutter) against
 its truth. Writes OUT/study.html (plots, a recommendation table) and OUT/study.json.
---quick takes about 2 minutes on 2 cores, the full study about 10. With
+--quick takes about 1.5 minutes on 2 cores, the full study about 10. With
 --recordings A,B it compares instead two calibrations of your own room, one per family
 (results folders of calibproj calibrate from videos). The
 measurements run on local processes (--workers), or on a Ray or Dask cluster (--cluster
