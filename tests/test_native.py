@@ -63,6 +63,10 @@ def assert_same_bytes(a: Path, b: Path, names: list[str]) -> None:
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
 
 
+def files_below(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
+
+
 @pytest.mark.parametrize("model", ["coplanar", "free"])
 def test_native_and_python_give_the_same_calibration(simulation: Path, tmp_path: Path, model: str) -> None:
     common = ["--tracks", str(simulation / "tracks.json"), "--intrinsics", str(simulation / "intrinsics"),
@@ -85,12 +89,38 @@ def test_native_scales_and_exports_as_python_does(simulation: Path, tmp_path: Pa
     assert python.returncode == 0, python.stderr
     native = run_native("calibrate", *common, "--out", str(tmp_path / "native"))
     assert native.returncode == 0, native.stderr
-    assert_same_bytes(tmp_path / "python", tmp_path / "native", CALIBRATION_FILES + EXPORT_FILES)
+    # Every file of the native folder, the Python one's too (which adds provenance.json):
+    # the results, the exports, and the tracks and intrinsics they came from.
+    written = files_below(tmp_path / "native")
+    assert set(CALIBRATION_FILES + EXPORT_FILES + ["tracks.json", "intrinsics/far1.json"]) <= set(written)
+    assert sorted(set(files_below(tmp_path / "python")) - set(written)) == ["provenance.json"]
+    assert_same_bytes(tmp_path / "python", tmp_path / "native", written)
     poses = json.loads((tmp_path / "native" / "camera_poses.json").read_text())
     centres = {name: np.array(pose["center"]) for name, pose in poses["cameras"].items()}
     assert poses["unit"] == "m"
     assert np.linalg.norm(centres["far1"] - centres["near2"]) == pytest.approx(3.25, rel=1e-12)
     assert "results in" in native.stdout and "(unit: m)" in native.stdout
+
+
+def test_intrinsics_without_an_image_size_are_kept_in_the_results(simulation: Path, tmp_path: Path) -> None:
+    """The reference code's JSON gives no image size: both tools calibrate with it and
+    keep it in results/intrinsics with resolution null (both used to fail at the end)."""
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    for path in sorted((simulation / "intrinsics").glob("*.json")):
+        ours = json.loads(path.read_text())
+        document = {"sensors": {"RGB": {"intrinsics": {"data": np.ravel(ours["K"]).tolist()},
+                                        "distortionCoefficients": {"data": ours["dist"]}}}}
+        (reference / path.name).write_text(json.dumps(document))
+    common = ["--tracks", str(simulation / "tracks.json"), "--intrinsics", str(reference)]
+    python = run_python("calibrate", *common, "--out", str(tmp_path / "python"), "--no-report")
+    native = run_native("calibrate", *common, "--out", str(tmp_path / "native"))
+    assert python.returncode == 0 and native.returncode == 0, (python.stderr, native.stderr)
+    kept = json.loads((tmp_path / "native" / "intrinsics" / "far1.json").read_text())
+    assert kept["resolution"] is None and kept["K"] == json.loads((simulation / "intrinsics" / "far1.json").read_text())["K"]
+    assert_same_bytes(tmp_path / "python", tmp_path / "native", files_below(tmp_path / "native"))
+    evaluated = run_python("evaluate", str(tmp_path / "native"), "--tracks", str(simulation / "eval_tracks.json"))
+    assert evaluated.returncode == 0, evaluated.stderr
 
 
 def test_native_scale_errors_match_python(simulation: Path, tmp_path: Path) -> None:

@@ -46,7 +46,7 @@ def detect_args(tmp_path: Path, out: Path) -> list[str]:
 def test_force_replaces_the_whole_folder(small: Path, tmp_path: Path) -> None:
     out = tmp_path / "results"
     assert run_native(*calibrate_args(small, out)).returncode == 0
-    # What an earlier run of the Python command left beside the three files.
+    # What an earlier run of the Python command left beside the native command's files.
     (out / "colmap").mkdir()
     (out / "colmap" / "cameras.txt").write_text("stale export")
     (out / "report.html").write_text("stale report")
@@ -60,7 +60,8 @@ def test_force_replaces_the_whole_folder(small: Path, tmp_path: Path) -> None:
 
     forced = run_native(*calibrate_args(small, out, "--force"))
     assert forced.returncode == 0, forced.stderr
-    assert sorted(p.name for p in out.iterdir()) == ["camera_poses.json", "metrics.json", "points.ply"]
+    assert sorted(p.name for p in out.iterdir()) == ["camera_poses.json", "intrinsics", "metrics.json", "points.ply",
+                                                     "tracks.json"]
     assert snapshot(out)["camera_poses.json"] == before["camera_poses.json"]  # the same calibration again
     assert siblings(out) == []
 

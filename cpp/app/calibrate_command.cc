@@ -32,7 +32,8 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   CLI::App* cmd = app.add_subcommand(
       "calibrate",
       "Calibrate the cameras: register every camera and refine, then write camera_poses.json, metrics.json and "
-      "points.ply (floor frame: z up, floor z = 0). An existing results folder is only overwritten with --force.");
+      "points.ply (floor frame: z up, floor z = 0), the tracks.json and intrinsics/ they came from, and the exports "
+      "asked for. An existing results folder is only overwritten with --force.");
   cmd->add_option("--tracks", args->tracks, "tracks.json to calibrate from")->required();
   cmd->add_option("--intrinsics", args->intrinsics, "folder of per-camera intrinsics files")->required();
   cmd->add_option("--out", args->out, "results folder")->required();
@@ -78,11 +79,17 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
 
 namespace {
 
-// The results and exports written into the staging folder, then moved into place.
+// The results, the inputs they came from (tracks.json and intrinsics/, as the Python
+// command keeps them) and the exports, written into the staging folder, then moved
+// into place.
 void SaveResults(OutputFolder& folder, const formats::Calibration& calibration,
-                 const std::map<std::string, CameraIntrinsics>& intrinsics, const Tracks& tracks,
-                 const std::vector<std::string>& exports) {
+                 const std::map<std::string, CameraIntrinsics>& intrinsics, const Tracks& given,
+                 const Tracks& tracks, const std::vector<std::string>& exports) {
   folder.Write([&](const fs::path& staging) {
+    for (const auto& name : given.cameras) {
+      if (intrinsics.count(name)) formats::WriteIntrinsics(staging / "intrinsics" / (name + ".json"), intrinsics.at(name));
+    }
+    formats::WriteTracks(staging / "tracks.json", given);
     formats::WriteCalibration(staging, calibration);
     std::vector<std::string> warnings;
     for (const auto& format : exports) {
@@ -161,7 +168,8 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   // Checked and locked before the inputs are read, as the Python command does.
   OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
   out.Open();
-  Tracks tracks = ReadTracks(arguments.tracks);
+  const Tracks given = ReadTracks(arguments.tracks);
+  Tracks tracks = given;
   const IntrinsicsDir folder = LoadIntrinsicsDir(arguments.intrinsics);
   const auto& intrinsics = folder.cameras;
   std::optional<formats::ProjectedMarkers> markers;
@@ -197,7 +205,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
       scale_error = error.what();
     }
   }
-  SaveResults(out, calibration, intrinsics, tracks, exports);
+  SaveResults(out, calibration, intrinsics, given, tracks, exports);
   PrintSummary(calibration, arguments.out);
   if (!scale_error.empty()) {
     throw InputError(scale_error + "; results written to " + arguments.out + " in arbitrary units");

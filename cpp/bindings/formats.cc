@@ -236,6 +236,12 @@ void register_formats(py::module_& m) {
       "The fields of an Intrinsics from a file in any supported format (name: the file stem when empty); "
       "InputError naming the file and the problem");
   m.def(
+      "write_intrinsics",
+      [](const std::filesystem::path& out, const py::object& intrinsics) {
+        formats::WriteIntrinsics(out, Converted("intrinsics", [&] { return CameraIntrinsicsFrom(intrinsics); }));
+      },
+      py::arg("out"), py::arg("intrinsics"), "Our intrinsics file of an Intrinsics, written atomically");
+  m.def(
       "intrinsics_from_json",
       [](const std::string& text, const std::string& name) {
         const nlohmann::json document = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);

@@ -123,8 +123,9 @@ CameraIntrinsics IntrinsicsFromDocument(const nlohmann::json& document, const st
   for (const char* key : {"resolution", "K"}) {
     if (!document.contains(key)) throw std::invalid_argument(std::string("missing field '") + key + "'");
   }
+  const nlohmann::json& resolution = document.at("resolution");  // null: not known
   return Build(name, document.at("K"), document.contains("dist") ? document.at("dist") : nlohmann::json::array(),
-               &document.at("resolution"));
+               resolution.is_null() ? nullptr : &resolution);
 }
 
 namespace {
@@ -193,6 +194,19 @@ CameraIntrinsics ReadIntrinsics(const fs::path& path, const std::string& name) {
   } catch (const std::exception& error) {
     throw InputError(path.string() + ": not a readable intrinsics file (" + error.what() + ")");
   }
+}
+
+void WriteIntrinsics(const fs::path& path, const CameraIntrinsics& intrinsics) {
+  nlohmann::ordered_json K = nlohmann::ordered_json::array();
+  for (int r = 0; r < 3; ++r) K.push_back({intrinsics.K(r, 0), intrinsics.K(r, 1), intrinsics.K(r, 2)});
+  const nlohmann::ordered_json body = {
+      {"camera", intrinsics.name},
+      {"resolution", intrinsics.has_resolution ? nlohmann::ordered_json{static_cast<std::int64_t>(intrinsics.width),
+                                                                        static_cast<std::int64_t>(intrinsics.height)}
+                                               : nlohmann::ordered_json(nullptr)},
+      {"K", K},
+      {"dist", intrinsics.dist}};
+  AtomicWrite(path, DumpSchemaJson("intrinsics", 1, body));
 }
 
 IntrinsicsDir LoadIntrinsicsDir(const fs::path& directory) {

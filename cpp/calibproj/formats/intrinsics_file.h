@@ -27,7 +27,12 @@ struct CameraIntrinsics {
 // InputError naming the file and the problem, with the Python reader's messages.
 CameraIntrinsics ReadIntrinsics(const std::filesystem::path& path, const std::string& name = "");
 
-// The body of our format ({resolution, K, dist}); std::invalid_argument with the problem.
+// Writes our format (calibproj.intrinsics/1) atomically, as the Python package writes
+// it; an image size not known (the reference code's JSON) is written as null.
+void WriteIntrinsics(const std::filesystem::path& path, const CameraIntrinsics& intrinsics);
+
+// The body of our format ({resolution, K, dist}, resolution null when not known);
+// std::invalid_argument with the problem.
 CameraIntrinsics IntrinsicsFromDocument(const nlohmann::json& document, const std::string& name);
 
 // The intrinsics files of a folder, keyed by camera name (the file stem). A file that

@@ -26,10 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.io.jsonio import FormatError, write_json
-
-SCHEMA_KIND = "intrinsics"
-SCHEMA_MAJOR = 1
+from calibproj.io.jsonio import FormatError
 
 # OpenCV accepts distortion vectors of these lengths:
 # [k1 k2 p1 p2], + k3, + k4 k5 k6 (rational), + s1..s4 (thin prism), + tau_x tau_y (tilt).
@@ -158,12 +155,11 @@ class Intrinsics:
         )
 
     def to_json(self) -> dict[str, Any]:
-        """Body of our intrinsics file (without the schema tag)."""
-        if self.resolution is None:
-            raise ValueError(f"intrinsics of {self.name!r}: resolution unknown, cannot write our format")
+        """Body of our intrinsics file (without the schema tag); ``resolution`` is None
+        when not known."""
         return {
             "camera": self.name,
-            "resolution": list(self.resolution),
+            "resolution": None if self.resolution is None else list(self.resolution),
             "K": self.K.tolist(),
             "dist": self.dist.tolist(),
         }
@@ -234,8 +230,11 @@ def read_intrinsics(path: str | os.PathLike, name: str | None = None) -> Intrins
 
 
 def write_intrinsics(path: str | os.PathLike, intrinsics: Intrinsics) -> None:
-    """Write our intrinsics format atomically."""
-    write_json(path, SCHEMA_KIND, SCHEMA_MAJOR, intrinsics.to_json())
+    """Write our intrinsics format atomically (by the C++ core, as ``calibproj-native``
+    writes it)."""
+    from calibproj import _core
+
+    _core.formats.write_intrinsics(Path(path), intrinsics)
 
 
 def write_intrinsics_dir(directory: str | os.PathLike, cameras: dict[str, Intrinsics]) -> None:
