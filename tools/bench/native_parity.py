@@ -4,8 +4,9 @@ Takes the folder of `calibproj demo --out DEMO` and repeats its calibration with
 standalone executable: `calibproj-native detect` on DEMO/room/videos, then
 `calibproj-native calibrate` from those tracks with the demo's metric scale (read from
 DEMO/results/provenance.json), its model and every export. Then compares, byte for
-byte, each file that both commands write (tracks.json, camera_poses.json,
-metrics.json, points.ply and the exports) and prints one line per file, then
+byte, every file the executable wrote (camera_poses.json, metrics.json, points.ply,
+tracks.json, intrinsics/*.json and the exports) with the demo's, and prints one line
+per file, then
 
   native-parity: identical=K/N
 
@@ -18,17 +19,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 from native_speed import find_native  # this folder is on sys.path when run as a script
-
-COMMON_FILES = ["tracks.json", "camera_poses.json", "metrics.json", "points.ply", "calibration_opencv.yaml",
-                "calibration.toml", "colmap/cameras.txt", "colmap/images.txt", "colmap/points3D.txt"]
-
 
 def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -68,13 +64,13 @@ def main() -> None:
              str(intrinsics), "--out", str(tracks), "--workers", str(args.workers), "--no-progress"])
         run([native, "calibrate", "--tracks", str(tracks), "--intrinsics", str(intrinsics), "--out", str(out),
              "--model", model, "--sequence", str(sequence), "--scale", scale, "--export", "yaml,colmap,anipose"])
-        shutil.copy(tracks, out / "tracks.json")
+        written = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
         identical = 0
-        for name in COMMON_FILES:
-            same = (out / name).read_bytes() == (results / name).read_bytes()
+        for name in written:
+            same = (results / name).is_file() and (out / name).read_bytes() == (results / name).read_bytes()
             identical += same
             print(f"{name:<26} {'identical' if same else 'DIFFERENT'}")
-    print(f"native-parity: identical={identical}/{len(COMMON_FILES)}")
+    print(f"native-parity: identical={identical}/{len(written)}")
 
 
 if __name__ == "__main__":
