@@ -10,9 +10,11 @@
 #include <string>
 #include <vector>
 
+#include "calibproj/formats/detect_report.h"
 #include "calibproj/ingest/camera_ingest.h"
 #include "checks.h"
 #include "ingest_options.h"
+#include "calibproj/formats/detect_report.h"
 #include "registry.h"
 #include "sync_convert.h"
 
@@ -186,8 +188,11 @@ py::list ScalesList(const std::vector<ingest::ScaleStats>& scales) {
   return out;
 }
 
-py::dict ResultDict(const ingest::CameraIngestResult& r) {
+py::dict ResultDict(const ingest::CameraIngestResult& r, const ingest::SequenceDescription& sequence) {
   py::dict d;
+  // The camera's entry of detect_report.json, built where calibproj-native builds it
+  // (JSON text: doubles written to 17 digits read back exactly).
+  d["report"] = py::module_::import("json").attr("loads")(formats::CameraResultSummary(r, sequence).dump());
   d["video"] = py::dict(py::arg("path") = r.video.path, py::arg("width") = r.video.width,
                         py::arg("height") = r.video.height, py::arg("fps") = r.video.fps,
                         py::arg("declared_fps") = r.video.declared_fps, py::arg("timed") = r.video.timed,
@@ -326,7 +331,7 @@ void register_ingest(py::module_& m) {
           py::gil_scoped_release release;
           result = ingest::IngestCamera(video, description, camera, options, callback);
         }
-        return ResultDict(result);
+        return ResultDict(result, description);
       },
       py::arg("video"), py::arg("sequence"), py::arg("K"), py::arg("dist"), py::arg("resolution"),
       py::arg("source"), py::arg("aruco"), py::arg("apriltag"), py::arg("progress") = py::none(),

@@ -72,7 +72,7 @@ class CameraIngest:
     def ok(self) -> bool:
         return self.error is None
 
-    def summary(self, projector_fps: float, scales: list[float]) -> dict[str, Any]:
+    def summary(self) -> dict[str, Any]:
         """The camera's entry of ``detect_report.json``."""
         entry: dict[str, Any] = {"video": self.video, "intrinsics": self.intrinsics,
                                  "status": "ok" if self.ok else "failed"}
@@ -82,24 +82,8 @@ class CameraIngest:
                 entry["brightness"] = {"frames_per_value": self.brightness_step,
                                        "values": [round(float(v), 5) for v in self.brightness]}
             return entry
-        raw = self.raw
-        entry["sync"] = _sync_summary(raw["sync"], raw["video"]["fps"], projector_fps)
-        entry["video_info"] = {key: raw["video"][key] for key in ("width", "height", "fps", "declared_fps",
-                                                                  "timed", "frame_count")}
-        timing = raw["timing"]
-        entry["frames"] = {"decoded": raw["frames_decoded"], "converted": raw["frames_converted"],
-                           "detected": raw["frames_detected"], "dropped": timing["dropped"],
-                           "duplicated": timing["duplicated"], "untimed": timing["untimed"],
-                           "largest_gap": timing["largest_gap"], "jitter_ms": 1e3 * timing["jitter_rms_s"]}
-        entry["patterns"] = {key: raw[f"patterns_{key}"] for key in ("whole_frame", "in_regions", "dropped",
-                                                                       "missing")}
-        entry["detections_rejected"] = raw["detections_rejected"]
-        entry["detections_inconsistent"] = raw["detections_inconsistent"]
-        entry["consistency_problem"] = raw["consistency_problem"]
-        entry["scales"] = [{"scale": scale, **stats} for scale, stats in zip(scales, raw["scales"])]
-        entry["msms_kept"] = int(len(raw["centres"]["array"]))
-        entry["homography_rms_px"] = raw["homography_rms_px"] if raw["homography_valid"] else None
-        entry["seconds"] = {"total": raw["seconds_total"], "detection": raw["seconds_detection"]}
+        # Built by the C++ core, as calibproj-native builds it.
+        entry.update(self.raw["report"])
         return entry
 
     def thumbnail(self) -> np.ndarray | None:
@@ -137,7 +121,7 @@ class IngestResult:
 
         cameras = {}
         for name, camera in self.cameras.items():
-            cameras[name] = camera.summary(self.projector_fps, self.scales)
+            cameras[name] = camera.summary()
             for key in ("video", "intrinsics"):
                 cameras[name][key] = recorded(cameras[name][key])
             if thumbnails and name in thumbnails:
@@ -459,22 +443,3 @@ def _tracks(cameras: dict[str, CameraIngest], markers_per_array: int) -> Tracks:
         return Tracks.empty(list(cameras), markers_per_array)
     return Tracks.from_observations(list(cameras), np.concatenate(names), np.concatenate(ids), np.concatenate(xy),
                                     markers_per_array)
-
-
-def _sync_summary(sync: dict[str, Any], video_fps: float, projector_fps: float) -> dict[str, Any]:
-    nominal_rate = video_fps / projector_fps
-    return {
-        "offset_frames": sync["offset"],
-        "offset_s": sync["offset"] / video_fps,
-        "offset_uncertainty_frames": sync["offset_uncertainty"],
-        "rate": sync["rate"],
-        "camera_fps": sync["rate"] * projector_fps,
-        "drift_ppm": (sync["rate"] / nominal_rate - 1.0) * 1e6,
-        "exposure_frames": sync["exposure"],
-        "sharp": sync["sharp"],
-        "start_correlation": sync["start"]["correlation"],
-        "end_correlation": sync["end"]["correlation"],
-        "fit_rms": sync["rms"],
-        "readout_s": None if sync["readout"] is None else sync["readout"]["readout"] / video_fps,
-        "readout_sigma_s": None if sync["readout"] is None else sync["readout"]["sigma"] / video_fps,
-    }

@@ -48,16 +48,10 @@ ordered_json ScalesSummary(const std::vector<ingest::ScaleStats>& stats, const s
   return out;
 }
 
-ordered_json CameraSummary(const CameraOutcome& camera, const ingest::SequenceDescription& sequence) {
+}  // namespace
+
+ordered_json CameraResultSummary(const ingest::CameraIngestResult& r, const ingest::SequenceDescription& sequence) {
   ordered_json entry;
-  entry["video"] = camera.video;
-  entry["intrinsics"] = camera.intrinsics;
-  entry["status"] = camera.ok() ? "ok" : "failed";
-  if (!camera.ok()) {
-    entry["error"] = camera.error;
-    return entry;
-  }
-  const ingest::CameraIngestResult& r = camera.result;
   entry["sync"] = SyncSummary(r.sync, r.video.fps, sequence.fps);
   entry["video_info"] = {{"width", r.video.width},         {"height", r.video.height},
                          {"fps", r.video.fps},             {"declared_fps", r.video.declared_fps},
@@ -76,6 +70,22 @@ ordered_json CameraSummary(const CameraOutcome& camera, const ingest::SequenceDe
   entry["msms_kept"] = r.centres.size();
   entry["homography_rms_px"] = r.homography_valid ? ordered_json(r.homography_rms_px) : ordered_json(nullptr);
   entry["seconds"] = {{"total", r.seconds_total}, {"detection", r.seconds_detection}};
+  return entry;
+}
+
+namespace {
+
+ordered_json CameraSummary(const CameraOutcome& camera, const ingest::SequenceDescription& sequence) {
+  ordered_json entry;
+  entry["video"] = camera.video;
+  entry["intrinsics"] = camera.intrinsics;
+  entry["status"] = camera.ok() ? "ok" : "failed";
+  if (!camera.ok()) {
+    entry["error"] = camera.error;
+    return entry;
+  }
+  const ordered_json summary = CameraResultSummary(camera.result, sequence);  // items() must not outlive it
+  for (const auto& [key, value] : summary.items()) entry[key] = value;
   return entry;
 }
 

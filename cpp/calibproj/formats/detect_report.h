@@ -21,6 +21,12 @@ struct CameraOutcome {
   bool ok() const { return error.empty(); }
 };
 
+// A calibrated camera's entry of detect_report.json after video, intrinsics and status:
+// sync, video_info, frames, patterns, detections, scales, MSMs kept, homography RMS,
+// seconds (the Python package's report takes it from here too).
+nlohmann::ordered_json CameraResultSummary(const ingest::CameraIngestResult& result,
+                                           const ingest::SequenceDescription& sequence);
+
 // The body of detect_report.json.
 nlohmann::ordered_json DetectReport(const std::vector<CameraOutcome>& cameras, const std::string& sequence_source,
                                     const ingest::SequenceDescription& sequence);
