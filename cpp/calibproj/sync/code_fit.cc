@@ -73,31 +73,59 @@ std::vector<Sample> WindowSamples(const std::vector<double>& signal, const Frame
   return samples;
 }
 
+// The sums of a window's samples that no offset or exposure changes.
+struct WindowSums {
+  double count = 0.0, tau = 0.0, tau_tau = 0.0;  // sums of 1, tau, tau^2
+  double value = 0.0, tau_value = 0.0, value_value = 0.0;
+
+  explicit WindowSums(const std::vector<Sample>& samples) {
+    for (const Sample& s : samples) {
+      count += 1.0;
+      tau += s.tau;
+      tau_tau += s.tau * s.tau;
+      value += s.value;
+      tau_value += s.tau * s.value;
+      value_value += s.value * s.value;
+    }
+  }
+};
+
 // Sum of squares of the best (a + a' tau) + (b + b' tau) W fit to the samples of one
-// window: a camera adjusting its gain during the code scales both levels alike.
-double DriftFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const FrameMap& map) {
-  Eigen::Matrix4d normal = Eigen::Matrix4d::Zero();
-  Eigen::Vector4d right = Eigen::Vector4d::Zero();
-  double smm = 0;
+// window: a camera adjusting its gain during the code scales both levels alike. The
+// normal equations of the basis (1, tau, W, tau W): what does not depend on W comes
+// from `sums`, the rest is summed here (the grid search calls this thousands of times).
+double DriftFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const WindowSums& sums,
+                    const FrameMap& map) {
+  double w_sum = 0, tw_sum = 0, t_tw = 0, w_w = 0, w_tw = 0, tw_tw = 0, w_value = 0, tw_value = 0;
   const double duration = map.ProjectorExposure();
   for (const Sample& s : samples) {
     const double w = timeline.Average(map.ProjectorTime(s.frame), duration);
-    const Eigen::Vector4d basis(1.0, s.tau, w, s.tau * w);
-    normal.selfadjointView<Eigen::Lower>().rankUpdate(basis);
-    right += basis * s.value;
-    smm += s.value * s.value;
+    const double tw = s.tau * w;
+    w_sum += w;
+    tw_sum += tw;
+    t_tw += s.tau * tw;
+    w_w += w * w;
+    w_tw += w * tw;
+    tw_tw += tw * tw;
+    w_value += w * s.value;
+    tw_value += tw * s.value;
   }
-  const Eigen::Matrix4d full = normal.selfadjointView<Eigen::Lower>();
-  const Eigen::LDLT<Eigen::Matrix4d> solver(full);
+  Eigen::Matrix4d normal;
+  normal << sums.count, sums.tau, w_sum, tw_sum,  //
+      sums.tau, sums.tau_tau, tw_sum, t_tw,       //
+      w_sum, tw_sum, w_w, w_tw,                   //
+      tw_sum, t_tw, w_tw, tw_tw;
+  const Eigen::Vector4d right(sums.value, sums.tau_value, w_value, tw_value);
+  const Eigen::LDLT<Eigen::Matrix4d> solver(normal);
   if (solver.info() != Eigen::Success || !(solver.rcond() > 1e-12)) return std::numeric_limits<double>::infinity();
   const Eigen::Vector4d theta = solver.solve(right);
-  return std::max(0.0, smm - theta.dot(right));
+  return std::max(0.0, sums.value_value - theta.dot(right));
 }
 
 // Sum of squares of the best a + b * W fit to the samples of one window.
-double LinearFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const FrameMap& map,
-                     bool gain_drift) {
-  if (gain_drift) return DriftFitCost(timeline, samples, map);
+double LinearFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const WindowSums& sums,
+                     const FrameMap& map, bool gain_drift) {
+  if (gain_drift) return DriftFitCost(timeline, samples, sums, map);
   double sw = 0, sww = 0, sm = 0, swm = 0, smm = 0;
   const double duration = map.ProjectorExposure();
   for (const Sample& s : samples) {
@@ -191,12 +219,16 @@ class CostSurface {
  public:
   CostSurface(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows, double rate,
               bool gain_drift)
-      : timeline_(timeline), windows_(windows), rate_(rate), gain_drift_(gain_drift) {}
+      : timeline_(timeline), windows_(windows), rate_(rate), gain_drift_(gain_drift) {
+    for (const auto& samples : windows_) sums_.emplace_back(samples);
+  }
 
   double operator()(double offset, double exposure) const {
     const FrameMap map{offset, rate_, exposure};
     double total = 0.0;
-    for (const auto& samples : windows_) total += LinearFitCost(timeline_, samples, map, gain_drift_);
+    for (std::size_t k = 0; k < windows_.size(); ++k) {
+      total += LinearFitCost(timeline_, windows_[k], sums_[k], map, gain_drift_);
+    }
     return total;
   }
 
@@ -230,6 +262,7 @@ class CostSurface {
  private:
   const LightTimeline& timeline_;
   const std::vector<std::vector<Sample>>& windows_;
+  std::vector<WindowSums> sums_;
   double rate_;
   bool gain_drift_;
 };
