@@ -517,6 +517,7 @@ class Baselines:
         write_intrinsics(folder / "a.json", intrinsics["a"])
         return {
             "_core.formats.write_calibration": Spec([("directory", folder), ("calibration", calibration)]),
+            "_core.formats.write_intrinsics": Spec([("out", folder / "written.json"), ("intrinsics", intrinsics["a"])]),
             "_core.formats.read_intrinsics": Spec([("path", str(folder / "a.json")), ("name", "a")]),
             "_core.formats.intrinsics_from_json": Spec([("text", json.dumps(intrinsics["a"].to_json())),
                                                        ("name", "a")]),

@@ -280,17 +280,30 @@ def test_calibrate_interrupted_or_failing_keeps_the_previous_results(small: Path
     calls = []
     write = jsonio.atomic_write_bytes
 
-    def disk_full_at_the_third_file(path, data):
+    def disk_full(path, data):  # provenance.json, the one file Python writes itself here
         calls.append(path)
-        if len(calls) == 3:
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
-        write(path, data)
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
-    monkeypatch.setattr(jsonio, "atomic_write_bytes", disk_full_at_the_third_file)
+    monkeypatch.setattr(jsonio, "atomic_write_bytes", disk_full)
     assert main(calibrate_args(small, out, "--force", "--no-report")) == 2
     assert one_error_line(capsys) == (f"calibproj calibrate: error: {out}: cannot write the output "
                                       f"(No space left on device)")
-    assert len(calls) == 3 and snapshot(out) == before and siblings(out) == []
+    assert len(calls) == 1 and snapshot(out) == before and siblings(out) == []
+
+
+def test_a_file_the_core_cannot_write_is_an_os_error_naming_it(small: Path, tmp_path: Path) -> None:
+    """The results files are written by the C++ core: a write it cannot make reaches
+    Python as OSError with the system's errno and the path, as open() raises it."""
+    from calibproj.registration import calibrate
+    from calibproj.io.intrinsics import load_intrinsics_dir
+    from calibproj.tracks import Tracks
+
+    calibration = calibrate(Tracks.read(small / "tracks.json"), load_intrinsics_dir(small / "intrinsics"))
+    blocked = tmp_path / "blocked"
+    blocked.write_text("a file where the results folder should be")
+    with pytest.raises(OSError) as error:
+        calibration.save(blocked)
+    assert error.value.errno in (errno.EEXIST, errno.ENOTDIR) and str(blocked) in str(error.value)
 
 
 def test_simulate_and_generate_write_their_folders_the_same_way(tmp_path: Path, capsys) -> None:
