@@ -4,6 +4,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
@@ -40,19 +41,6 @@ std::string FormatList() {
   std::string out;
   for (const auto& format : kExportFormats) out += (out.empty() ? "" : ", ") + format;
   return out;
-}
-
-std::string Trimmed(const std::string& text) {
-  const char* space = " \t\n\r\f\v";
-  const size_t first = text.find_first_not_of(space);
-  if (first == std::string::npos) return "";
-  return text.substr(first, text.find_last_not_of(space) - first + 1);
-}
-
-std::string General(double value) {
-  char buffer[64];
-  std::snprintf(buffer, sizeof(buffer), "%g", value);
-  return buffer;
 }
 
 // Image size, or twice the principal point (rounded half to even, as Python's round).
@@ -184,7 +172,7 @@ std::string ColmapImagesText(const Calibration& calibration,
                      "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n"
                      "#   POINTS2D[] as (X, Y, POINT3D_ID)\n"
                      "# Number of images: " + std::to_string(images) + ", mean observations per image: " +
-                     General(static_cast<double>(count) / images) + "\n";
+                     FormatNumber("%g", static_cast<double>(count) / images) + "\n";
   int image_id = 1;
   for (const auto& pose : calibration.poses) {
     const Eigen::Vector4d q = QuaternionWxyz(pose.R);
@@ -226,7 +214,7 @@ std::string ColmapPointsText(const Calibration& calibration,
   std::string text = "# 3D point list with one line of data per point:\n"
                      "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n"
                      "# Number of points: " + std::to_string(points) + ", mean track length: " +
-                     General(points ? static_cast<double>(track_sum) / points : 0.0) + "\n";
+                     FormatNumber("%g", points ? static_cast<double>(track_sum) / points : 0.0) + "\n";
   for (size_t p = 0; p < points; ++p) {
     const std::int64_t id = calibration.point_ids[p];
     double error = 0.0;

@@ -55,6 +55,13 @@ std::string PythonFloat(double value);
 // them, non-ASCII characters escaped. std::invalid_argument for a non-finite float.
 std::string PythonJson(const nlohmann::ordered_json& value);
 
+// The text without leading and trailing white space.
+std::string Trimmed(const std::string& text);
+
+// One number through printf's `format` ("%g", "%.4g", "%.0f"): Python's format
+// specifications of the same name give the same text.
+std::string FormatNumber(const char* format, double value);
+
 // A string as Python's repr() writes it ('text', or "text" when it holds a ' and no "),
 // for messages that quote what the user wrote as the Python package quotes it.
 std::string PythonRepr(const std::string& text);

@@ -36,12 +36,6 @@ std::string PythonMatrix(const Eigen::Matrix3d& K) {
   return out + "]";
 }
 
-std::string General(double value) {
-  char buffer[64];
-  std::snprintf(buffer, sizeof(buffer), "%g", value);
-  return buffer;
-}
-
 // What is wrong with these values (the Python Intrinsics' own checks), or "".
 std::string Problem(const CameraIntrinsics& in) {
   const Eigen::Matrix3d& K = in.K;
@@ -62,7 +56,7 @@ std::string Problem(const CameraIntrinsics& in) {
   const double width = in.ImageWidth(), height = in.ImageHeight();
   if (!(width > 0 && width <= limits::kMaxImageSide && height > 0 && height <= limits::kMaxImageSide)) {
     return "image size must be at most " + std::to_string(limits::kMaxImageSide) + " pixels per side, got " +
-           General(width) + "x" + General(height);
+           FormatNumber("%g", width) + "x" + FormatNumber("%g", height);
   }
   return "";
 }

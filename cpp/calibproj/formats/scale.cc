@@ -6,7 +6,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
-#include <map>
+#include <limits>
 #include <stdexcept>
 
 #include "calibproj/formats/files.h"
@@ -31,19 +31,6 @@ std::string FormOf(const std::string& kind) {
     if (name == kind) return form;
   }
   return "";
-}
-
-std::string Trimmed(const std::string& text) {
-  const char* space = " \t\n\r\f\v";
-  const size_t first = text.find_first_not_of(space);
-  if (first == std::string::npos) return "";
-  return text.substr(first, text.find_last_not_of(space) - first + 1);
-}
-
-std::string Format(const char* format, double value) {
-  char buffer[64];
-  std::snprintf(buffer, sizeof(buffer), format, value);
-  return buffer;
 }
 
 double ParseMetres(const std::string& where, const std::string& value) {
@@ -197,7 +184,7 @@ double CameraHeight(const Calibration& calibration, const ScaleMeasurement& meas
   const double height = RegisteredCentre(calibration, measurement, measurement.cameras[0]).z();
   if (!(height > 0)) {
     throw std::invalid_argument(Where(measurement) + ": camera " + PythonRepr(measurement.cameras[0]) +
-                                " is not above the floor in the calibration (height " + Format("%.4g", height) + ")");
+                                " is not above the floor in the calibration (height " + FormatNumber("%.4g", height) + ")");
   }
   return height;
 }
@@ -234,9 +221,9 @@ double MarkerSideOnFloor(const Calibration& calibration, const ScaleMeasurement&
   }
   if (static_cast<int>(pixels.size()) < kMinMarkerNeighbours) {
     throw std::invalid_argument(Where(measurement) + ": only " + std::to_string(pixels.size()) +
-                                " reconstructed MSM centres within " + Format("%.0f", radius) +
-                                " projector pixels of the marker measured (at " + Format("%.0f", centre.x) + ", " +
-                                Format("%.0f", centre.y) + "); " + std::to_string(kMinMarkerNeighbours) +
+                                " reconstructed MSM centres within " + FormatNumber("%.0f", radius) +
+                                " projector pixels of the marker measured (at " + FormatNumber("%.0f", centre.x) + ", " +
+                                FormatNumber("%.0f", centre.y) + "); " + std::to_string(kMinMarkerNeighbours) +
                                 " are needed: measure a marker that the cameras saw");
   }
   const cv::Mat H = cv::findHomography(pixels, floor, 0);
@@ -260,7 +247,7 @@ double MarkerSideOnFloor(const Calibration& calibration, const ScaleMeasurement&
 }  // namespace
 
 std::string ScaleMeasurement::Label() const {
-  return !text.empty() ? text : kind + "=" + Format("%g", metres) + " m";
+  return !text.empty() ? text : kind + "=" + FormatNumber("%g", metres) + " m";
 }
 
 void ScaleMeasurement::Check() const {
