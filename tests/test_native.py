@@ -123,6 +123,22 @@ def test_intrinsics_without_an_image_size_are_kept_in_the_results(simulation: Pa
     assert evaluated.returncode == 0, evaluated.stderr
 
 
+def test_when_no_camera_registers_both_write_the_failures_and_no_export(simulation: Path, tmp_path: Path) -> None:
+    intrinsics = tmp_path / "intrinsics"
+    intrinsics.mkdir()
+    shutil.copy(simulation / "intrinsics" / "far1.json", intrinsics / "other.json")  # nobody's
+    common = ["--tracks", str(simulation / "tracks.json"), "--intrinsics", str(intrinsics), "--export", "yaml"]
+    python = run_python("calibrate", *common, "--out", str(tmp_path / "python"), "--no-report")
+    native = run_native("calibrate", *common, "--out", str(tmp_path / "native"))
+    assert python.returncode == 1 and native.returncode == 1, (python.stderr, native.stderr)
+    assert "nothing exported" in python.stderr and "nothing exported" in native.stderr
+    written = files_below(tmp_path / "native")
+    assert "calibration_opencv.yaml" not in written and "metrics.json" in written
+    assert_same_bytes(tmp_path / "python", tmp_path / "native", written)
+    metrics = json.loads((tmp_path / "native" / "metrics.json").read_text())
+    assert all(camera["failure"] for camera in metrics["cameras"].values()) and len(metrics["cameras"]) == 10
+
+
 def test_native_scale_errors_match_python(simulation: Path, tmp_path: Path) -> None:
     tracks, intrinsics = str(simulation / "tracks.json"), str(simulation / "intrinsics")
     cases = [["--scale", "camera-height:far7=2.5"], ["--scale", "height:far1=2"], ["--scale", "distance:far1=2"],

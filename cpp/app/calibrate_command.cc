@@ -92,9 +92,10 @@ void SaveResults(OutputFolder& folder, const formats::Calibration& calibration,
     formats::WriteTracks(staging / "tracks.json", given);
     formats::WriteCalibration(staging, calibration);
     std::vector<std::string> warnings;
-    for (const auto& format : exports) {
-      if (calibration.poses.empty()) break;  // nothing to export; the failures say why
-      formats::Export(calibration, format, staging, intrinsics, &tracks, &warnings);
+    if (calibration.poses.empty() && !exports.empty()) {
+      warnings.push_back("no camera registered: nothing exported");  // the failures in metrics.json say why
+    } else {
+      for (const auto& format : exports) formats::Export(calibration, format, staging, intrinsics, &tracks, &warnings);
     }
     for (const auto& warning : warnings) std::cerr << warning << "\n";
   });
@@ -184,7 +185,8 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
     if (intrinsics.count(camera)) continue;
     // A camera whose file is bad fails alone, with the file and its problem.
     const auto bad = folder.unusable.find(camera);
-    const std::string reason = bad != folder.unusable.end() ? bad->second : "no intrinsics for this camera";
+    const std::string reason =
+        bad != folder.unusable.end() ? bad->second : formats::MissingIntrinsicsFile(arguments.intrinsics, camera);
     missing.push_back(camera);
     left_out.emplace_back(camera, reason);
     std::cerr << "camera " << camera << ": " << reason << ", left out\n";

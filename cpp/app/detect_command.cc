@@ -215,12 +215,7 @@ CameraIntrinsics IntrinsicsFor(const fs::path& folder, const std::string& name, 
   const auto found = std::find_if(candidates.begin(), candidates.end(), [](const fs::path& p) {
     return fs::is_regular_file(p);
   });
-  if (found == candidates.end()) {
-    std::string others;
-    for (size_t i = 1; i < candidates.size(); ++i) others += (i > 1 ? ", " : "") + candidates[i].filename().string();
-    throw InputError(candidates[0].string() + ": no intrinsics file for camera '" + name + "' (also looked for " +
-                     others + ")");
-  }
+  if (found == candidates.end()) throw InputError(formats::MissingIntrinsicsFile(folder, name));
   *source = found->string();
   return ReadIntrinsics(*found);
 }

@@ -299,6 +299,9 @@ def _write_results(out: Path, final: Path, calibration: Calibration, tracks: Tra
         relative = {name: Path(path).relative_to(out).as_posix() for name, path in thumbnails.items()}
         ingest_result.write_report(out / DETECT_REPORT_FILE, relative, recorded_from=final)
     calibration.save(out)
-    export_all(calibration, formats, out, used, tracks)
+    if calibration.poses:
+        export_all(calibration, formats, out, used, tracks)
+    elif formats:  # the failures in metrics.json say why
+        logger.warning("no camera registered: nothing exported")
     if report:
         write_report(out, tracks, used)

@@ -203,6 +203,13 @@ void WriteIntrinsics(const fs::path& path, const CameraIntrinsics& intrinsics) {
   AtomicWrite(path, DumpSchemaJson("intrinsics", 1, body));
 }
 
+std::string MissingIntrinsicsFile(const fs::path& folder, const std::string& name) {
+  std::string others;
+  for (const auto& suffix : kYamlSuffixes) others += (others.empty() ? "" : ", ") + name + suffix;
+  return (folder / (name + ".json")).string() + ": no intrinsics file for camera " + PythonRepr(name) +
+         " (also looked for " + others + ")";
+}
+
 IntrinsicsDir LoadIntrinsicsDir(const fs::path& directory) {
   if (!fs::is_directory(directory)) throw InputError(directory.string() + ": no such intrinsics directory");
   std::vector<fs::path> files;

@@ -35,6 +35,10 @@ void WriteIntrinsics(const std::filesystem::path& path, const CameraIntrinsics& 
 // std::invalid_argument with the problem.
 CameraIntrinsics IntrinsicsFromDocument(const nlohmann::json& document, const std::string& name);
 
+// Why a camera has no intrinsics in `folder`: "<folder>/<name>.json: no intrinsics file for
+// camera '<name>' (also looked for <name>.yaml, <name>.yml, <name>.xml)".
+std::string MissingIntrinsicsFile(const std::filesystem::path& folder, const std::string& name);
+
 // The intrinsics files of a folder, keyed by camera name (the file stem). A file that
 // cannot be used (malformed, or a second file for one camera) fails its own camera only.
 struct IntrinsicsDir {
