@@ -175,69 +175,6 @@ nlohmann::json ReadJson(const fs::path& path) {
   }
 }
 
-namespace {
-
-std::string TypeOf(const nlohmann::json& value) { return value.type_name(); }
-
-}  // namespace
-
-double NumberValue(const nlohmann::json& value, const std::string& what) {
-  if (!value.is_number()) throw std::invalid_argument(what + ": expected a number, got " + TypeOf(value));
-  const double number = value.get<double>();
-  if (!std::isfinite(number)) throw std::invalid_argument(what + ": expected a finite number");
-  return number;
-}
-
-long long IntegerValue(const nlohmann::json& value, const std::string& what, long long lo, long long hi) {
-  const bool integral = value.is_number_integer() ||
-                        (value.is_number_float() && value.get<double>() == std::floor(value.get<double>()));
-  if (!integral) {
-    throw std::invalid_argument(what + ": expected an integer, got " +
-                                (value.is_number() ? value.dump() : TypeOf(value)));
-  }
-  // Compared as doubles first: a float or an unsigned beyond the range does not convert.
-  const double approximate = value.get<double>();
-  if (!(approximate >= static_cast<double>(lo) && approximate <= static_cast<double>(hi))) {
-    throw std::invalid_argument(what + ": " + value.dump() + " is outside [" + std::to_string(lo) + ", " +
-                                std::to_string(hi) + "]");
-  }
-  const long long integer = value.is_number_float() ? static_cast<long long>(approximate) : value.get<long long>();
-  if (integer < lo || integer > hi) {
-    throw std::invalid_argument(what + ": " + value.dump() + " is outside [" + std::to_string(lo) + ", " +
-                                std::to_string(hi) + "]");
-  }
-  return integer;
-}
-
-int IntValue(const nlohmann::json& value, const std::string& what) {
-  return static_cast<int>(
-      IntegerValue(value, what, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
-}
-
-bool BoolValue(const nlohmann::json& value, const std::string& what) {
-  if (!value.is_boolean()) throw std::invalid_argument(what + ": expected true or false, got " + TypeOf(value));
-  return value.get<bool>();
-}
-
-std::string StringValue(const nlohmann::json& value, const std::string& what) {
-  if (!value.is_string()) throw std::invalid_argument(what + ": expected a string, got " + TypeOf(value));
-  return value.get<std::string>();
-}
-
-std::vector<double> NumberList(const nlohmann::json& value, const std::string& what) {
-  if (!value.is_array()) throw std::invalid_argument(what + ": expected a list of numbers, got " + TypeOf(value));
-  std::vector<double> out;
-  for (const auto& item : value) out.push_back(NumberValue(item, what + "[" + std::to_string(out.size()) + "]"));
-  return out;
-}
-
-std::vector<int> IntList(const nlohmann::json& value, const std::string& what) {
-  if (!value.is_array()) throw std::invalid_argument(what + ": expected a list of integers, got " + TypeOf(value));
-  std::vector<int> out;
-  for (const auto& item : value) out.push_back(IntValue(item, what + "[" + std::to_string(out.size()) + "]"));
-  return out;
-}
-
 nlohmann::json ReadSchemaJson(const fs::path& path, const std::string& kind, int major) {
   const nlohmann::json document = ReadJson(path);
   if (!document.is_object()) throw InputError(path.string() + ": expected a JSON object at the top level");

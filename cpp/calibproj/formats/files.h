@@ -26,17 +26,6 @@ nlohmann::json ReadSchemaJson(const std::filesystem::path& path, const std::stri
 nlohmann::json ReadJson(const std::filesystem::path& path);
 constexpr int kMaxJsonDepth = 512;
 
-// Values of a document with the type its schema gives them; std::invalid_argument
-// naming `what` otherwise. nlohmann converts silently between booleans, floats and
-// integers (true as 1, 1e30 as an int), so a file is read through these.
-double NumberValue(const nlohmann::json& value, const std::string& what);
-long long IntegerValue(const nlohmann::json& value, const std::string& what, long long lo, long long hi);
-int IntValue(const nlohmann::json& value, const std::string& what);
-bool BoolValue(const nlohmann::json& value, const std::string& what);
-std::string StringValue(const nlohmann::json& value, const std::string& what);
-std::vector<double> NumberList(const nlohmann::json& value, const std::string& what);
-std::vector<int> IntList(const nlohmann::json& value, const std::string& what);
-
 // Writes text to a temporary file in the same folder, syncs it, then renames it over
 // `path`: readers see the old file or the whole new one. std::filesystem::filesystem_error
 // with the system's error (a full disk, ...) when that fails; no temporary file stays.

@@ -1,6 +1,7 @@
 #include "calibproj/formats/json_values.h"
 
 #include <cmath>
+#include <limits>
 #include <set>
 #include <stdexcept>
 
@@ -122,9 +123,60 @@ std::string Describe(const json& value) {
   return KindOf(value) + " (" + written.substr(0, kDescribeCharacters) + "...)";
 }
 
-bool BooleanOf(const json& value, const std::string& where) {
-  if (!value.is_boolean()) throw std::invalid_argument(where + ": expected true or false, got " + Describe(value));
+double NumberValue(const nlohmann::json& value, const std::string& what) {
+  if (!value.is_number()) throw std::invalid_argument(what + ": expected a number, got " + Describe(value));
+  const double number = value.get<double>();
+  if (!std::isfinite(number)) throw std::invalid_argument(what + ": expected a finite number");
+  return number;
+}
+
+long long IntegerValue(const nlohmann::json& value, const std::string& what, long long lo, long long hi) {
+  const bool integral = value.is_number_integer() ||
+                        (value.is_number_float() && value.get<double>() == std::floor(value.get<double>()));
+  if (!integral) {
+    throw std::invalid_argument(what + ": expected an integer, got " + Describe(value));
+  }
+  // Compared as doubles first: a float or an unsigned beyond the range does not convert.
+  const double approximate = value.get<double>();
+  if (!(approximate >= static_cast<double>(lo) && approximate <= static_cast<double>(hi))) {
+    throw std::invalid_argument(what + ": " + Describe(value) + " is outside [" + std::to_string(lo) + ", " +
+                                std::to_string(hi) + "]");
+  }
+  const long long integer = value.is_number_float() ? static_cast<long long>(approximate) : value.get<long long>();
+  if (integer < lo || integer > hi) {
+    throw std::invalid_argument(what + ": " + Describe(value) + " is outside [" + std::to_string(lo) + ", " +
+                                std::to_string(hi) + "]");
+  }
+  return integer;
+}
+
+int IntValue(const nlohmann::json& value, const std::string& what) {
+  return static_cast<int>(
+      IntegerValue(value, what, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
+}
+
+bool BoolValue(const nlohmann::json& value, const std::string& what) {
+  if (!value.is_boolean()) throw std::invalid_argument(what + ": expected true or false, got " + Describe(value));
   return value.get<bool>();
+}
+
+std::string StringValue(const nlohmann::json& value, const std::string& what) {
+  if (!value.is_string()) throw std::invalid_argument(what + ": expected a string, got " + Describe(value));
+  return value.get<std::string>();
+}
+
+std::vector<double> NumberList(const nlohmann::json& value, const std::string& what) {
+  if (!value.is_array()) throw std::invalid_argument(what + ": expected a list of numbers, got " + Describe(value));
+  std::vector<double> out;
+  for (const auto& item : value) out.push_back(NumberValue(item, what + "[" + std::to_string(out.size()) + "]"));
+  return out;
+}
+
+std::vector<int> IntList(const nlohmann::json& value, const std::string& what) {
+  if (!value.is_array()) throw std::invalid_argument(what + ": expected a list of integers, got " + Describe(value));
+  std::vector<int> out;
+  for (const auto& item : value) out.push_back(IntValue(item, what + "[" + std::to_string(out.size()) + "]"));
+  return out;
 }
 
 NumberArray NumbersOf(const json& value, const std::string& where) {

@@ -17,7 +17,17 @@ namespace calibproj::formats {
 // beginning when longer than 40 characters.
 std::string Describe(const nlohmann::json& value);
 
-bool BooleanOf(const nlohmann::json& value, const std::string& where);
+// Single values and flat lists with the type a schema gives them; std::invalid_argument
+// naming `what` otherwise. nlohmann converts silently between booleans, floats and
+// integers (true as 1, 1e30 as an int), so a file is read through these.
+double NumberValue(const nlohmann::json& value, const std::string& what);
+long long IntegerValue(const nlohmann::json& value, const std::string& what, long long lo, long long hi);
+int IntValue(const nlohmann::json& value, const std::string& what);
+bool BoolValue(const nlohmann::json& value, const std::string& what);
+std::string StringValue(const nlohmann::json& value, const std::string& what);
+std::vector<double> NumberList(const nlohmann::json& value, const std::string& what);
+std::vector<int> IntList(const nlohmann::json& value, const std::string& what);
+
 
 // Nested lists of numbers with rows of equal length: the numbers row-major and the
 // lists' shape (an empty shape for a single number).

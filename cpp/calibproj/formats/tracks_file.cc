@@ -137,7 +137,7 @@ Tracks TracksFromDocument(const nlohmann::json& document) {
     throw std::invalid_argument("observations of camera(s) " + PythonList(unknown) + " not listed in cameras");
   }
   const auto undistorted = document.find("undistorted");
-  if (undistorted != document.end() && !BooleanOf(*undistorted, "undistorted")) {
+  if (undistorted != document.end() && !BoolValue(*undistorted, "undistorted")) {
     throw std::invalid_argument("only undistorted observations are supported");
   }
   std::vector<int> cameras;

@@ -91,23 +91,6 @@ def number_array(value: Any, where: str, shape: tuple[int | None, ...] | None = 
     return array
 
 
-def integer_array(value: Any, where: str, minimum: int, maximum: int) -> np.ndarray:
-    """A list of integers in ``[minimum, maximum]`` as an int64 array."""
-    flat, dims = _flatten(value, where)
-    if len(dims) != 1:
-        raise ValueError(f"{where}: expected a list of integers")
-    _check_numbers(flat, where)
-    if flat:
-        low, high = min(flat), max(flat)
-        if low < minimum or high > maximum:
-            outside = low if low < minimum else high
-            raise ValueError(f"{where}: integers must be in [{minimum}, {maximum}], got {describe(outside)}")
-        fraction = next((v for v in flat if type(v) is float and v != math.floor(v)), None)
-        if fraction is not None:
-            raise ValueError(f"{where}: expected integers, got {fraction!r}")
-    return np.array([int(v) for v in flat], dtype=np.int64)
-
-
 def _check_range(value: float, where: str, minimum: float | None, maximum: float | None) -> None:
     if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
         if maximum is None:
