@@ -144,7 +144,7 @@ ordered_json Failures(const Calibration& calibration) {
   return failed;
 }
 
-const CameraMetrics* MetricsOf(const Calibration& calibration, const std::string& name) {
+const CameraMetrics* FindMetrics(const Calibration& calibration, const std::string& name) {
   for (const auto& [camera, metrics] : calibration.metrics) {
     if (camera == name) return &metrics;
   }
@@ -157,7 +157,7 @@ std::string CameraPosesJson(const Calibration& calibration) {
   ordered_json cameras = ordered_json::object();
   for (const auto& pose : calibration.poses) {
     ordered_json entry = {{"R", Matrix(pose.R)}, {"t", Vector(pose.t)}, {"center", Vector(pose.Centre())}};
-    if (const CameraMetrics* m = MetricsOf(calibration, pose.name)) {
+    if (const CameraMetrics* m = FindMetrics(calibration, pose.name)) {
       entry["rotation_sigma_deg"] = Optional(m->rotation_sigma_deg);
       entry["centre_sigma"] = Optional(m->centre_sigma);
       entry["weak"] = m->weak;

@@ -49,8 +49,7 @@ std::pair<int, int> ImageSize(const CameraIntrinsics& camera, std::vector<std::s
   if (warnings) {
     warnings->push_back("camera " + camera.name + ": no image size in its intrinsics; using twice the principal point");
   }
-  return {static_cast<int>(std::nearbyint(2.0 * camera.K(0, 2) + 1.0)),
-          static_cast<int>(std::nearbyint(2.0 * camera.K(1, 2) + 1.0))};
+  return {static_cast<int>(std::nearbyint(camera.ImageWidth())), static_cast<int>(std::nearbyint(camera.ImageHeight()))};
 }
 
 Eigen::Vector3d Rodrigues(const Eigen::Matrix3d& R) {
