@@ -100,8 +100,6 @@ class IngestResult:
     cameras: dict[str, CameraIngest]
     sequence_source: str
     markers: str
-    projector_fps: float
-    scales: list[float]
     pattern_arrays: list[int] = field(default_factory=list)  # the array each pattern shows
 
     @property
@@ -238,8 +236,8 @@ def ingest(
     finally:
         bars.close()
     tracks = _tracks(cameras, sequence.centres.shape[1])
-    return IngestResult(tracks, cameras, sequence_source, sequence.markers.spec, float(sequence.fps),
-                        [float(s) for s in sequence.layout.scales], [int(p.array) for p in sequence.patterns])
+    return IngestResult(tracks, cameras, sequence_source, sequence.markers.spec,
+                        [int(p.array) for p in sequence.patterns])
 
 
 class _CameraJob:
