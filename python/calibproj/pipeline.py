@@ -49,6 +49,7 @@ def calibrate(
     force: bool = False,
     ingest_options: Any = None,
     detector_options: Mapping[str, Any] | None = None,
+    exposures: Mapping[str, float] | None = None,
     workers: int = 2,
     progress: bool = True,
     command: list[str] | None = None,
@@ -72,8 +73,9 @@ def calibrate(
         report: write ``report.html`` and ``report/*.png`` (needs ``out``).
         force: replace an existing results folder ``out`` (the whole folder: nothing
             of the earlier run remains); without it an existing folder is an error.
-        ingest_options, detector_options, workers, progress: passed to
-            ``calibproj.ingest.ingest`` when ``source`` is videos. With
+        ingest_options, detector_options, exposures, workers, progress: passed to
+            ``calibproj.ingest.ingest`` when ``source`` is videos (``exposures``: known
+            exposure times of some cameras, name -> seconds). With
             ``refine_intrinsics`` and no ``ingest_options``, the ingest's local check
             (``consistency_local_neighbours``) is off: it compares each centre with its
             neighbours to a fraction of a pixel, which a lens still to be refined does
@@ -122,8 +124,8 @@ def calibrate(
             intrinsics_source = intrinsics if intrinsics_source is None else intrinsics_source
         tracks, ingest_failed, ingest_result = _tracks_of(given, sequence,
                                                           intrinsics if nominal_fov_deg is not None else intrinsics_source,
-                                                          ingest_options,
-                                                          detector_options, workers, progress)
+                                                          ingest_options, detector_options, exposures,
+                                                          workers, progress)
         left_out = _left_out(ingest_failed, unusable)
         markers = None
         if sequence is not None and measurement is not None:
@@ -247,10 +249,12 @@ def video_camera_names(folder: Path) -> list[str]:
     return sorted({p.stem for p in folder.iterdir() if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES})
 
 
-def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, workers, progress):
+def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, exposures, workers, progress):
     """(tracks, cameras that failed before registration, the ingest result or None)."""
     path = _videos_folder(source)
     if path is None:
+        if exposures:
+            raise ValueError("exposures apply to videos, not to tracks")
         return (source, {}, None) if isinstance(source, Tracks) else (Tracks.read(source), {}, None)
     if not path.is_dir():
         raise FileNotFoundError(f"{path}: no such videos folder")
@@ -259,7 +263,7 @@ def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, w
     from calibproj.ingest import ingest
 
     result = ingest(path, sequence, intrinsics, options=ingest_options, detector_options=detector_options,
-                    workers=workers, progress=progress)
+                    workers=workers, progress=progress, exposures=exposures)
     for name, error in result.failed.items():
         logger.error("camera %s failed: %s", name, error)
     return result.tracks, result.failed, result

@@ -4,14 +4,16 @@ each effect alone (two levels) and all combined, over several seeds.
 Per condition it prints cameras registered / total (and the failed ones with their
 reason), rotation and translation RMSE against the truth after Sim(3) alignment,
 evaluation on the rendering's independent points (mean px, success at 0.5 px), the
-largest sync error against the truth (camera frames), the largest readout error
-(ms, where a readout is estimated), and observations assigned to a wrong point
-(farther than --wrong-px from that point's true image position). Rotation RMSE and
+largest sync error against the truth (camera frames; over the cameras whose offset the
+video determines, and over all with the largest excess over the reported uncertainty),
+the largest readout error (ms, where a readout is estimated), and observations assigned
+to a wrong point (farther than --wrong-px from that point's true image position). Rotation RMSE and
 success are also given over the cameras not reported weak (rotation known worse than
 the registration's weak_rotation_sigma_deg), the success on evaluation points that the
 weak cameras did not place; weak cameras are listed with their sigma.
 The last line, over the cameras not reported weak:
-``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B``.
+``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
+sync_beyond_frames=.. worst_readout_ms=.. wrong=N``.
 
     python tools/bench/realism.py                       # every condition, 3 seeds
     python tools/bench/realism.py --conditions clean,drops-2 --seeds 1 --arrays 12
@@ -111,6 +113,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     try:
         calibration = calibrate(room / "videos", room / "intrinsics", sequence=sequence_path, out=results,
                                 options=RegistrationOptions(model=args.model),
+                                exposures=locked_exposures(scene) if args.locked_exposures else None,
                                 scale=f"marker-size:{marker_side_m:.9f}", force=True, progress=False)
     except ValueError as error:  # the scale could not be measured: results in arbitrary units
         logging.warning("%s seed %d: %s", condition, seed, error)
@@ -143,14 +146,24 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     return row
 
 
+def locked_exposures(scene: Scene) -> dict[str, float]:
+    """The exposure times a user who locked them knows: every camera's but those with
+    automatic exposure."""
+    return {camera.name: camera.exposure_s for camera in scene.cameras if camera.auto_exposure is None}
+
+
 def rms(values: list[float]) -> float:
     return float(np.sqrt(np.mean(np.square(values)))) if values else math.nan
 
 
-def max_sync_error(report: dict, truth: dict) -> tuple[float, float]:
-    """Largest sync error (camera frames) and largest excess over the reported
-    uncertainty (0 when every truth lies within its interval)."""
-    worst, beyond = 0.0, 0.0
+def max_sync_error(report: dict, truth: dict) -> dict[str, float]:
+    """Sync errors against the truth (camera frames): the largest over the cameras whose
+    offset the video determines (``sharp``: some frames straddle a light change), the
+    largest over all cameras, and the largest excess over the reported uncertainty (0
+    when every truth lies within its interval). A camera whose frames keep a fixed
+    phase to the projector's and never straddle a light change records the same video
+    for any offset inside its interval: there the interval is what can be known."""
+    determined, worst, beyond = 0.0, 0.0, 0.0
     for name, camera in report["cameras"].items():
         if camera["status"] != "ok":
             continue
@@ -158,8 +171,10 @@ def max_sync_error(report: dict, truth: dict) -> tuple[float, float]:
         true_offset = -timing["first_exposure_start_s"] * timing["fps"]
         error = abs(camera["sync"]["offset_frames"] - true_offset)
         worst = max(worst, error)
+        if camera["sync"]["sharp"]:
+            determined = max(determined, error)
         beyond = max(beyond, error - camera["sync"]["offset_uncertainty_frames"])
-    return worst, beyond
+    return {"determined": determined, "all": worst, "beyond": max(beyond, 0.0)}
 
 
 def max_readout_error(report: dict, truth: dict) -> float | None:
@@ -186,18 +201,23 @@ def wrong_assignments(tracks_path: Path, truth: dict, threshold_px: float) -> in
     return wrong
 
 
+def format_sync(sync: dict[str, float]) -> str:
+    return (f"sync {sync['determined']:.3f} fr where determined (all {sync['all']:.3f}, "
+            f"beyond +-: {sync['beyond']:.3f})")
+
+
 def format_row(row: dict) -> str:
     failed = "; ".join(f"{name}: {reason[:80]}" for name, reason in row["failed"].items())
     weak = ", ".join(f"{name} ({sigma:.3f} deg)" for name, sigma in row["weak"].items())
     readout = "-" if row["readout_ms"] is None else f"{row['readout_ms']:.2f}"
     if "rot" not in row:
         return (f"{row['condition']:<20} seed {row['seed']}  registered {row['registered']}/{row['total']}  "
-                f"sync {row['sync_frames'][0]:.3f} fr (beyond +-: {row['sync_frames'][1]:.3f})  {failed}")
+                f"{format_sync(row['sync_frames'])}  {failed}")
     mm = "-" if row["mm"] is None else f"{row['mm']:.2f}"
     return (f"{row['condition']:<20} seed {row['seed']}  registered {row['registered']}/{row['total']}  "
             f"rot {row['rot']:.4f} deg (not weak {row['rot_strong']:.4f})  {mm} mm  eval {row['eval_px']:.3f} px  "
             f"@0.5 {100 * row['success']:.0f} % (not weak {100 * row['success_strong']:.0f} %)  "
-            f"sync {row['sync_frames'][0]:.3f} fr (beyond +-: {max(row['sync_frames'][1], 0.0):.3f})  "
+            f"{format_sync(row['sync_frames'])}  "
             f"readout {readout} ms  wrong {row['wrong']}"
             + (f"  weak: {weak}" if weak else "") + (f"  failed: {failed}" if failed else ""))
 
@@ -213,6 +233,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", default="coplanar", choices=("coplanar", "free"))
     parser.add_argument("--wrong-px", type=float, default=3.0,
                         help="an observation this far from its point's true position counts as wrong (default 3)")
+    parser.add_argument("--locked-exposures", action="store_true",
+                        help="give the calibration the exposure time of every camera without automatic exposure "
+                             "(calibrate --exposure), as a user who locked them knows them")
     parser.add_argument("--work", type=Path, default=None, help="keep renderings here (default: a temporary folder)")
     parser.add_argument("--json", type=Path, default=None, help="also write every row to this JSON file")
     args = parser.parse_args(argv)
@@ -242,8 +265,14 @@ def main(argv: list[str] | None = None) -> int:
     worst_success = min((row["success_strong"] for row in evaluated), default=math.nan)
     registered = sum(row["registered"] for row in rows)
     total = sum(row["total"] for row in rows)
+    worst_sync = max((row["sync_frames"]["determined"] for row in rows), default=math.nan)
+    beyond = max((row["sync_frames"]["beyond"] for row in rows), default=math.nan)
+    readouts = [row["readout_ms"] for row in rows if row["readout_ms"] is not None]
+    worst_readout = max(readouts, default=math.nan)
+    wrong = sum(row["wrong"] for row in rows)
     print(f"realism: worst_rot_deg={worst_rot:.4f} worst_eval_success={worst_success:.3f} "
-          f"registered={registered}/{total}")
+          f"registered={registered}/{total} worst_sync_frames={worst_sync:.3f} sync_beyond_frames={beyond:.3f} "
+          f"worst_readout_ms={worst_readout:.2f} wrong={wrong}")
     return 0
 
 

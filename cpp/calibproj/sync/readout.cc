@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace calibproj::sync {
 
@@ -21,13 +23,81 @@ constexpr double kMaxBandUncertainty = 0.25;
 // compression and a textured floor to about 0.1).
 constexpr double kMaxBandRms = 0.15;
 
+// Readouts tried across the feasible range when bounding the first row's offset.
+constexpr int kRangeSamples = 65;
+
 double Median(std::vector<double> values) {
   const auto middle = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
   std::nth_element(values.begin(), middle, values.end());
   return *middle;
 }
 
+// The first-row offsets o that put every band inside its interval at readout r:
+// o in [max(offset + r row - half_width), min(offset + r row + half_width)].
+std::pair<double, double> FirstRowOffsets(const std::vector<BandInterval>& bands, double r) {
+  double low = -std::numeric_limits<double>::infinity(), high = std::numeric_limits<double>::infinity();
+  for (const BandInterval& band : bands) {
+    low = std::max(low, band.offset + r * band.row - band.half_width);
+    high = std::min(high, band.offset + r * band.row + band.half_width);
+  }
+  return {low, high};
+}
+
+// A uniform interval's standard deviation from its half-width.
+double UniformSigma(double half_width) { return half_width / std::sqrt(3.0); }
+
+// Widens the estimate to the range of readouts (and first-row offsets) that every
+// band's interval allows, and moves a line fit outside that range to its middle.
+void BoundByIntervals(const std::vector<BandInterval>& intervals, ReadoutEstimate* estimate) {
+  double low = 0.0, high = 0.0;
+  if (!FeasibleReadouts(intervals, &low, &high)) return;
+  estimate->bounded = true;
+  estimate->readout_low = low;
+  estimate->readout_high = high;
+  if (estimate->readout < low || estimate->readout > high) {
+    estimate->readout = 0.5 * (low + high);
+    const auto [first_low, first_high] = FirstRowOffsets(intervals, estimate->readout);
+    estimate->first_row_offset = 0.5 * (first_low + first_high);
+  }
+  estimate->readout_sigma = std::max(estimate->readout_sigma, UniformSigma(0.5 * (high - low)));
+  double first_low = std::numeric_limits<double>::infinity(), first_high = -first_low;
+  for (int k = 0; k < kRangeSamples; ++k) {
+    const double r = low + (high - low) * k / (kRangeSamples - 1);
+    const auto [a, b] = FirstRowOffsets(intervals, r);
+    if (a > b) continue;
+    first_low = std::min(first_low, a);
+    first_high = std::max(first_high, b);
+  }
+  if (first_low <= first_high) {
+    estimate->offset_sigma = std::max(estimate->offset_sigma, UniformSigma(0.5 * (first_high - first_low)));
+  }
+}
+
 }  // namespace
+
+bool FeasibleReadouts(const std::vector<BandInterval>& bands, double* low, double* high) {
+  // Some o meets every interval iff for every pair (a, b):
+  // offset_a + r row_a - half_a <= offset_b + r row_b + half_b, i.e.
+  // r (row_a - row_b) <= offset_b - offset_a + half_a + half_b.
+  double lower = -std::numeric_limits<double>::infinity(), upper = std::numeric_limits<double>::infinity();
+  for (const BandInterval& a : bands) {
+    for (const BandInterval& b : bands) {
+      const double slope = a.row - b.row;
+      const double bound = b.offset - a.offset + a.half_width + b.half_width;
+      if (slope > 0.0) {
+        upper = std::min(upper, bound / slope);
+      } else if (slope < 0.0) {
+        lower = std::max(lower, bound / slope);
+      } else if (bound < 0.0) {
+        return false;
+      }
+    }
+  }
+  if (!(lower <= upper) || !std::isfinite(lower) || !std::isfinite(upper)) return false;
+  *low = lower;
+  *high = upper;
+  return true;
+}
 
 // The estimate from one code window at the map's rate.
 ReadoutEstimate EstimateInWindow(const std::vector<std::vector<double>>& band_signals, const LightTimeline& timeline,
@@ -40,6 +110,7 @@ ReadoutEstimate EstimateInWindow(const std::vector<std::vector<double>>& band_si
   CodeFitOptions band_options = options;
   band_options.offset_range = options.offset_range + 1.0;
   std::vector<double> rows, offsets, weights, exposures;
+  std::vector<BandInterval> intervals;  // every band that shows the codes
   for (int b = 0; b < bands; ++b) {
     try {
       const CodeFit fit = FitCodeWindows(band_signals[b], timeline, windows, map, false, band_options);
@@ -48,8 +119,13 @@ ReadoutEstimate EstimateInWindow(const std::vector<std::vector<double>>& band_si
       const double sigma = std::max(fit.offset_uncertainty / std::sqrt(3.0), options.offset_step / std::sqrt(12.0));
       BandFit band{(b + 0.5) / bands, fit.map.offset, sigma, fit.rms, false};
       // A band that sees little of the projection (walls, the image's edge) fits noise.
-      band.used = fit.offset_uncertainty <= kMaxBandUncertainty && fit.contrast > 0.0 && fit.rms <= kMaxBandRms;
+      const bool shows_codes = fit.contrast > 0.0 && fit.rms <= kMaxBandRms;
+      band.used = shows_codes && fit.offset_uncertainty <= kMaxBandUncertainty;
       estimate.bands.push_back(band);
+      // An interval cut by the offsets searched bounds nothing.
+      if (shows_codes && fit.offset_uncertainty < band_options.offset_range) {
+        intervals.push_back({band.row, fit.map.offset, fit.offset_uncertainty});
+      }
       if (!band.used) continue;
       rows.push_back((b + 0.5) / bands);
       offsets.push_back(fit.map.offset);
@@ -91,6 +167,7 @@ ReadoutEstimate EstimateInWindow(const std::vector<std::vector<double>>& band_si
   estimate.offset_sigma = std::sqrt(dispersion * (1.0 / sw + mean_row * mean_row / srr));
   estimate.exposure = Median(exposures);
   estimate.bands_used = n;
+  BoundByIntervals(intervals, &estimate);
   return estimate;
 }
 
@@ -126,6 +203,23 @@ ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_sig
   }
   combined.readout = readout / weights;
   combined.readout_sigma = std::sqrt(1.0 / weights);
+  // Both windows' ranges hold: their intersection bounds the readout.
+  combined.bounded = true;
+  combined.readout_low = -std::numeric_limits<double>::infinity();
+  combined.readout_high = std::numeric_limits<double>::infinity();
+  for (const ReadoutEstimate& e : estimates) {
+    combined.bounded = combined.bounded && e.bounded;
+    combined.readout_low = std::max(combined.readout_low, e.readout_low);
+    combined.readout_high = std::min(combined.readout_high, e.readout_high);
+  }
+  combined.bounded = combined.bounded && combined.readout_low <= combined.readout_high;
+  if (combined.bounded) {
+    const double low = combined.readout_low, high = combined.readout_high;
+    if (combined.readout < low || combined.readout > high) combined.readout = 0.5 * (low + high);
+    combined.readout_sigma = std::max(combined.readout_sigma, UniformSigma(0.5 * (high - low)));
+  } else {
+    combined.readout_low = combined.readout_high = 0.0;
+  }
   const ReadoutEstimate& last = estimates.back();
   const double first_position = combined.first_row_offset + map.rate * anchors.front();
   const double last_position = last.first_row_offset + map.rate * anchors.back();

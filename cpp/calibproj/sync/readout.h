@@ -7,6 +7,14 @@
 // readout * (y_b / h). A line through the bands whose fit is sharp gives the readout,
 // the first row's offset (the frame map of the frame's timestamp) and their
 // uncertainties. A global shutter gives a readout near 0.
+//
+// Where the camera's frames keep a few fixed phases to the projector's (25 fps against
+// 30), a band sees a light change within a frame only at some rows, and how far into
+// its exposure tells the readout only relative to the exposure: with the exposure
+// unknown, many readouts explain the codes. Every band that shows the codes bounds its
+// offset to the interval of offsets that fit it; the readouts for which one line meets
+// every interval are the feasible range, and the reported sigma is never below that
+// range's (as a uniform interval's). A known exposure (fixed_exposure) narrows it.
 
 #include <vector>
 
@@ -36,7 +44,25 @@ struct ReadoutEstimate {
   double rate = 0.0;             // the first row's rate, from two code windows (0: not measured)
   bool applied = false;          // the frame map was moved to the first row
   int bands_used = 0;
+  // Readouts (camera frames) for which one line meets every band's interval of offsets
+  // that fit; bounded = false when the bands gave no such range.
+  bool bounded = false;
+  double readout_low = 0.0;
+  double readout_high = 0.0;
 };
+
+// One band's interval of offsets that fit its codes: [offset - half_width, offset +
+// half_width] at its centre row (share of the image height).
+struct BandInterval {
+  double row = 0.0;
+  double offset = 0.0;
+  double half_width = 0.0;
+};
+
+// The readouts r for which some first-row offset o puts every band's offset o - r * row
+// inside its interval: false when there is none (bands disagreeing beyond their
+// intervals), else the range [*low, *high]. Exact: each pair of bands bounds r linearly.
+bool FeasibleReadouts(const std::vector<BandInterval>& bands, double* low, double* high);
 
 // `band_signals[b][j]`: mean luma of band b (rows [b h / B, (b + 1) h / B)) in camera
 // frame j, NaN where not measured. `map` is the whole frame's fit. Each window is fitted

@@ -30,7 +30,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from calibproj.commands.options import add_dataclass_arguments, dataclass_from_args
+from calibproj.commands.options import (add_dataclass_arguments, add_exposure_argument, dataclass_from_args,
+                                        parse_exposures)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -52,6 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write the calibration as yaml, colmap and/or anipose (comma-separated)")
     parser.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
     parser.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
+    add_exposure_argument(parser, "with videos; default: estimated")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.add_argument("--refine-intrinsics", action="append", metavar="[CAMERA=]ENTRIES",
                         help="refine these lens entries from the projection itself, starting from the "
@@ -78,6 +80,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("give either VIDEOS_DIR (with --sequence) or --tracks FILE")
     if args.videos is not None and args.sequence is None:
         raise ValueError(f"{args.videos}: calibrating from videos needs --sequence sequence.json")
+    exposures = parse_exposures(args.exposure)
+    if exposures and args.videos is None:
+        raise ValueError("--exposure applies to videos, not to --tracks")
     calibration = calibrate(
         args.tracks or args.videos,
         args.intrinsics,
@@ -88,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
         exports=[args.export] if args.export else [],
         report=not args.no_report,
         force=args.force,
+        exposures=exposures,
         workers=args.workers,
         progress=not args.no_progress,
         command=getattr(args, "command_line", None),

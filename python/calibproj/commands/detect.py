@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import argparse
 
-from calibproj.commands.options import add_dataclass_arguments, dataclass_from_args
+from calibproj.commands.options import (add_dataclass_arguments, add_exposure_argument, dataclass_from_args,
+                                        parse_exposures)
 
 REPORT_NAME = "detect_report.json"
 
@@ -36,8 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--detector-option", action="append", default=[], metavar="NAME=VALUE",
                         help="marker detector option as calibproj.detect_markers takes it, e.g. quad_decimate=2 "
                              "(repeatable; default: the detector's defaults)")
-    parser.add_argument("--exposure", action="append", default=[], metavar="CAMERA=SECONDS",
-                        help="known exposure time of one camera (repeatable; default: --exposure-s for all)")
+    add_exposure_argument(parser, "default: --exposure-s for all")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.add_argument("--json", action="store_true", help="print the report as JSON instead of a table")
     add_dataclass_arguments(parser, IngestOptions, "ingest options")
@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from calibproj.io.output_folder import OutputFile
 
     options = dataclass_from_args(IngestOptions, args)
-    detector_options, exposures = _detector_options(args.detector_option), _exposures(args.exposure)
+    detector_options, exposures = _detector_options(args.detector_option), parse_exposures(args.exposure)
     with OutputFile(args.out) as output:
         result = ingest.ingest(args.videos, args.sequence, args.intrinsics, options=options,
                                detector_options=detector_options, workers=args.workers,
@@ -62,20 +62,6 @@ def run(args: argparse.Namespace) -> int:
     report = result.report()
     print(json.dumps(report, indent=1) if args.json else format_report(report))
     return 0 if len(result.failed) < len(result.cameras) else 1
-
-
-def _exposures(items: list[str]) -> dict[str, float]:
-    exposures = {}
-    for item in items:
-        name, separator, text = item.partition("=")
-        try:
-            seconds = float(text)
-        except ValueError:
-            seconds = -1.0
-        if not separator or not name or not seconds > 0:
-            raise ValueError(f"--exposure expects CAMERA=SECONDS with SECONDS > 0, got {item!r}")
-        exposures[name.strip()] = seconds
-    return exposures
 
 
 def _detector_options(items: list[str]) -> dict:

@@ -54,3 +54,24 @@ def _comma_list(item_type: type):
             raise argparse.ArgumentTypeError(f"expected a comma-separated list of {item_type.__name__}, got {text!r}")
 
     return parse
+
+
+def add_exposure_argument(parser: argparse.ArgumentParser, default: str) -> None:
+    parser.add_argument("--exposure", action="append", default=[], metavar="CAMERA=SECONDS",
+                        help="known exposure time of one camera: with it a rolling shutter's readout is measured "
+                             f"where the light codes alone leave it open (repeatable; {default})")
+
+
+def parse_exposures(items: list[str]) -> dict[str, float]:
+    """--exposure CAMERA=SECONDS values: camera name -> seconds."""
+    exposures = {}
+    for item in items:
+        name, separator, text = item.partition("=")
+        try:
+            seconds = float(text)
+        except ValueError:
+            seconds = -1.0
+        if not separator or not name or not seconds > 0:
+            raise ValueError(f"--exposure expects CAMERA=SECONDS with SECONDS > 0, got {item!r}")
+        exposures[name.strip()] = seconds
+    return exposures
