@@ -115,6 +115,27 @@ def test_scale_cameras_are_checked_against_the_videos_before_the_ingest(
     assert not (tmp_path / "results").exists()
 
 
+@pytest.mark.parametrize("extra, message", [
+    (["--exposure", "far3=0.01"], "exposures given for camera(s) without a video: far3"),
+    (["--exposure", "far1=fast"], "--exposure expects CAMERA=SECONDS with SECONDS > 0, got 'far1=fast'"),
+    (["--exposure", "far1=0"], "--exposure expects CAMERA=SECONDS with SECONDS > 0, got 'far1=0'"),
+])
+def test_exposures_are_checked_before_the_ingest(videos: Path, tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                 extra: list[str], message: str) -> None:
+    status = main(["calibrate", str(videos), "--sequence", str(tmp_path / "sequence.json"), "--intrinsics",
+                   str(tmp_path / "intrinsics"), "--out", str(tmp_path / "results"), *extra])
+    assert status == EXIT_USAGE
+    assert capsys.readouterr().err.strip() == f"calibproj calibrate: error: {message}"
+    assert not (tmp_path / "results").exists()
+
+
+def test_exposures_apply_to_videos_only(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    status = main(["calibrate", "--tracks", str(tmp_path / "tracks.json"), "--intrinsics", str(tmp_path),
+                   "--out", str(tmp_path / "results"), "--exposure", "far1=0.01"])
+    assert status == EXIT_USAGE
+    assert capsys.readouterr().err.strip() == "calibproj calibrate: error: --exposure applies to videos, not to --tracks"
+
+
 # -- exit status --------------------------------------------------------------------------------------
 
 

@@ -197,6 +197,15 @@ def test_a_camera_whose_intrinsics_file_is_bad_or_missing_fails_alone(
     assert errors.translation_rmse_pct < MAX_TRANSLATION_RMSE_PCT
 
 
+def test_a_known_exposure_reaches_the_sync(room: Path, tmp_path: Path) -> None:
+    """calibrate(exposures=...) fits cam2's light codes with its exposure as given."""
+    timing = json.loads((room / "room" / "truth.json").read_text())["timing"]["cameras"]["cam2"]
+    calibration = calibrate_room(room, tmp_path / "results", report=False, exposures={"cam2": timing["exposure_s"]})
+    assert calibration.failed == {}
+    sync = json.loads((tmp_path / "results" / "detect_report.json").read_text())["cameras"]["cam2"]["sync"]
+    assert sync["exposure_frames"] == pytest.approx(timing["exposure_s"] * timing["fps"], rel=1e-6)
+
+
 def test_videos_without_intrinsics_files(room: Path, tmp_path: Path) -> None:
     """Cameras without an intrinsics file start from a guessed field of view (100 deg;
     the truth is 93). With one camera calibrated, the floor's metric is known and the

@@ -175,6 +175,13 @@ def detect(
     return result.tracks
 
 
+def check_exposures(exposures: Mapping[str, float], names: list[str]) -> None:
+    """ValueError naming the cameras of ``exposures`` that have no video among ``names``."""
+    unknown = sorted(set(exposures) - set(names))
+    if unknown:
+        raise ValueError(f"exposures given for camera(s) without a video: {', '.join(unknown)}")
+
+
 def ingest(
     videos: str | os.PathLike | Mapping[str, str | os.PathLike] | Iterable[str | os.PathLike],
     sequence: Any,
@@ -215,9 +222,7 @@ def ingest(
     names = list(video_paths)
     bars = _Progress(names, enabled=progress)
     exposures = dict(exposures or {})
-    unknown = sorted(set(exposures) - set(names))
-    if unknown:
-        raise ValueError(f"exposures given for camera(s) without a video: {', '.join(unknown)}")
+    check_exposures(exposures, names)
 
     def run(name: str) -> CameraIngest:
         camera_options = options.replace(exposure_s=exposures.get(name, options.exposure_s))

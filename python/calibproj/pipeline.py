@@ -109,6 +109,10 @@ def calibrate(
                           _projected_markers(sequence, None) if measurement.kind == "marker-size" else None)
     if request is not None and videos is not None:
         request.check_cameras(video_camera_names(videos))
+    if exposures and videos is not None:
+        from calibproj.ingest import check_exposures
+
+        check_exposures(exposures, video_camera_names(videos))
     _check_nominal_fov(nominal_fov_deg, request, videos, intrinsics)
     folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
