@@ -6,14 +6,15 @@ reason), rotation and translation RMSE against the truth after Sim(3) alignment,
 evaluation on the rendering's independent points (mean px, success at 0.5 px), the
 largest sync error against the truth (camera frames; over the cameras whose offset the
 video determines, and over all with the largest excess over the reported uncertainty),
-the largest readout error (ms, where a readout is estimated), and observations assigned
-to a wrong point (farther than --wrong-px from that point's true image position). Rotation RMSE and
-success are also given over the cameras not reported weak (rotation known worse than
-the registration's weak_rotation_sigma_deg), the success on evaluation points that the
-weak cameras did not place; weak cameras are listed with their sigma.
+the largest readout error (ms, where a readout is estimated, and in units of its sigma),
+and observations assigned to a wrong point (farther than --wrong-px from that point's
+true image position). Rotation RMSE and success are also given over the cameras not
+reported weak (rotation known worse than the registration's weak_rotation_sigma_deg),
+the success on evaluation points that the weak cameras did not place; weak cameras are
+listed with their sigma.
 The last line, over the cameras not reported weak:
 ``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
-sync_beyond_frames=.. worst_readout_ms=.. wrong=N``.
+sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
 
     python tools/bench/realism.py                       # every condition, 3 seeds
     python tools/bench/realism.py --conditions clean,drops-2 --seeds 1 --arrays 12
@@ -177,11 +178,16 @@ def max_sync_error(report: dict, truth: dict) -> dict[str, float]:
     return {"determined": determined, "all": worst, "beyond": max(beyond, 0.0)}
 
 
-def max_readout_error(report: dict, truth: dict) -> float | None:
-    errors = [abs(camera["sync"]["readout_s"] - truth["timing"]["cameras"][name]["readout_s"]) * 1e3
+def max_readout_error(report: dict, truth: dict) -> tuple[float, float] | None:
+    """The largest readout error (ms) over the cameras whose readout is estimated, and
+    the largest error in units of the camera's reported sigma; None without any."""
+    errors = [(abs(camera["sync"]["readout_s"] - truth["timing"]["cameras"][name]["readout_s"]) * 1e3,
+               camera["sync"]["readout_sigma_s"] * 1e3)
               for name, camera in report["cameras"].items()
               if camera["status"] == "ok" and camera["sync"].get("readout_s") is not None]
-    return max(errors) if errors else None
+    if not errors:
+        return None
+    return max(error for error, _ in errors), max(error / max(sigma, 1e-9) for error, sigma in errors)
 
 
 def wrong_assignments(tracks_path: Path, truth: dict, threshold_px: float) -> int:
@@ -209,7 +215,7 @@ def format_sync(sync: dict[str, float]) -> str:
 def format_row(row: dict) -> str:
     failed = "; ".join(f"{name}: {reason[:80]}" for name, reason in row["failed"].items())
     weak = ", ".join(f"{name} ({sigma:.3f} deg)" for name, sigma in row["weak"].items())
-    readout = "-" if row["readout_ms"] is None else f"{row['readout_ms']:.2f}"
+    readout = "-" if row["readout_ms"] is None else f"{row['readout_ms'][0]:.2f} ({row['readout_ms'][1]:.1f} sigma)"
     if "rot" not in row:
         return (f"{row['condition']:<20} seed {row['seed']}  registered {row['registered']}/{row['total']}  "
                 f"{format_sync(row['sync_frames'])}  {failed}")
@@ -268,11 +274,12 @@ def main(argv: list[str] | None = None) -> int:
     worst_sync = max((row["sync_frames"]["determined"] for row in rows), default=math.nan)
     beyond = max((row["sync_frames"]["beyond"] for row in rows), default=math.nan)
     readouts = [row["readout_ms"] for row in rows if row["readout_ms"] is not None]
-    worst_readout = max(readouts, default=math.nan)
+    worst_readout = max((error for error, _ in readouts), default=math.nan)
+    worst_readout_sigmas = max((sigmas for _, sigmas in readouts), default=math.nan)
     wrong = sum(row["wrong"] for row in rows)
     print(f"realism: worst_rot_deg={worst_rot:.4f} worst_eval_success={worst_success:.3f} "
           f"registered={registered}/{total} worst_sync_frames={worst_sync:.3f} sync_beyond_frames={beyond:.3f} "
-          f"worst_readout_ms={worst_readout:.2f} wrong={wrong}")
+          f"worst_readout_ms={worst_readout:.2f} worst_readout_sigmas={worst_readout_sigmas:.1f} wrong={wrong}")
     return 0
 
 
