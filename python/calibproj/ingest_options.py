@@ -181,12 +181,14 @@ class IngestOptions:
             its rows.
         max_readout_sigma: ... provided it is known to this many camera frames (1 sigma);
             a readout known less well is reported, not used; the offset, which then
-            refers to rows near the middle, has its uncertainty widened by half the
-            readout (plus two sigma).
+            refers to the rows that see the projection, has its uncertainty widened by
+            the readout (plus two sigma) times the share of the image between those
+            rows and the farther of the first and last rows (half when the projection
+            fills the image).
         unmeasured_readout_frames: the readout of a camera where it cannot be measured
             (no band of rows sees a light change) may be anything up to this many
-            camera frames: its offset's uncertainty widens by half of it (0 assumes a
-            global shutter; 1, the default, any rolling shutter).
+            camera frames: its offset's uncertainty widens by that share of it (0
+            assumes a global shutter; 1, the default, any rolling shutter).
         use_timestamps: time comes from the container's frame timestamps: each frame
             is placed on the camera's frame grid, so dropped frames leave gaps instead
             of shifting every later frame (false: time from the decoding order, for

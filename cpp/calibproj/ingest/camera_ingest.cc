@@ -270,13 +270,15 @@ class CameraIngest {
                                      sync::CodeWindow(timeline_, sequence_.end_code, options_.sync)},
                                     sync->map);
     if (!ReadoutApplies(sync->readout)) {
-      // A readout known too poorly to move the map: the map is that of rows near the
-      // middle, up to half the readout from the first row's.
+      // A readout known too poorly to move the map: the map is that of the rows that
+      // see the projection (near the middle when it fills the image), up to that share
+      // of the readout from the first row's, and as far from the last row's.
       const double readout_bound = sync->readout.valid
                                        ? std::abs(sync->readout.readout) + 2.0 * sync->readout.readout_sigma
                                        : options_.unmeasured_readout_frames;
+      const double row = sync->readout.signal_row;
       // Added, not the larger of the two: the middle rows' offset is itself uncertain.
-      sync->offset_uncertainty += 0.5 * readout_bound;
+      sync->offset_uncertainty += std::max(row, 1.0 - row) * readout_bound;
       return;
     }
     sync->readout.applied = true;

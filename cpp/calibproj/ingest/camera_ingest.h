@@ -102,8 +102,10 @@ struct IngestOptions {
   double readout_sigmas = 3.0;
   double max_readout_sigma = 0.1;
   // A readout that could not be measured (no band sees a light change) may be anything
-  // up to this many camera frames: the offset, which then refers to rows near the middle,
-  // has its uncertainty widened by half of it (0 assumes a global shutter).
+  // up to this many camera frames: the offset, which then refers to the rows that see
+  // the projection, has its uncertainty widened by the share of it that lies between
+  // those rows and the farther of the first and last rows (half of it when the
+  // projection fills the image; 0 assumes a global shutter).
   double unmeasured_readout_frames = 1.0;
   // Decoded grey frames kept while the start code is being looked for.
   int lookback_frames = 16;

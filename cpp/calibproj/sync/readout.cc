@@ -135,6 +135,11 @@ ReadoutEstimate EstimateInWindow(const std::vector<std::vector<double>>& band_si
       // Too few measured frames in this band's windows: it gives nothing.
     }
   }
+  if (!intervals.empty()) {
+    double sum = 0.0;
+    for (const BandInterval& band : intervals) sum += band.row;
+    estimate.signal_row = sum / static_cast<double>(intervals.size());
+  }
   const int n = static_cast<int>(rows.size());
   if (n < kMinBands || rows.back() - rows.front() < kMinSpread) return estimate;
   // Weighted least-squares line offset = intercept + slope * row.

@@ -44,6 +44,9 @@ struct ReadoutEstimate {
   double rate = 0.0;             // the first row's rate, from two code windows (0: not measured)
   bool applied = false;          // the frame map was moved to the first row
   int bands_used = 0;
+  // Mean centre row (share of the image height) of the bands that show the codes: the
+  // rows a whole-frame fit's offset refers to (0.5 when no band was fitted).
+  double signal_row = 0.5;
   // Readouts (camera frames) for which one line meets every band's interval of offsets
   // that fit; bounded = false when the bands gave no such range.
   bool bounded = false;
