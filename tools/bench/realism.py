@@ -43,7 +43,7 @@ from calibproj.registration import RegistrationOptions
 from calibproj.sequence import generate
 from calibproj.simulate.presets import REAL_PEOPLE
 from calibproj.simulate.render import RenderOptions, simulate_videos
-from calibproj.simulate.scene import AutoExposure, FloorTexture, Person, Scene, load_scene
+from calibproj.simulate.scene import AutoExposure, FloorTexture, Person, Scene, load_scene, read_scene
 
 Effect = Callable[[Scene], Scene]
 
@@ -108,7 +108,8 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     effect, render_changes = CONDITIONS[condition]
     scene = effect(load_scene(args.scene, seed=seed))
     room = work / f"{condition}-{seed}"
-    simulate_videos(scene, sequence, room, seed=seed, options=replace(RenderOptions(), **render_changes))
+    if not (args.reuse and rendered(room, scene)):
+        simulate_videos(scene, sequence, room, seed=seed, options=replace(RenderOptions(), **render_changes))
     marker_side_m = marker_side_on_floor(room / "scene.json", sequence)
     results = room / "results"
     try:
@@ -145,6 +146,14 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     row["readout_ms"] = max_readout_error(report, truth)
     row["wrong"] = wrong_assignments(room / "results" / "tracks.json", truth, args.wrong_px)
     return row
+
+
+def rendered(room: Path, scene: Scene) -> bool:
+    """The room folder already holds a complete rendering of this scene."""
+    try:
+        return (room / "truth.json").is_file() and read_scene(room / "scene.json") == scene
+    except (OSError, ValueError):
+        return False
 
 
 def locked_exposures(scene: Scene) -> dict[str, float]:
@@ -243,6 +252,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="give the calibration the exposure time of every camera without automatic exposure "
                              "(calibrate --exposure), as a user who locked them knows them")
     parser.add_argument("--work", type=Path, default=None, help="keep renderings here (default: a temporary folder)")
+    parser.add_argument("--reuse", action="store_true",
+                        help="with --work: calibrate the renderings already there again where their scene is the "
+                             "condition's (same --arrays and --markers assumed) instead of rendering them anew")
     parser.add_argument("--json", type=Path, default=None, help="also write every row to this JSON file")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")

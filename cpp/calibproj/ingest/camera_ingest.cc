@@ -134,7 +134,18 @@ class CameraIngest {
       options.detector.aruco.refinement.method = detect::CornerRefinement::kNone;
       options.detector.apriltag.refinement.method = detect::CornerRefinement::kNone;
     }
-    if (options.exposure_s > 0.0) options.sync.fit.fixed_exposure = options.exposure_s * video_fps;
+    if (options.exposure_s > 0.0) {
+      const double exposure = std::min(options.exposure_s * video_fps, 1.0);
+      if (options.readout_bands > 0 && options.unmeasured_readout_frames > 0.0) {
+        // A rolling shutter's whole frame sees the light from its first row's exposure
+        // to its last row's: the known exposure is a row's, the frame's lasts up to the
+        // readout longer. The bands are fitted with the row's (RowFitOptions).
+        options.sync.fit.min_exposure = exposure;
+        options.sync.fit.max_exposure = std::min(1.0, exposure + options.unmeasured_readout_frames);
+      } else {
+        options.sync.fit.fixed_exposure = exposure;
+      }
+    }
     // One knob for the surfaces: those planned with and those kept by the check.
     options.homography.max_surfaces = options.consistency.max_surfaces;
     options.Check();
@@ -261,7 +272,15 @@ class CameraIngest {
 
   sync::ReadoutEstimate EstimateReadout(const std::vector<sync::FrameWindow>& windows, const sync::FrameMap& map) {
     if (band_signals_.empty()) return {};
-    return sync::EstimateReadout(band_signals_, timeline_, windows, map, options_.sync.fit);
+    return sync::EstimateReadout(band_signals_, timeline_, windows, map, RowFitOptions());
+  }
+
+  // The code fit of a band of rows: with the known exposure, which is a row's.
+  sync::CodeFitOptions RowFitOptions() const {
+    sync::CodeFitOptions fit = options_.sync.fit;
+    const double video_fps = nominal_rate_ * sequence_.fps;
+    if (options_.exposure_s > 0.0) fit.fixed_exposure = std::min(options_.exposure_s * video_fps, 1.0);
+    return fit;
   }
 
   // The readout from both codes; a rolling shutter's frame map is its first row's.
