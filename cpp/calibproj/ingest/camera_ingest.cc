@@ -285,9 +285,10 @@ class CameraIngest {
 
   // The readout from both codes; a rolling shutter's frame map is its first row's.
   void ApplyReadout(sync::SyncResult* sync) {
-    sync->readout = EstimateReadout({sync::CodeWindow(timeline_, sequence_.start_code, options_.sync),
-                                     sync::CodeWindow(timeline_, sequence_.end_code, options_.sync)},
-                                    sync->map);
+    const std::vector<sync::FrameWindow> windows{sync::CodeWindow(timeline_, sequence_.start_code, options_.sync),
+                                                 sync::CodeWindow(timeline_, sequence_.end_code, options_.sync)};
+    sync->readout = EstimateReadout(windows, sync->map);
+    RefitWithKnownExposure(windows, sync);
     if (!ReadoutApplies(sync->readout)) {
       // A readout known too poorly to move the map: the map is that of the rows that
       // see the projection (near the middle when it fills the image), up to that share
@@ -308,6 +309,26 @@ class CameraIngest {
     // One sigma of margin: the picks were made from the same kind of estimate, and the
     // floor-consistency check catches a frame whose last rows saw the next pattern.
     sync->window_map = sync::CoverRows(sync->window_map, sync->readout, 1.0);
+  }
+
+  // With a known exposure the whole frame was fitted with exposures up to the largest
+  // readout longer; a measured readout that bounds that tighter (a global shutter's,
+  // near 0) fits the whole frame again with its bound, so that the known exposure
+  // pins the offset as it would without any rolling shutter.
+  void RefitWithKnownExposure(const std::vector<sync::FrameWindow>& windows, sync::SyncResult* sync) const {
+    const sync::ReadoutEstimate& readout = sync->readout;
+    const sync::CodeFitOptions& fit = options_.sync.fit;
+    if (!(options_.exposure_s > 0.0) || fit.fixed_exposure > 0.0 || !readout.valid) return;
+    const double bound = std::abs(readout.readout) + 2.0 * readout.readout_sigma;
+    if (!(fit.min_exposure + bound < fit.max_exposure)) return;
+    sync::CodeFitOptions tighter = fit;
+    tighter.max_exposure = fit.min_exposure + bound;
+    const sync::CodeFit joint = sync::FitCodeWindows(result_.signal, timeline_, windows, sync->map, true, tighter);
+    sync->map = joint.map;
+    sync->window_map = joint.window_map;
+    sync->offset_uncertainty = joint.offset_uncertainty;
+    sync->sharp = joint.sharp;
+    sync->rms = joint.rms;
   }
 
   bool ReadoutApplies(const sync::ReadoutEstimate& readout) const {
