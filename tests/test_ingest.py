@@ -199,6 +199,26 @@ def test_scales_a_camera_cannot_resolve_are_skipped(aruco, aruco_results):
         assert report.raw["frames_detected"] < aruco_results[True].cameras[camera].raw["frames_detected"]
 
 
+def test_a_recording_that_runs_on_is_not_decoded_past_the_projection(aruco, aruco_results, tmp_path):
+    """The same room recorded 4 s longer: decoding stops after the end code's window and
+    the last pick, and the observations are those of the short recording."""
+    from calibproj.simulate.render import RenderOptions
+
+    _, sequence, _ = aruco
+    simulate_videos("small", sequence, tmp_path, seed=7, options=RenderOptions(tail_s=4.0))
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    result = ingest(tmp_path / "videos", sequence, tmp_path / "intrinsics",
+                    options=IngestOptions(explore_interval=0), progress=False)
+    short = aruco_results[True]
+    for name, camera in result.cameras.items():
+        timing = truth["timing"]["cameras"][name]
+        assert camera.raw["frames_decoded"] < timing["recorded_frames"] - 3.5 * timing["fps"], name
+        ids, xy = result.tracks.observations(name)
+        short_ids, short_xy = short.tracks.observations(name)
+        np.testing.assert_array_equal(ids, short_ids)
+        np.testing.assert_allclose(xy, short_xy, atol=1e-9)
+
+
 def test_detect_command_writes_tracks_and_report(aruco, tmp_path, capsys):
     out, sequence, _ = aruco
     sequence_file = tmp_path / "sequence.json"

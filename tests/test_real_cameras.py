@@ -134,8 +134,11 @@ def test_dropped_frames_and_jitter_are_reported(dropping):
     for name, camera in result.cameras.items():
         timing = truth["timing"]["cameras"][name]
         frames = report[name]["frames"]
-        assert frames["decoded"] == timing["recorded_frames"]
-        assert frames["dropped"] == len(timing["dropped_frames"])
+        # Decoding stops after the end code's window: drops are counted up to there.
+        assert timing["recorded_frames"] - 40 < frames["decoded"] <= timing["recorded_frames"]
+        recorded = np.setdiff1d(np.arange(timing["frame_count"]), timing["dropped_frames"])
+        last_slot = recorded[frames["decoded"] - 1]
+        assert frames["dropped"] == sum(1 for slot in timing["dropped_frames"] if slot < last_slot)
         assert frames["duplicated"] == 0
         assert frames["jitter_ms"] == pytest.approx(1e3 * np.std(timing["jitter_s"]), rel=0.25)
         assert report[name]["video_info"]["fps"] == pytest.approx(timing["fps"], rel=1e-4)

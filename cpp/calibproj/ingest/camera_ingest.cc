@@ -103,6 +103,9 @@ class CameraIngest {
       converted_ = false;
       if (started_) {
         OnFrameAfterStart(frame);
+        // Past the end code's window and the last planned pick nothing is used: a
+        // recording that runs on after the projection is not decoded further.
+        if (frame >= last_needed_frame_) break;
       } else {
         OnFrameBeforeStart(frame);
       }
@@ -203,6 +206,8 @@ class CameraIngest {
     provisional_ = sync::FrameMap{window.CameraFrame(first) - nominal_rate_ * first, nominal_rate_, window.exposure};
     PlanPicks();
     PlanEndCodeMeans();
+    last_needed_frame_ = end_means_last_;
+    if (!frame_pattern_.empty()) last_needed_frame_ = std::max(last_needed_frame_, frame_pattern_.rbegin()->first);
     started_ = true;
     for (const auto& [index, gray] : ring_.frames()) {
       const auto pick = frame_pattern_.find(index);
@@ -680,6 +685,7 @@ class CameraIngest {
   std::map<int, int> frame_pattern_;
   int end_means_first_ = 0;
   int end_means_last_ = -1;
+  int last_needed_frame_ = -1;  // the last camera frame the sync or a pick uses
   PendingPattern pending_;
   std::map<int, DetectionOutput> arrived_;  // finished, not yet absorbed, by pattern
   std::vector<PatternStatus> status_;
