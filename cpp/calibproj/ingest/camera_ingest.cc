@@ -302,7 +302,7 @@ class CameraIngest {
                                        ? std::abs(sync->readout.readout) + 2.0 * sync->readout.readout_sigma
                                        : options_.unmeasured_readout_frames;
       const double row = sync->readout.signal_row;
-      // Added, not the larger of the two: the middle rows' offset is itself uncertain.
+      // Added, not the larger of the two: those rows' offset is itself uncertain.
       sync->offset_uncertainty += std::max(row, 1.0 - row) * readout_bound;
       return;
     }
