@@ -294,6 +294,8 @@ class CameraIngest {
                                                  sync::CodeWindow(timeline_, sequence_.end_code, options_.sync)};
     sync->readout = EstimateReadout(windows, sync->map);
     RefitWithKnownExposure(windows, sync);
+    // A known exposure is reported as given (a row's), whatever the whole frame's fit.
+    if (options_.exposure_s > 0.0) sync->map.exposure = RowFitOptions().fixed_exposure;
     if (!ReadoutApplies(sync->readout)) {
       // A readout known too poorly to move the map: the map is that of the rows that
       // see the projection (near the middle when it fills the image), up to that share
