@@ -197,6 +197,12 @@ def test_a_camera_whose_intrinsics_file_is_bad_or_missing_fails_alone(
     assert errors.translation_rmse_pct < MAX_TRANSLATION_RMSE_PCT
 
 
+def test_exposures_with_tracks_are_refused_before_anything_is_written(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="exposures apply to videos, not to tracks"):
+        calibrate(tmp_path / "tracks.json", tmp_path, out=tmp_path / "results", exposures={"cam1": 0.01})
+    assert not (tmp_path / "results").exists()
+
+
 def test_a_known_exposure_reaches_the_sync(room: Path, tmp_path: Path) -> None:
     """calibrate(exposures=...) fits cam2's light codes with its exposure as given."""
     timing = json.loads((room / "room" / "truth.json").read_text())["timing"]["cameras"]["cam2"]

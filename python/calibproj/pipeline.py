@@ -109,7 +109,9 @@ def calibrate(
                           _projected_markers(sequence, None) if measurement.kind == "marker-size" else None)
     if request is not None and videos is not None:
         request.check_cameras(video_camera_names(videos))
-    if exposures and videos is not None:
+    if exposures and videos is None:
+        raise ValueError("exposures apply to videos, not to tracks")
+    if exposures:
         from calibproj.ingest import check_exposures
 
         check_exposures(exposures, video_camera_names(videos))
@@ -257,8 +259,6 @@ def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, e
     """(tracks, cameras that failed before registration, the ingest result or None)."""
     path = _videos_folder(source)
     if path is None:
-        if exposures:
-            raise ValueError("exposures apply to videos, not to tracks")
         return (source, {}, None) if isinstance(source, Tracks) else (Tracks.read(source), {}, None)
     if not path.is_dir():
         raise FileNotFoundError(f"{path}: no such videos folder")

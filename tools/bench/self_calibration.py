@@ -1,10 +1,12 @@
 """Self-calibration (``calibrate --refine-intrinsics``) against the truth of simulated rooms.
 
-Per preset and seed, tracks are simulated with ground truth and calibrated three times:
+Per preset and seed, tracks are simulated with ground truth and calibrated four times:
 with the true intrinsics (the reference), with nominal intrinsics (the true ones with
 the focal length --focal-error too long, same principal point, no distortion) as they
-are, and with the nominal ones refined (--entries). The nominal runs see the tracks
-undistorted with the nominal intrinsics, as a user who has only those would.
+are, with the nominal ones refined (--entries), and with the true lens but the refined
+run's focal lengths (focal-only: how much of the refined run's pose error its focal
+lengths alone make). The nominal runs see the tracks undistorted with the nominal
+intrinsics, as a user who has only those would.
 
 Per camera of the refined run it prints how far its floor observations reach towards
 the image corners (coverage, from self_calibration.json), the focal error against the
@@ -15,7 +17,7 @@ what remains is the distortion's error), its rotation error against the truth in
 true and the refined calibrations after alignment on the camera centres (deg), and the
 entries held with the reason.
 
-Per run (true, nominal, refined):
+Per run (true, nominal, refined, focal-only):
 
 - pairwise rotation error, gauge-free: the RMS over every pair of cameras not reported
   weak in the true-intrinsics run and declared observable by the refinement of the
@@ -39,7 +41,10 @@ of those cameras is at most 1.5 x the true one; the evaluation on every point su
 for each of them. The restricted evaluation is shown beside it (over the cameras for
 which it succeeds with the true intrinsics; the others are listed). The last line:
 ``self-calibration: worst_focal_pct=.. worst_dist_px=.. worst_pair_rot_ratio=..
-worst_centre_rot_ratio=.. eval_success_observable=.. eval_success_seen=.. eval_success_all=..``.
+worst_centre_rot_ratio=.. eval_success_observable=.. eval_success_seen=.. eval_success_all=..
+rms_pair_rot_ratio=.. focal_only_rms_pair_rot_ratio=.. focal_z_rms=..``: the last three
+over all rows (RMS pairwise error of the refined and the focal-only runs over the true
+run's, and the RMS of the refined focal errors in units of their reported sigma).
 
     python tools/bench/self_calibration.py                        # or-full and demo, 1 seed
     python tools/bench/self_calibration.py --presets or-full,demo --seeds 3
@@ -73,7 +78,7 @@ from calibproj.simulate.geometric import GeometricSimulation, simulate_tracks
 from calibproj.simulate.scene import Scene, load_scene
 from calibproj.tracks import Tracks
 
-RUNS = ("true", "nominal", "refined")
+RUNS = ("true", "nominal", "refined", "focal-only")
 MAX_FOCAL_PCT = 0.3
 MAX_DIST_PX = 0.1
 MAX_ROT_RATIO = 1.5
@@ -86,6 +91,17 @@ def nominal_intrinsics(truth: Intrinsics, focal_error: float) -> Intrinsics:
     K[0, 0] *= 1.0 + focal_error
     K[1, 1] *= 1.0 + focal_error
     return Intrinsics(truth.name, truth.resolution, K, np.zeros(5))
+
+
+def with_focal_lengths(truth: Mapping[str, Intrinsics], refined: Mapping[str, Intrinsics]) -> dict[str, Intrinsics]:
+    """The true intrinsics with fx, fy scaled as the refined focal length is."""
+    out = {}
+    for name, lens in truth.items():
+        K = lens.K.copy()
+        if name in refined:
+            K[:2, :2] *= refined[name].K[0, 0] / lens.K[0, 0]
+        out[name] = Intrinsics(name, lens.resolution, K, lens.dist.copy())
+    return out
 
 
 def true_scene(preset: str, seed: int, lens: str) -> Scene:
@@ -113,6 +129,11 @@ def run(preset: str, seed: int, work: Path, args) -> dict:
         calibration = calibrate(tracks, intrinsics, out=results, report=False, force=True, progress=False,
                                 refine_intrinsics=entries)
         row["runs"][label] = score(calibration, results, room, simulation)
+    focal_only = with_focal_lengths(truth, load_intrinsics_dir(room / "refined" / "intrinsics"))
+    results = room / "focal-only"
+    calibration = calibrate(convert_tracks(simulation.tracks, truth, focal_only), focal_only, out=results,
+                            report=False, force=True, progress=False)
+    row["runs"]["focal-only"] = score(calibration, results, room, simulation)
     row["cameras"] = lens_errors(room / "refined", truth)
     # The pairs: cameras registered and not weak in the reference (true-intrinsics) run
     # whose focal length the refinement declared observable (a camera held keeps the
@@ -295,6 +316,11 @@ def format_summary(row: dict) -> str:
             + f"  ({row['seconds']:.0f} s)")
 
 
+def rms_ratio(rows: list[dict], label: str) -> float:
+    """RMS over the rows of a run's pairwise rotation error over the true run's."""
+    return rms([row["runs"][label]["rot_pairs"] for row in rows]) / rms([row["runs"]["true"]["rot_pairs"] for row in rows])
+
+
 def pair_ratio(row: dict) -> float:
     return row["runs"]["refined"]["rot_pairs"] / row["runs"]["true"]["rot_pairs"]
 
@@ -376,10 +402,12 @@ def main(argv: list[str] | None = None) -> int:
     success_observable = min((observable_success(row) for row in rows), default=math.nan)
     success_seen = min((seen_success(row) for row in rows), default=math.nan)
     success_all = min((row["runs"]["refined"]["success"] for row in rows), default=math.nan)
+    z = [c["focal_pct"] / c["sigma_pct"] for c in cameras if c["sigma_pct"]]
     print(f"self-calibration: worst_focal_pct={worst_focal:.3f} worst_dist_px={worst_dist:.3f} "
           f"worst_pair_rot_ratio={worst_pairs:.2f} worst_centre_rot_ratio={worst_centre:.2f} "
           f"eval_success_observable={success_observable:.3f} eval_success_seen={success_seen:.3f} "
-          f"eval_success_all={success_all:.3f}")
+          f"eval_success_all={success_all:.3f} rms_pair_rot_ratio={rms_ratio(rows, 'refined'):.2f} "
+          f"focal_only_rms_pair_rot_ratio={rms_ratio(rows, 'focal-only'):.2f} focal_z_rms={rms(z):.2f}")
     return 0
 
 
