@@ -237,3 +237,38 @@ def test_plane_manifold_keeps_a_unit_normal_and_the_fixed_offset() -> None:
     for _ in range(20):
         plus = ba.fixed_distance_pose_manifold(pose[3:], pose, pose, rng.normal(size=5))["plus"]
         assert abs(np.linalg.norm(plus[3:]) - np.linalg.norm(pose[3:])) < 1e-14
+
+
+def reference_projector_residual(projector: np.ndarray, weight: float, surface_map: np.ndarray, lens: np.ndarray,
+                                 ab: np.ndarray) -> np.ndarray:
+    """weight * (G(a, b) - u~ (1 + k1 r^2 + k2 r^4)), G the homography of the map (g33 = 1)."""
+    G = np.append(surface_map, 1.0).reshape(3, 3)
+    h = G @ np.array([ab[0], ab[1], 1.0])
+    r2 = float(projector @ projector)
+    return weight * (h[:2] / h[2] - projector * (1.0 + lens[0] * r2 + lens[1] * r2 * r2))
+
+
+def test_projector_cost_jacobians_match_numeric() -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        projector = rng.uniform([-0.5, -0.28], [0.5, 0.28])
+        # A ceiling projector's map of a floor: near-affine with a small perspective part.
+        surface_map = np.array([0.4, 0.02, 0.01, -0.03, 0.41, -0.02, 0.0, 0.0]) + rng.normal(scale=0.02, size=8)
+        lens = rng.normal(scale=0.05, size=2)
+        ab = rng.uniform(-1.5, 1.5, size=2)
+        weight = rng.uniform(1.0, 1e4)
+        ok, residual, (J_map, J_lens, J_ab) = ba.evaluate_projector_cost(projector, weight, surface_map, lens, ab)
+        assert ok
+        expected = reference_projector_residual(projector, weight, surface_map, lens, ab)
+        np.testing.assert_allclose(residual, expected, rtol=1e-10, atol=1e-10 * weight)
+        for analytic, f, x in (
+                (J_map, lambda g: reference_projector_residual(projector, weight, g, lens, ab), surface_map),
+                (J_lens, lambda k: reference_projector_residual(projector, weight, surface_map, k, ab), lens),
+                (J_ab, lambda v: reference_projector_residual(projector, weight, surface_map, lens, v), ab)):
+            assert relative_error(analytic, numeric_jacobian(f, x)) < TOLERANCE
+
+
+def test_projector_cost_refuses_a_point_on_the_maps_vanishing_line() -> None:
+    surface_map = np.array([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0])  # h3 = a + 1
+    ok, _, _ = ba.evaluate_projector_cost(np.zeros(2), 1.0, surface_map, np.zeros(2), np.array([-1.0, 0.3]))
+    assert not ok

@@ -57,7 +57,8 @@ def cost_from_truth(driver: RegistrationDriver, sim, model: str) -> float:
 @pytest.mark.parametrize("seed", range(20))
 def test_paper_rig_reaches_the_global_optimum_within_bounds(model: str, seed: int) -> None:
     sim = simulate_tracks("paper", None, noise_px=0.5, seed=seed)
-    driver = RegistrationDriver(sim.tracks, sim.intrinsics, RegistrationOptions(model=model))
+    # One noise for every camera: the cost from the truth is the unweighted one.
+    driver = RegistrationDriver(sim.tracks, sim.intrinsics, RegistrationOptions(model=model, estimate_noise=False))
     calibration = driver.run()
     assert calibration.failed == {}
     assert sorted(calibration.registered) == sorted(sim.tracks.camera_names)
@@ -288,3 +289,65 @@ def test_a_weak_camera_does_not_pull_the_others() -> None:
     result = compare(CameraPoses({n: first.poses[n] for n in strong}, first.unit),
                      CameraPoses({n: second.poses[n] for n in strong}, second.unit))
     assert max(result.cameras[name].rotation_deg for name in strong) < 0.1 * MAX_ROTATION_RMSE_DEG
+
+
+# The projector in the model (ba/projector_cost.h): the demo room, its zoomed ceiling
+# camera seeing about 25 centres of a 48-array sequence.
+def demo_with_projector(noise_px: float = 0.1, seed: int = 0):
+    from calibproj.scale import ProjectedMarkers
+    from calibproj.sequence.layout import MsmLayout
+
+    layout = MsmLayout(arrays=48)
+    sim = simulate_tracks("demo", None, noise_px=noise_px, seed=seed, layout=layout)
+    return sim, ProjectedMarkers.from_layout(layout)
+
+
+def rotation_error_deg(calibration, sim, name: str) -> float:
+    return compare(CameraPoses(calibration.poses, calibration.unit, calibration.failed), truth_poses(sim)).cameras[name].rotation_deg
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_projector_makes_the_zoomed_camera_known_with_an_honest_sigma(seed: int) -> None:
+    sim, markers = demo_with_projector(seed=seed)
+    without = calibrate(sim.tracks, sim.intrinsics, RegistrationOptions())
+    driver = RegistrationDriver(sim.tracks, sim.intrinsics, RegistrationOptions(), projector=markers)
+    calibration = driver.run()
+    assert without.metrics["ceiling"].weak  # too few points to place it from the cameras alone
+    error = rotation_error_deg(calibration, sim, "ceiling")
+    sigma = calibration.metrics["ceiling"].rotation_sigma_deg
+    assert not calibration.metrics["ceiling"].weak
+    assert error < 0.5 * rotation_error_deg(without, sim, "ceiling")
+    assert error <= 3.0 * sigma
+    # The noise each camera shows is the simulated one; the projector's maps are exact
+    # here, so their noise is small against the cameras' (in floor terms 0.1 px of a far
+    # camera is about 0.3 projector px).
+    rec = driver.reconstruction
+    np.testing.assert_allclose(rec.camera_sigma_px, 0.1, rtol=0.25)
+    assert rec.projector_sigma_px < 0.1
+    np.testing.assert_allclose(rec.projector_lens, 0.0, atol=0.01)  # a pinhole projector
+
+
+def test_a_camera_seeing_a_few_centres_alone_is_registered_through_the_projector() -> None:
+    sim, markers = demo_with_projector()
+    tracks = sim.tracks
+    camera_index, point_index, xy = tracks.bundle_arrays()
+    ceiling = tracks.camera_names.index("ceiling")
+    own = camera_index == ceiling
+    pixels, points = xy[own], point_index[own]
+    # Five centres spread over the ceiling camera's image (its corners' nearest and its
+    # middle's), and no other camera sees them.
+    width, height = sim.intrinsics["ceiling"].resolution
+    targets = [(0, 0), (width, 0), (0, height), (width, height), (width / 2, height / 2)]
+    keep_points = np.unique([points[np.argmin(np.hypot(*(pixels - target).T))] for target in targets])
+    assert len(keep_points) == 5
+    drop = (np.isin(point_index, keep_points) & (camera_index != ceiling)) | \
+           ((camera_index == ceiling) & ~np.isin(point_index, keep_points))
+    sparse = tracks.select(~drop)
+    assert (sparse.bundle_arrays()[0] == sparse.camera_names.index("ceiling")).sum() == 5
+    without = calibrate(sparse, sim.intrinsics, RegistrationOptions())
+    assert "ceiling" in without.failed
+    calibration = calibrate(sparse, sim.intrinsics, RegistrationOptions(), projector=markers)
+    assert "ceiling" in calibration.registered
+    assert calibration.metrics["ceiling"].weak
+    error = rotation_error_deg(calibration, sim, "ceiling")
+    assert error <= 3.0 * calibration.metrics["ceiling"].rotation_sigma_deg

@@ -2,6 +2,8 @@
 
 #include <filesystem>
 #include <iostream>
+#include <cstdint>
+#include <limits>
 #include <map>
 #include <optional>
 
@@ -41,7 +43,7 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   cmd->add_option("--scale", args->scale,
                   "metric scale from one measurement: camera-height:NAME=METRES, distance:CAM_A,CAM_B=METRES or "
                   "marker-size:[ARRAY/MARKER=]METRES (default: arbitrary unit)");
-  cmd->add_option("--sequence", args->sequence, "sequence.json of the projection (needed by --scale marker-size)");
+  cmd->add_option("--sequence", args->sequence, "sequence.json of the projection: its projector pixels tie every centre to the floor (and --scale marker-size needs it)");
   cmd->add_option("--export", args->exports,
                   "also write the calibration as yaml, colmap and/or anipose (comma-separated)");
   registration::Options& o = args->options;
@@ -122,8 +124,23 @@ void CheckScale(const formats::ScaleMeasurement& measurement, const std::vector<
   }
 }
 
+// Per point of the tracks its projector pixel (NaN for an id beyond the sequence).
+ba::PixelMatrix ProjectorPixels(const Tracks& tracks, const formats::ProjectedMarkers& markers) {
+  ba::PixelMatrix pixels(static_cast<int>(tracks.point_ids.size()), 2);
+  for (size_t p = 0; p < tracks.point_ids.size(); ++p) {
+    const std::int64_t id = tracks.point_ids[p];
+    if (id >= 0 && id < static_cast<std::int64_t>(markers.centres.size())) {
+      pixels.row(static_cast<int>(p)) << markers.centres[id].x, markers.centres[id].y;
+    } else {
+      pixels.row(static_cast<int>(p)).setConstant(std::numeric_limits<double>::quiet_NaN());
+    }
+  }
+  return pixels;
+}
+
 registration::RegistrationResult Register(const Tracks& tracks, const std::map<std::string, CameraIntrinsics>& intrinsics,
-                                          const CalibrateArguments& arguments) {
+                                          const CalibrateArguments& arguments,
+                                          const std::optional<formats::ProjectedMarkers>& markers) {
   std::vector<registration::Camera> cameras;
   for (const auto& name : tracks.cameras) {
     const CameraIntrinsics& in = intrinsics.at(name);
@@ -140,6 +157,7 @@ registration::RegistrationResult Register(const Tracks& tracks, const std::map<s
                                                                                            : ba::Loss::kNone;
   registration::Reconstruction reconstruction(cameras, static_cast<int>(tracks.point_ids.size()), tracks.camera_index,
                                               tracks.point_index, tracks.xy, options);
+  if (markers) reconstruction.SetProjector(ProjectorPixels(tracks, *markers), markers->projector_width, markers->projector_height);
   registration::Run(
       reconstruction, [](const std::string& message) { std::cerr << message << "\n"; }, tracks.cameras);
   return registration::Summarize(reconstruction);
@@ -174,8 +192,8 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   const IntrinsicsDir folder = LoadIntrinsicsDir(arguments.intrinsics);
   const auto& intrinsics = folder.cameras;
   std::optional<formats::ProjectedMarkers> markers;
+  if (!arguments.sequence.empty()) markers = MarkersOf(arguments.sequence, tracks.markers_per_array);
   if (measurement) {
-    if (!arguments.sequence.empty()) markers = MarkersOf(arguments.sequence, tracks.markers_per_array);
     CheckScale(*measurement, tracks.cameras, markers ? &*markers : nullptr);
   }
 
@@ -194,7 +212,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   if (!missing.empty()) tracks = tracks.WithoutCameras(missing);
 
   formats::Calibration calibration =
-      formats::FromRegistration(Register(tracks, intrinsics, arguments), tracks.cameras, tracks.point_ids, left_out,
+      formats::FromRegistration(Register(tracks, intrinsics, arguments, markers), tracks.cameras, tracks.point_ids, left_out,
                                 arguments.model);
   std::string scale_error;
   if (measurement && !calibration.poses.empty()) {

@@ -10,6 +10,7 @@
 
 #include "calibproj/ba/bundle_adjuster.h"
 #include "calibproj/ba/manifolds.h"
+#include "calibproj/ba/projector_cost.h"
 #include "calibproj/ba/reprojection_cost.h"
 #include "convert.h"
 #include "registry.h"
@@ -235,6 +236,16 @@ void register_ba(py::module_& m) {
       py::arg("K"), py::arg("observed"), py::arg("pose"), py::arg("plane"), py::arg("ab"),
       py::arg("want") = std::vector<bool>{true, true, true},
       "Diagnostics: (ok, residual, [J_pose, J_plane, J_ab]) of the COPLANAR reprojection cost.");
+  m.def(
+      "evaluate_projector_cost",
+      [](const Eigen::VectorXd& projector, double weight, const Eigen::VectorXd& surface_map,
+         const Eigen::VectorXd& lens, const Eigen::VectorXd& ab, const std::vector<bool>& want) {
+        const ba::ProjectorSurfaceCost cost(Vec2(projector, "projector"), weight);
+        return EvaluateCost(cost, {surface_map, lens, ab}, want);
+      },
+      py::arg("projector"), py::arg("weight"), py::arg("surface_map"), py::arg("lens"), py::arg("ab"),
+      py::arg("want") = std::vector<bool>{true, true, true},
+      "Diagnostics: (ok, residual, [J_map, J_lens, J_ab]) of the projector surface cost (normalised pixel).");
   m.def(
       "point_on_plane",
       [](const Eigen::Vector4d& plane, const Eigen::Vector2d& ab) { return ba::PointOnPlane(plane.data(), ab.data()); },

@@ -53,6 +53,10 @@ registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
     else if (key == "max_planes") o.max_planes = CastTo<int>(value, what);
     else if (key == "min_plane_points") o.min_plane_points = CastTo<int>(value, what);
     else if (key == "plane_distance") o.plane_distance = CastTo<double>(value, what);
+    else if (key == "use_projector") o.use_projector = CastTo<bool>(value, what);
+    else if (key == "min_projector_pnp_points") o.min_projector_pnp_points = CastTo<int>(value, what);
+    else if (key == "estimate_noise") o.estimate_noise = CastTo<bool>(value, what);
+    else if (key == "projector_sigma_px") o.projector_sigma_px = CastTo<double>(value, what);
     else throw std::invalid_argument("registration: unknown option '" + key + "'");
   }
   o.Check();
@@ -263,6 +267,21 @@ of calibproj.registration.RegistrationOptions.)doc")
       .def_property_readonly("gauge_camera", &Reconstruction::gauge_camera)
       .def_property_readonly("registration_order", &Reconstruction::registration_order)
       .def("residuals", &Reconstruction::Residuals, "Residuals (N, 2) of the active observations, NaN elsewhere.")
+      .def("set_projector", [](Reconstruction& r, const RowMatrix& pixels, double width, double height) {
+             if (pixels.cols() != 2 && pixels.size() > 0) throw std::invalid_argument("projector pixels: expected shape (N, 2)");
+             ba::PixelMatrix p(pixels.rows(), 2);
+             if (pixels.size() > 0) p = pixels;
+             r.SetProjector(p, width, height);
+           }, py::arg("pixels"), py::arg("width"), py::arg("height"),
+           "Projector pixel (N, 2) of every point, NaN where unknown, and the projector's image size.")
+      .def("projector_prediction", [](const Reconstruction& r, int point) -> py::object {
+             Eigen::Vector3d X;
+             if (!r.ProjectorPrediction(point, &X)) return py::none();
+             return py::cast(Eigen::VectorXd(X));
+           }, py::arg("point"), "Where the projector draws the point on the main plane, or None.")
+      .def_property_readonly("projector_lens", [](const Reconstruction& r) { return Eigen::VectorXd(r.projector_lens()); })
+      .def_property_readonly("projector_sigma_px", &Reconstruction::projector_sigma_px)
+      .def_property_readonly("camera_sigma_px", &Reconstruction::camera_sigma_px)
       .def("view_score", &Reconstruction::ViewScore, py::arg("camera"))
       .def("summarize", [](const Reconstruction& r) { return ToDict(registration::Summarize(r)); },
            "Poses (R, t) and points in the floor frame, and per-camera metrics, of the current state.");

@@ -133,12 +133,10 @@ def calibrate(
                                                           ingest_options, detector_options, exposures,
                                                           workers, progress)
         left_out = _left_out(ingest_failed, unusable)
-        markers = None
-        if sequence is not None and measurement is not None:
-            markers = _projected_markers(sequence, tracks.markers_per_array)
+        markers = _projected_markers(sequence, tracks.markers_per_array) if sequence is not None else None
         if measurement is not None:
             check_measurement(measurement, tracks.camera_names, markers)
-        calibration = register(tracks, intrinsics, options, left_out=left_out)
+        calibration = register(tracks, intrinsics, options, left_out=left_out, projector=markers)
         self_calibration = None
         if request is not None:
             calibration, tracks, intrinsics, self_calibration = _self_calibrate(

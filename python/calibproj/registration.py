@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,6 +26,9 @@ from calibproj import _core
 from calibproj.calibration import MODELS, Calibration
 from calibproj.io.intrinsics import Intrinsics
 from calibproj.tracks import Tracks
+
+if TYPE_CHECKING:
+    from calibproj.scale import ProjectedMarkers
 
 logger = logging.getLogger(__name__)
 
@@ -70,6 +73,18 @@ class RegistrationOptions:
         min_plane_points: points a plane needs to be found.
         plane_distance: a point belongs to a plane within this distance, in units of
             the first camera's height above the floor.
+        use_projector: coplanar model with the sequence known: tie every centre's
+            floor (or table) position to its projector pixel through each surface's
+            projector map (a homography and the projector lens's radial distortion,
+            refined with the rest), so that centres one camera alone sees count too,
+            and a camera can be registered on centres no other camera placed.
+        min_projector_pnp_points: centres a camera needs to be registered once the
+            projector places them.
+        estimate_noise: weight each camera by the noise its own centres show and the
+            projector by its maps' (variance components), and scale the pose
+            covariance with them; off: one noise for every camera.
+        projector_sigma_px: the projector maps' noise (projector pixels) until it is
+            estimated, or for good with estimate_noise off.
     """
 
     model: str = "coplanar"
@@ -95,6 +110,10 @@ class RegistrationOptions:
     max_planes: int = 3
     min_plane_points: int = 30
     plane_distance: float = 0.004
+    use_projector: bool = True
+    min_projector_pnp_points: int = 4
+    estimate_noise: bool = True
+    projector_sigma_px: float = 0.1
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -122,6 +141,16 @@ def image_size(intrinsics: Intrinsics) -> tuple[float, float]:
     return 2.0 * float(intrinsics.K[0, 2]) + 1.0, 2.0 * float(intrinsics.K[1, 2]) + 1.0
 
 
+def projector_pixels(markers: ProjectedMarkers, point_ids: np.ndarray) -> np.ndarray:
+    """Projector pixel of every point id (NaN for an id beyond the sequence's MSMs)."""
+    centres = markers.centres_px.reshape(-1, 2)
+    ids = np.asarray(point_ids, dtype=np.int64)
+    pixels = np.full((ids.size, 2), np.nan)
+    known = (ids >= 0) & (ids < len(centres))
+    pixels[known] = centres[ids[known]]
+    return pixels
+
+
 class RegistrationDriver:
     """Registers the cameras of ``tracks`` step by step (see the module docstring).
 
@@ -134,6 +163,7 @@ class RegistrationDriver:
         intrinsics: Mapping[str, Intrinsics],
         options: RegistrationOptions | None = None,
         left_out: Mapping[str, str] | None = None,
+        projector: ProjectedMarkers | None = None,
     ) -> None:
         self.options = options or RegistrationOptions()
         # Cameras that failed before registration (e.g. their video), with the reason.
@@ -157,6 +187,8 @@ class RegistrationDriver:
         self.reconstruction = _core.registration.Reconstruction(
             K, sizes, self.tracks.num_points, camera_index, point_index, xy, **self.options.to_kwargs()
         )
+        if projector is not None:
+            self.reconstruction.set_projector(projector_pixels(projector, self.tracks.point_ids), *projector.projector)
 
     def name(self, camera: int) -> str:
         return self.tracks.camera_names[camera]
@@ -239,9 +271,12 @@ def calibrate(
     options: RegistrationOptions | None = None,
     callback: Callable[[Step], bool | None] | None = None,
     left_out: Mapping[str, str] | None = None,
+    projector: ProjectedMarkers | None = None,
 ) -> Calibration:
     """Register every camera of ``tracks`` and return the ``Calibration`` (floor frame).
 
     ``left_out`` names cameras that failed before registration, with the reason.
+    ``projector``: where the projector drew every MSM (from the sequence); with it the
+    coplanar model ties each centre to the floor through the projector's maps.
     """
-    return RegistrationDriver(tracks, intrinsics, options, left_out).run(callback)
+    return RegistrationDriver(tracks, intrinsics, options, left_out, projector).run(callback)

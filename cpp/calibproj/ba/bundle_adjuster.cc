@@ -2,6 +2,7 @@
 
 #include <ceres/ceres.h>
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -127,6 +128,14 @@ struct Parameters {
   Eigen::Vector4d plane;
   PlaneMatrix more_planes;
   std::vector<int> point_plane;  // per point: 0 plane, k >= 1 more_planes row k - 1, -1 free
+  // Projector: per plane its map (valid or not) and the lens. Kept in this struct, not
+  // on the heap: Ceres's covariance orders blocks by address, and these must come after
+  // the heap arrays' in every process for the results to repeat to the bit.
+  std::array<double, 8 * kMaxProjectorSurfaces> map_storage{};
+  std::vector<bool> map_valid;
+  Eigen::Vector2d lens = Eigen::Vector2d::Zero();
+
+  double* Map(int k) { return map_storage.data() + 8 * k; }
 
   double* Plane(int k) { return k == 0 ? plane.data() : more_planes.row(k - 1).data(); }
   double* PointBlock(int p) { return points.row(p).data(); }
@@ -139,6 +148,37 @@ Eigen::Vector4d OrientedPlane(Eigen::Vector4d plane, bool main) {
   plane /= plane.head<3>().norm();  // unit normal, offset in world units
   if (main ? plane(3) < 0.0 : plane(2) < 0.0) plane = -plane;
   return plane;
+}
+
+bool HasProjectorPixel(const Data& data, int p) {
+  return data.projector.rows() > 0 && data.projector.row(p).allFinite();
+}
+
+bool HasProjectorMap(const Parameters& params, int k) {
+  return k >= 0 && k < static_cast<int>(params.map_valid.size()) && params.map_valid[k];
+}
+
+// Per plane, the map that best fits its points' plane coordinates to their projector
+// pixels; valid for the planes with min_projector_points such points.
+void InitialProjectorMaps(const Data& data, const Options& options, Parameters* params) {
+  const int num_planes = std::min(1 + static_cast<int>(params->more_planes.rows()), kMaxProjectorSurfaces);
+  params->map_valid.assign(num_planes, false);
+  params->lens = data.projector_lens;
+  if (data.projector.rows() == 0 || !(data.projector_weight > 0.0)) return;
+  std::vector<std::vector<Eigen::Vector2d>> ab(num_planes), u(num_planes);
+  for (int p = 0; p < static_cast<int>(params->points.rows()); ++p) {
+    const int k = params->point_plane[p];
+    if (k < 0 || k >= num_planes || !HasProjectorPixel(data, p)) continue;
+    ab[k].push_back(params->points.row(p).head<2>().transpose());
+    u[k].push_back(UndistortProjector(data.projector.row(p).transpose(), params->lens));
+  }
+  for (int k = 0; k < num_planes; ++k) {
+    if (static_cast<int>(ab[k].size()) < options.min_projector_points) continue;
+    SurfaceMap map;
+    if (!FitSurfaceMap(ab[k], u[k], &map)) continue;
+    Eigen::Map<SurfaceMap>(params->Map(k)) = map;
+    params->map_valid[k] = true;
+  }
 }
 
 Parameters InitialParameters(const Data& gauge_data, const Options& options) {
@@ -164,6 +204,7 @@ Parameters InitialParameters(const Data& gauge_data, const Options& options) {
     const Eigen::Matrix<double, 3, 2> B = TangentBasis(Eigen::Map<const Eigen::Vector3d>(params.Plane(params.point_plane[p])));
     params.points.row(p) << (B.transpose() * gauge_data.points.row(p).transpose()).transpose(), 0.0;
   }
+  InitialProjectorMaps(gauge_data, options, &params);
   return params;
 }
 
@@ -186,8 +227,33 @@ struct Gauge {
   bool fixed = false;  // poses and points both refined: the gauge must be removed
 };
 
+// One residual per point with a projector pixel on a plane with a valid map; returns
+// how many.
+int AddProjectorTerms(const Data& data, Parameters& params, ceres::LossFunction* loss, ceres::Problem* problem,
+                      ceres::ParameterBlockOrdering* ordering) {
+  int terms = 0;
+  for (int p = 0; p < static_cast<int>(params.points.rows()); ++p) {
+    const int k = params.point_plane[p];
+    if (!HasProjectorMap(params, k) || !HasProjectorPixel(data, p)) continue;
+    problem->AddResidualBlock(new ProjectorSurfaceCost(data.projector.row(p).transpose(), data.projector_weight), loss,
+                              params.Map(k), params.lens.data(), params.PointBlock(p));
+    ++terms;
+  }
+  if (terms == 0) return 0;
+  // Groups of their own after the planes': blocks of one group are ordered by address,
+  // and the lens does not live in the maps' array (results must repeat to the bit).
+  const int num_planes = 1 + static_cast<int>(params.more_planes.rows());
+  for (int k = 0; k < static_cast<int>(params.map_valid.size()); ++k) {
+    if (params.map_valid[k]) ordering->AddElementToGroup(params.Map(k), 2 + num_planes);
+  }
+  ordering->AddElementToGroup(params.lens.data(), 3 + num_planes);
+  return terms;
+}
+
 void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, Parameters& params,
-                  const CostFactory& make_cost, const RotationCache* rotations, ceres::LossFunction* loss, ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
+                  const CostFactory& make_cost, const RotationCache* rotations, ceres::LossFunction* loss,
+                  const std::vector<std::unique_ptr<ceres::LossFunction>>& camera_losses, ceres::Problem* problem,
+                  ceres::ParameterBlockOrdering* ordering) {
   const bool coplanar = options.model == Model::kCoplanar;
   for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
     problem->AddParameterBlock(params.PointBlock(p), params.point_plane[p] < 0 ? 3 : 2);
@@ -211,6 +277,7 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
     ordering->AddElementToGroup(plane, 2 + k);  // a group each: the planes lie in different arrays
   }
   for (int i = 0; i < data.camera_index.size(); ++i) {
+    ceres::LossFunction* camera_loss = camera_losses.empty() ? loss : camera_losses[data.camera_index(i)].get();
     double* pose = params.poses.row(data.camera_index(i)).data();
     const int p = data.point_index(i);
     const int camera = data.camera_index(i);
@@ -219,11 +286,12 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
                                           data.observed.row(i).transpose(),
                                           rotations != nullptr ? rotations->Entry(camera) : nullptr);
     if (on_plane >= 0) {
-      problem->AddResidualBlock(cost, loss, pose, params.Plane(on_plane), params.PointBlock(p));
+      problem->AddResidualBlock(cost, camera_loss, pose, params.Plane(on_plane), params.PointBlock(p));
     } else {
-      problem->AddResidualBlock(cost, loss, pose, params.PointBlock(p));
+      problem->AddResidualBlock(cost, camera_loss, pose, params.PointBlock(p));
     }
   }
+  AddProjectorTerms(data, params, loss, problem, ordering);
   if (!options.refine_poses) {
     for (int c = 0; c < params.poses.rows(); ++c) problem->SetParameterBlockConstant(params.poses.row(c).data());
   } else if (gauge.fixed) {
@@ -234,6 +302,34 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
       problem->SetParameterBlockConstant(params.PointBlock(p));
     }
     for (int k = 0; k < num_planes; ++k) problem->SetParameterBlockConstant(params.Plane(k));
+  }
+}
+
+// Result fields of the projector: maps in the caller's frame, lens, residuals.
+void CopyProjectorOut(const Data& data, Parameters& params, const FrameChange& change, Result* result) {
+  result->projector_lens = params.lens;
+  result->projector_surfaces.assign(params.map_valid.size(), ProjectorSurface());
+  for (size_t k = 0; k < params.map_valid.size(); ++k) {
+    if (!params.map_valid[k]) continue;
+    const double* plane = params.Plane(static_cast<int>(k));
+    const Eigen::Map<const Eigen::Vector3d> n(plane);
+    Eigen::Matrix3d E;
+    E << TangentBasis(n), plane[3] * n;
+    ProjectorSurface& surface = result->projector_surfaces[k];
+    surface.valid = true;
+    surface.map = Eigen::Map<const SurfaceMap>(params.Map(static_cast<int>(k)));
+    surface.world_from_plane = change.R.transpose() * (E - change.t * Eigen::RowVector3d(0.0, 0.0, 1.0));
+  }
+  const int num_points = static_cast<int>(params.points.rows());
+  result->projector_residuals = PixelMatrix::Constant(num_points, 2, std::numeric_limits<double>::quiet_NaN());
+  for (int p = 0; p < num_points; ++p) {
+    const int k = params.point_plane[p];
+    if (!HasProjectorMap(params, k) || !HasProjectorPixel(data, p)) continue;
+    const ProjectorSurfaceCost cost(data.projector.row(p).transpose(), 1.0);
+    const double* blocks[3] = {params.Map(k), params.lens.data(), params.PointBlock(p)};
+    double r[2];
+    if (cost.Evaluate(blocks, r, nullptr)) result->projector_residuals.row(p) << r[0], r[1];
+    ++result->projector_terms;
   }
 }
 
@@ -309,6 +405,7 @@ std::unique_ptr<ceres::LossFunction> MakeLoss(Loss loss, double scale_px) {
 }
 
 void Options::Check() const {
+  limits::RequireInRange(min_projector_points, 4, limits::kMaxPoints, "options: min_projector_points");
   Require(loss_scale_px > 0.0 && std::isfinite(loss_scale_px),
           "options: loss scale must be a positive number of pixels, got " + Str(loss_scale_px));
   limits::RequireInRange(max_iterations, 0, limits::kMaxIterations, "options: max_iterations");
@@ -381,6 +478,21 @@ void ValidateData(const Data& data, const Options& options) {
       }
     }
   }
+  Require(data.camera_weights.size() == 0 || data.camera_weights.size() == num_cameras,
+          "camera weights: " + Str(int(data.camera_weights.size())) + " entries for " + Str(num_cameras) + " cameras");
+  for (int c = 0; c < data.camera_weights.size(); ++c) {
+    Require(std::isfinite(data.camera_weights(c)) && data.camera_weights(c) > 0.0,
+            "camera weights: camera " + Str(c) + " needs a positive finite weight");
+  }
+  Require(data.projector.rows() == 0 || data.projector.rows() == num_points,
+          "projector: " + Str(int(data.projector.rows())) + " pixels for " + Str(num_points) + " points");
+  for (int p = 0; p < data.projector.rows(); ++p) {
+    const bool known = data.projector.row(p).allFinite();
+    Require(known || data.projector.row(p).array().isNaN().all(),
+            "projector: point " + Str(p) + " needs a finite pixel or NaN in both coordinates");
+  }
+  Require(data.projector_lens.allFinite() && std::isfinite(data.projector_weight) && data.projector_weight >= 0.0,
+          "projector: lens and weight must be finite, the weight >= 0");
   Require(options.gauge_camera >= 0 && options.gauge_camera < num_cameras,
           "options: gauge camera " + Str(options.gauge_camera) + " out of range [0, " + Str(num_cameras) + ")");
   Require(options.scale_camera >= -1 && options.scale_camera < num_cameras &&
@@ -414,6 +526,15 @@ PixelMatrix ComputeResiduals(const Data& data) {
     }
   }
   return residuals;
+}
+
+bool ProjectorPoint(const ProjectorSurface& surface, const Eigen::Vector2d& lens, const Eigen::Vector2d& normalised,
+                    Eigen::Vector3d* X) {
+  if (!surface.valid) return false;
+  Eigen::Vector2d ab;
+  if (!InvertSurfaceMap(surface.map, UndistortProjector(normalised, lens), &ab)) return false;
+  *X = surface.world_from_plane * ab.homogeneous();
+  return X->allFinite();
 }
 
 CostFactory AnalyticCosts() {
@@ -467,7 +588,13 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   problem_options.evaluation_callback = rotations.get();
   ceres::Problem problem(problem_options);
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-  BuildProblem(gauge_data, options, gauge, params, make_cost, rotations.get(), loss.get(), &problem, ordering.get());
+  std::vector<std::unique_ptr<ceres::LossFunction>> camera_losses;
+  for (int c = 0; c < data.camera_weights.size(); ++c) {
+    const double w = data.camera_weights(c);
+    camera_losses.push_back(std::make_unique<ceres::ScaledLoss>(loss.get(), w * w, ceres::DO_NOT_TAKE_OWNERSHIP));
+  }
+  BuildProblem(gauge_data, options, gauge, params, make_cost, rotations.get(), loss.get(), camera_losses, &problem,
+               ordering.get());
 
   ceres::Solver::Summary summary;
   const auto start = std::chrono::steady_clock::now();
@@ -490,6 +617,7 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   if (options.compute_covariance && result.usable) {
     result.pose_covariances = PoseCovariances(&problem, params, gauge, change, options);
   }
+  if (options.model == Model::kCoplanar) CopyProjectorOut(gauge_data, params, change, &result);
   result.poses = params.poses;
   result.plane = params.plane;
   result.more_planes = params.more_planes;

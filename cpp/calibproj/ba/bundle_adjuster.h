@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "calibproj/ba/camera.h"
+#include "calibproj/ba/projector_cost.h"
 
 namespace ceres {
 class CostFunction;
@@ -55,6 +56,9 @@ struct Options {
   bool compute_covariance = false;
   bool full_report = false;
   bool cache_rotations = true;  // one rotation per camera and evaluation (rotation_cache.h)
+  // COPLANAR with a projector (Data::projector): a plane gets a projector map when this
+  // many of its points have a projector pixel.
+  int min_projector_points = 12;
 
   // Throws std::invalid_argument naming the first inconsistent option.
   void Check() const;
@@ -76,7 +80,32 @@ struct Data {
   // point on `plane`. Only `plane` carries the scale gauge; the others move freely.
   PlaneMatrix more_planes;
   Eigen::VectorXi point_plane;
+  // Per camera, the factor its reprojection residuals are multiplied by in the cost
+  // (the reference noise over the camera's own); empty: 1 for every camera.
+  Eigen::VectorXd camera_weights;
+  // COPLANAR: the projector (projector_cost.h). Per point its normalised projector
+  // pixel, NaN for a point the projector did not draw; empty: no projector term. The
+  // term joins a plane's points once min_projector_points of them have a pixel.
+  PixelMatrix projector;
+  Eigen::Vector2d projector_lens = Eigen::Vector2d::Zero();
+  double projector_weight = 0.0;  // see ProjectorSurfaceCost; <= 0: no projector term
 };
+
+// Planes that can have a projector map (the main plane first; further ones have none).
+constexpr int kMaxProjectorSurfaces = 16;
+
+// A surface's projector map in the caller's frame: the world point of plane
+// coordinates (a, b) is world_from_plane * [a, b, 1].
+struct ProjectorSurface {
+  bool valid = false;
+  SurfaceMap map = SurfaceMap::Zero();
+  Eigen::Matrix3d world_from_plane = Eigen::Matrix3d::Zero();
+};
+
+// The world point where the projector draws the normalised pixel on `surface`; false
+// where the map is not valid or not defined.
+bool ProjectorPoint(const ProjectorSurface& surface, const Eigen::Vector2d& lens, const Eigen::Vector2d& normalised,
+                    Eigen::Vector3d* X);
 
 struct Result {
   double initial_cost = 0.0;  // 0.5 * sum of squared (robustified) residuals
@@ -95,6 +124,13 @@ struct Result {
   // Per camera when requested: covariance of [dtheta, dt] with R = Exp(dtheta) R_hat,
   // t = t_hat + dt, in the caller's frame. Zero for the gauge camera.
   std::vector<Matrix6d> pose_covariances;
+  // With a projector term: per plane (0 the main one) its map, the lens, per point the
+  // projector residual G(a, b) - u in normalised projector units (NaN without a term),
+  // and how many points had one.
+  std::vector<ProjectorSurface> projector_surfaces;
+  Eigen::Vector2d projector_lens = Eigen::Vector2d::Zero();
+  PixelMatrix projector_residuals;
+  int projector_terms = 0;
   std::string report;         // Ceres FullReport when requested, else BriefReport
 };
 

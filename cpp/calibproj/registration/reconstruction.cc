@@ -1,4 +1,5 @@
 #include "calibproj/registration/reconstruction.h"
+#include "calibproj/registration/noise_model.h"
 
 #include "calibproj/registration/floor_frame.h"
 
@@ -11,6 +12,8 @@
 #include <numeric>
 #include <stdexcept>
 #include <tuple>
+
+#include <opencv2/calib3d.hpp>
 
 #include "calibproj/ba/rotation.h"
 #include "calibproj/common/limits.h"
@@ -45,6 +48,17 @@ void SetPose(ba::PoseMatrix* poses, int c, const Eigen::Matrix3d& R, const Eigen
   poses->row(c).head<3>() = ba::AngleAxisFromRotation(R).transpose();
   poses->row(c).tail<3>() = t.transpose();
 }
+
+// Floors of the estimated noise (camera pixels, projector pixels): a perfect fit on
+// rendered data must not make one group's weight unbounded.
+constexpr double kMinNoisePx = 0.005;
+constexpr double kMinProjectorNoisePx = 0.002;
+// Redundancy (observations beyond the parameters they determine) worth the pooled
+// noise as a prior for one camera's noise.
+constexpr double kPriorRedundancy = 10.0;
+// Chi-square difference (in units of the camera's noise variance) below which the
+// mirror pose of a planar view is not ruled out: 5 sigma.
+constexpr double kAmbiguityEvidence = 25.0;
 
 // Robust standard deviation of 2D residuals from the median of their norms
 // (for isotropic Gaussian noise, median |r| = sigma * sqrt(2 ln 2)).
@@ -101,7 +115,59 @@ void Options::Check() const {
   limits::RequireInRange(max_planes, 0, 100, "registration: max_planes");
   limits::RequireInRange(min_plane_points, 3, limits::kMaxPoints, "registration: min_plane_points");
   limits::RequireInRange(plane_distance, 1e-9, 1.0, "registration: plane_distance");
+  limits::RequireInRange(min_projector_pnp_points, 4, limits::kMaxPoints, "registration: min_projector_pnp_points");
+  limits::RequireInRange(projector_sigma_px, 1e-6, 100.0, "registration: projector_sigma_px");
 }
+
+namespace {
+
+struct PlanarPose {
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  double rms_px = 0.0;
+};
+
+double RmsReprojection(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& image,
+                       const ba::Intrinsics& K, const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  double sum = 0.0;
+  for (size_t i = 0; i < object.size(); ++i) {
+    const Eigen::Vector3d x = R * Eigen::Vector3d(object[i].x, object[i].y, object[i].z) + t;
+    if (x.z() <= 0.0) return std::numeric_limits<double>::infinity();
+    const Eigen::Vector2d pixel(K.fx * x.x() / x.z() + K.skew * x.y() / x.z() + K.cx, K.fy * x.y() / x.z() + K.cy);
+    sum += (pixel - Eigen::Vector2d(image[i].x, image[i].y)).squaredNorm();
+  }
+  return std::sqrt(sum / static_cast<double>(object.size()));
+}
+
+// The two poses of a planar PnP (OpenCV's IPPE), best first; empty when it fails.
+std::vector<PlanarPose> PlanarPoses(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& image,
+                                    const ba::Intrinsics& K) {
+  std::vector<PlanarPose> out;
+  if (object.size() < 4) return out;
+  std::vector<cv::Mat> rvecs, tvecs;
+  try {
+    const cv::Matx33d camera_matrix(K.fx, K.skew, K.cx, 0.0, K.fy, K.cy, 0.0, 0.0, 1.0);
+    cv::solvePnPGeneric(object, image, camera_matrix, cv::noArray(), rvecs, tvecs, false, cv::SOLVEPNP_IPPE);
+  } catch (const cv::Exception&) {
+    return out;
+  }
+  for (size_t k = 0; k < rvecs.size() && k < tvecs.size(); ++k) {
+    cv::Mat R;
+    cv::Rodrigues(rvecs[k], R);
+    PlanarPose pose;
+    for (int r = 0; r < 3; ++r) {
+      pose.t(r) = tvecs[k].at<double>(r);
+      for (int c = 0; c < 3; ++c) pose.R(r, c) = R.at<double>(r, c);
+    }
+    pose.rms_px = RmsReprojection(object, image, K, pose.R, pose.t);
+    if (std::isfinite(pose.rms_px)) out.push_back(pose);
+  }
+  std::sort(out.begin(), out.end(), [](const PlanarPose& a, const PlanarPose& b) { return a.rms_px < b.rms_px; });
+  return out;
+}
+
+
+}  // namespace
 
 Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eigen::VectorXi camera_index,
                                Eigen::VectorXi point_index, PixelMatrix observed, Options options)
@@ -144,6 +210,48 @@ Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eige
   point_plane_.assign(num_points_, -1);
   single_view_.assign(num_points_, false);
   active_.assign(num_obs, true);
+  camera_sigma_px_.assign(cameras_.size(), std::numeric_limits<double>::quiet_NaN());
+  projector_sigma_px_ = options_.projector_sigma_px;
+}
+
+void Reconstruction::SetProjector(const PixelMatrix& pixels, double width, double height) {
+  Require(pixels.rows() == num_points_, "registration: " + Str(int(pixels.rows())) + " projector pixels for " +
+                                            Str(num_points_) + " points");
+  Require(width >= 1.0 && height >= 1.0 && width <= limits::kMaxImageSide && height <= limits::kMaxImageSide,
+          "registration: the projector needs a valid image size");
+  projector_.resize(num_points_, 2);
+  const Eigen::RowVector2d centre(0.5 * (width - 1.0), 0.5 * (height - 1.0));
+  for (int p = 0; p < num_points_; ++p) {
+    const bool known = pixels.row(p).allFinite();
+    Require(known || pixels.row(p).array().isNaN().all(),
+            "registration: projector pixel of point " + Str(p) + " must be finite or NaN");
+    projector_.row(p) = known ? Eigen::RowVector2d((pixels.row(p) - centre) / width)
+                              : Eigen::RowVector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+  }
+  projector_width_ = width;
+}
+
+bool Reconstruction::ProjectorPrediction(int point, Eigen::Vector3d* X) const {
+  if (!HasProjector() || projector_surfaces_.empty() || point < 0 || point >= num_points_) return false;
+  if (!projector_.row(point).allFinite()) return false;
+  return ba::ProjectorPoint(projector_surfaces_[0], projector_lens_, projector_.row(point).transpose(), X);
+}
+
+bool Reconstruction::AllOnMainPlane(const std::vector<int>& observations, const std::vector<int>& subset) const {
+  if (options_.model != ba::Model::kCoplanar || subset.empty()) return false;
+  for (const int k : subset) {
+    const int p = point_index_(observations[k]);
+    if (reconstructed_[p] ? point_plane_[p] != 0 : !projector_.rows()) return false;
+  }
+  return true;
+}
+
+bool Reconstruction::KnownPoint(int point, Eigen::Vector3d* X) const {
+  if (reconstructed_[point]) {
+    *X = points_.row(point).transpose();
+    return true;
+  }
+  return ProjectorPrediction(point, X);
 }
 
 double Reconstruction::Focal(int camera) const { return 0.5 * (cameras_[camera].K.fx + cameras_[camera].K.fy); }
@@ -400,13 +508,14 @@ NextCameraCandidate Reconstruction::ChooseNextCamera() const {
     if (registered_[c] || !failure_[c].empty()) continue;
     VisibilityPyramid pyramid(options_.view_score_levels, cameras_[c].width, cameras_[c].height);
     int count = 0;
+    Eigen::Vector3d X;
     for (int i : camera_observations_[c]) {
-      if (active_[i] && reconstructed_[point_index_(i)]) {
+      if (active_[i] && KnownPoint(point_index_(i), &X)) {
         pyramid.Add(observed_(i, 0), observed_(i, 1));
         ++count;
       }
     }
-    if (count < options_.min_pnp_points) continue;
+    if (count < MinPnpPoints()) continue;
     if (pyramid.Score() > best.score || (pyramid.Score() == best.score && count > best.points)) {
       best = {c, pyramid.Score(), count};
     }
@@ -417,32 +526,53 @@ NextCameraCandidate Reconstruction::ChooseNextCamera() const {
 RegisterResult Reconstruction::RegisterCamera(int camera) {
   Require(camera >= 0 && camera < num_cameras(), "register: camera index out of range");
   RegisterResult result;
+  // Points placed by the registered cameras, and, with the projector, those it places.
   std::vector<int> observations;
+  std::vector<Eigen::Vector3d> known;
   for (int i : camera_observations_[camera]) {
-    if (active_[i] && reconstructed_[point_index_(i)]) observations.push_back(i);
+    Eigen::Vector3d X;
+    if (active_[i] && KnownPoint(point_index_(i), &X)) {
+      observations.push_back(i);
+      known.push_back(X);
+    }
   }
   result.correspondences = static_cast<int>(observations.size());
   geometry::Points3 X(observations.size(), 3);
   geometry::Points2 pixels(observations.size(), 2);
   for (size_t k = 0; k < observations.size(); ++k) {
-    X.row(k) = points_.row(point_index_(observations[k]));
+    X.row(k) = known[k].transpose();
     pixels.row(k) = observed_.row(observations[k]);
   }
   geometry::PnpOptions pnp;
   pnp.threshold_px = options_.pnp_threshold_px;
   pnp.max_iterations = options_.ransac_max_iterations;
   pnp.confidence = options_.ransac_confidence;
-  pnp.min_inliers = options_.min_pnp_points;
-  const geometry::PnpEstimate estimate =
-      geometry::EstimatePoseRansac(X, pixels, CameraMatrix(cameras_[camera].K), pnp);
+  pnp.min_inliers = MinPnpPoints();
+  geometry::PnpEstimate estimate = geometry::EstimatePoseRansac(X, pixels, CameraMatrix(cameras_[camera].K), pnp);
   result.inliers = static_cast<int>(estimate.inliers.size());
   if (!estimate.success) {
     result.reason = !estimate.problem.empty()
                         ? "PnP failed: " + estimate.problem
                         : "PnP failed: " + Str(result.inliers) + " inliers of " + Str(result.correspondences) +
-                              " correspondences (need " + Str(options_.min_pnp_points) + ")";
+                              " correspondences (need " + Str(MinPnpPoints()) + ")";
     failure_[camera] = result.reason;
     return result;
+  }
+  // Points on one plane seen nearly affinely fit two mirror poses; RANSAC's solver may
+  // return the worse one. IPPE gives both: the one that fits the inliers best is kept.
+  if (AllOnMainPlane(observations, estimate.inliers)) {
+    std::vector<cv::Point3d> object;
+    std::vector<cv::Point2d> image;
+    for (const int k : estimate.inliers) {
+      object.emplace_back(X(k, 0), X(k, 1), X(k, 2));
+      image.emplace_back(pixels(k, 0), pixels(k, 1));
+    }
+    const std::vector<PlanarPose> planar = PlanarPoses(object, image, cameras_[camera].K);
+    if (!planar.empty() &&
+        planar[0].rms_px < RmsReprojection(object, image, cameras_[camera].K, estimate.R, estimate.t)) {
+      estimate.R = planar[0].R;
+      estimate.t = planar[0].t;
+    }
   }
   // Refine the pose on the inliers with the points held fixed.
   ba::Data data;
@@ -690,6 +820,24 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
     data.point_plane.resize(static_cast<int>(points.size()));
     for (size_t k = 0; k < points.size(); ++k) data.point_plane(k) = point_plane_[points[k]];
   }
+  // Weights: each camera's noise against the median camera's; the projector's noise
+  // in the same reference.
+  const std::vector<double> sigma = WeightingSigmas();
+  std::vector<double> used_sigma;
+  for (int c : cameras) used_sigma.push_back(sigma[c]);
+  std::nth_element(used_sigma.begin(), used_sigma.begin() + used_sigma.size() / 2, used_sigma.end());
+  const double reference_sigma = used_sigma[used_sigma.size() / 2];
+  const bool estimated = std::any_of(cameras.begin(), cameras.end(), [&](int c) { return std::isfinite(camera_sigma_px_[c]); });
+  if (options_.estimate_noise && estimated && reference_sigma > 0.0) {
+    data.camera_weights.resize(static_cast<int>(cameras.size()));
+    for (size_t k = 0; k < cameras.size(); ++k) data.camera_weights(k) = reference_sigma / sigma[cameras[k]];
+  }
+  if (coplanar && HasProjector()) {
+    data.projector.resize(static_cast<int>(points.size()), 2);
+    for (size_t k = 0; k < points.size(); ++k) data.projector.row(k) = projector_.row(points[k]);
+    data.projector_lens = projector_lens_;
+    data.projector_weight = projector_width_ * reference_sigma / projector_sigma_px_;
+  }
   ba::Options ba_options;
   ba_options.model = options_.model;
   ba_options.loss = options_.loss;
@@ -713,6 +861,10 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
     // The poses are not all determined: solve again without the covariance.
     ba_options.compute_covariance = false;
     solved = ba::BundleAdjust(data, ba_options);
+  }
+  if (coplanar && HasProjector()) {
+    projector_lens_ = solved.projector_lens;
+    projector_surfaces_ = solved.projector_surfaces;
   }
   if (covariance) StoreCovariances(solved, cameras, static_cast<int>(kept.size()), static_cast<int>(points.size()));
   for (size_t k = 0; k < cameras.size(); ++k) poses_.row(cameras[k]) = solved.poses.row(k);
@@ -796,8 +948,11 @@ void Reconstruction::StoreCovariances(const ba::Result& solved, const std::vecto
   if (solved.pose_covariances.size() != cameras.size()) return;
   // Ceres gives the covariance for residuals of unit variance; scale it by the
   // variance the residuals show (per image coordinate).
-  const int parameters = 6 * static_cast<int>(cameras.size()) + (options_.model == ba::Model::kCoplanar ? 2 : 3) * points;
-  const int dof = 2 * observations - parameters;
+  int maps = 0;
+  for (const auto& surface : solved.projector_surfaces) maps += surface.valid ? 1 : 0;
+  const int parameters = 6 * static_cast<int>(cameras.size()) + (options_.model == ba::Model::kCoplanar ? 2 : 3) * points +
+                         8 * maps + (maps > 0 ? 2 : 0);
+  const int dof = 2 * observations + 2 * solved.projector_terms - parameters;
   if (dof <= 0) return;
   const double variance = 2.0 * solved.final_cost / dof;
   pose_covariances_.assign(cameras_.size(), ba::Matrix6d::Constant(std::numeric_limits<double>::quiet_NaN()));
@@ -882,25 +1037,143 @@ RefineResult Reconstruction::Refine() {
   for (int round = 0; round < options_.max_refine_rounds; ++round) {
     result.last = Adjust(true, round + 1 == options_.max_refine_rounds);
     ++result.rounds;
+    const std::vector<double> before = camera_sigma_px_;
+    const double projector_before = projector_sigma_px_;
+    EstimateNoise();
     result.thresholds = OutlierThresholds();
     const int changed = FilterOutliers(result.thresholds);
     result.changed += changed;
-    if (changed == 0) {
+    if (changed == 0 && NoiseSettled(before, projector_before)) {
       // Converged: once more from the same state, for the covariance.
       if (pose_covariances_.empty()) Adjust(true, true);
       break;
     }
   }
   result.removed = static_cast<int>(std::count(active_.begin(), active_.end(), false));
+  CheckPlanarAmbiguity();
   return result;
+}
+
+
+void Reconstruction::CheckPlanarAmbiguity() {
+  // A camera that sees a small patch of one plane nearly affinely fits two poses, mirror
+  // images about its line of sight (the planar PnP ambiguity). When the images cannot
+  // tell them apart at its noise, the angle between them is how well its rotation is
+  // known, whatever the covariance of the chosen one says.
+  ambiguity_deg_.assign(cameras_.size(), 0.0);
+  const std::vector<double> sigma = WeightingSigmas();
+  for (int c = 0; c < num_cameras(); ++c) {
+    if (!registered_[c] || c == gauge_camera_) continue;
+    // The points as the other cameras and the projector place them: this camera's
+    // own pose has pulled the ones it alone sees.
+    std::vector<cv::Point3d> object;
+    std::vector<cv::Point2d> image;
+    for (int i : camera_observations_[c]) {
+      const int p = point_index_(i);
+      if (!active_[i] || !reconstructed_[p] || point_plane_[p] != 0) continue;
+      Eigen::Vector3d X = points_.row(p).transpose();
+      ProjectorPrediction(p, &X);
+      object.emplace_back(X.x(), X.y(), X.z());
+      image.emplace_back(observed_(i, 0), observed_(i, 1));
+    }
+    const std::vector<PlanarPose> poses = PlanarPoses(object, image, cameras_[c].K);
+    if (poses.size() < 2) continue;
+    const double n = static_cast<double>(object.size());
+    const double evidence =
+        n * (poses[1].rms_px * poses[1].rms_px - poses[0].rms_px * poses[0].rms_px) / (sigma[c] * sigma[c]);
+    if (!(evidence < kAmbiguityEvidence)) continue;
+    const double cosine = std::clamp(((poses[0].R.transpose() * poses[1].R).trace() - 1.0) / 2.0, -1.0, 1.0);
+    ambiguity_deg_[c] = std::acos(cosine) * 180.0 / M_PI;
+  }
+}
+
+std::vector<double> Reconstruction::WeightingSigmas() const {
+  // Until a camera's own noise is estimated it gets the pooled one: its residuals alone
+  // understate it, the more so the more its centres determine their points.
+  const PixelMatrix residuals = Residuals();
+  std::vector<double> norms;
+  for (int i = 0; i < residuals.rows(); ++i) {
+    if (std::isfinite(residuals(i, 0))) norms.push_back(residuals.row(i).norm());
+  }
+  const double pooled = std::max(RobustSigma(norms), kMinNoisePx);
+  std::vector<double> sigma(cameras_.size(), pooled);
+  for (size_t c = 0; c < cameras_.size(); ++c) {
+    if (std::isfinite(camera_sigma_px_[c])) sigma[c] = camera_sigma_px_[c];
+  }
+  return sigma;
+}
+
+bool Reconstruction::NoiseSettled(const std::vector<double>& before, double projector_before) const {
+  if (!options_.estimate_noise) return true;
+  const auto close = [](double a, double b) {
+    return (!std::isfinite(a) && !std::isfinite(b)) || std::abs(a - b) <= 0.05 * std::max(std::abs(a), std::abs(b));
+  };
+  for (size_t c = 0; c < before.size(); ++c) {
+    if (!close(before[c], camera_sigma_px_[c])) return false;
+  }
+  return close(projector_before, projector_sigma_px_);
+}
+
+void Reconstruction::EstimateNoise() {
+  if (!options_.estimate_noise) return;
+  std::vector<ba::Intrinsics> intrinsics;
+  for (const Camera& camera : cameras_) intrinsics.push_back(camera.K);
+  std::vector<Eigen::Vector4d> planes = {plane_};
+  planes.insert(planes.end(), more_planes_.begin(), more_planes_.end());
+  NoiseInputs in;
+  in.intrinsics = &intrinsics;
+  in.poses = &poses_;
+  in.points = &points_;
+  in.registered = &registered_;
+  in.reconstructed = &reconstructed_;
+  in.active = &active_;
+  in.camera_index = &camera_index_;
+  in.point_index = &point_index_;
+  in.observed = &observed_;
+  in.point_plane = &point_plane_;
+  in.planes = &planes;
+  if (HasProjector()) {
+    in.projector = &projector_;
+    in.lens = projector_lens_;
+    in.surfaces = &projector_surfaces_;
+    in.projector_width = projector_width_;
+  }
+  in.gauge_camera = gauge_camera_;
+  in.camera_sigma_px = WeightingSigmas();
+  in.projector_sigma_px = projector_sigma_px_;
+  const NoiseEstimate estimate = registration::EstimateNoise(in);
+  // The pooled noise: the median of the cameras whose residuals tell it well.
+  std::vector<double> reliable;
+  for (int c = 0; c < num_cameras(); ++c) {
+    if (std::isfinite(estimate.camera_sigma_px[c]) && estimate.camera_redundancy[c] >= kPriorRedundancy) {
+      reliable.push_back(estimate.camera_sigma_px[c]);
+    }
+  }
+  if (reliable.empty()) return;
+  std::nth_element(reliable.begin(), reliable.begin() + reliable.size() / 2, reliable.end());
+  const double pooled = reliable[reliable.size() / 2];
+  for (int c = 0; c < num_cameras(); ++c) {
+    if (!registered_[c]) continue;
+    // A camera with little redundancy is drawn towards the pooled noise, as if the pooled
+    // value came from kPriorRedundancy observations of its own.
+    const double r = std::max(estimate.camera_redundancy[c], 0.0);
+    const double own = std::isfinite(estimate.camera_sigma_px[c]) ? estimate.camera_sigma_px[c] : pooled;
+    const double variance = (r * own * own + kPriorRedundancy * pooled * pooled) / (r + kPriorRedundancy);
+    camera_sigma_px_[c] = std::max(std::sqrt(variance), kMinNoisePx);
+  }
+  if (std::isfinite(estimate.projector_sigma_px)) {
+    projector_sigma_px_ = std::max(estimate.projector_sigma_px, kMinProjectorNoisePx);
+    projector_sigma_estimated_ = true;
+  }
 }
 
 void Reconstruction::FailUnregistered() {
   for (int c = 0; c < num_cameras(); ++c) {
     if (registered_[c] || !failure_[c].empty()) continue;
     int shared = 0;
+    Eigen::Vector3d X;
     for (int i : camera_observations_[c]) {
-      if (active_[i] && reconstructed_[point_index_(i)]) ++shared;
+      if (active_[i] && KnownPoint(point_index_(i), &X)) ++shared;
     }
     if (camera_observations_[c].empty()) {
       failure_[c] = "no observations";
@@ -908,7 +1181,7 @@ void Reconstruction::FailUnregistered() {
       failure_[c] = "no point in common with the registered cameras (disconnected)";
     } else {
       failure_[c] = "only " + Str(shared) + " points in common with the registered cameras (need " +
-                    Str(options_.min_pnp_points) + ")";
+                    Str(MinPnpPoints()) + ")";
     }
   }
 }

@@ -8,7 +8,9 @@
 // methods, so every algorithmic step exists once.
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -48,6 +50,17 @@ struct Options {
   int max_planes = 3;
   int min_plane_points = 30;
   double plane_distance = 0.004;
+  // COPLANAR with projector pixels (SetProjector): every centre's plane coordinates are
+  // tied to its projector pixel through its surface's map (ba/projector_cost.h), and a
+  // camera can be registered on centres no other camera has placed (their points
+  // predicted from the maps; min_projector_pnp_points of them suffice).
+  bool use_projector = true;
+  int min_projector_pnp_points = 4;
+  // Each camera's centre noise and the projector maps' from the residuals (variance
+  // components, noise_model.h), used as weights and for the covariance; off: one noise
+  // for all cameras, the projector at projector_sigma_px.
+  bool estimate_noise = true;
+  double projector_sigma_px = 0.1;  // projector pixels, until estimated
 
   void Check() const;
 };
@@ -135,6 +148,11 @@ class Reconstruction {
   RefineResult Refine();
   void FailUnregistered();
 
+  // The projector pixel of every point (NaN: not known) and the projector's image size.
+  void SetProjector(const PixelMatrix& pixels, double width, double height);
+  // Where the projector draws point `point` on the main plane (false without a map).
+  bool ProjectorPrediction(int point, Eigen::Vector3d* X) const;
+
   // State.
   int num_cameras() const { return static_cast<int>(cameras_.size()); }
   int num_points() const { return num_points_; }
@@ -158,6 +176,16 @@ class Reconstruction {
   // R_hat) relative to the gauge camera, scaled by the residuals' variance; empty when
   // not computed or not determined.
   const std::vector<ba::Matrix6d>& pose_covariances() const { return pose_covariances_; }
+  // Projector after an adjustment: per plane its map, the lens, the maps' noise
+  // (projector px; NaN until estimated); per camera its centres' noise (px, NaN until
+  // estimated).
+  const std::vector<ba::ProjectorSurface>& projector_surfaces() const { return projector_surfaces_; }
+  const Eigen::Vector2d& projector_lens() const { return projector_lens_; }
+  double projector_sigma_px() const { return projector_sigma_estimated_ ? projector_sigma_px_ : std::numeric_limits<double>::quiet_NaN(); }
+  const std::vector<double>& camera_sigma_px() const { return camera_sigma_px_; }
+  // Per camera after Refine(): the angle (deg) to the mirror pose its view of the floor
+  // does not rule out (0 when it does); its rotation is known no better.
+  const std::vector<double>& ambiguity_deg() const { return ambiguity_deg_; }
   // Residuals of the active observations of registered cameras and reconstructed
   // points; NaN elsewhere.
   PixelMatrix Residuals() const;
@@ -184,6 +212,20 @@ class Reconstruction {
   bool InFront(int observation, const std::vector<Eigen::Matrix3d>& rotations) const;
   int ThirdCamera(int camera1, int camera2) const;
   void StoreCovariances(const ba::Result& solved, const std::vector<int>& cameras, int observations, int points);
+  bool KnownPoint(int point, Eigen::Vector3d* X) const;
+  // True when the points of observations[k], k in subset, all lie on the main plane.
+  bool AllOnMainPlane(const std::vector<int>& observations, const std::vector<int>& subset) const;
+  int MinPnpPoints() const {
+    return HasProjector() && !projector_surfaces_.empty()
+               ? std::min(options_.min_pnp_points, options_.min_projector_pnp_points)
+               : options_.min_pnp_points;
+  }
+  // Per camera noise used as weights: the estimate, else the robust sigma of its residuals.
+  std::vector<double> WeightingSigmas() const;
+  void EstimateNoise();
+  void CheckPlanarAmbiguity();
+  bool NoiseSettled(const std::vector<double>& before, double projector_before) const;
+  bool HasProjector() const { return options_.use_projector && projector_.rows() == num_points_ && options_.model == ba::Model::kCoplanar; }
 
   std::vector<Camera> cameras_;
   int num_points_;
@@ -205,6 +247,14 @@ class Reconstruction {
   int gauge_camera_ = -1;
   std::vector<int> order_;
   std::vector<ba::Matrix6d> pose_covariances_;
+  ba::PixelMatrix projector_;  // normalised pixels (ba/projector_cost.h), per point
+  double projector_width_ = 1.0;
+  Eigen::Vector2d projector_lens_ = Eigen::Vector2d::Zero();
+  std::vector<ba::ProjectorSurface> projector_surfaces_;
+  double projector_sigma_px_ = 0.1;
+  bool projector_sigma_estimated_ = false;
+  std::vector<double> camera_sigma_px_;  // NaN until estimated
+  std::vector<double> ambiguity_deg_;
 };
 
 }  // namespace calibproj::registration

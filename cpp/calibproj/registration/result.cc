@@ -103,9 +103,12 @@ RegistrationResult Summarize(const Reconstruction& rec) {
     camera.t = result.frame.scale * (R * result.frame.origin + t);
     if (!rec.pose_covariances().empty()) {
       const auto [rotation_sigma, centre_sigma] = PoseSigmas(rec.pose_covariances()[registered[k]], R, t);
-      camera.rotation_sigma_deg = rotation_sigma;
+      // A mirror pose the images do not rule out bounds what the covariance can say.
+      const int index = registered[k];
+      const double ambiguity = index < static_cast<int>(rec.ambiguity_deg().size()) ? rec.ambiguity_deg()[index] : 0.0;
+      camera.rotation_sigma_deg = std::max(rotation_sigma, ambiguity);
       camera.centre_sigma = result.frame.scale * centre_sigma;
-      camera.weak = rotation_sigma > rec.options().weak_rotation_sigma_deg;
+      camera.weak = camera.rotation_sigma_deg > rec.options().weak_rotation_sigma_deg;
     }
   }
   double sum_sq = 0.0;

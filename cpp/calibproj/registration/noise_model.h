@@ -1,0 +1,56 @@
+#pragma once
+// How noisy each camera's centres are, and how well the projector's maps hold, from
+// what the bundle adjustment leaves (variance component estimation).
+//
+// Each group of observations (one camera's centres; the projector pixels) has its own
+// variance. A group's estimate is the sum of its squared residuals over its
+// redundancy: the share of its observations not spent on determining the parameters.
+// Per point, an observation's share follows from the point's information matrix N (the
+// weighted sum over its observations of J^T J, J the derivative of the observation by
+// the point's coordinates): 2 - tr(w J N^-1 J^T) per 2D observation. A camera's own
+// pose takes 6 more, the projector's maps 8 each and its lens 2. Iterated with the
+// bundle adjustment this converges to the weights under which every group's residuals
+// match their variance, so a camera whose centres are biased (a floor texture across
+// its markers) gets the sigma its residuals show, and its pose covariance widens.
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "calibproj/ba/bundle_adjuster.h"
+
+namespace calibproj::registration {
+
+struct NoiseInputs {
+  const std::vector<ba::Intrinsics>* intrinsics = nullptr;  // per camera
+  const ba::PoseMatrix* poses = nullptr;
+  const ba::PointMatrix* points = nullptr;
+  const std::vector<bool>* registered = nullptr;
+  const std::vector<bool>* reconstructed = nullptr;
+  const std::vector<bool>* active = nullptr;
+  const Eigen::VectorXi* camera_index = nullptr;
+  const Eigen::VectorXi* point_index = nullptr;
+  const ba::PixelMatrix* observed = nullptr;
+  const std::vector<int>* point_plane = nullptr;          // -1: a free point
+  const std::vector<Eigen::Vector4d>* planes = nullptr;   // 0 the main plane, then the others
+  // Projector (may be empty): per point normalised pixel, lens, maps per plane, and its
+  // width in pixels (normalised units to pixels).
+  const ba::PixelMatrix* projector = nullptr;
+  Eigen::Vector2d lens = Eigen::Vector2d::Zero();
+  const std::vector<ba::ProjectorSurface>* surfaces = nullptr;
+  double projector_width = 1.0;
+  int gauge_camera = -1;
+  // Current sigmas: per camera (px) and the projector's (projector px).
+  std::vector<double> camera_sigma_px;
+  double projector_sigma_px = 0.0;
+};
+
+struct NoiseEstimate {
+  std::vector<double> camera_sigma_px;  // NaN where a camera has no redundancy
+  std::vector<double> camera_redundancy;
+  double projector_sigma_px = std::numeric_limits<double>::quiet_NaN();
+  double projector_redundancy = 0.0;
+};
+
+NoiseEstimate EstimateNoise(const NoiseInputs& in);
+
+}  // namespace calibproj::registration
