@@ -59,7 +59,8 @@ REGISTRATION_OPTIONS = {
     "min_pair_points": 15, "min_pnp_points": 6, "min_triangulation_angle_deg": 1.0, "min_pair_parallax_deg": 1.0,
     "outlier_threshold_px": 1.0, "outlier_sigma_factor": 3.0, "max_refine_rounds": 5, "view_score_levels": 3,
     "num_threads": 1, "intermediate_ba_iterations": 20, "final_ba_iterations": 100,
-    "weak_rotation_sigma_deg": 1.0,
+    "weak_rotation_sigma_deg": 1.0, "use_projector": True, "min_projector_pnp_points": 4, "estimate_noise": True,
+    "projector_sigma_px": 0.1,
 }
 
 
@@ -408,6 +409,10 @@ class Baselines:
             "_core.ba.evaluate_plane_cost": Spec([("K", s["K"][0]), ("observed", x[0]), ("pose", pose),
                                                  ("plane", s["plane"]), ("ab", np.array([0.1, 0.2])),
                                                  ("want", [True, True, True])]),
+            "_core.ba.evaluate_projector_cost": Spec([("projector", np.array([0.1, -0.05])), ("weight", 100.0),
+                                                     ("surface_map", np.array([0.4, 0, 0.01, 0, 0.4, 0, 0, 0])),
+                                                     ("lens", np.zeros(2)), ("ab", np.array([0.1, 0.2])),
+                                                     ("want", [True, True, True])]),
             "_core.selfcal.self_calibrate": Spec(
                 [("camera_index", s["camera_index"]), ("point_index", s["point_index"]), ("observed", s["observed"]),
                  ("lenses", np.tile([500.0, 320.0, 240.0, 0, 0, 0, 0, 0], (len(s["poses"]), 1))),
@@ -444,6 +449,9 @@ class Baselines:
             "_core.registration.Reconstruction.adjust": Spec([("final", True)]),
             "_core.registration.Reconstruction.filter_outliers": Spec([("thresholds", [1.0, 1.0, 1.0, 1.0])]),
             "_core.registration.Reconstruction.view_score": Spec([("camera", 1)]),
+            "_core.registration.Reconstruction.set_projector": Spec(
+                [("pixels", np.tile([960.0, 540.0], (len(s["points"]), 1))), ("width", 1920.0), ("height", 1080.0)]),
+            "_core.registration.Reconstruction.projector_prediction": Spec([("point", 0)]),
             "_core.registration.Reconstruction.run": Spec([("log", lambda message: None)]),
             "_core.registration.view_score": Spec([("pixels", s["observed"][:30]), ("width", 640.0),
                                                   ("height", 480.0), ("levels", 3)]),

@@ -140,7 +140,7 @@ def calibrate(
         self_calibration = None
         if request is not None:
             calibration, tracks, intrinsics, self_calibration = _self_calibrate(
-                tracks, intrinsics, calibration, request, self_calibration_options, options, left_out)
+                tracks, intrinsics, calibration, request, self_calibration_options, options, left_out, markers)
         scale_error, scale_source = None, None
         if measurement is not None and calibration.registered:
             try:
@@ -211,7 +211,7 @@ def _with_nominal(source: Any, videos: Path, fov_deg: float) -> tuple[dict[str, 
 
 def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration: Calibration,
                     request: RefineRequest, options: SelfCalibrationOptions | None,
-                    registration: RegistrationOptions | None, left_out: Mapping[str, str]):
+                    registration: RegistrationOptions | None, left_out: Mapping[str, str], projector: Any = None):
     """The calibration registered again with intrinsics refined from the first one:
     ``(calibration, tracks, intrinsics, (self-calibration, given intrinsics, options))``."""
     options = options or SelfCalibrationOptions()
@@ -221,13 +221,13 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
     intrinsics, result = closed_form_start(tracks, given, calibration, request, options), None
     if any(intrinsics[name] is not given[name] for name in intrinsics):
         tracks = convert_tracks(tracks, given, intrinsics)
-        calibration = register(tracks, intrinsics, registration, left_out=left_out)
+        calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector)
     for _ in range(options.rounds):  # each round starts from the registration the last one made
         result = self_calibrate(tracks, intrinsics, calibration, request, options, num_threads=threads, given=given,
                                 earlier=result.reports if result is not None else None)
         tracks = convert_tracks(tracks, intrinsics, result.intrinsics)
         intrinsics = result.intrinsics
-        calibration = register(tracks, intrinsics, registration, left_out=left_out)
+        calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector)
     for name, report in result.reports.items():
         # Its pose rests on a focal length nobody checked: it must not steer comparisons.
         if "focal" in report.held and name in calibration.poses and not calibration.metrics[name].weak:
