@@ -351,3 +351,27 @@ def test_a_camera_seeing_a_few_centres_alone_is_registered_through_the_projector
     assert calibration.metrics["ceiling"].weak
     error = rotation_error_deg(calibration, sim, "ceiling")
     assert error <= 3.0 * calibration.metrics["ceiling"].rotation_sigma_deg
+
+
+def test_a_noisier_camera_gets_its_own_noise_and_a_wider_sigma() -> None:
+    sim, markers = demo_with_projector(noise_px=0.1)
+    tracks = sim.tracks
+    camera_index, point_index, xy = tracks.bundle_arrays()
+    far2 = tracks.camera_names.index("far2")
+    noisy = xy.copy()
+    rng = np.random.default_rng(3)
+    # 0.1 px as simulated plus 0.3 px more: 0.32 px on far2.
+    noisy[camera_index == far2] += rng.normal(scale=0.3, size=(int((camera_index == far2).sum()), 2))
+    degraded = Tracks.from_observations(tracks.camera_names, camera_index, np.asarray(tracks.point_ids)[point_index],
+                                        noisy, tracks.markers_per_array)
+    plain = calibrate(degraded, sim.intrinsics, RegistrationOptions(estimate_noise=False), projector=markers)
+    driver = RegistrationDriver(degraded, sim.intrinsics, RegistrationOptions(), projector=markers)
+    weighted = driver.run()
+    sigma = dict(zip(degraded.camera_names, driver.reconstruction.camera_sigma_px))
+    assert sigma["far2"] == pytest.approx(np.hypot(0.1, 0.3), rel=0.15)
+    for name in ("far1", "far4", "far5", "near1"):
+        assert sigma[name] == pytest.approx(0.1, rel=0.15)
+    # Its pose is known as poorly as its centres say: wider than with one noise pooled
+    # over all cameras (which its own residuals inflate too), and holding the truth.
+    assert weighted.metrics["far2"].rotation_sigma_deg > 1.25 * plain.metrics["far2"].rotation_sigma_deg
+    assert rotation_error_deg(weighted, sim, "far2") <= 3.0 * weighted.metrics["far2"].rotation_sigma_deg
