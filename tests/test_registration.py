@@ -293,12 +293,17 @@ def test_a_weak_camera_does_not_pull_the_others() -> None:
 
 # The projector in the model (ba/projector_cost.h): the demo room, its zoomed ceiling
 # camera seeing about 25 centres of a 48-array sequence.
-def demo_with_projector(noise_px: float = 0.1, seed: int = 0):
+def demo_with_projector(noise_px: float = 0.1, seed: int = 0, projector_dist: tuple[float, float] = (0.0, 0.0)):
+    from dataclasses import replace
+
     from calibproj.scale import ProjectedMarkers
     from calibproj.sequence.layout import MsmLayout
+    from calibproj.simulate.scene import load_scene
 
     layout = MsmLayout(arrays=48)
-    sim = simulate_tracks("demo", None, noise_px=noise_px, seed=seed, layout=layout)
+    scene = load_scene("demo")
+    scene = replace(scene, projector=replace(scene.projector, dist=projector_dist))
+    sim = simulate_tracks(scene, None, noise_px=noise_px, seed=seed, layout=layout)
     return sim, ProjectedMarkers.from_layout(layout)
 
 
@@ -375,3 +380,17 @@ def test_a_noisier_camera_gets_its_own_noise_and_a_wider_sigma() -> None:
     # over all cameras (which its own residuals inflate too), and holding the truth.
     assert weighted.metrics["far2"].rotation_sigma_deg > 1.25 * plain.metrics["far2"].rotation_sigma_deg
     assert rotation_error_deg(weighted, sim, "far2") <= 3.0 * weighted.metrics["far2"].rotation_sigma_deg
+
+
+def test_the_projector_lens_is_estimated_with_the_maps() -> None:
+    # A projector lens throwing the image's corners 30 px outwards (k1 0.05, k2 0.01).
+    sim, markers = demo_with_projector(projector_dist=(0.05, 0.01))
+    driver = RegistrationDriver(sim.tracks, sim.intrinsics, RegistrationOptions(), projector=markers)
+    calibration = driver.run()
+    rec = driver.reconstruction
+    assert rec.projector_lens[0] < -0.01  # undoes a barrel-free, pincushion-like outward throw
+    # The maps hold to well under the cameras' noise in floor terms (0.1 px of a far
+    # camera is about 0.3 projector px), and the zoomed camera gains as without the lens.
+    assert rec.projector_sigma_px < 0.1
+    assert not calibration.metrics["ceiling"].weak
+    assert rotation_error_deg(calibration, sim, "ceiling") <= 3.0 * calibration.metrics["ceiling"].rotation_sigma_deg

@@ -156,3 +156,31 @@ def test_people_round_trip_and_bad_fields_are_named(tmp_path):
         bad["people"][0][field] = value
         with pytest.raises(FormatError, match=message):
             scene_from_json(bad, source="scene.json")
+
+
+def test_a_projector_lens_bends_its_rays_and_round_trips() -> None:
+    from dataclasses import replace
+
+    from calibproj.simulate.warp import floor_view
+
+    scene = load_scene("demo")
+    projector = replace(scene.projector, dist=(0.05, 0.01))
+    corners = np.array([[0.0, 0.0], [1919.0, 1079.0], [959.5, 539.5]])
+    pinhole = scene.projector.pixels_to_floor(corners)
+    bent = projector.pixels_to_floor(corners)
+    # The corners land farther out (k1 > 0 throws the buffer's corners from rays nearer
+    # the axis), the centre where it was.
+    assert np.linalg.norm(bent[0, :2]) < np.linalg.norm(pinhole[0, :2])
+    np.testing.assert_allclose(bent[2], pinhole[2], atol=1e-12)
+    ideal = projector.ideal_pixels(corners)
+    np.testing.assert_allclose(projector.buffer_pixels(ideal), corners, atol=1e-6)
+    # The renderer reads the buffer where the lens sends each floor point.
+    camera = scene.cameras[0]
+    view = floor_view(camera, projector, scene.floor)
+    inside = np.isfinite(view.projector_x)
+    x, y = view.projector_x[inside][::997], view.projector_y[inside][::997]
+    floor = projector.pixels_to_floor(np.column_stack([x, y]))
+    pinhole_view = floor_view(camera, scene.projector, scene.floor)
+    ideal_xy = np.column_stack([pinhole_view.projector_x[inside][::997], pinhole_view.projector_y[inside][::997]])
+    np.testing.assert_allclose(projector.buffer_pixels(ideal_xy), np.column_stack([x, y]), atol=1e-6)
+    np.testing.assert_allclose(floor[:, 2], 0.0, atol=1e-9)

@@ -112,7 +112,7 @@ def projected_points(scene: Scene, pixels: np.ndarray) -> tuple[np.ndarray, np.n
     if not scene.boxes:
         points = scene.projector.pixels_to_floor(pixels)
         return points, np.where(np.isfinite(points[:, 0]), boxes.FLOOR, -1)
-    pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    pixels = scene.projector.ideal_pixels(pixels)
     rays = np.linalg.solve(scene.projector.K, np.column_stack([pixels, np.ones(len(pixels))]).T)
     return boxes.first_hits(scene.projector.center, (scene.projector.R.T @ rays).T, scene.boxes)
 

@@ -216,24 +216,46 @@ class LookAtPose:
 
 @dataclass(frozen=True)
 class Projector(LookAtPose):
-    """A pinhole projector (no distortion, principal point at the image centre)."""
+    """A projector with its principal point at the image centre and, optionally, the
+    radial distortion of its lens: ``dist = (k1, k2)`` in OpenCV's model (the pixel the
+    frame buffer holds is the distorted image of the ray's ideal one)."""
 
     position: tuple[float, float, float]
     look_at: tuple[float, float, float]
     resolution: tuple[int, int]
     fx: float
+    dist: tuple[float, float] = (0.0, 0.0)
 
     @property
     def K(self) -> np.ndarray:
         width, height = self.resolution
         return np.array([[self.fx, 0.0, (width - 1) / 2.0], [0.0, self.fx, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
 
+    @property
+    def lens(self) -> Intrinsics:
+        return Intrinsics("projector", tuple(self.resolution), self.K, np.array([*self.dist, 0.0, 0.0, 0.0]))
+
+    def ideal_pixels(self, pixels: np.ndarray) -> np.ndarray:
+        """The pinhole pixels of the rays that frame-buffer pixels are thrown along."""
+        pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
+        return self.lens.undistort_points(pixels) if any(self.dist) else pixels
+
+    def buffer_pixels(self, ideal: np.ndarray) -> np.ndarray:
+        """The frame-buffer pixels thrown along the rays of pinhole pixels (NaN kept)."""
+        ideal = np.asarray(ideal, dtype=float).reshape(-1, 2)
+        if not any(self.dist):
+            return ideal
+        out = np.full_like(ideal, np.nan)
+        finite = np.isfinite(ideal).all(axis=1)
+        out[finite] = self.lens.distort_points(ideal[finite])
+        return out
+
     def pixels_to_floor(self, pixels: np.ndarray) -> np.ndarray:
         """Floor points (z = 0), shape ``(N, 3)``, hit by the rays of projector pixels.
 
         Rays that do not go down towards the floor give NaN rows.
         """
-        pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
+        pixels = self.ideal_pixels(pixels)
         rays_cam = np.linalg.solve(self.K, np.column_stack([pixels, np.ones(len(pixels))]).T)
         rays_world = (self.R.T @ rays_cam).T
         origin = self.center
@@ -326,7 +348,8 @@ class Scene:
         return {
             "floor": _without_none({"size_m": list(self.floor.size_m),
                                     "texture": None if self.floor.texture is None else asdict(self.floor.texture)}),
-            "projector": _plain(asdict(self.projector)),
+            "projector": {key: value for key, value in _plain(asdict(self.projector)).items()
+                          if key != "dist" or any(self.projector.dist)},
             "cameras": [_without_none(_plain(asdict(camera))) for camera in self.cameras],
             "photometric": asdict(self.photometric),
             **({"people": [_plain(asdict(person)) for person in self.people]} if self.people else {}),
@@ -476,11 +499,16 @@ def _read_auto_exposure(reader: _FieldReader, entry: Any, where: str) -> AutoExp
 
 def _read_projector(reader: _FieldReader, entry: Any) -> Projector:
     where = "projector"
-    reader.no_unknown_keys(entry, {"position", "look_at", "resolution", "fx"}, where)
+    reader.no_unknown_keys(entry, {"position", "look_at", "resolution", "fx", "dist"}, where)
     position, look_at = _read_placement(reader, entry, where)
     resolution = _read_resolution(reader, entry, where)
     fx = reader.number(entry, "fx", where, positive=True)
-    return Projector(position, look_at, resolution, fx)
+    dist = (0.0, 0.0)
+    if "dist" in entry:
+        dist = tuple(reader.numbers(entry, "dist", where, 2))
+        if any(abs(k) > 1.0 for k in dist):
+            reader.fail(f"{where}.dist", "expected a projector lens's radial distortion [k1, k2], each within [-1, 1]")
+    return Projector(position, look_at, resolution, fx, dist)
 
 
 def _read_camera(reader: _FieldReader, entry: Any, where: str) -> Camera:

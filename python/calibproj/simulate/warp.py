@@ -125,6 +125,7 @@ def floor_view(camera: Camera, projector: Projector, floor: Floor, supersample: 
         on_floor = (modelled & (on_floor_h[:, 2] > 0) & (projected[:, 2] > 0)
                     & np.all(np.abs(floor_xy) <= half_size, axis=1))
     projector_xy[~on_floor] = np.nan
+    projector_xy = projector.buffer_pixels(projector_xy)
     floor_xy[~on_floor] = np.nan
     shape = grid_x.shape
     x, y = projector_xy[:, 0].reshape(shape), projector_xy[:, 1].reshape(shape)
@@ -155,6 +156,7 @@ def _view_with_boxes(camera: Camera, projector: Projector, floor: Floor, supersa
     with np.errstate(divide="ignore", invalid="ignore"):
         projector_xy = (in_projector @ projector.K.T)[:, :2] / in_projector[:, 2:]
     seen &= in_projector[:, 2] > 0
+    projector_xy = projector.buffer_pixels(np.where(seen[:, None], projector_xy, np.nan))
     lit = seen & ~boxes.hidden(projector.center, np.nan_to_num(points), scene_boxes)
     reflectance = np.ones(len(points))
     toward = projector.center - points
