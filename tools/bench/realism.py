@@ -114,7 +114,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     results = room / "results"
     try:
         calibration = calibrate(room / "videos", room / "intrinsics", sequence=sequence_path, out=results,
-                                options=RegistrationOptions(model=args.model),
+                                options=RegistrationOptions(model=args.model, use_projector=not args.no_projector),
                                 exposures=locked_exposures(scene) if args.locked_exposures else None,
                                 scale=f"marker-size:{marker_side_m:.9f}", force=True, progress=False)
     except ValueError as error:  # the scale could not be measured: results in arbitrary units
@@ -246,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--arrays", type=int, default=48, help="MSM arrays projected (default 48, as the demo)")
     parser.add_argument("--markers", default="aruco:4X4_50", help="marker family (default aruco:4X4_50)")
     parser.add_argument("--model", default="coplanar", choices=("coplanar", "free"))
+    parser.add_argument("--no-projector", action="store_true",
+                        help="leave the projector out of the model (the registration's use_projector off), for comparison")
     parser.add_argument("--wrong-px", type=float, default=3.0,
                         help="an observation this far from its point's true position counts as wrong (default 3)")
     parser.add_argument("--locked-exposures", action="store_true",

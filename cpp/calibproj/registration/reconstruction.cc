@@ -1054,7 +1054,6 @@ RefineResult Reconstruction::Refine() {
   return result;
 }
 
-
 void Reconstruction::CheckPlanarAmbiguity() {
   // A camera that sees a small patch of one plane nearly affinely fits two poses, mirror
   // images about its line of sight (the planar PnP ambiguity). When the images cannot
