@@ -539,6 +539,8 @@ class Baselines:
                                                ("measurement", parse_scale("marker-size:1/4=0.1")),
                                                ("markers", markers), ("radius_sides", 30.0)]),
             "_core.formats.parse_export_formats": Spec([("text", "yaml,colmap")]),
+            "_core.formats.projector_pixels": Spec([("markers", markers),
+                                                   ("point_ids", np.array([0, 3, 10**9], dtype=np.int64))]),
             "_core.formats.colmap_camera": Spec([("intrinsics", intrinsics["a"])]),
             "_core.formats.quaternion_wxyz": Spec([("R", np.eye(3))]),
             "_core.formats.export": Spec([("calibration", calibration), ("format", "colmap"), ("directory", folder),

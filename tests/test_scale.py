@@ -209,3 +209,13 @@ def test_cli_bad_scale_exits_with_one_line(small_simulation, tmp_path, capsys, s
     error = capsys.readouterr().err.strip()
     assert len(error.splitlines()) == 1 and message in error
     assert not (tmp_path / "r" / "camera_poses.json").exists()
+
+
+def test_projector_pixels_follow_the_point_ids() -> None:
+    from calibproj import _core
+
+    centres = np.arange(2 * 3 * 2, dtype=float).reshape(2, 3, 2) + 0.5  # 2 arrays of 3 markers
+    markers = ProjectedMarkers(centres, 24.0, (1920, 1080))
+    pixels = _core.formats.projector_pixels(markers, np.array([4, 0, 6, -1], dtype=np.int64))
+    np.testing.assert_array_equal(pixels[:2], [centres[1, 1], centres[0, 0]])  # id = array * 3 + marker
+    assert np.isnan(pixels[2:]).all()  # beyond the sequence's MSMs

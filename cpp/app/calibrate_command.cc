@@ -2,8 +2,6 @@
 
 #include <filesystem>
 #include <iostream>
-#include <cstdint>
-#include <limits>
 #include <map>
 #include <optional>
 
@@ -124,20 +122,6 @@ void CheckScale(const formats::ScaleMeasurement& measurement, const std::vector<
   }
 }
 
-// Per point of the tracks its projector pixel (NaN for an id beyond the sequence).
-ba::PixelMatrix ProjectorPixels(const Tracks& tracks, const formats::ProjectedMarkers& markers) {
-  ba::PixelMatrix pixels(static_cast<int>(tracks.point_ids.size()), 2);
-  for (size_t p = 0; p < tracks.point_ids.size(); ++p) {
-    const std::int64_t id = tracks.point_ids[p];
-    if (id >= 0 && id < static_cast<std::int64_t>(markers.centres.size())) {
-      pixels.row(static_cast<int>(p)) << markers.centres[id].x, markers.centres[id].y;
-    } else {
-      pixels.row(static_cast<int>(p)).setConstant(std::numeric_limits<double>::quiet_NaN());
-    }
-  }
-  return pixels;
-}
-
 registration::RegistrationResult Register(const Tracks& tracks, const std::map<std::string, CameraIntrinsics>& intrinsics,
                                           const CalibrateArguments& arguments,
                                           const std::optional<formats::ProjectedMarkers>& markers) {
@@ -157,7 +141,7 @@ registration::RegistrationResult Register(const Tracks& tracks, const std::map<s
                                                                                            : ba::Loss::kNone;
   registration::Reconstruction reconstruction(cameras, static_cast<int>(tracks.point_ids.size()), tracks.camera_index,
                                               tracks.point_index, tracks.xy, options);
-  if (markers) reconstruction.SetProjector(ProjectorPixels(tracks, *markers), markers->projector_width, markers->projector_height);
+  if (markers) reconstruction.SetProjector(markers->PixelsOf(tracks.point_ids), markers->projector_width, markers->projector_height);
   registration::Run(
       reconstruction, [](const std::string& message) { std::cerr << message << "\n"; }, tracks.cameras);
   return registration::Summarize(reconstruction);

@@ -297,6 +297,15 @@ void register_formats(py::module_& m) {
         return out;
       },
       py::arg("calibration"), py::arg("measurement"), py::arg("markers"), py::arg("radius_sides"));
+  m.def(
+      "projector_pixels",
+      [](const py::object& markers, const std::vector<std::int64_t>& point_ids) {
+        const auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
+        if (!projected) throw py::type_error("markers: expected a ProjectedMarkers, got None");
+        return projected->PixelsOf(point_ids);
+      },
+      py::arg("markers"), py::arg("point_ids"),
+      "Per point id its projector pixel (N, 2), NaN for an id beyond the sequence's MSMs");
   m.def("parse_export_formats", &formats::ParseExportFormats, py::arg("text"));
   m.def(
       "colmap_camera",

@@ -141,16 +141,6 @@ def image_size(intrinsics: Intrinsics) -> tuple[float, float]:
     return 2.0 * float(intrinsics.K[0, 2]) + 1.0, 2.0 * float(intrinsics.K[1, 2]) + 1.0
 
 
-def projector_pixels(markers: ProjectedMarkers, point_ids: np.ndarray) -> np.ndarray:
-    """Projector pixel of every point id (NaN for an id beyond the sequence's MSMs)."""
-    centres = markers.centres_px.reshape(-1, 2)
-    ids = np.asarray(point_ids, dtype=np.int64)
-    pixels = np.full((ids.size, 2), np.nan)
-    known = (ids >= 0) & (ids < len(centres))
-    pixels[known] = centres[ids[known]]
-    return pixels
-
-
 class RegistrationDriver:
     """Registers the cameras of ``tracks`` step by step (see the module docstring).
 
@@ -188,7 +178,8 @@ class RegistrationDriver:
             K, sizes, self.tracks.num_points, camera_index, point_index, xy, **self.options.to_kwargs()
         )
         if projector is not None:
-            self.reconstruction.set_projector(projector_pixels(projector, self.tracks.point_ids), *projector.projector)
+            pixels = _core.formats.projector_pixels(projector, np.asarray(self.tracks.point_ids, dtype=np.int64))
+            self.reconstruction.set_projector(pixels, *projector.projector)
 
     def name(self, camera: int) -> str:
         return self.tracks.camera_names[camera]

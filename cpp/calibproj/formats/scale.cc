@@ -276,6 +276,19 @@ ProjectedMarkers ProjectedMarkers::FromSequence(const ingest::SequenceDescriptio
   return markers;
 }
 
+ba::PixelMatrix ProjectedMarkers::PixelsOf(const std::vector<std::int64_t>& point_ids) const {
+  ba::PixelMatrix pixels(static_cast<int>(point_ids.size()), 2);
+  for (size_t p = 0; p < point_ids.size(); ++p) {
+    const std::int64_t id = point_ids[p];
+    if (id >= 0 && id < static_cast<std::int64_t>(centres.size())) {
+      pixels.row(static_cast<int>(p)) << centres[id].x, centres[id].y;
+    } else {
+      pixels.row(static_cast<int>(p)).setConstant(std::numeric_limits<double>::quiet_NaN());
+    }
+  }
+  return pixels;
+}
+
 void ProjectedMarkers::Check() const {
   if (arrays <= 0 || markers_per_array <= 0 || centres.size() != static_cast<size_t>(arrays) * markers_per_array) {
     throw std::invalid_argument("MSM centres must have shape (arrays, markers, 2), got " +

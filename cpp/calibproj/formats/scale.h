@@ -7,11 +7,13 @@
 
 #include <opencv2/core.hpp>
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "calibproj/ba/bundle_adjuster.h"
 #include "calibproj/formats/calibration.h"
 #include "calibproj/ingest/sequence_description.h"
 
@@ -42,6 +44,8 @@ struct ProjectedMarkers {
   static ProjectedMarkers FromSequence(const ingest::SequenceDescription& sequence);
   // std::invalid_argument when the shapes or the side make no sense.
   void Check() const;
+  // Per point id its projector pixel; NaN for an id beyond the sequence's MSMs.
+  ba::PixelMatrix PixelsOf(const std::vector<std::int64_t>& point_ids) const;
 };
 
 // Neighbourhood fitted around the measured marker, in marker sides (projector pixels).

@@ -19,12 +19,11 @@ Eigen::Matrix<double, 3, 2> PlaneDirections(const Eigen::Vector4d& plane) {
   return B;
 }
 
-// d(pixel)/d(world point) of camera c at X.
-bool PixelJacobian(const ba::Intrinsics& K, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
-                   const Eigen::Vector3d& X, Eigen::Matrix<double, 2, 3>* J) {
-  Eigen::Vector2d pixel;
+// Pixel of the world point X in a camera and its derivative by X.
+bool ProjectWorld(const ba::Intrinsics& K, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                  const Eigen::Vector3d& X, Eigen::Vector2d* pixel, Eigen::Matrix<double, 2, 3>* J) {
   Eigen::Matrix<double, 2, 3> J_cam;
-  if (!ba::ProjectPoint(K, R * X + t, &pixel, &J_cam)) return false;
+  if (!ba::ProjectPoint(K, R * X + t, pixel, &J_cam)) return false;
   *J = J_cam * R;
   return true;
 }
@@ -77,15 +76,21 @@ NoiseEstimate EstimateNoise(const NoiseInputs& in) {
     if (k >= 0) D = PlaneDirections((*in.planes)[k]);
     const int dof = static_cast<int>(D.cols());
     Eigen::MatrixXd N = Eigen::MatrixXd::Zero(dof, dof);
+    std::vector<int> used_obs;
     std::vector<Eigen::MatrixXd> J_obs;
-    std::vector<double> var_obs;
+    std::vector<double> var_obs, error_obs;
     for (int i : observations[p]) {
       const int c = (*in.camera_index)(i);
+      Eigen::Vector2d pixel;
       Eigen::Matrix<double, 2, 3> J;
-      if (!PixelJacobian((*in.intrinsics)[c], rotations[c], in.poses->row(c).tail<3>().transpose(), X, &J)) continue;
+      if (!ProjectWorld((*in.intrinsics)[c], rotations[c], in.poses->row(c).tail<3>().transpose(), X, &pixel, &J)) {
+        continue;
+      }
       const double var = in.camera_sigma_px[c] * in.camera_sigma_px[c];
+      used_obs.push_back(i);
       J_obs.push_back(J * D);
       var_obs.push_back(var);
+      error_obs.push_back((pixel - in.observed->row(i).transpose()).squaredNorm());
       N += J_obs.back().transpose() * J_obs.back() / var;
     }
     Eigen::Matrix2d J_proj;
@@ -105,18 +110,11 @@ NoiseEstimate EstimateNoise(const NoiseInputs& in) {
     const Eigen::FullPivLU<Eigen::MatrixXd> lu(N);
     if (lu.rank() < dof) continue;
     const Eigen::MatrixXd N_inv = lu.inverse();
-    size_t k_obs = 0;
-    for (int i : observations[p]) {
-      if (k_obs >= J_obs.size()) break;
-      const int c = (*in.camera_index)(i);
+    for (size_t k_obs = 0; k_obs < used_obs.size(); ++k_obs) {
+      const int c = (*in.camera_index)(used_obs[k_obs]);
       const Eigen::MatrixXd& J = J_obs[k_obs];
-      const double used = (J * N_inv * J.transpose()).trace() / var_obs[k_obs];
-      ++k_obs;
-      const ba::Intrinsics& K = (*in.intrinsics)[c];
-      const Eigen::Vector3d x = rotations[c] * X + in.poses->row(c).tail<3>().transpose();
-      const Eigen::Vector2d pixel(K.fx * x.x() / x.z() + K.skew * x.y() / x.z() + K.cx, K.fy * x.y() / x.z() + K.cy);
-      camera_sum[c] += (pixel - in.observed->row(i).transpose()).squaredNorm();
-      camera_r[c] += 2.0 - used;
+      camera_sum[c] += error_obs[k_obs];
+      camera_r[c] += 2.0 - (J * N_inv * J.transpose()).trace() / var_obs[k_obs];
     }
     if (projector_term) {
       projector_sum += e_proj.squaredNorm() * in.projector_width * in.projector_width;

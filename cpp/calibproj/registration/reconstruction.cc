@@ -131,9 +131,10 @@ double RmsReprojection(const std::vector<cv::Point3d>& object, const std::vector
                        const ba::Intrinsics& K, const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
   double sum = 0.0;
   for (size_t i = 0; i < object.size(); ++i) {
-    const Eigen::Vector3d x = R * Eigen::Vector3d(object[i].x, object[i].y, object[i].z) + t;
-    if (x.z() <= 0.0) return std::numeric_limits<double>::infinity();
-    const Eigen::Vector2d pixel(K.fx * x.x() / x.z() + K.skew * x.y() / x.z() + K.cx, K.fy * x.y() / x.z() + K.cy);
+    Eigen::Vector2d pixel;
+    if (!ba::ProjectPoint(K, R * Eigen::Vector3d(object[i].x, object[i].y, object[i].z) + t, &pixel, nullptr)) {
+      return std::numeric_limits<double>::infinity();
+    }
     sum += (pixel - Eigen::Vector2d(image[i].x, image[i].y)).squaredNorm();
   }
   return std::sqrt(sum / static_cast<double>(object.size()));
