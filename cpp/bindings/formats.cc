@@ -12,6 +12,7 @@
 #include "calibproj/formats/calibration.h"
 #include "calibproj/formats/export.h"
 #include "calibproj/formats/files.h"
+#include "calibproj/formats/earlier_observations.h"
 #include "calibproj/formats/intrinsics_file.h"
 #include "calibproj/formats/scale.h"
 #include "convert.h"
@@ -262,6 +263,18 @@ void register_formats(py::module_& m) {
         formats::WriteTracks(out, *given);
       },
       py::arg("out"), py::arg("tracks"), "tracks.json of a Tracks, written atomically");
+  m.def(
+      "with_earlier_observations",
+      [](const std::filesystem::path& earlier, const py::object& tracks, const py::dict& intrinsics) {
+        const auto given = Converted("tracks", [&] { return TracksFrom(tracks); });
+        if (!given) throw py::type_error("tracks: expected a Tracks, got None");
+        given->Check();
+        const auto cameras = Converted("intrinsics", [&] { return IntrinsicsFrom(intrinsics); });
+        return TracksDict(formats::WithEarlierObservations(earlier, *given, cameras));
+      },
+      py::arg("earlier"), py::arg("tracks"), py::arg("intrinsics"),
+      "The fields of a Tracks: `tracks` with the observations of an earlier results folder (or tracks.json) "
+      "added; InputError naming the file (other intrinsics, shared point ids)");
   m.def(
       "scaled_lengths",
       [](const py::object& calibration, double factor) {

@@ -33,6 +33,7 @@ from calibproj.self_calibration import (RefineRequest, SelfCalibrationOptions, c
                                         nominal_intrinsics, self_calibrate, write_self_calibration)
 from calibproj.results import CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, TRACKS_FILE
 from calibproj.tracks import Tracks
+from calibproj.io.jsonio import FormatError
 
 logger = logging.getLogger(__name__)
 
@@ -56,6 +57,7 @@ def calibrate(
     refine_intrinsics: str | Sequence[str] | None = None,
     self_calibration_options: SelfCalibrationOptions | None = None,
     nominal_fov_deg: float | None = None,
+    merge: str | os.PathLike | None = None,
 ) -> Calibration:
     """Calibrate a camera network and, with ``out``, write its results folder.
 
@@ -92,6 +94,12 @@ def calibrate(
             intrinsics file (or every camera, when ``intrinsics`` is None) starts from a
             pinhole with this horizontal field of view, the principal point at the image
             centre and no distortion (``calibproj.self_calibration.nominal_intrinsics``).
+        merge: the results folder (or ``tracks.json``) of an earlier calibration of the same
+            cameras, whose observations are added to the new ones: the new projection is
+            then one that ``calibproj generate --densify`` planned from those results (its
+            point ids are new) and ``sequence`` is that densified sequence. A camera the
+            new projection gives nothing keeps its earlier observations. The intrinsics
+            must be the ones the earlier results used. None (default): nothing merged.
     """
     from calibproj.export import parse_formats
     from calibproj.scale import check_measurement, parse_scale, scale_factor, scaled
@@ -122,9 +130,11 @@ def calibrate(
         given = source if videos is not None or isinstance(source, Tracks) else Tracks.read(source)
         # Before the ingest: a bad or missing file fails its own camera only (the reason
         # names the file and the problem), a missing or empty folder the whole run.
+        earlier_cameras = _earlier_cameras(merge) if merge is not None else []
         if nominal_fov_deg is None:
+            names = video_camera_names(videos) if videos is not None else list(given.camera_names)
             intrinsics, unusable = intrinsics_of_cameras(
-                intrinsics_source, video_camera_names(videos) if videos is not None else given.camera_names)
+                intrinsics_source, names + [name for name in earlier_cameras if name not in names])
         else:
             intrinsics, unusable = _with_nominal(intrinsics_source, videos, nominal_fov_deg)
             intrinsics_source = intrinsics if intrinsics_source is None else intrinsics_source
@@ -132,6 +142,8 @@ def calibrate(
                                                           intrinsics if nominal_fov_deg is not None else intrinsics_source,
                                                           ingest_options, detector_options, exposures,
                                                           workers, progress)
+        if merge is not None:
+            tracks, ingest_failed = _with_earlier(merge, tracks, intrinsics, ingest_failed)
         left_out = _left_out(ingest_failed, unusable)
         markers = _projected_markers(sequence, tracks.markers_per_array) if sequence is not None else None
         if measurement is not None:
@@ -156,7 +168,8 @@ def calibrate(
             markers_spec = ingest_result.markers if ingest_result is not None else None
             record = provenance(folder.path, command=command, source=source, sequence=sequence,
                                 intrinsics=intrinsics_source, markers=markers_spec, model=calibration.model,
-                                options=options, scale=scale_source, videos=_video_files(ingest_result))
+                                options=options, scale=scale_source, videos=_video_files(ingest_result),
+                                merged=merge)
             with folder.writing() as staging:
                 write_provenance(staging, record)  # first, as the self-calibration: the report shows them
                 if self_calibration is not None:
@@ -269,6 +282,35 @@ def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, e
     for name, error in result.failed.items():
         logger.error("camera %s failed: %s", name, error)
     return result.tracks, result.failed, result
+
+
+def _earlier_cameras(merge: str | os.PathLike) -> list[str]:
+    """The cameras of the earlier observations to merge (FormatError naming the file)."""
+    path = Path(merge)
+    return list(Tracks.read(path / TRACKS_FILE if path.is_dir() else path).camera_names)
+
+
+def _with_earlier(merge: str | os.PathLike, tracks: Tracks, intrinsics: Mapping[str, Intrinsics],
+                  ingest_failed: dict[str, str]) -> tuple[Tracks, dict[str, str]]:
+    """The new tracks with the earlier observations added, and the cameras that still
+    failed: one the new projection gave nothing keeps its earlier observations."""
+    from calibproj import _core
+
+    try:
+        merged = Tracks(**_core.formats.with_earlier_observations(Path(merge), tracks, dict(intrinsics)))
+    except _core.formats.InputError as error:
+        raise FormatError(str(error)) from None
+    counts = merged.counts_per_camera()
+    still_failed = {}
+    for name, reason in ingest_failed.items():
+        if counts.get(name, 0) > 0:
+            logger.warning("camera %s: nothing from the new projection (%s); its earlier observations are used",
+                           name, reason)
+        else:
+            still_failed[name] = reason
+    logger.info("merged the observations of %s: %d observations of %d points", merge, len(merged),
+                merged.num_points)
+    return merged, still_failed
 
 
 def _video_files(ingest_result: Any) -> dict[str, str]:

@@ -81,6 +81,7 @@ def provenance(
     options: Any = None,
     scale: Mapping[str, Any] | None = None,
     videos: Mapping[str, str | os.PathLike] | None = None,
+    merged: Any = None,
 ) -> dict[str, Any]:
     """The body of ``provenance.json``.
 
@@ -96,6 +97,7 @@ def provenance(
         options: the registration options (a dataclass).
         scale: where the metric scale came from (measurement, factor), or None.
         videos: camera -> video file, each identified by size and time (or hash).
+        merged: the earlier results (or tracks file) whose observations were added.
     """
     folder = Path(folder)
     return {
@@ -109,6 +111,7 @@ def provenance(
             "sequence": _input_entry(sequence, folder),
             "intrinsics": _input_entry(intrinsics, folder),
             "videos": {name: file_identity(path, folder) for name, path in (videos or {}).items()},
+            "merged": _input_entry(merged, folder) if merged is not None else None,
         },
         "markers": markers,
         "model": model,

@@ -1,6 +1,7 @@
 #include "calibproj/formats/tracks_file.h"
 
 #include <algorithm>
+#include <iterator>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -76,6 +77,39 @@ Tracks Tracks::WithoutCameras(const std::vector<std::string>& names) const {
     pixels.push_back(xy.row(i).transpose());
   }
   return MakeTracks(kept, camera, ids, pixels, markers_per_array);
+}
+
+Tracks MergeTracks(const Tracks& first, const Tracks& second) {
+  if (first.markers_per_array != second.markers_per_array) {
+    const auto text = [](const std::optional<int>& value) { return value ? std::to_string(*value) : "none"; };
+    throw std::invalid_argument("the tracks have " + text(first.markers_per_array) + " and " +
+                                text(second.markers_per_array) + " markers per array: not of one sequence");
+  }
+  std::vector<std::int64_t> shared;
+  std::set_intersection(first.point_ids.begin(), first.point_ids.end(), second.point_ids.begin(),
+                        second.point_ids.end(), std::back_inserter(shared));
+  if (!shared.empty()) {
+    throw std::invalid_argument(std::to_string(shared.size()) + " point id(s) in both, e.g. " +
+                                std::to_string(shared.front()) +
+                                ": the second projection must show only arrays the first did not (calibproj generate "
+                                "--densify)");
+  }
+  std::vector<std::string> cameras = first.cameras;
+  for (const auto& name : second.cameras) {
+    if (std::find(cameras.begin(), cameras.end(), name) == cameras.end()) cameras.push_back(name);
+  }
+  std::vector<int> camera;
+  std::vector<std::int64_t> ids;
+  std::vector<Eigen::Vector2d> pixels;
+  for (const Tracks* part : {&first, &second}) {
+    for (int i = 0; i < part->camera_index.size(); ++i) {
+      const auto& name = part->cameras[part->camera_index(i)];
+      camera.push_back(static_cast<int>(std::find(cameras.begin(), cameras.end(), name) - cameras.begin()));
+      ids.push_back(part->point_ids[part->point_index(i)]);
+      pixels.push_back(part->xy.row(i).transpose());
+    }
+  }
+  return MakeTracks(cameras, camera, ids, pixels, first.markers_per_array);
 }
 
 namespace {

@@ -31,6 +31,12 @@ struct Tracks {
 
 Tracks ReadTracks(const std::filesystem::path& path);
 
+// The observations of both (cameras: `first`'s, then those only `second` has).
+// std::invalid_argument when they share a point id or differ in markers per array:
+// merged tracks come from two projections of one sequence family, whose point ids are
+// disjoint by construction (a densified sequence shows only arrays the first lacks).
+Tracks MergeTracks(const Tracks& first, const Tracks& second);
+
 // Writes tracks.json atomically in the Python writer's layout: the header indented,
 // then per camera its point ids and pixels on one line each (every camera listed,
 // those without observations with empty lists).

@@ -4,6 +4,8 @@ From the camera videos of a projection (sync, frame picking, marker detection, t
     calibproj calibrate VIDEOS_DIR --sequence sequence.json --intrinsics INTRINSICS_DIR --out RESULTS_DIR
 From tracks (e.g. of `calibproj simulate --tracks-only` or `calibproj detect`):
     calibproj calibrate --tracks tracks.json --intrinsics INTRINSICS_DIR --out RESULTS_DIR
+With a short extra projection where cameras have few points (`calibproj generate --densify`):
+    calibproj calibrate DENSE_VIDEOS_DIR --sequence DENSE/sequence.json --merge RESULTS_DIR ...
 
 Writes camera_poses.json (world-to-camera poses in the floor frame: z up, floor z = 0),
 metrics.json (per camera: mean and std reprojection error, inliers, view score, or why
@@ -51,6 +53,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sequence.json of the projection (needed with videos and by --scale marker-size)")
     parser.add_argument("--export", metavar="FORMATS",
                         help="also write the calibration as yaml, colmap and/or anipose (comma-separated)")
+    parser.add_argument("--merge", metavar="RESULTS",
+                        help="add the observations of an earlier calibration (its results folder or tracks.json): "
+                             "the new videos record a projection planned by `calibproj generate --densify RESULTS`, "
+                             "and --sequence is that densified sequence.json; same intrinsics as RESULTS")
     parser.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
     parser.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
     add_exposure_argument(parser, "with videos; default: estimated")
@@ -100,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         refine_intrinsics=args.refine_intrinsics,
         nominal_fov_deg=args.nominal_fov,
         self_calibration_options=dataclass_from_args(SelfCalibrationOptions, args),
+        merge=args.merge,
     )
     rows = calibration_summary(calibration)
     if args.json:

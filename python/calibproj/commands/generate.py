@@ -10,6 +10,15 @@ Defaults follow the paper: 100 arrays of 4x8 ArUco markers (3200 points), scales
 
 SEQ_DIR is written beside itself and moved into place at the end; an existing folder
 is only replaced, whole, with --force.
+
+Densification (--densify RESULTS): a short extra projection (at most --densify-seconds,
+codes included) that fills the view of each weak camera, or camera with few points,
+with MSMs sized for it, planned from the calibration in RESULTS. Its sequence keeps the
+arrays of the sequence RESULTS came from (--sequence; default: the one its
+provenance.json names) and shows only the new ones. Record it with the cameras as
+they are, then: calibproj calibrate DENSE_VIDEOS --sequence SEQ_DIR/sequence.json
+--merge RESULTS ... The marker family, projector, frame rates and codes are the
+sequence's; the layout options above do not apply.
 """
 
 from __future__ import annotations
@@ -18,6 +27,7 @@ import argparse
 import json
 
 from calibproj.cli import CommandError
+from calibproj.sequence.densify import DensifyOptions
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -56,9 +66,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--preset", default=None, help="x264 preset (default: veryfast)")
     parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     parser.add_argument("--json", action="store_true", help="print a JSON summary")
+    densify = parser.add_argument_group("densification (see above)")
+    densify.add_argument("--densify", metavar="RESULTS",
+                         help="plan an extra projection for the weak cameras of this results folder")
+    densify.add_argument("--sequence", metavar="FILE",
+                         help="with --densify: the sequence.json RESULTS were calibrated from "
+                              "(default: the one its provenance.json names)")
+    densify.add_argument("--densify-seconds", type=float, default=DensifyOptions.max_seconds,
+                         help="longest extra projection, codes included (default: %(default)s)")
+    densify.add_argument("--densify-cameras", metavar="NAMES",
+                         help="comma-separated cameras to densify for (default: the weak ones and those with "
+                              "fewer than --densify-min-points inliers)")
+    densify.add_argument("--densify-min-points", type=int, default=DensifyOptions.min_points,
+                         help="inliers below which a camera is densified for (default: %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.densify is not None:
+        return _run_densify(args)
+    if args.sequence is not None:
+        raise CommandError("--sequence applies to --densify")
     from calibproj.io.output_folder import OutputFolder
     from calibproj.sequence import SequenceOptions, generate
     from calibproj.sequence.builder import SEQUENCE_FILE
@@ -109,3 +136,68 @@ def _scales(text: str) -> tuple[float, ...]:
         return tuple(float(v) for v in text.split(","))
     except ValueError:
         raise CommandError(f"--scales must look like 1,1.4,2, got {text!r}") from None
+
+
+def _run_densify(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from calibproj.io.output_folder import OutputFolder
+    from calibproj.sequence import Sequence
+    from calibproj.sequence.builder import SEQUENCE_FILE, write_sequence
+    from calibproj.sequence.densify import densify
+    from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET
+
+    results = Path(args.densify)
+    if not results.is_dir():
+        raise CommandError(f"{results}: no such results folder")
+    cameras = tuple(n.strip() for n in args.densify_cameras.split(",") if n.strip()) if args.densify_cameras else None
+    options = DensifyOptions(max_seconds=args.densify_seconds, cameras=cameras, min_points=args.densify_min_points)
+    sequence_path = Path(args.sequence) if args.sequence else _calibrated_sequence(results)
+    dense, plans = densify(results, Sequence.load(sequence_path), options)
+    summary = {"sequence": None, "video": None, "extra_seconds": 0.0, "cameras": {}}
+    if dense is not None:
+        with OutputFolder(args.out, force=args.force, signature=[SEQUENCE_FILE]) as folder, \
+                folder.writing() as staging:
+            write_sequence(staging, dense, video=args.video, png=args.png,
+                           crf=DEFAULT_CRF if args.crf is None else args.crf, preset=args.preset or DEFAULT_PRESET,
+                           progress=args.progress and not args.json)
+        summary.update(sequence=f"{args.out}/sequence.json", video=f"{args.out}/projection.mp4" if args.video else None,
+                       extra_seconds=round(dense.duration_s, 3))
+        for plan in plans:
+            low, high = plan.footprint.camera_px_per_projector_px
+            summary["cameras"][plan.footprint.camera] = {
+                "arrays": len(plan.centres), "centres": int(sum(len(c) for c in plan.centres)),
+                "points_before": plan.footprint.points, "marker_sides_projector_px": list(plan.sides_px),
+                "marker_sides_camera_px": [round(plan.sides_px[0] * low, 1), round(plan.sides_px[-1] * high, 1)]}
+    if args.json:
+        print(json.dumps(summary))
+    elif dense is None:
+        print(f"{results}: no camera needs densification (none is weak or has fewer than "
+              f"{options.min_points} inliers); nothing written")
+    else:
+        for name, entry in summary["cameras"].items():
+            low, high = entry["marker_sides_camera_px"]
+            print(f"{name}: {entry['centres']} new centres in {entry['arrays']} arrays (it had "
+                  f"{entry['points_before']} points), markers of {low:.0f}-{high:.0f} px in its image")
+        print(f"{summary['sequence']}: extra projection of {dense.duration_s:.1f} s; record it, then calibrate "
+              f"with --sequence {summary['sequence']} --merge {results}")
+    return 0
+
+
+def _calibrated_sequence(results) -> "Path":
+    """The sequence file the results' provenance names, if it is still there unchanged."""
+    import hashlib
+    from pathlib import Path
+
+    from calibproj.provenance import read_provenance
+
+    entry = ((read_provenance(results) or {}).get("inputs") or {}).get("sequence")
+    if not isinstance(entry, dict) or not isinstance(entry.get("path"), str):
+        raise CommandError(f"{results}: its provenance names no sequence file; give it with --sequence")
+    path = Path(entry["path"])
+    path = path if path.is_absolute() else results / path
+    if not path.is_file():
+        raise CommandError(f"{path}: the sequence {results} was calibrated from is gone; give it with --sequence")
+    if "sha256" in entry and hashlib.sha256(path.read_bytes()).hexdigest() != entry["sha256"]:
+        raise CommandError(f"{path}: changed since {results} was calibrated; give the original with --sequence")
+    return path

@@ -103,34 +103,62 @@ def build_sequence(options: SequenceOptions | None = None, **overrides: Any) -> 
         raise ValueError(f"a {options.grid[0]}x{options.grid[1]} grid needs {layout.markers_per_array} ids but "
                          f"{markers.spec} has only {markers.id_count}")
     omitted = _omissions(layout, markers, options)
-    frames_per_pattern = _frames_per_pattern(options)
     bits_frames = options.code_frames_per_bit or default_frames_per_pattern(options.fps, options.min_camera_fps)
-    if bits_frames < 1 or options.reference_frames < 1:
+    shown = [ShownPattern(array, scale_index, omitted[scale_index][array])
+             for array in range(layout.arrays) for scale_index in range(len(layout.scales))]
+    return assemble_sequence(markers, layout, layout.centres(), shown, fps=float(options.fps),
+                             frames_per_pattern=_frames_per_pattern(options), code_degree=options.code_degree,
+                             code_frames_per_bit=bits_frames, reference_frames=options.reference_frames,
+                             min_gap_modules=options.min_gap_modules)
+
+
+@dataclass(frozen=True)
+class ShownPattern:
+    """One pattern to show: array ``array`` at the layout's scale ``scale_index``,
+    without the markers in ``omitted``."""
+
+    array: int
+    scale_index: int
+    omitted: tuple[int, ...] = ()
+
+
+def assemble_sequence(markers: MarkerSystem, layout: MsmLayout, centres: np.ndarray, shown: list[ShownPattern], *,
+                      fps: float, frames_per_pattern: int, code_degree: int, code_frames_per_bit: int,
+                      reference_frames: int, min_gap_modules: float) -> Sequence:
+    """The sequence that shows the patterns ``shown`` in order, framed by the reference
+    frames and light codes of the module docstring's timeline (checked: ValueError)."""
+    if code_frames_per_bit < 1 or reference_frames < 1:
         raise ValueError("code_frames_per_bit and reference_frames must be at least 1")
-    start_bits, end_bits = code_pair(options.code_degree)
+    if not shown:
+        raise ValueError("a sequence needs at least one pattern")
+    start_bits, end_bits = code_pair(code_degree)
     timeline = _Timeline()
-    timeline.add("white", options.reference_frames)
-    timeline.add("black", options.reference_frames)
-    start = LightCode(start_bits, bits_frames, timeline.add("start_code", len(start_bits) * bits_frames))
-    timeline.add("black", options.reference_frames)
-    pattern_count = layout.arrays * len(layout.scales)
-    first_pattern_frame = timeline.add("patterns", pattern_count * frames_per_pattern)
-    timeline.add("black", options.reference_frames)
-    end = LightCode(end_bits, bits_frames, timeline.add("end_code", len(end_bits) * bits_frames))
-    timeline.add("black", options.reference_frames)
-    timeline.add("white", options.reference_frames)
+    timeline.add("white", reference_frames)
+    timeline.add("black", reference_frames)
+    start = LightCode(start_bits, code_frames_per_bit, timeline.add("start_code", len(start_bits) * code_frames_per_bit))
+    timeline.add("black", reference_frames)
+    first_pattern_frame = timeline.add("patterns", len(shown) * frames_per_pattern)
+    timeline.add("black", reference_frames)
+    end = LightCode(end_bits, code_frames_per_bit, timeline.add("end_code", len(end_bits) * code_frames_per_bit))
+    timeline.add("black", reference_frames)
+    timeline.add("white", reference_frames)
     patterns = []
-    for array in range(layout.arrays):
-        for scale_index, scale in enumerate(layout.scales):
-            first = first_pattern_frame + len(patterns) * frames_per_pattern
-            patterns.append(Pattern(array, scale_index, scale, layout.marker_side(scale), first,
-                                    first + frames_per_pattern - 1, omitted[scale_index][array]))
-    sequence = Sequence(markers=markers, projector=layout.projector, fps=float(options.fps), layout=layout,
-                        min_gap_modules=options.min_gap_modules, frames_per_pattern=frames_per_pattern,
-                        centres=layout.centres(), patterns=patterns, segments=timeline.segments,
+    for item in shown:
+        first = first_pattern_frame + len(patterns) * frames_per_pattern
+        scale = layout.scales[item.scale_index]
+        patterns.append(Pattern(item.array, item.scale_index, scale, layout.marker_side(scale), first,
+                                first + frames_per_pattern - 1, tuple(item.omitted)))
+    sequence = Sequence(markers=markers, projector=layout.projector, fps=float(fps), layout=layout,
+                        min_gap_modules=min_gap_modules, frames_per_pattern=frames_per_pattern,
+                        centres=centres, patterns=patterns, segments=timeline.segments,
                         start_code=start, end_code=end)
     sequence.validate()
     return sequence
+
+
+def overhead_frames(code_degree: int, code_frames_per_bit: int, reference_frames: int) -> int:
+    """Frames of a sequence besides its patterns: six reference blocks and two codes."""
+    return 6 * reference_frames + 2 * (2 ** code_degree - 1) * code_frames_per_bit
 
 
 def generate(
@@ -162,6 +190,13 @@ def generate(
         presence means the video is complete.
     """
     sequence = build_sequence(options, **overrides)
+    write_sequence(out_dir, sequence, video=video, png=png, crf=crf, preset=preset, progress=progress)
+    return sequence
+
+
+def write_sequence(out_dir: str | os.PathLike, sequence: Sequence, *, video: bool = True, png: bool = False,
+                   crf: int = DEFAULT_CRF, preset: str = DEFAULT_PRESET, progress: bool = False) -> None:
+    """Write ``sequence`` to ``out_dir`` as :func:`generate` does (``sequence.json`` last)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if video:
@@ -171,7 +206,6 @@ def generate(
     sequence.save(out / SEQUENCE_FILE)
     log.debug("wrote %s: %d frames (%.1f s), %d patterns, %d points", out, sequence.frame_count,
              sequence.duration_s, len(sequence.patterns), sequence.point_count)
-    return sequence
 
 
 class _Timeline:

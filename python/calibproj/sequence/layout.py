@@ -127,11 +127,7 @@ class MsmLayout:
         The image covers ``[-0.5, width - 0.5] x [-0.5, height - 0.5]`` (pixel centres
         on integers).
         """
-        centres = self.centres()
-        limits = np.asarray(self.projector, dtype=np.float64) - 0.5
-        low = centres - 0.5 * side
-        high = centres + 0.5 * side
-        return ((low < -0.5 - 1e-9) | (high > limits + 1e-9)).any(axis=-1)
+        return outside_image(self.centres(), side, self.projector)
 
     def too_close(self, side: float, gap: float) -> np.ndarray:
         """``(arrays, markers, markers)``: pairs of markers of one array closer than ``gap``.
@@ -152,3 +148,12 @@ class MsmLayout:
         dx = self.span[0] / max(cols * nx - 1, 1) * nx
         dy = self.span[1] / max(rows * ny - 1, 1) * ny
         return dx, dy
+
+
+def outside_image(centres: np.ndarray, side: float, projector: tuple[int, int]) -> np.ndarray:
+    """Whether squares of ``side`` pixels at ``centres`` (``(..., 2)``) leave a projector
+    image of ``projector = (width, height)`` pixels (pixel centres on integers)."""
+    limits = np.asarray(projector, dtype=np.float64) - 0.5
+    low = np.asarray(centres, dtype=np.float64) - 0.5 * side
+    high = np.asarray(centres, dtype=np.float64) + 0.5 * side
+    return ((low < -0.5 - 1e-9) | (high > limits + 1e-9)).any(axis=-1)
