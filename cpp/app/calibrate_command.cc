@@ -5,6 +5,7 @@
 #include <map>
 #include <optional>
 
+#include "calibproj/formats/earlier_observations.h"
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/intrinsics_file.h"
 #include "output_folder.h"
@@ -42,6 +43,10 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
                   "metric scale from one measurement: camera-height:NAME=METRES, distance:CAM_A,CAM_B=METRES or "
                   "marker-size:[ARRAY/MARKER=]METRES (default: arbitrary unit)");
   cmd->add_option("--sequence", args->sequence, "sequence.json of the projection: its projector pixels tie every centre to the floor (and --scale marker-size needs it)");
+  cmd->add_option("--merge", args->merge,
+                  "add the observations of an earlier calibration (its results folder or tracks.json): --tracks "
+                  "then come from a projection planned by `calibproj generate --densify`, and --sequence is that "
+                  "densified sequence.json; same intrinsics as the earlier results");
   cmd->add_option("--export", args->exports,
                   "also write the calibration as yaml, colmap and/or anipose (comma-separated)");
   registration::Options& o = args->options;
@@ -171,10 +176,12 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   // Checked and locked before the inputs are read, as the Python command does.
   OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
   out.Open();
-  const Tracks given = ReadTracks(arguments.tracks);
-  Tracks tracks = given;
+  const Tracks recorded = ReadTracks(arguments.tracks);
   const IntrinsicsDir folder = LoadIntrinsicsDir(arguments.intrinsics);
   const auto& intrinsics = folder.cameras;
+  const Tracks given =
+      arguments.merge.empty() ? recorded : formats::WithEarlierObservations(arguments.merge, recorded, intrinsics);
+  Tracks tracks = given;
   std::optional<formats::ProjectedMarkers> markers;
   if (!arguments.sequence.empty()) markers = MarkersOf(arguments.sequence, tracks.markers_per_array);
   if (measurement) {

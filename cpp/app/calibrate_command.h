@@ -18,6 +18,7 @@ struct CalibrateArguments {
   std::string scale;     // one metric measurement (formats/scale.h); empty: arbitrary unit
   std::string sequence;  // sequence.json, for a marker-size measurement
   std::string exports;   // comma-separated export formats (formats/export.h)
+  std::string merge;     // earlier results folder or tracks.json whose observations are added
   bool force = false;
   std::string model = "coplanar";
   std::string loss = "none";

@@ -23,6 +23,7 @@ sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import logging
 import math
@@ -40,7 +41,8 @@ from calibproj.demo import marker_side_on_floor
 from calibproj.evaluation import EvaluationOptions, evaluate
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
-from calibproj.sequence import generate
+from calibproj.sequence import Sequence, generate
+from calibproj.sequence.densify import DensifyOptions, densify
 from calibproj.simulate.presets import REAL_PEOPLE
 from calibproj.simulate.render import RenderOptions, simulate_videos
 from calibproj.simulate.scene import AutoExposure, FloorTexture, Person, Scene, load_scene, read_scene
@@ -112,19 +114,26 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         simulate_videos(scene, sequence, room, seed=seed, options=replace(RenderOptions(), **render_changes))
     marker_side_m = marker_side_on_floor(room / "scene.json", sequence)
     results = room / "results"
-    try:
-        calibration = calibrate(room / "videos", room / "intrinsics", sequence=sequence_path, out=results,
-                                options=RegistrationOptions(model=args.model, use_projector=not args.no_projector),
-                                exposures=locked_exposures(scene) if args.locked_exposures else None,
-                                scale=f"marker-size:{marker_side_m:.9f}", force=True, progress=False)
-    except ValueError as error:  # the scale could not be measured: results in arbitrary units
-        logging.warning("%s seed %d: %s", condition, seed, error)
-        from calibproj.calibration import Calibration
-
-        calibration = Calibration.load(results)
+    calibrate_room = functools.partial(
+        calibrate_scaled, intrinsics=room / "intrinsics", scale=f"marker-size:{marker_side_m:.9f}",
+        options=RegistrationOptions(model=args.model, use_projector=not args.no_projector),
+        exposures=locked_exposures(scene) if args.locked_exposures else None, label=f"{condition} seed {seed}")
+    calibration = calibrate_room(room / "videos", sequence_path, results)
+    extra_s = 0.0
+    if args.densify:
+        dense, _ = densify(results, Sequence.load(sequence_path), DensifyOptions(max_seconds=args.densify_seconds))
+        if dense is not None:
+            extra_s = dense.duration_s
+            dense.save(room / "dense_sequence.json")
+            if not (args.reuse and rendered(room / "dense", scene)):
+                simulate_videos(scene, dense, room / "dense", seed=seed + 1000,
+                                options=replace(RenderOptions(), **render_changes))
+            results = room / "results_dense"
+            calibration = calibrate_room(room / "dense" / "videos", room / "dense_sequence.json", results,
+                                         merge=room / "results")
     truth = json.loads((room / "truth.json").read_text())
-    report = json.loads((results / "detect_report.json").read_text())
-    row = {"condition": condition, "seed": seed, "total": len(scene.cameras),
+    report = json.loads(((room / "results") / "detect_report.json").read_text())
+    row = {"condition": condition, "seed": seed, "total": len(scene.cameras), "extra_s": extra_s,
            "failed": {name: reason for name, reason in calibration.failed.items()}}
     registered = [name for name in scene.camera_names if name in calibration.poses]
     row["registered"] = len(registered)
@@ -142,10 +151,33 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         passed = [strict.cameras[name].mean_px is not None and strict.cameras[name].mean_px < 0.5
                   for name in strong if name in strict.cameras]
         row["success_strong"] = float(np.mean(passed)) if passed else math.nan
+        # Every camera on points placed without it (the weak ones included), and each
+        # camera's rotation error in units of its reported sigma (the reference has none).
+        alone = [strict.cameras[name].mean_px is not None and strict.cameras[name].mean_px < 0.5
+                 for name in comparison.cameras if name in strict.cameras]
+        row["success_alone"] = float(np.mean(alone)) if alone else math.nan
+        row["sigmas"] = {name: comparison.cameras[name].rotation_deg / calibration.metrics[name].rotation_sigma_deg
+                         for name in comparison.cameras if (calibration.metrics[name].rotation_sigma_deg or 0) > 0}
+        row["sigma_deg"] = {name: calibration.metrics[name].rotation_sigma_deg for name in comparison.cameras}
+        row["rot_deg"] = {name: comparison.cameras[name].rotation_deg for name in comparison.cameras}
     row["sync_frames"] = max_sync_error(report, truth)
     row["readout_ms"] = max_readout_error(report, truth)
     row["wrong"] = wrong_assignments(room / "results" / "tracks.json", truth, args.wrong_px)
     return row
+
+
+def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics: Path, scale: str,
+                     options: RegistrationOptions, exposures, label: str, merge: Path | None = None):
+    """calibrate() into ``results`` with a metric scale; results in arbitrary units
+    (logged) when the scale cannot be measured."""
+    try:
+        return calibrate(videos, intrinsics, sequence=sequence, out=results, options=options, exposures=exposures,
+                         scale=scale, force=True, progress=False, merge=merge)
+    except ValueError as error:
+        logging.warning("%s: %s", label, error)
+        from calibproj.calibration import Calibration
+
+        return Calibration.load(results)
 
 
 def rendered(room: Path, scene: Scene) -> bool:
@@ -221,6 +253,16 @@ def format_sync(sync: dict[str, float]) -> str:
             f"beyond +-: {sync['beyond']:.3f})")
 
 
+def worst_ratio(row: dict) -> float:
+    return max(row["sigmas"].values(), default=math.nan)
+
+
+def zoomed(row: dict) -> str:
+    """The camera with the largest rotation sigma: its error and sigma (deg)."""
+    name = max(row["sigma_deg"], key=lambda n: row["sigma_deg"][n] or 0.0)
+    return f"{name} {row['rot_deg'][name]:.4f}/{row['sigma_deg'][name]:.4f} deg"
+
+
 def format_row(row: dict) -> str:
     failed = "; ".join(f"{name}: {reason[:80]}" for name, reason in row["failed"].items())
     weak = ", ".join(f"{name} ({sigma:.3f} deg)" for name, sigma in row["weak"].items())
@@ -231,7 +273,10 @@ def format_row(row: dict) -> str:
     mm = "-" if row["mm"] is None else f"{row['mm']:.2f}"
     return (f"{row['condition']:<20} seed {row['seed']}  registered {row['registered']}/{row['total']}  "
             f"rot {row['rot']:.4f} deg (not weak {row['rot_strong']:.4f})  {mm} mm  eval {row['eval_px']:.3f} px  "
-            f"@0.5 {100 * row['success']:.0f} % (not weak {100 * row['success_strong']:.0f} %)  "
+            f"@0.5 {100 * row['success']:.0f} % (not weak {100 * row['success_strong']:.0f} %, each on points "
+            f"placed without it {100 * row['success_alone']:.0f} %)  worst error/sigma {worst_ratio(row):.1f}  "
+            + (f"extra projection {row['extra_s']:.1f} s  " if row["extra_s"] else "") +
+            f"zoomed {zoomed(row)}  "
             f"{format_sync(row['sync_frames'])}  "
             f"readout {readout} ms  wrong {row['wrong']}"
             + (f"  weak: {weak}" if weak else "") + (f"  failed: {failed}" if failed else ""))
@@ -257,6 +302,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--reuse", action="store_true",
                         help="with --work: calibrate the renderings already there again where their scene is the "
                              "condition's (same --arrays and --markers assumed) instead of rendering them anew")
+    parser.add_argument("--densify", action="store_true",
+                        help="after the first calibration, render the extra projection `calibproj generate --densify` "
+                             "plans for its weak cameras and calibrate again with --merge")
+    parser.add_argument("--densify-seconds", type=float, default=DensifyOptions.max_seconds,
+                        help="longest extra projection (default %(default)s)")
     parser.add_argument("--json", type=Path, default=None, help="also write every row to this JSON file")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
@@ -291,6 +341,12 @@ def main(argv: list[str] | None = None) -> int:
     worst_readout = max((error for error, _ in readouts), default=math.nan)
     worst_readout_sigmas = max((sigmas for _, sigmas in readouts), default=math.nan)
     wrong = sum(row["wrong"] for row in rows)
+    worst_alone = min((row["success_alone"] for row in evaluated), default=math.nan)
+    worst_sigmas = max((worst_ratio(row) for row in evaluated), default=math.nan)
+    weak_runs = sum(bool(row["weak"]) for row in rows)
+    worst_extra = max((row["extra_s"] for row in rows), default=0.0)
+    print(f"realism: all cameras: worst_success_alone={worst_alone:.3f} worst_error_sigmas={worst_sigmas:.2f} "
+          f"runs_with_weak={weak_runs}/{len(rows)} worst_extra_projection_s={worst_extra:.1f}")
     print(f"realism: worst_rot_deg={worst_rot:.4f} worst_eval_success={worst_success:.3f} "
           f"registered={registered}/{total} worst_sync_frames={worst_sync:.3f} sync_beyond_frames={beyond:.3f} "
           f"worst_readout_ms={worst_readout:.2f} worst_readout_sigmas={worst_readout_sigmas:.1f} wrong={wrong}")

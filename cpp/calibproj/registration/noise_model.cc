@@ -1,6 +1,7 @@
 #include "calibproj/registration/noise_model.h"
 
 #include <Eigen/Dense>
+#include <utility>
 #include <cmath>
 #include <limits>
 
@@ -50,23 +51,25 @@ bool ProjectorJacobian(const ba::ProjectorSurface& surface, const Eigen::Vector3
 
 }  // namespace
 
-NoiseEstimate EstimateNoise(const NoiseInputs& in) {
-  const int num_cameras = static_cast<int>(in.registered->size());
+NoiseProblem::NoiseProblem(const NoiseInputs& in)
+    : num_cameras_(static_cast<int>(in.registered->size())),
+      gauge_camera_(in.gauge_camera),
+      has_projector_(in.projector != nullptr && in.surfaces != nullptr &&
+                     in.projector->rows() == static_cast<Eigen::Index>(in.reconstructed->size())),
+      projector_width_(in.projector_width) {
   const int num_points = static_cast<int>(in.reconstructed->size());
   std::vector<std::vector<int>> observations(num_points);
   for (int i = 0; i < in.camera_index->size(); ++i) {
     const int c = (*in.camera_index)(i), p = (*in.point_index)(i);
     if ((*in.active)[i] && (*in.registered)[c] && (*in.reconstructed)[p]) observations[p].push_back(i);
   }
-  std::vector<Eigen::Matrix3d> rotations(num_cameras);
-  for (int c = 0; c < num_cameras; ++c) {
+  std::vector<Eigen::Matrix3d> rotations(num_cameras_);
+  for (int c = 0; c < num_cameras_; ++c) {
     rotations[c] = ba::RotationFromAngleAxis(in.poses->row(c).head<3>().transpose());
   }
-  std::vector<double> camera_sum(num_cameras, 0.0), camera_r(num_cameras, 0.0);
-  double projector_sum = 0.0, projector_r = 0.0;
-  const bool has_projector = in.projector != nullptr && in.projector->rows() == num_points && in.surfaces != nullptr;
-  const double projector_var = in.projector_sigma_px * in.projector_sigma_px /
-                               (in.projector_width * in.projector_width);  // normalised units
+  if (has_projector_) {
+    for (const auto& surface : *in.surfaces) projector_maps_ += surface.valid ? 1 : 0;
+  }
   for (int p = 0; p < num_points; ++p) {
     if (observations[p].empty()) continue;
     const Eigen::Vector3d X = in.points->row(p).transpose();
@@ -74,11 +77,8 @@ NoiseEstimate EstimateNoise(const NoiseInputs& in) {
     // The point's directions of freedom: its plane's, or all three when free.
     Eigen::MatrixXd D = Eigen::Matrix3d::Identity();
     if (k >= 0) D = PlaneDirections((*in.planes)[k]);
-    const int dof = static_cast<int>(D.cols());
-    Eigen::MatrixXd N = Eigen::MatrixXd::Zero(dof, dof);
-    std::vector<int> used_obs;
-    std::vector<Eigen::MatrixXd> J_obs;
-    std::vector<double> var_obs, error_obs;
+    Point point;
+    point.dof = static_cast<int>(D.cols());
     for (int i : observations[p]) {
       const int c = (*in.camera_index)(i);
       Eigen::Vector2d pixel;
@@ -86,56 +86,82 @@ NoiseEstimate EstimateNoise(const NoiseInputs& in) {
       if (!ProjectWorld((*in.intrinsics)[c], rotations[c], in.poses->row(c).tail<3>().transpose(), X, &pixel, &J)) {
         continue;
       }
-      const double var = in.camera_sigma_px[c] * in.camera_sigma_px[c];
-      used_obs.push_back(i);
-      J_obs.push_back(J * D);
-      var_obs.push_back(var);
-      error_obs.push_back((pixel - in.observed->row(i).transpose()).squaredNorm());
-      N += J_obs.back().transpose() * J_obs.back() / var;
+      point.observations.push_back({c, J * D, pixel - in.observed->row(i).transpose()});
     }
     Eigen::Matrix2d J_proj;
-    Eigen::Vector2d e_proj;
-    bool projector_term = false;
-    if (has_projector && k >= 0 && k < static_cast<int>(in.surfaces->size()) && (*in.surfaces)[k].valid &&
-        in.projector->row(p).allFinite() && projector_var > 0.0) {
+    if (has_projector_ && k >= 0 && k < static_cast<int>(in.surfaces->size()) && (*in.surfaces)[k].valid &&
+        in.projector->row(p).allFinite()) {
       const ba::ProjectorSurface& surface = (*in.surfaces)[k];
       Eigen::Vector3d predicted;
       if (ba::ProjectorPoint(surface, in.lens, in.projector->row(p).transpose(), &predicted) &&
           ProjectorJacobian(surface, X, D, &J_proj)) {
-        e_proj = J_proj * D.transpose() * (X - predicted);  // first order, normalised units
-        N += J_proj.transpose() * J_proj / projector_var;
-        projector_term = true;
+        point.has_projector = true;
+        point.J_projector = J_proj;
+        point.projector_error = J_proj * D.transpose() * (X - predicted);  // first order
       }
     }
-    const Eigen::FullPivLU<Eigen::MatrixXd> lu(N);
-    if (lu.rank() < dof) continue;
-    const Eigen::MatrixXd N_inv = lu.inverse();
-    for (size_t k_obs = 0; k_obs < used_obs.size(); ++k_obs) {
-      const int c = (*in.camera_index)(used_obs[k_obs]);
-      const Eigen::MatrixXd& J = J_obs[k_obs];
-      camera_sum[c] += error_obs[k_obs];
-      camera_r[c] += 2.0 - (J * N_inv * J.transpose()).trace() / var_obs[k_obs];
+    if (!point.observations.empty()) points_.push_back(std::move(point));
+  }
+}
+
+NoiseEstimate NoiseProblem::Estimate(const std::vector<double>& camera_sigma_px, double projector_sigma_px) const {
+  using Square = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 3, 3>;
+  using Vector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 3, 1>;
+  std::vector<double> camera_sum(num_cameras_, 0.0), camera_r(num_cameras_, 0.0);
+  double projector_sum = 0.0, projector_r = 0.0;
+  const double projector_var = projector_sigma_px * projector_sigma_px / (projector_width_ * projector_width_);
+  const bool weigh_projector = has_projector_ && projector_var > 0.0;
+  for (const Point& point : points_) {
+    Square N = Square::Zero(point.dof, point.dof);
+    Vector gradient = Vector::Zero(point.dof);
+    for (const Observation& o : point.observations) {
+      const double var = camera_sigma_px[o.camera] * camera_sigma_px[o.camera];
+      N.noalias() += o.J.transpose() * o.J / var;
+      gradient.noalias() += o.J.transpose() * o.error / var;
     }
+    const bool projector_term = weigh_projector && point.has_projector;
     if (projector_term) {
-      projector_sum += e_proj.squaredNorm() * in.projector_width * in.projector_width;
-      projector_r += 2.0 - (J_proj * N_inv * J_proj.transpose()).trace() / projector_var;
+      N.noalias() += point.J_projector.transpose() * point.J_projector / projector_var;
+      gradient.noalias() += point.J_projector.transpose() * point.projector_error / projector_var;
+    }
+    const Eigen::FullPivLU<Square> lu(N);
+    if (lu.rank() < point.dof) continue;
+    const Square N_inv = lu.inverse();
+    // The point as these weights would place it (one Gauss-Newton step from where the
+    // adjustment put it under the weights it had): the estimate can then be iterated to
+    // its fixed point without a new adjustment.
+    const Vector step = -N_inv * gradient;
+    for (const Observation& o : point.observations) {
+      const double var = camera_sigma_px[o.camera] * camera_sigma_px[o.camera];
+      camera_sum[o.camera] += (o.error + o.J * step).squaredNorm();
+      camera_r[o.camera] += 2.0 - (o.J * N_inv * o.J.transpose()).trace() / var;
+    }
+    // A point one camera alone sees tells only the sum of that camera's and the
+    // projector's variances, not how it splits (any split fits its residuals equally):
+    // the projector's share is taken where cameras fix the point.
+    if (projector_term && point.observations.size() >= 2) {
+      projector_sum += (point.projector_error + point.J_projector * step).squaredNorm() * projector_width_ *
+                       projector_width_;
+      projector_r += 2.0 - (point.J_projector * N_inv * point.J_projector.transpose()).trace() / projector_var;
     }
   }
   NoiseEstimate out;
-  out.camera_sigma_px.assign(num_cameras, std::numeric_limits<double>::quiet_NaN());
-  out.camera_redundancy.assign(num_cameras, 0.0);
-  for (int c = 0; c < num_cameras; ++c) {
-    const double r = camera_r[c] - (c == in.gauge_camera ? 0.0 : 6.0);
+  out.camera_sigma_px.assign(num_cameras_, std::numeric_limits<double>::quiet_NaN());
+  out.camera_redundancy.assign(num_cameras_, 0.0);
+  for (int c = 0; c < num_cameras_; ++c) {
+    const double r = camera_r[c] - (c == gauge_camera_ ? 0.0 : 6.0);
     out.camera_redundancy[c] = r;
     if (r >= 1.0) out.camera_sigma_px[c] = std::sqrt(camera_sum[c] / r);
   }
-  if (has_projector && in.surfaces != nullptr) {
-    int maps = 0;
-    for (const auto& surface : *in.surfaces) maps += surface.valid ? 1 : 0;
-    out.projector_redundancy = projector_r - 8.0 * maps - (maps > 0 ? 2.0 : 0.0);
+  if (has_projector_) {
+    out.projector_redundancy = projector_r - 8.0 * projector_maps_ - (projector_maps_ > 0 ? 2.0 : 0.0);
     if (out.projector_redundancy >= 1.0) out.projector_sigma_px = std::sqrt(projector_sum / out.projector_redundancy);
   }
   return out;
+}
+
+NoiseEstimate EstimateNoise(const NoiseInputs& in) {
+  return NoiseProblem(in).Estimate(in.camera_sigma_px, in.projector_sigma_px);
 }
 
 }  // namespace calibproj::registration

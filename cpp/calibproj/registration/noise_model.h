@@ -8,12 +8,17 @@
 // Per point, an observation's share follows from the point's information matrix N (the
 // weighted sum over its observations of J^T J, J the derivative of the observation by
 // the point's coordinates): 2 - tr(w J N^-1 J^T) per 2D observation. A camera's own
-// pose takes 6 more, the projector's maps 8 each and its lens 2. Iterated with the
+// pose takes 6 more, the projector's maps 8 each and its lens 2. The points are
+// re-placed under the sigmas given (one linear step from the adjustment's), so the
+// estimate can be iterated to its fixed point between adjustments: a camera whose
+// centres mostly determine their own points (a zoomed one beside far ones) has little
+// redundancy, and a single step moves its sigma only a little. Iterated with the
 // bundle adjustment this converges to the weights under which every group's residuals
 // match their variance, so a camera whose centres are biased (a floor texture across
 // its markers) gets the sigma its residuals show, and its pose covariance widens.
 
 #include <Eigen/Core>
+#include <limits>
 #include <vector>
 
 #include "calibproj/ba/bundle_adjuster.h"
@@ -49,6 +54,35 @@ struct NoiseEstimate {
   std::vector<double> camera_redundancy;
   double projector_sigma_px = std::numeric_limits<double>::quiet_NaN();
   double projector_redundancy = 0.0;
+};
+
+// Every point's observations linearised once, under the adjustment's poses, maps and
+// points; Estimate() then re-weights them cheaply, so the estimate can be iterated.
+class NoiseProblem {
+ public:
+  explicit NoiseProblem(const NoiseInputs& in);
+  NoiseEstimate Estimate(const std::vector<double>& camera_sigma_px, double projector_sigma_px) const;
+
+ private:
+  using Block = Eigen::Matrix<double, 2, Eigen::Dynamic, 0, 2, 3>;  // d(residual)/d(point's free coordinates)
+  struct Observation {
+    int camera;
+    Block J;
+    Eigen::Vector2d error;
+  };
+  struct Point {
+    int dof;
+    std::vector<Observation> observations;
+    bool has_projector = false;
+    Block J_projector;
+    Eigen::Vector2d projector_error;  // normalised projector units
+  };
+  std::vector<Point> points_;
+  int num_cameras_ = 0;
+  int gauge_camera_ = -1;
+  int projector_maps_ = 0;
+  bool has_projector_ = false;
+  double projector_width_ = 1.0;
 };
 
 NoiseEstimate EstimateNoise(const NoiseInputs& in);

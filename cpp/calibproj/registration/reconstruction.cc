@@ -56,6 +56,10 @@ constexpr double kMinProjectorNoisePx = 0.002;
 // Redundancy (observations beyond the parameters they determine) worth the pooled
 // noise as a prior for one camera's noise.
 constexpr double kPriorRedundancy = 10.0;
+// Steps of the noise estimate between two adjustments, and the relative change of
+// every sigma under which it has settled.
+constexpr int kNoiseSteps = 200;
+constexpr double kNoiseStepTolerance = 1e-3;
 // Chi-square difference (in units of the camera's noise variance) below which the
 // mirror pose of a planar view is not ruled out: 5 sigma.
 constexpr double kAmbiguityEvidence = 25.0;
@@ -1141,7 +1145,24 @@ void Reconstruction::EstimateNoise() {
   in.gauge_camera = gauge_camera_;
   in.camera_sigma_px = WeightingSigmas();
   in.projector_sigma_px = projector_sigma_px_;
-  const NoiseEstimate estimate = registration::EstimateNoise(in);
+  // To the fixed point under the adjustment's poses and maps (the points re-placed at
+  // each step); the next adjustment then starts from weights that hold.
+  const NoiseProblem problem(in);
+  for (int step = 0; step < kNoiseSteps; ++step) {
+    const std::vector<double> before = in.camera_sigma_px;
+    const double projector_before = in.projector_sigma_px;
+    if (!UpdateNoise(problem.Estimate(in.camera_sigma_px, in.projector_sigma_px))) return;
+    in.camera_sigma_px = WeightingSigmas();
+    in.projector_sigma_px = projector_sigma_px_;
+    double change = std::abs(projector_before - in.projector_sigma_px) / std::max(projector_before, 1e-12);
+    for (size_t c = 0; c < before.size(); ++c) {
+      change = std::max(change, std::abs(before[c] - in.camera_sigma_px[c]) / std::max(before[c], 1e-12));
+    }
+    if (change < kNoiseStepTolerance) break;
+  }
+}
+
+bool Reconstruction::UpdateNoise(const NoiseEstimate& estimate) {
   // The pooled noise: the median of the cameras whose residuals tell it well.
   std::vector<double> reliable;
   for (int c = 0; c < num_cameras(); ++c) {
@@ -1149,7 +1170,7 @@ void Reconstruction::EstimateNoise() {
       reliable.push_back(estimate.camera_sigma_px[c]);
     }
   }
-  if (reliable.empty()) return;
+  if (reliable.empty()) return false;
   std::nth_element(reliable.begin(), reliable.begin() + reliable.size() / 2, reliable.end());
   const double pooled = reliable[reliable.size() / 2];
   for (int c = 0; c < num_cameras(); ++c) {
@@ -1165,6 +1186,7 @@ void Reconstruction::EstimateNoise() {
     projector_sigma_px_ = std::max(estimate.projector_sigma_px, kMinProjectorNoisePx);
     projector_sigma_estimated_ = true;
   }
+  return true;
 }
 
 void Reconstruction::FailUnregistered() {

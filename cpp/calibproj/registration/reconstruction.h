@@ -17,6 +17,7 @@
 
 #include "calibproj/ba/bundle_adjuster.h"
 #include "calibproj/geometry/triangulation.h"
+#include "calibproj/registration/noise_model.h"
 
 namespace calibproj::registration {
 
@@ -223,6 +224,9 @@ class Reconstruction {
   // Per camera noise used as weights: the estimate, else the robust sigma of its residuals.
   std::vector<double> WeightingSigmas() const;
   void EstimateNoise();
+  // One step of the noise estimate applied (with the prior towards the pooled noise);
+  // false when no camera's residuals tell the noise.
+  bool UpdateNoise(const NoiseEstimate& estimate);
   void CheckPlanarAmbiguity();
   bool NoiseSettled(const std::vector<double>& before, double projector_before) const;
   bool HasProjector() const { return options_.use_projector && projector_.rows() == num_points_ && options_.model == ba::Model::kCoplanar; }

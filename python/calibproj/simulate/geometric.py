@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from calibproj.sequence.layout import MsmLayout
+from calibproj.sequence.sequence import Sequence
 from calibproj.io.intrinsics import Intrinsics, write_intrinsics_dir
 from calibproj.simulate import boxes
 from calibproj.simulate.scene import Camera, Scene, load_scene, save_scene
@@ -255,7 +256,7 @@ def simulate_tracks(
     seed: int = 0,
     outlier_fraction: float = 0.0,
     min_marker_px: float = DEFAULT_MIN_MARKER_PX,
-    layout: MsmLayout | None = None,
+    layout: MsmLayout | Sequence | None = None,
     eval_points: int = DEFAULT_EVAL_POINTS,
     eval_points_per_camera: int = DEFAULT_EVAL_POINTS_PER_CAMERA,
     eval_height_m: float = DEFAULT_EVAL_HEIGHT_M,
@@ -271,7 +272,9 @@ def simulate_tracks(
         seed: seed of every random draw.
         outlier_fraction: share of MSM observations replaced by a uniform draw over the image.
         min_marker_px: shortest marker side, in image pixels, that a camera still decodes.
-        layout: MSM layout; default ``MsmLayout`` at the projector's resolution.
+        layout: MSM layout; default ``MsmLayout`` at the projector's resolution. A
+            ``Sequence`` gives its own centres and the scales it shows, and only the
+            arrays it shows are observed (a densified sequence shows only its new ones).
         eval_points: evaluation points drawn uniformly in the working volume.
         eval_points_per_camera: extra evaluation points drawn inside each camera's view.
         eval_height_m: height of the working volume above the floor.
@@ -280,6 +283,10 @@ def simulate_tracks(
     _check_settings(noise_px, outlier_fraction, min_marker_px, eval_points, eval_points_per_camera, eval_height_m)
     if not isinstance(scene, Scene):
         scene = load_scene(scene, seed=seed)
+    shown = None
+    if isinstance(layout, Sequence):
+        shown = np.unique([pattern.array for pattern in layout.patterns])
+        layout = sequence_layout(layout)
     layout = layout or MsmLayout(projector=scene.projector.resolution)
     noise_rng, outlier_rng, eval_rng, eval_noise_rng = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)
@@ -287,6 +294,8 @@ def simulate_tracks(
     msm_points = msm_floor_points(scene, layout)
     tracks, outliers = _msm_tracks(scene, layout, msm_points, noise_rng, outlier_rng, noise_px,
                                    outlier_fraction, min_marker_px, min_depth_m)
+    if shown is not None:
+        tracks = tracks.select(np.isin(tracks.point_ids[tracks.point_index] // layout.markers_per_array, shown))
     eval_xyz, eval_tracks = evaluation_tracks(scene, eval_rng, eval_noise_rng, noise_px, eval_points,
                                               eval_points_per_camera, eval_height_m, min_depth_m)
     settings = {"noise_px": noise_px, "seed": seed, "outlier_fraction": outlier_fraction,
@@ -297,6 +306,26 @@ def simulate_tracks(
     if out is not None:
         simulation.write(out)
     return simulation
+
+
+@dataclass(frozen=True, eq=False)
+class _PlacedLayout(MsmLayout):
+    """A layout whose centres are given (as a sequence file holds them)."""
+
+    placed: tuple = ()  # (arrays, markers, 2) as nested tuples: written into truth.json as they are
+
+    def centres(self) -> np.ndarray:
+        return np.asarray(self.placed, dtype=np.float64)
+
+
+def sequence_layout(sequence: Sequence) -> MsmLayout:
+    """The layout of ``sequence`` as the simulation needs it: its centres, wherever they
+    are (a densified sequence places its own), and only the scales its patterns show."""
+    layout = sequence.layout
+    shown = sorted({pattern.scale for pattern in sequence.patterns})
+    return _PlacedLayout(projector=layout.projector, grid=layout.grid, arrays=layout.arrays, scales=tuple(shown),
+                         marker_px=layout.marker_px, margin_px=layout.margin, snap_to_pixels=layout.snap_to_pixels,
+                         placed=tuple(tuple(tuple(centre) for centre in array) for array in sequence.centres.tolist()))
 
 
 def _check_settings(noise_px: float, outlier_fraction: float, min_marker_px: float, eval_points: int,
