@@ -520,6 +520,8 @@ class Baselines:
         intrinsics = {name: Intrinsics(name, (64, 48), self.K, self.dist) for name in poses}
         observed = np.tile(centres.reshape(-1, 2), (2, 1))
         tracks = Tracks.from_observations(["a", "b"], np.repeat([0, 1], 18), np.tile(np.arange(18), 2), observed)
+        # A second projection's observations: other point ids (a densified sequence's).
+        later = Tracks.from_observations(["a", "b"], np.repeat([0, 1], 18), np.tile(np.arange(18, 36), 2), observed)
         folder = Path(self.files["tiny.mkv"]).parent / "formats"
         tracks.write(folder / "valid_tracks.json")
         write_intrinsics(folder / "a.json", intrinsics["a"])
@@ -531,6 +533,8 @@ class Baselines:
                                                        ("name", "a")]),
             "_core.formats.read_tracks": Spec([("path", str(folder / "valid_tracks.json"))]),
             "_core.formats.write_tracks": Spec([("out", folder / "tracks.json"), ("tracks", tracks)]),
+            "_core.formats.with_earlier_observations": Spec([("earlier", folder / "valid_tracks.json"),
+                                                            ("tracks", later), ("intrinsics", intrinsics)]),
             "_core.formats.scaled_lengths": Spec([("calibration", calibration), ("factor", 2.0)]),
             "_core.formats.parse_scale": Spec([("text", "distance:a,b=2.0")]),
             "_core.formats.check_measurement": Spec([("measurement", parse_scale("marker-size:1/4=0.1")),

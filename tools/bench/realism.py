@@ -124,10 +124,13 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         dense, _ = densify(results, Sequence.load(sequence_path), DensifyOptions(max_seconds=args.densify_seconds))
         if dense is not None:
             extra_s = dense.duration_s
-            dense.save(room / "dense_sequence.json")
-            if not (args.reuse and rendered(room / "dense", scene)):
+            planned = room / "dense_sequence.json"
+            same_plan = planned.is_file() and Sequence.load(planned).to_dict() == dense.to_dict()
+            if not (args.reuse and same_plan and rendered(room / "dense", scene)):
+                planned.unlink(missing_ok=True)  # written once its rendering is complete
                 simulate_videos(scene, dense, room / "dense", seed=seed + 1000,
                                 options=replace(RenderOptions(), **render_changes))
+                dense.save(planned)
             results = room / "results_dense"
             calibration = calibrate_room(room / "dense" / "videos", room / "dense_sequence.json", results,
                                          merge=room / "results")
@@ -156,10 +159,11 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         alone = [strict.cameras[name].mean_px is not None and strict.cameras[name].mean_px < 0.5
                  for name in comparison.cameras if name in strict.cameras]
         row["success_alone"] = float(np.mean(alone)) if alone else math.nan
-        row["sigmas"] = {name: comparison.cameras[name].rotation_deg / calibration.metrics[name].rotation_sigma_deg
-                         for name in comparison.cameras if (calibration.metrics[name].rotation_sigma_deg or 0) > 0}
-        row["sigma_deg"] = {name: calibration.metrics[name].rotation_sigma_deg for name in comparison.cameras}
-        row["rot_deg"] = {name: comparison.cameras[name].rotation_deg for name in comparison.cameras}
+        # The sigma is relative to the reference camera (sigma 0): so is this error.
+        relative = rotation_errors_to_reference(calibration, scene)
+        row["sigmas"] = {name: relative[name] / calibration.metrics[name].rotation_sigma_deg for name in relative}
+        row["sigma_deg"] = {name: calibration.metrics[name].rotation_sigma_deg for name in relative}
+        row["rot_deg"] = relative
     row["sync_frames"] = max_sync_error(report, truth)
     row["readout_ms"] = max_readout_error(report, truth)
     row["wrong"] = wrong_assignments(room / "results" / "tracks.json", truth, args.wrong_px)
@@ -178,6 +182,24 @@ def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics:
         from calibproj.calibration import Calibration
 
         return Calibration.load(results)
+
+
+def rotation_errors_to_reference(calibration, scene: Scene) -> dict[str, float]:
+    """Per registered camera but the reference (rotation sigma 0, the gauge of the
+    covariance), its rotation error relative to the reference (deg)."""
+    truth = {camera.name: camera.R for camera in scene.cameras}
+    sigma = {name: calibration.metrics[name].rotation_sigma_deg for name in calibration.poses}
+    reference = next((name for name, value in sigma.items() if value == 0.0), None)
+    if reference is None:
+        return {}
+    reference_R = calibration.poses[reference][0]
+    errors = {}
+    for name, (R, _) in calibration.poses.items():
+        if name == reference or not sigma[name]:
+            continue
+        E = (R @ reference_R.T) @ (truth[name] @ truth[reference].T).T
+        errors[name] = math.degrees(math.acos(min(1.0, max(-1.0, (np.trace(E) - 1.0) / 2.0))))
+    return errors
 
 
 def rendered(room: Path, scene: Scene) -> bool:
@@ -274,7 +296,8 @@ def format_row(row: dict) -> str:
     return (f"{row['condition']:<20} seed {row['seed']}  registered {row['registered']}/{row['total']}  "
             f"rot {row['rot']:.4f} deg (not weak {row['rot_strong']:.4f})  {mm} mm  eval {row['eval_px']:.3f} px  "
             f"@0.5 {100 * row['success']:.0f} % (not weak {100 * row['success_strong']:.0f} %, each on points "
-            f"placed without it {100 * row['success_alone']:.0f} %)  worst error/sigma {worst_ratio(row):.1f}  "
+            f"placed without it {100 * row['success_alone']:.0f} %)  worst error/sigma {worst_ratio(row):.1f} "
+            f"(to the reference camera)  "
             + (f"extra projection {row['extra_s']:.1f} s  " if row["extra_s"] else "") +
             f"zoomed {zoomed(row)}  "
             f"{format_sync(row['sync_frames'])}  "
