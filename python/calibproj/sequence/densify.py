@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from calibproj.sequence.builder import ShownPattern, assemble_sequence, overhead_frames
-from calibproj.sequence.layout import MsmLayout, outside_image
+from calibproj.sequence.layout import MsmLayout, outside_image, snap_centres
 from calibproj.sequence.sequence import Sequence
 
 log = logging.getLogger(__name__)
@@ -233,6 +233,8 @@ def densify(results: str | os.PathLike, sequence: Sequence,
     footprints = []
     for name in names:
         try:
+            if name not in intrinsics:
+                raise ValueError(f"camera {name}: no intrinsics file in {folder / 'intrinsics'}")
             footprints.append(camera_footprint(name, calibration, intrinsics[name], tracks, markers, options))
         except ValueError as error:
             if options.cameras is not None:
@@ -376,17 +378,11 @@ def _offset_arrays(polygon: np.ndarray, pitch: float, offsets: int, sides: tuple
         shift = (np.array([k % offsets, k // offsets], float) + 0.5) / offsets * pitch
         xs = np.arange(low[0] + shift[0] - pitch, high[0] + pitch, pitch)
         ys = np.arange(low[1] + shift[1] - pitch, high[1] + pitch, pitch)
-        lattice = _snap(np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2), sequence.layout.marker_px)
+        lattice = snap_centres(np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2), sequence.layout.marker_px)
         inside = [cv2.pointPolygonTest(contour, (float(x), float(y)), True) >= half for x, y in lattice]
         kept = lattice[np.asarray(inside, bool) & ~outside_image(lattice, sides[0], sequence.projector)]
         arrays.extend(kept[i:i + capacity] for i in range(0, len(kept), capacity))
     return [array for array in arrays if len(array)]
-
-
-def _snap(centres: np.ndarray, marker_px: float) -> np.ndarray:
-    """As ``MsmLayout.centres``: a marker's left edge at scale 1 on a pixel boundary."""
-    half_side = 0.5 * marker_px
-    return np.round(centres - half_side - 0.5) + 0.5 + half_side
 
 
 def _pattern_budget(sequence: Sequence, options: DensifyOptions) -> int:

@@ -111,11 +111,7 @@ class MsmLayout:
             oy, ox = divmod(array, nx)
             out[array, :, 0] = self.margin + (marker_col * nx + ox) * step_x
             out[array, :, 1] = self.margin + (marker_row * ny + oy) * step_y
-        if self.snap_to_pixels:
-            # Left edge (centre - side / 2) on a pixel boundary, i.e. on k + 0.5.
-            half_side = 0.5 * self.marker_px
-            out = np.round(out - half_side - 0.5) + 0.5 + half_side
-        return out
+        return snap_centres(out, self.marker_px) if self.snap_to_pixels else out
 
     def marker_side(self, scale: float) -> float:
         """Side of a marker at ``scale`` in projector pixels, border included."""
@@ -157,3 +153,10 @@ def outside_image(centres: np.ndarray, side: float, projector: tuple[int, int]) 
     low = np.asarray(centres, dtype=np.float64) - 0.5 * side
     high = np.asarray(centres, dtype=np.float64) + 0.5 * side
     return ((low < -0.5 - 1e-9) | (high > limits + 1e-9)).any(axis=-1)
+
+
+def snap_centres(centres: np.ndarray, marker_px: float) -> np.ndarray:
+    """Centres moved by at most half a pixel so that a marker of ``marker_px`` pixels has
+    its left edge (centre - side / 2) on a pixel boundary, i.e. on k + 0.5."""
+    half_side = 0.5 * marker_px
+    return np.round(np.asarray(centres, dtype=np.float64) - half_side - 0.5) + 0.5 + half_side
