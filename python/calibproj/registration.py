@@ -232,7 +232,8 @@ class RegistrationDriver:
         for c, name in enumerate(self.tracks.camera_names):
             if summary["registered"][c] and summary["weak"][c]:
                 logger.warning("camera %s is weakly determined: rotation known to %.3f deg (1 sigma, limit %g), "
-                               "centre to %.3g units; more points in its view (a denser grid, more arrays) help",
+                               "centre to %.3g units; more points in its view help (calibproj generate --densify RESULTS "
+                               "plans a short extra projection for it)",
                                name, summary["rotation_sigma_deg"][c], self.options.weak_rotation_sigma_deg,
                                summary["centre_sigma"][c])
 

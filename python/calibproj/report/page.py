@@ -361,7 +361,8 @@ def _camera_table(views: list[CameraView], unit: str) -> str:
                  str(m.track2_observations), str(m.view_score), _number(m.rotation_sigma_deg, 4),
                  _number(centre_sigma, 2 if unit == "m" else 5)] if m else ["-"] * 8
         weak = (f'<tr><td></td><td class="weak" colspan="8">WEAK: rotation known to '
-                f'{m.rotation_sigma_deg:.3f} deg (1 sigma); more points in its view help</td></tr>'
+                f'{m.rotation_sigma_deg:.3f} deg (1 sigma); more points in its view help: '
+                f'<code>calibproj generate --densify</code> plans a short extra projection for it</td></tr>'
                 if m is not None and m.weak and m.rotation_sigma_deg is not None else "")
         rows.append(f"<tr>{name}" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>" + weak)
     return "<table>" + "".join(rows) + "</table>"
