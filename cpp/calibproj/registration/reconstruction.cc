@@ -171,7 +171,6 @@ std::vector<PlanarPose> PlanarPoses(const std::vector<cv::Point3d>& object, cons
   return out;
 }
 
-
 }  // namespace
 
 Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eigen::VectorXi camera_index,
@@ -1143,7 +1142,17 @@ void Reconstruction::EstimateNoise() {
     in.projector_width = projector_width_;
   }
   in.gauge_camera = gauge_camera_;
-  in.camera_sigma_px = WeightingSigmas();
+  // The residuals do not change between steps: the weights of cameras without an
+  // estimate (the robust sigma of all residuals) are computed once.
+  const std::vector<double> start = WeightingSigmas();
+  const auto current = [&] {
+    std::vector<double> sigma = start;
+    for (size_t c = 0; c < sigma.size(); ++c) {
+      if (std::isfinite(camera_sigma_px_[c])) sigma[c] = camera_sigma_px_[c];
+    }
+    return sigma;
+  };
+  in.camera_sigma_px = start;
   in.projector_sigma_px = projector_sigma_px_;
   // To the fixed point under the adjustment's poses and maps (the points re-placed at
   // each step); the next adjustment then starts from weights that hold.
@@ -1152,7 +1161,7 @@ void Reconstruction::EstimateNoise() {
     const std::vector<double> before = in.camera_sigma_px;
     const double projector_before = in.projector_sigma_px;
     if (!UpdateNoise(problem.Estimate(in.camera_sigma_px, in.projector_sigma_px))) return;
-    in.camera_sigma_px = WeightingSigmas();
+    in.camera_sigma_px = current();
     in.projector_sigma_px = projector_sigma_px_;
     double change = std::abs(projector_before - in.projector_sigma_px) / std::max(projector_before, 1e-12);
     for (size_t c = 0; c < before.size(); ++c) {
