@@ -78,6 +78,8 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   option("--final-ba-iterations", o.final_ba_iterations, "iterations of the final bundle adjustments");
   option("--weak-rotation-sigma-deg", o.weak_rotation_sigma_deg,
          "cameras whose rotation is known worse than this (1 sigma) are reported as weak");
+  option("--error-correlation", o.error_correlation,
+         "correlation of one camera's centre errors: the uncertainty counts N centres as N / (1 + (N - 1) * this)");
   *command = cmd;
   return args;
 }

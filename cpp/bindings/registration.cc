@@ -57,6 +57,7 @@ registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
     else if (key == "min_projector_pnp_points") o.min_projector_pnp_points = CastTo<int>(value, what);
     else if (key == "estimate_noise") o.estimate_noise = CastTo<bool>(value, what);
     else if (key == "projector_sigma_px") o.projector_sigma_px = CastTo<double>(value, what);
+    else if (key == "error_correlation") o.error_correlation = CastTo<double>(value, what);
     else throw std::invalid_argument("registration: unknown option '" + key + "'");
   }
   o.Check();

@@ -85,6 +85,11 @@ class RegistrationOptions:
             covariance with them; off: one noise for every camera.
         projector_sigma_px: the projector maps' noise (projector pixels) until it is
             estimated, or for good with estimate_noise off.
+        error_correlation: the correlation of one camera's centre errors (and of the
+            projector's): a share of each error that its centres have in common (the
+            lens model, blur, a floor's texture) is not averaged away by their number, so
+            the pose covariance counts a camera's N centres as N / (1 + (N - 1) *
+            error_correlation) independent ones. The poses do not depend on it.
     """
 
     model: str = "coplanar"
@@ -114,6 +119,7 @@ class RegistrationOptions:
     min_projector_pnp_points: int = 4
     estimate_noise: bool = True
     projector_sigma_px: float = 0.1
+    error_correlation: float = 0.005
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:

@@ -250,10 +250,62 @@ int AddProjectorTerms(const Data& data, Parameters& params, ceres::LossFunction*
   return terms;
 }
 
+// The loss of each camera's residuals and of the projector's. Each is a wrapper when
+// the covariance discounts shared errors, so that its weight can change after the solve.
+struct GroupLosses {
+  ceres::LossFunction* loss = nullptr;  // the robust loss (nullptr: none), not owned
+  std::vector<std::unique_ptr<ceres::LossFunction>> cameras;  // empty: `loss` for every camera
+  std::unique_ptr<ceres::LossFunctionWrapper> projector;     // nullptr: `loss`
+  ceres::LossFunction* Camera(int c) const { return cameras.empty() ? loss : cameras[c].get(); }
+  ceres::LossFunction* Projector() const { return projector ? projector.get() : loss; }
+};
+
+std::unique_ptr<ceres::LossFunction> WeightedLoss(ceres::LossFunction* loss, double weight) {
+  return std::make_unique<ceres::ScaledLoss>(loss, weight * weight, ceres::DO_NOT_TAKE_OWNERSHIP);
+}
+
+GroupLosses MakeGroupLosses(const Data& data, ceres::LossFunction* loss, bool adjustable) {
+  GroupLosses losses;
+  losses.loss = loss;
+  const int num_cameras = static_cast<int>(data.intrinsics.size());
+  if (data.camera_weights.size() == 0 && !adjustable) return losses;
+  for (int c = 0; c < num_cameras; ++c) {
+    const double w = data.camera_weights.size() == 0 ? 1.0 : data.camera_weights(c);
+    if (!adjustable) {
+      losses.cameras.push_back(WeightedLoss(loss, w));
+      continue;
+    }
+    losses.cameras.push_back(
+        std::make_unique<ceres::LossFunctionWrapper>(WeightedLoss(loss, w).release(), ceres::TAKE_OWNERSHIP));
+  }
+  if (adjustable) {
+    losses.projector =
+        std::make_unique<ceres::LossFunctionWrapper>(WeightedLoss(loss, 1.0).release(), ceres::TAKE_OWNERSHIP);
+  }
+  return losses;
+}
+
+// Errors that one group of residuals shares are not averaged away by their number: a
+// group of N residuals with correlation rho carries the information of N / (1 + (N - 1)
+// rho) independent ones. The covariance sees each group's weight divided accordingly.
+void DiscountSharedErrors(const Data& data, double correlation, ceres::Problem* problem, GroupLosses* losses) {
+  const auto discount = [&](int n) { return 1.0 / std::sqrt(1.0 + std::max(0, n - 1) * correlation); };
+  std::vector<int> observations(losses->cameras.size(), 0);
+  for (int i = 0; i < data.camera_index.size(); ++i) ++observations[data.camera_index(i)];
+  for (size_t c = 0; c < losses->cameras.size(); ++c) {
+    const double w = data.camera_weights.size() == 0 ? 1.0 : data.camera_weights(static_cast<int>(c));
+    static_cast<ceres::LossFunctionWrapper*>(losses->cameras[c].get())
+        ->Reset(WeightedLoss(losses->loss, w * discount(observations[c])).release(), ceres::TAKE_OWNERSHIP);
+  }
+  std::vector<ceres::ResidualBlockId> blocks;
+  problem->GetResidualBlocks(&blocks);
+  const int projector_terms = static_cast<int>(blocks.size()) - static_cast<int>(data.camera_index.size());
+  losses->projector->Reset(WeightedLoss(losses->loss, discount(projector_terms)).release(), ceres::TAKE_OWNERSHIP);
+}
+
 void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, Parameters& params,
-                  const CostFactory& make_cost, const RotationCache* rotations, ceres::LossFunction* loss,
-                  const std::vector<std::unique_ptr<ceres::LossFunction>>& camera_losses, ceres::Problem* problem,
-                  ceres::ParameterBlockOrdering* ordering) {
+                  const CostFactory& make_cost, const RotationCache* rotations, const GroupLosses& losses,
+                  ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
   const bool coplanar = options.model == Model::kCoplanar;
   for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
     problem->AddParameterBlock(params.PointBlock(p), params.point_plane[p] < 0 ? 3 : 2);
@@ -277,7 +329,7 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
     ordering->AddElementToGroup(plane, 2 + k);  // a group each: the planes lie in different arrays
   }
   for (int i = 0; i < data.camera_index.size(); ++i) {
-    ceres::LossFunction* camera_loss = camera_losses.empty() ? loss : camera_losses[data.camera_index(i)].get();
+    ceres::LossFunction* camera_loss = losses.Camera(data.camera_index(i));
     double* pose = params.poses.row(data.camera_index(i)).data();
     const int p = data.point_index(i);
     const int camera = data.camera_index(i);
@@ -291,7 +343,7 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
       problem->AddResidualBlock(cost, camera_loss, pose, params.PointBlock(p));
     }
   }
-  AddProjectorTerms(data, params, loss, problem, ordering);
+  AddProjectorTerms(data, params, losses.Projector(), problem, ordering);
   if (!options.refine_poses) {
     for (int c = 0; c < params.poses.rows(); ++c) problem->SetParameterBlockConstant(params.poses.row(c).data());
   } else if (gauge.fixed) {
@@ -415,6 +467,8 @@ void Options::Check() const {
   limits::RequireInRange(num_threads, 1, limits::kMaxThreads, "options: num_threads");
   Require(refine_poses || refine_points, "options: nothing to refine (refine_poses and refine_points both off)");
   Require(!compute_covariance || refine_poses, "options: covariance needs refine_poses");
+  Require(error_correlation >= 0.0 && error_correlation <= 1.0,
+          "options: error_correlation must be in [0, 1], got " + Str(error_correlation));
 }
 
 void ValidateData(const Data& data, const Options& options) {
@@ -588,13 +642,9 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   problem_options.evaluation_callback = rotations.get();
   ceres::Problem problem(problem_options);
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-  std::vector<std::unique_ptr<ceres::LossFunction>> camera_losses;
-  for (int c = 0; c < data.camera_weights.size(); ++c) {
-    const double w = data.camera_weights(c);
-    camera_losses.push_back(std::make_unique<ceres::ScaledLoss>(loss.get(), w * w, ceres::DO_NOT_TAKE_OWNERSHIP));
-  }
-  BuildProblem(gauge_data, options, gauge, params, make_cost, rotations.get(), loss.get(), camera_losses, &problem,
-               ordering.get());
+  const bool shared_errors = options.compute_covariance && options.error_correlation > 0.0;
+  GroupLosses losses = MakeGroupLosses(data, loss.get(), shared_errors);
+  BuildProblem(gauge_data, options, gauge, params, make_cost, rotations.get(), losses, &problem, ordering.get());
 
   ceres::Solver::Summary summary;
   const auto start = std::chrono::steady_clock::now();
@@ -615,6 +665,7 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
 
   if (rotations) rotations->Refresh();  // the last evaluation may have been a rejected step
   if (options.compute_covariance && result.usable) {
+    if (shared_errors) DiscountSharedErrors(data, options.error_correlation, &problem, &losses);
     result.pose_covariances = PoseCovariances(&problem, params, gauge, change, options);
   }
   if (options.model == Model::kCoplanar) CopyProjectorOut(gauge_data, params, change, &result);

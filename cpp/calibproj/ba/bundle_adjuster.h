@@ -59,6 +59,11 @@ struct Options {
   // COPLANAR with a projector (Data::projector): a plane gets a projector map when this
   // many of its points have a projector pixel.
   int min_projector_points = 12;
+  // With compute_covariance: the correlation of one camera's residuals (a share of each
+  // error common to all of them: the lens model, blur, a floor's texture), and of the
+  // projector's. The covariance counts a group of N residuals as N / (1 + (N - 1) *
+  // error_correlation) independent ones; the solution does not depend on it.
+  double error_correlation = 0.0;
 
   // Throws std::invalid_argument naming the first inconsistent option.
   void Check() const;

@@ -121,6 +121,7 @@ void Options::Check() const {
   limits::RequireInRange(plane_distance, 1e-9, 1.0, "registration: plane_distance");
   limits::RequireInRange(min_projector_pnp_points, 4, limits::kMaxPoints, "registration: min_projector_pnp_points");
   limits::RequireInRange(projector_sigma_px, 1e-6, 100.0, "registration: projector_sigma_px");
+  limits::RequireInRange(error_correlation, 0.0, 1.0, "registration: error_correlation");
 }
 
 namespace {
@@ -856,6 +857,7 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   ba_options.max_iterations = final ? options_.final_ba_iterations : options_.intermediate_ba_iterations;
   if (!final) ba_options.function_tolerance = 1e-6;
   ba_options.compute_covariance = covariance;
+  ba_options.error_correlation = options_.error_correlation;
   if (cameras.size() < 2 && options_.model == ba::Model::kFree) return result;
   ba::Result solved;
   try {

@@ -62,6 +62,9 @@ struct Options {
   // for all cameras, the projector at projector_sigma_px.
   bool estimate_noise = true;
   double projector_sigma_px = 0.1;  // projector pixels, until estimated
+  // The correlation of one camera's centre errors (ba::Options::error_correlation): the
+  // covariance counts a camera's N centres as N / (1 + (N - 1) * this) independent ones.
+  double error_correlation = 0.005;
 
   void Check() const;
 };
