@@ -391,14 +391,19 @@ def test_an_interrupted_ingest_stops_every_camera_early(aruco, monkeypatch):
         def update(decoded: int, total: int) -> None:
             seen.setdefault(name, []).append((decoded, total))
             first_call.set()
+            # No camera gets further before the key is pressed, however fast it decodes.
+            pressed.wait(10)
             inner(decoded, total)
 
         return update
 
     monkeypatch.setattr(ingest_module._Progress, "callback", callback)
+    pressed = threading.Event()
+
     def press_ctrl_c() -> None:  # a real SIGINT to the main thread, as a terminal sends it
         if first_call.wait(120):
             signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+            pressed.set()
 
     threading.Thread(target=press_ctrl_c, daemon=True).start()
     with pytest.raises(KeyboardInterrupt):
