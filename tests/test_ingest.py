@@ -405,9 +405,14 @@ def test_an_interrupted_ingest_stops_every_camera_early(aruco, monkeypatch):
             signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
             pressed.set()
 
-    threading.Thread(target=press_ctrl_c, daemon=True).start()
-    with pytest.raises(KeyboardInterrupt):
-        ingest(out / "videos", sequence, out / "intrinsics", progress=False, workers=2)
+    # Python as a terminal starts it (a job started in the background ignores SIGINT).
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        threading.Thread(target=press_ctrl_c, daemon=True).start()
+        with pytest.raises(KeyboardInterrupt):
+            ingest(out / "videos", sequence, out / "intrinsics", progress=False, workers=2)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert seen and not [t for t in threading.enumerate() if t.name.startswith("ingest")]
     for name, calls in seen.items():
         decoded, total = calls[-1]
