@@ -190,3 +190,21 @@ def test_truth_file_is_read_like_camera_poses(tmp_path):
     poses = read_poses(tmp_path / "truth.json")
     assert poses.unit == "m" and poses.names == ["cam1", "cam2", "cam3"]
     np.testing.assert_allclose(poses.poses["cam2"][0], scene.cameras[1].R)
+
+
+def test_rotation_errors_relative_to_the_reference_ignore_a_common_rotation() -> None:
+    """A frame turned as a whole changes no relative rotation; a camera turned by a known
+    tiny angle shows exactly that angle, the reference none."""
+    from calibproj.comparison import rotation_errors_to_reference
+    from calibproj.synthetic import matrix_from_rotvec
+
+    rng = np.random.default_rng(3)
+    truth = {name: matrix_from_rotvec(rng.normal(size=3)) for name in ("a", "b", "c")}
+    frame = matrix_from_rotvec(np.array([0.3, -0.2, 0.9]))
+    poses = {name: (R @ frame, np.zeros(3)) for name, R in truth.items()}
+    turn = np.radians(0.001)
+    poses["c"] = (matrix_from_rotvec(np.array([0.0, turn, 0.0])) @ poses["c"][0], np.zeros(3))
+    errors = rotation_errors_to_reference(poses, "a", truth)
+    assert set(errors) == {"b", "c"}
+    assert errors["b"] == pytest.approx(0.0, abs=1e-9)
+    assert errors["c"] == pytest.approx(0.001, rel=1e-6)

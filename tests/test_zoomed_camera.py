@@ -6,12 +6,11 @@ makes it known as well as the others, within its sigma."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
-import numpy as np
 import pytest
 
+from calibproj.comparison import rotation_errors_to_reference
 from calibproj.pipeline import calibrate
 from calibproj.sequence import build_sequence
 from calibproj.sequence.densify import DensifyOptions, densify
@@ -25,11 +24,9 @@ CAMERAS = ("far1", "far2", "far4", "near1", "ceiling")
 def rotation_error_to_reference_deg(calibration, scene, name: str) -> float:
     """The camera's rotation error relative to the reference camera (the gauge of the
     covariance, rotation sigma 0), as its sigma is."""
+    reference = next(n for n in calibration.poses if calibration.metrics[n].rotation_sigma_deg == 0.0)
     truth = {camera.name: camera.R for camera in scene.cameras}
-    reference = next(n for n, m in calibration.metrics.items() if m.rotation_sigma_deg == 0.0 and n in calibration.poses)
-    R, R_ref = calibration.poses[name][0], calibration.poses[reference][0]
-    E = (R @ R_ref.T) @ (truth[name] @ truth[reference].T).T
-    return math.degrees(math.acos(min(1.0, max(-1.0, (np.trace(E) - 1.0) / 2.0))))
+    return rotation_errors_to_reference(calibration.poses, reference, truth)[name]
 
 
 @pytest.fixture(scope="module")

@@ -155,6 +155,17 @@ def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
     return float(np.degrees(2.0 * np.arcsin(min(chord, 1.0))))
 
 
+def rotation_errors_to_reference(poses: dict[str, tuple[np.ndarray, np.ndarray]], reference: str,
+                                 truth: dict[str, np.ndarray]) -> dict[str, float]:
+    """Per camera of ``poses`` (name -> (R, t)) but ``reference``, the rotation error
+    relative to the reference camera, degrees: the angle between the estimated and the
+    true ``R @ R_reference.T``. This is the error a pose covariance whose gauge is the
+    reference camera describes; ``truth`` maps names to true rotations."""
+    R_reference, truth_reference = poses[reference][0], truth[reference]
+    return {name: rotation_angle_deg(R @ R_reference.T, truth[name] @ truth_reference.T)
+            for name, (R, _) in poses.items() if name != reference}
+
+
 def mean_pairwise_distance(points: np.ndarray) -> float:
     """Mean distance over all pairs of points."""
     differences = points[:, None, :] - points[None, :, :]

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.comparison import compare
+from calibproj.comparison import compare, rotation_errors_to_reference
 from calibproj.demo import marker_side_on_floor
 from calibproj.evaluation import EvaluationOptions, evaluate
 from calibproj.pipeline import calibrate
@@ -160,7 +160,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
                  for name in comparison.cameras if name in strict.cameras]
         row["success_alone"] = float(np.mean(alone)) if alone else math.nan
         # The sigma is relative to the reference camera (sigma 0): so is this error.
-        relative = rotation_errors_to_reference(calibration, scene)
+        relative = errors_to_reference(calibration, scene)
         row["sigmas"] = {name: relative[name] / calibration.metrics[name].rotation_sigma_deg for name in relative}
         row["sigma_deg"] = {name: calibration.metrics[name].rotation_sigma_deg for name in relative}
         row["rot_deg"] = relative
@@ -184,22 +184,15 @@ def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics:
         return Calibration.load(results)
 
 
-def rotation_errors_to_reference(calibration, scene: Scene) -> dict[str, float]:
+def errors_to_reference(calibration, scene: Scene) -> dict[str, float]:
     """Per registered camera but the reference (rotation sigma 0, the gauge of the
     covariance), its rotation error relative to the reference (deg)."""
-    truth = {camera.name: camera.R for camera in scene.cameras}
     sigma = {name: calibration.metrics[name].rotation_sigma_deg for name in calibration.poses}
     reference = next((name for name, value in sigma.items() if value == 0.0), None)
     if reference is None:
         return {}
-    reference_R = calibration.poses[reference][0]
-    errors = {}
-    for name, (R, _) in calibration.poses.items():
-        if name == reference or not sigma[name]:
-            continue
-        E = (R @ reference_R.T) @ (truth[name] @ truth[reference].T).T
-        errors[name] = math.degrees(math.acos(min(1.0, max(-1.0, (np.trace(E) - 1.0) / 2.0))))
-    return errors
+    errors = rotation_errors_to_reference(calibration.poses, reference, {c.name: c.R for c in scene.cameras})
+    return {name: error for name, error in errors.items() if sigma[name]}
 
 
 def rendered(room: Path, scene: Scene) -> bool:

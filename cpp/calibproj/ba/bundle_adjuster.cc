@@ -260,6 +260,8 @@ struct GroupLosses {
   ceres::LossFunction* Projector() const { return projector ? projector.get() : loss; }
 };
 
+double CameraWeight(const Data& data, int c) { return data.camera_weights.size() == 0 ? 1.0 : data.camera_weights(c); }
+
 std::unique_ptr<ceres::LossFunction> WeightedLoss(ceres::LossFunction* loss, double weight) {
   return std::make_unique<ceres::ScaledLoss>(loss, weight * weight, ceres::DO_NOT_TAKE_OWNERSHIP);
 }
@@ -270,13 +272,9 @@ GroupLosses MakeGroupLosses(const Data& data, ceres::LossFunction* loss, bool ad
   const int num_cameras = static_cast<int>(data.intrinsics.size());
   if (data.camera_weights.size() == 0 && !adjustable) return losses;
   for (int c = 0; c < num_cameras; ++c) {
-    const double w = data.camera_weights.size() == 0 ? 1.0 : data.camera_weights(c);
-    if (!adjustable) {
-      losses.cameras.push_back(WeightedLoss(loss, w));
-      continue;
-    }
-    losses.cameras.push_back(
-        std::make_unique<ceres::LossFunctionWrapper>(WeightedLoss(loss, w).release(), ceres::TAKE_OWNERSHIP));
+    std::unique_ptr<ceres::LossFunction> weighted = WeightedLoss(loss, CameraWeight(data, c));
+    if (adjustable) weighted = std::make_unique<ceres::LossFunctionWrapper>(weighted.release(), ceres::TAKE_OWNERSHIP);
+    losses.cameras.push_back(std::move(weighted));
   }
   if (adjustable) {
     losses.projector =
@@ -288,24 +286,22 @@ GroupLosses MakeGroupLosses(const Data& data, ceres::LossFunction* loss, bool ad
 // Errors that one group of residuals shares are not averaged away by their number: a
 // group of N residuals with correlation rho carries the information of N / (1 + (N - 1)
 // rho) independent ones. The covariance sees each group's weight divided accordingly.
-void DiscountSharedErrors(const Data& data, double correlation, ceres::Problem* problem, GroupLosses* losses) {
+void DiscountSharedErrors(const Data& data, double correlation, int projector_terms, GroupLosses* losses) {
   const auto discount = [&](int n) { return 1.0 / std::sqrt(1.0 + std::max(0, n - 1) * correlation); };
   std::vector<int> observations(losses->cameras.size(), 0);
   for (int i = 0; i < data.camera_index.size(); ++i) ++observations[data.camera_index(i)];
   for (size_t c = 0; c < losses->cameras.size(); ++c) {
-    const double w = data.camera_weights.size() == 0 ? 1.0 : data.camera_weights(static_cast<int>(c));
+    const double w = CameraWeight(data, static_cast<int>(c)) * discount(observations[c]);
     static_cast<ceres::LossFunctionWrapper*>(losses->cameras[c].get())
-        ->Reset(WeightedLoss(losses->loss, w * discount(observations[c])).release(), ceres::TAKE_OWNERSHIP);
+        ->Reset(WeightedLoss(losses->loss, w).release(), ceres::TAKE_OWNERSHIP);
   }
-  std::vector<ceres::ResidualBlockId> blocks;
-  problem->GetResidualBlocks(&blocks);
-  const int projector_terms = static_cast<int>(blocks.size()) - static_cast<int>(data.camera_index.size());
   losses->projector->Reset(WeightedLoss(losses->loss, discount(projector_terms)).release(), ceres::TAKE_OWNERSHIP);
 }
 
-void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, Parameters& params,
-                  const CostFactory& make_cost, const RotationCache* rotations, const GroupLosses& losses,
-                  ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
+// Returns the number of projector terms.
+int BuildProblem(const Data& data, const Options& options, const Gauge& gauge, Parameters& params,
+                 const CostFactory& make_cost, const RotationCache* rotations, const GroupLosses& losses,
+                 ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
   const bool coplanar = options.model == Model::kCoplanar;
   for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
     problem->AddParameterBlock(params.PointBlock(p), params.point_plane[p] < 0 ? 3 : 2);
@@ -343,7 +339,7 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
       problem->AddResidualBlock(cost, camera_loss, pose, params.PointBlock(p));
     }
   }
-  AddProjectorTerms(data, params, losses.Projector(), problem, ordering);
+  const int projector_terms = AddProjectorTerms(data, params, losses.Projector(), problem, ordering);
   if (!options.refine_poses) {
     for (int c = 0; c < params.poses.rows(); ++c) problem->SetParameterBlockConstant(params.poses.row(c).data());
   } else if (gauge.fixed) {
@@ -355,6 +351,7 @@ void BuildProblem(const Data& data, const Options& options, const Gauge& gauge, 
     }
     for (int k = 0; k < num_planes; ++k) problem->SetParameterBlockConstant(params.Plane(k));
   }
+  return projector_terms;
 }
 
 // Result fields of the projector: maps in the caller's frame, lens, residuals.
@@ -644,7 +641,8 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
   const bool shared_errors = options.compute_covariance && options.error_correlation > 0.0;
   GroupLosses losses = MakeGroupLosses(data, loss.get(), shared_errors);
-  BuildProblem(gauge_data, options, gauge, params, make_cost, rotations.get(), losses, &problem, ordering.get());
+  const int projector_terms =
+      BuildProblem(gauge_data, options, gauge, params, make_cost, rotations.get(), losses, &problem, ordering.get());
 
   ceres::Solver::Summary summary;
   const auto start = std::chrono::steady_clock::now();
@@ -665,7 +663,7 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
 
   if (rotations) rotations->Refresh();  // the last evaluation may have been a rejected step
   if (options.compute_covariance && result.usable) {
-    if (shared_errors) DiscountSharedErrors(data, options.error_correlation, &problem, &losses);
+    if (shared_errors) DiscountSharedErrors(data, options.error_correlation, projector_terms, &losses);
     result.pose_covariances = PoseCovariances(&problem, params, gauge, change, options);
   }
   if (options.model == Model::kCoplanar) CopyProjectorOut(gauge_data, params, change, &result);
