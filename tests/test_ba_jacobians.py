@@ -272,3 +272,45 @@ def test_projector_cost_refuses_a_point_on_the_maps_vanishing_line() -> None:
     surface_map = np.array([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0])  # h3 = a + 1
     ok, _, _ = ba.evaluate_projector_cost(np.zeros(2), 1.0, surface_map, np.zeros(2), np.array([-1.0, 0.3]))
     assert not ok
+
+
+def reference_relief_residual(pose: np.ndarray, plane: np.ndarray, ab: np.ndarray, nodes: np.ndarray,
+                              spacing: float, observed: np.ndarray) -> np.ndarray:
+    """The plane's point raised along the normal by the bilinear height of ``nodes``
+    (the corners (0, 0), (1, 0), (0, 1), (1, 1) of the cell [0, spacing]^2); outside
+    the cell, that of the nearest point of its edge."""
+    s, t = np.clip(ab / spacing, 0.0, 1.0)
+    h = nodes @ np.array([(1 - s) * (1 - t), s * (1 - t), (1 - s) * t, s * t])
+    raised = np.append(plane[:3], plane[3] + h)
+    return reference_residual(pose, plane_point(raised, ab), observed)
+
+
+def test_relief_cost_jacobians_match_numeric() -> None:
+    rng = np.random.default_rng(11)
+    spacing = 0.5
+    for _ in range(30):
+        n = rng.normal(size=3) + np.array([0.0, 0.0, 3.0])
+        plane = np.append(n / np.linalg.norm(n), rng.uniform(1.0, 3.0))
+        # Inside the cell and a little outside it (a point that moved during the solve).
+        ab = rng.uniform(-0.1, 0.6, size=2)
+        nodes = rng.normal(scale=0.01, size=4)
+        pose = camera_looking_at(rng, plane_point(plane, ab), 0.4)
+        observed = rng.uniform([0, 0], [1920, 1080])
+        ok, residual, jacobians = ba.evaluate_relief_cost(K, observed, spacing, pose, plane, ab, nodes)
+        assert ok
+        args = [pose, plane, ab, nodes]
+        np.testing.assert_allclose(residual, reference_relief_residual(*args, spacing, observed), rtol=1e-10, atol=1e-8)
+
+        def along(block):
+            return lambda x: reference_relief_residual(*[x if k == block else a for k, a in enumerate(args)],
+                                                       spacing, observed)
+        for block, analytic in enumerate(jacobians[:3]):
+            assert relative_error(analytic, numeric_jacobian(along(block), args[block])) < TOLERANCE
+        node_jacobian = np.column_stack([J.ravel() for J in jacobians[3:]])
+        assert relative_error(node_jacobian, numeric_jacobian(along(3), nodes)) < TOLERANCE
+        # A cost asked for some Jacobians only gives those, the same.
+        ok, _, partial = ba.evaluate_relief_cost(K, observed, spacing, pose, plane, ab, nodes,
+                                                 [False, False, True, False, True, False, False])
+        assert partial[0] is None and partial[1] is None
+        np.testing.assert_allclose(partial[2], jacobians[2], rtol=1e-12)
+        np.testing.assert_allclose(partial[4], jacobians[4], rtol=1e-12)

@@ -60,7 +60,7 @@ REGISTRATION_OPTIONS = {
     "outlier_threshold_px": 1.0, "outlier_sigma_factor": 3.0, "max_refine_rounds": 5, "view_score_levels": 3,
     "num_threads": 1, "intermediate_ba_iterations": 20, "final_ba_iterations": 100,
     "weak_rotation_sigma_deg": 1.0, "use_projector": True, "min_projector_pnp_points": 4, "estimate_noise": True,
-    "projector_sigma_px": 0.1, "error_correlation": 0.005,
+    "projector_sigma_px": 0.1, "error_correlation": 0.005, "floor_relief": 0.001,
 }
 
 
@@ -409,6 +409,10 @@ class Baselines:
             "_core.ba.evaluate_plane_cost": Spec([("K", s["K"][0]), ("observed", x[0]), ("pose", pose),
                                                  ("plane", s["plane"]), ("ab", np.array([0.1, 0.2])),
                                                  ("want", [True, True, True])]),
+            "_core.ba.evaluate_relief_cost": Spec([("K", s["K"][0]), ("observed", x[0]), ("spacing", 0.5),
+                                                  ("pose", pose), ("plane", s["plane"]), ("ab", np.array([0.1, 0.2])),
+                                                  ("nodes", np.array([0.0, 0.01, -0.01, 0.0])),
+                                                  ("want", [True] * 7)]),
             "_core.ba.evaluate_projector_cost": Spec([("projector", np.array([0.1, -0.05])), ("weight", 100.0),
                                                      ("surface_map", np.array([0.4, 0, 0.01, 0, 0.4, 0, 0, 0])),
                                                      ("lens", np.zeros(2)), ("ab", np.array([0.1, 0.2])),

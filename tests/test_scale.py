@@ -110,7 +110,9 @@ def test_marker_size_at_the_image_centre_gives_metric_poses(paper) -> None:
     side = true_marker_side(sim.scene, markers, markers.image_centre())
     metric = apply_scale(calibration, f"marker-size:{side}", markers)
     assert rigid_centre_errors(metric, sim.scene).max() < MAX_CENTRE_ERROR_M
-    assert metric.points[:, 2] == pytest.approx(0.0, abs=1e-9)  # still on the floor, now in metres
+    # Still on the floor, now in metres: on the floor's fitted relief, which the noise
+    # moves by a fraction of a millimetre here.
+    assert np.abs(metric.points[:, 2]).max() < 2e-3
 
 
 def test_marker_size_is_local_under_a_tilted_projector() -> None:

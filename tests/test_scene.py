@@ -184,3 +184,49 @@ def test_a_projector_lens_bends_its_rays_and_round_trips() -> None:
     ideal_xy = np.column_stack([pinhole_view.projector_x[inside][::997], pinhole_view.projector_y[inside][::997]])
     np.testing.assert_allclose(projector.buffer_pixels(ideal_xy), np.column_stack([x, y]), atol=1e-6)
     np.testing.assert_allclose(floor[:, 2], 0.0, atol=1e-9)
+
+
+def test_an_uneven_floor_is_met_by_every_ray_and_round_trips(tmp_path) -> None:
+    from dataclasses import replace
+
+    from calibproj.simulate.scene import Floor, FloorRelief
+    from calibproj.simulate.warp import floor_view
+
+    relief = FloorRelief(rms_m=0.004, wavelength_m=1.2, seed=3)
+    scene = load_scene("demo")
+    uneven = replace(scene, floor=Floor(scene.floor.size_m, relief=relief))
+    # The relief has the asked-for spread and is smooth on the scale of a marker.
+    xs, ys = np.meshgrid(np.linspace(-2, 2, 201), np.linspace(-1.5, 1.5, 151))
+    heights = relief.height(np.column_stack([xs.ravel(), ys.ravel()]))
+    assert math.sqrt(np.mean(heights**2)) == pytest.approx(0.004, rel=0.35)
+    assert np.abs(np.diff(heights.reshape(xs.shape), axis=1)).max() < 0.001  # per 2 cm
+    # Projector rays land on the relief, not on z = 0.
+    pixels = np.array([[100.0, 80.0], [959.5, 539.5], [1800.0, 1000.0]])
+    landed = scene.projector.pixels_to_floor(pixels, uneven.floor)
+    np.testing.assert_allclose(landed[:, 2], relief.height(landed[:, :2]), atol=1e-10)
+    assert np.abs(landed - scene.projector.pixels_to_floor(pixels)).max() > 1e-4
+    # So do camera rays: a pixel's floor point is where the projector's ray through
+    # the projector pixel it reads lands.
+    camera = scene.cameras[0]
+    view = floor_view(camera, scene.projector, uneven.floor)
+    inside = np.flatnonzero(np.isfinite(view.projector_x).ravel())[::4999]
+    read = np.column_stack([view.projector_x.ravel()[inside], view.projector_y.ravel()[inside]])
+    floor_points = np.column_stack([view.floor_x.ravel()[inside], view.floor_y.ravel()[inside]])
+    np.testing.assert_allclose(scene.projector.pixels_to_floor(read, uneven.floor)[:, :2], floor_points, atol=1e-8)
+    save_scene(tmp_path / "scene.json", uneven)
+    assert read_scene(tmp_path / "scene.json") == uneven
+
+
+@pytest.mark.parametrize(("field", "value", "message"), [
+    ("rms_m", 0.2, r"floor\.relief\.rms_m: expected a number in \[0, 0\.05\]"),
+    ("wavelength_m", 0.01, r"floor\.relief\.wavelength_m: expected a number of at least 0\.2"),
+    ("seed", 1.5, r"floor\.relief\.seed: expected a non-negative integer"),
+    ("slope", 1, r"unknown field"),
+])
+def test_a_bad_floor_relief_is_named(field, value, message) -> None:
+    from calibproj.io.jsonio import FormatError
+
+    document = _document()
+    document["floor"]["relief"] = {field: value}
+    with pytest.raises(FormatError, match=message):
+        scene_from_json(document, source="room.json")

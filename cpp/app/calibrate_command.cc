@@ -80,6 +80,8 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
          "cameras whose rotation is known worse than this (1 sigma) are reported as weak");
   option("--error-correlation", o.error_correlation,
          "correlation of one camera's centre errors: the uncertainty counts N centres as N / (1 + (N - 1) * this)");
+  option("--floor-relief", o.floor_relief,
+         "expected rms height of the floor's unevenness, a share of the extent of its centres (0: flat)");
   *command = cmd;
   return args;
 }

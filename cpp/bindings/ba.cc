@@ -11,6 +11,7 @@
 #include "calibproj/ba/bundle_adjuster.h"
 #include "calibproj/ba/manifolds.h"
 #include "calibproj/ba/projector_cost.h"
+#include "calibproj/ba/relief_cost.h"
 #include "calibproj/ba/reprojection_cost.h"
 #include "convert.h"
 #include "registry.h"
@@ -236,6 +237,25 @@ void register_ba(py::module_& m) {
       py::arg("K"), py::arg("observed"), py::arg("pose"), py::arg("plane"), py::arg("ab"),
       py::arg("want") = std::vector<bool>{true, true, true},
       "Diagnostics: (ok, residual, [J_pose, J_plane, J_ab]) of the COPLANAR reprojection cost.");
+  m.def(
+      "evaluate_relief_cost",
+      [](const Eigen::Matrix3d& K, const Eigen::VectorXd& observed, double spacing, const Eigen::VectorXd& pose,
+         const Eigen::VectorXd& plane, const Eigen::VectorXd& ab, const Eigen::VectorXd& nodes,
+         const std::vector<bool>& want) {
+        if (!(spacing > 0.0) || nodes.size() != 4) throw std::invalid_argument("expected a positive spacing and 4 nodes");
+        ba::ReliefGrid grid;
+        grid.spacing = spacing;
+        grid.columns = grid.rows = 2;
+        const ba::ReliefReprojectionCost cost(
+            new ba::PlanePointReprojectionCost(IntrinsicsOf(K), Vec2(observed, "observed")), grid, 0);
+        Eigen::VectorXd n0(1), n1(1), n2(1), n3(1);
+        n0 << nodes(0); n1 << nodes(1); n2 << nodes(2); n3 << nodes(3);
+        return EvaluateCost(cost, {pose, plane, ab, n0, n1, n2, n3}, want);
+      },
+      py::arg("K"), py::arg("observed"), py::arg("spacing"), py::arg("pose"), py::arg("plane"), py::arg("ab"),
+      py::arg("nodes"), py::arg("want") = std::vector<bool>(7, true),
+      "Diagnostics: (ok, residual, [J_pose, J_plane, J_ab, J_node0..3]) of the COPLANAR cost on a relief of one\n"
+      "cell [0, spacing]^2 whose corner heights are `nodes` (order (0,0), (1,0), (0,1), (1,1)).");
   m.def(
       "evaluate_projector_cost",
       [](const Eigen::VectorXd& projector, double weight, const Eigen::VectorXd& surface_map,

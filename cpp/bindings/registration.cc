@@ -58,6 +58,7 @@ registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
     else if (key == "estimate_noise") o.estimate_noise = CastTo<bool>(value, what);
     else if (key == "projector_sigma_px") o.projector_sigma_px = CastTo<double>(value, what);
     else if (key == "error_correlation") o.error_correlation = CastTo<double>(value, what);
+    else if (key == "floor_relief") o.floor_relief = CastTo<double>(value, what);
     else throw std::invalid_argument("registration: unknown option '" + key + "'");
   }
   o.Check();

@@ -90,6 +90,12 @@ class RegistrationOptions:
             lens model, blur, a floor's texture) is not averaged away by their number, so
             the pose covariance counts a camera's N centres as N / (1 + (N - 1) *
             error_correlation) independent ones. The poses do not depend on it.
+        floor_relief: coplanar: the expected root mean square height of the floor's
+            unevenness, as a share of the extent of the centres on it (0.001: 3 mm
+            over a 3 m projection). The floor's centres may leave its plane by a smooth
+            relief with that prior, which cameras seeing them from several directions
+            measure; a camera zoomed onto a patch of floor is then not handed the
+            patch's slope as its own tilt. 0: an exactly flat floor.
     """
 
     model: str = "coplanar"
@@ -120,6 +126,7 @@ class RegistrationOptions:
     estimate_noise: bool = True
     projector_sigma_px: float = 0.1
     error_correlation: float = 0.005
+    floor_relief: float = 0.001
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:

@@ -45,7 +45,8 @@ from calibproj.sequence import Sequence, generate
 from calibproj.sequence.densify import DensifyOptions, densify
 from calibproj.simulate.presets import REAL_PEOPLE
 from calibproj.simulate.render import RenderOptions, simulate_videos
-from calibproj.simulate.scene import AutoExposure, FloorTexture, Person, Scene, load_scene, read_scene
+from calibproj.simulate.scene import (AutoExposure, FloorRelief, FloorTexture, Person, Scene, load_scene,
+                                      read_scene)
 
 Effect = Callable[[Scene], Scene]
 
@@ -77,6 +78,11 @@ def texture(**changes) -> Effect:
     return lambda scene: replace(scene, floor=replace(scene.floor, texture=FloorTexture(**changes)))
 
 
+def relief(rms_m: float) -> Effect:
+    """A slightly uneven floor (``run`` gives it the run's seed)."""
+    return lambda scene: replace(scene, floor=replace(scene.floor, relief=FloorRelief(rms_m=rms_m)))
+
+
 # name -> (scene effect, render option changes)
 CONDITIONS: dict[str, tuple[Effect, dict]] = {
     "clean": (lambda scene: scene, {}),
@@ -93,6 +99,8 @@ CONDITIONS: dict[str, tuple[Effect, dict]] = {
     "rolling-15ms": (readout(0.015), {}),
     "rolling-30ms": (readout(0.030), {}),
     "people": (lambda scene: replace(scene, people=tuple(Person(**p) for p in REAL_PEOPLE)), {}),
+    "uneven-floor": (relief(0.003), {}),
+    "uneven-floor-strong": (relief(0.006), {}),
 }
 COMBINED = "all"
 
@@ -109,6 +117,8 @@ CONDITIONS[COMBINED] = (combined, {"crf": 24})
 def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, args) -> dict:
     effect, render_changes = CONDITIONS[condition]
     scene = effect(load_scene(args.scene, seed=seed))
+    if scene.floor.relief is not None:  # each seed its own floor
+        scene = replace(scene, floor=replace(scene.floor, relief=replace(scene.floor.relief, seed=seed)))
     room = work / f"{condition}-{seed}"
     if not (args.reuse and rendered(room, scene)):
         simulate_videos(scene, sequence, room, seed=seed, options=replace(RenderOptions(), **render_changes))

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "calibproj/ba/manifolds.h"
+#include "calibproj/ba/relief_cost.h"
 #include "calibproj/ba/reprojection_cost.h"
 #include "calibproj/ba/rotation_cache.h"
 #include "calibproj/ba/rotation.h"
@@ -137,6 +138,23 @@ struct Parameters {
 
   double* Map(int k) { return map_storage.data() + 8 * k; }
 
+  // The main plane's relief (relief_cost.h): node heights, kept here for the same
+  // reason as the maps; per point its grid cell, -1 for a point without relief.
+  ReliefGrid relief_grid;
+  std::array<double, (kMaxReliefCells + 1) * (kMaxReliefCells + 1)> relief_storage{};
+  std::vector<int> relief_cell;
+
+  bool HasRelief() const { return relief_grid.size() > 0; }
+  double* ReliefNode(int node) { return relief_storage.data() + node; }
+  // The relief's height under point p (0 without one).
+  double ReliefHeight(int p) const {
+    if (relief_cell.empty() || relief_cell[p] < 0) return 0.0;
+    const ReliefGrid::Cell cell = relief_grid.CellAt(relief_cell[p], points.row(p).head<2>().transpose());
+    double h = 0.0;
+    for (int k = 0; k < 4; ++k) h += cell.weights[k] * relief_storage[cell.nodes[k]];
+    return h;
+  }
+
   double* Plane(int k) { return k == 0 ? plane.data() : more_planes.row(k - 1).data(); }
   double* PointBlock(int p) { return points.row(p).data(); }
 };
@@ -181,6 +199,20 @@ void InitialProjectorMaps(const Data& data, const Options& options, Parameters* 
   }
 }
 
+// A flat relief over the main plane's points, each given the cell it lies in.
+void InitialRelief(const Options& options, Parameters* params) {
+  std::vector<Eigen::Vector2d> ab;
+  for (int p = 0; p < static_cast<int>(params->points.rows()); ++p) {
+    if (params->point_plane[p] == 0) ab.push_back(params->points.row(p).head<2>().transpose());
+  }
+  if (ab.size() < 2) return;
+  params->relief_grid = ReliefGrid::Covering(ab, options.relief_cells);
+  params->relief_cell.assign(params->points.rows(), -1);
+  for (int p = 0; p < static_cast<int>(params->points.rows()); ++p) {
+    if (params->point_plane[p] == 0) params->relief_grid.CellOf(params->points.row(p).head<2>(), &params->relief_cell[p]);
+  }
+}
+
 Parameters InitialParameters(const Data& gauge_data, const Options& options) {
   Parameters params;
   params.poses = gauge_data.poses;
@@ -205,6 +237,7 @@ Parameters InitialParameters(const Data& gauge_data, const Options& options) {
     params.points.row(p) << (B.transpose() * gauge_data.points.row(p).transpose()).transpose(), 0.0;
   }
   InitialProjectorMaps(gauge_data, options, &params);
+  if (gauge_data.relief_weight > 0.0) InitialRelief(options, &params);
   return params;
 }
 
@@ -212,7 +245,10 @@ void CopyPointsOut(Parameters& params, PointMatrix* points) {
   *points = params.points;
   for (int p = 0; p < points->rows(); ++p) {
     const int k = params.point_plane[p];
-    if (k >= 0) points->row(p) = PointOnPlane(params.Plane(k), params.points.row(p).data()).transpose();
+    if (k < 0) continue;
+    const Eigen::Vector4d raised = Eigen::Map<const Eigen::Vector4d>(params.Plane(k)) +
+                                   Eigen::Vector4d(0.0, 0.0, 0.0, params.ReliefHeight(p));
+    points->row(p) = PointOnPlane(raised.data(), params.points.row(p).data()).transpose();
   }
 }
 
@@ -248,6 +284,16 @@ int AddProjectorTerms(const Data& data, Parameters& params, ceres::LossFunction*
   }
   ordering->AddElementToGroup(params.lens.data(), 3 + num_planes);
   return terms;
+}
+
+// Every relief node's prior, the nodes in a group of their own after the projector's.
+void AddReliefPrior(const Data& data, Parameters& params, ceres::Problem* problem,
+                    ceres::ParameterBlockOrdering* ordering) {
+  const int num_planes = 1 + static_cast<int>(params.more_planes.rows());
+  for (int node = 0; node < params.relief_grid.size(); ++node) {
+    problem->AddResidualBlock(new ReliefPriorCost(data.relief_weight), nullptr, params.ReliefNode(node));
+    ordering->AddElementToGroup(params.ReliefNode(node), 4 + num_planes);
+  }
 }
 
 // The loss of each camera's residuals and of the projector's. Each is a wrapper when
@@ -333,13 +379,20 @@ int BuildProblem(const Data& data, const Options& options, const Gauge& gauge, P
     ceres::CostFunction* cost = make_cost(on_plane < 0 ? Model::kFree : Model::kCoplanar, data.intrinsics[camera],
                                           data.observed.row(i).transpose(),
                                           rotations != nullptr ? rotations->Entry(camera) : nullptr);
-    if (on_plane >= 0) {
+    if (on_plane >= 0 && !params.relief_cell.empty() && params.relief_cell[p] >= 0) {
+      const ReliefGrid::Cell cell = params.relief_grid.CellAt(params.relief_cell[p], Eigen::Vector2d::Zero());
+      std::vector<double*> blocks = {pose, params.Plane(on_plane), params.PointBlock(p)};
+      for (int node : cell.nodes) blocks.push_back(params.ReliefNode(node));
+      problem->AddResidualBlock(new ReliefReprojectionCost(cost, params.relief_grid, params.relief_cell[p]),
+                                camera_loss, blocks);
+    } else if (on_plane >= 0) {
       problem->AddResidualBlock(cost, camera_loss, pose, params.Plane(on_plane), params.PointBlock(p));
     } else {
       problem->AddResidualBlock(cost, camera_loss, pose, params.PointBlock(p));
     }
   }
   const int projector_terms = AddProjectorTerms(data, params, losses.Projector(), problem, ordering);
+  AddReliefPrior(data, params, problem, ordering);
   if (!options.refine_poses) {
     for (int c = 0; c < params.poses.rows(); ++c) problem->SetParameterBlockConstant(params.poses.row(c).data());
   } else if (gauge.fixed) {
@@ -350,6 +403,9 @@ int BuildProblem(const Data& data, const Options& options, const Gauge& gauge, P
       problem->SetParameterBlockConstant(params.PointBlock(p));
     }
     for (int k = 0; k < num_planes; ++k) problem->SetParameterBlockConstant(params.Plane(k));
+    for (int node = 0; node < params.relief_grid.size(); ++node) {
+      problem->SetParameterBlockConstant(params.ReliefNode(node));
+    }
   }
   return projector_terms;
 }
@@ -466,6 +522,7 @@ void Options::Check() const {
   Require(!compute_covariance || refine_poses, "options: covariance needs refine_poses");
   Require(error_correlation >= 0.0 && error_correlation <= 1.0,
           "options: error_correlation must be in [0, 1], got " + Str(error_correlation));
+  limits::RequireInRange(relief_cells, 1, kMaxReliefCells, "options: relief_cells");
 }
 
 void ValidateData(const Data& data, const Options& options) {
@@ -544,6 +601,7 @@ void ValidateData(const Data& data, const Options& options) {
   }
   Require(data.projector_lens.allFinite() && std::isfinite(data.projector_weight) && data.projector_weight >= 0.0,
           "projector: lens and weight must be finite, the weight >= 0");
+  Require(std::isfinite(data.relief_weight) && data.relief_weight >= 0.0, "relief: the weight must be finite and >= 0");
   Require(options.gauge_camera >= 0 && options.gauge_camera < num_cameras,
           "options: gauge camera " + Str(options.gauge_camera) + " out of range [0, " + Str(num_cameras) + ")");
   Require(options.scale_camera >= -1 && options.scale_camera < num_cameras &&
@@ -667,6 +725,12 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
     result.pose_covariances = PoseCovariances(&problem, params, gauge, change, options);
   }
   if (options.model == Model::kCoplanar) CopyProjectorOut(gauge_data, params, change, &result);
+  if (params.HasRelief()) {
+    result.relief_nodes = params.relief_grid.size();
+    double sum = 0.0;
+    for (int node = 0; node < result.relief_nodes; ++node) sum += *params.ReliefNode(node) * *params.ReliefNode(node);
+    result.relief_rms = std::sqrt(sum / result.relief_nodes);
+  }
   result.poses = params.poses;
   result.plane = params.plane;
   result.more_planes = params.more_planes;

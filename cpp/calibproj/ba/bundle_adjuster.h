@@ -64,6 +64,9 @@ struct Options {
   // projector's. The covariance counts a group of N residuals as N / (1 + (N - 1) *
   // error_correlation) independent ones; the solution does not depend on it.
   double error_correlation = 0.0;
+  // COPLANAR with Data::relief_weight > 0: cells of the main plane's relief grid across
+  // the larger extent of its points (relief_cost.h), at most kMaxReliefCells.
+  int relief_cells = 8;
 
   // Throws std::invalid_argument naming the first inconsistent option.
   void Check() const;
@@ -94,7 +97,13 @@ struct Data {
   PixelMatrix projector;
   Eigen::Vector2d projector_lens = Eigen::Vector2d::Zero();
   double projector_weight = 0.0;  // see ProjectorSurfaceCost; <= 0: no projector term
+  // COPLANAR: the main plane's points may leave it by a smooth relief (relief_cost.h)
+  // whose nodes have a prior of weight relief_weight = the reference noise (px) over the
+  // expected root mean square height (world units); <= 0: the plane is flat.
+  double relief_weight = 0.0;
 };
+
+constexpr int kMaxReliefCells = 16;
 
 // Planes that can have a projector map (the main plane first; further ones have none).
 constexpr int kMaxProjectorSurfaces = 16;
@@ -122,7 +131,7 @@ struct Result {
   int gauge_camera = -1;
   int scale_camera = -1;      // FREE with poses and points refined; -1 otherwise
   PoseMatrix poses;
-  PointMatrix points;         // COPLANAR: exactly on their plane (but the free ones)
+  PointMatrix points;         // COPLANAR: on their plane (but the free ones), or on the main plane's relief
   Eigen::Vector4d plane = Eigen::Vector4d::Zero();
   PlaneMatrix more_planes;    // COPLANAR: the other planes, refined
   PixelMatrix residuals;      // per observation, projected minus observed, pixels
@@ -136,6 +145,9 @@ struct Result {
   Eigen::Vector2d projector_lens = Eigen::Vector2d::Zero();
   PixelMatrix projector_residuals;
   int projector_terms = 0;
+  // With a relief: root mean square of its node heights (world units), and how many.
+  double relief_rms = 0.0;
+  int relief_nodes = 0;
   std::string report;         // Ceres FullReport when requested, else BriefReport
 };
 

@@ -17,6 +17,7 @@
 
 #include "calibproj/ba/rotation.h"
 #include "calibproj/common/limits.h"
+#include "calibproj/common/quantile.h"
 #include "calibproj/geometry/homography.h"
 #include "calibproj/geometry/pnp.h"
 #include "calibproj/geometry/triangulation.h"
@@ -122,6 +123,7 @@ void Options::Check() const {
   limits::RequireInRange(min_projector_pnp_points, 4, limits::kMaxPoints, "registration: min_projector_pnp_points");
   limits::RequireInRange(projector_sigma_px, 1e-6, 100.0, "registration: projector_sigma_px");
   limits::RequireInRange(error_correlation, 0.0, 1.0, "registration: error_correlation");
+  limits::RequireInRange(floor_relief, 0.0, 0.1, "registration: floor_relief");
 }
 
 namespace {
@@ -257,6 +259,20 @@ bool Reconstruction::KnownPoint(int point, Eigen::Vector3d* X) const {
     return true;
   }
   return ProjectorPrediction(point, X);
+}
+
+double Reconstruction::MainPlaneExtent(const std::vector<int>& points) const {
+  // Between the 1st and 99th percentiles along each axis: a stray point does not count.
+  double extent = 0.0;
+  for (int axis = 0; axis < 3; ++axis) {
+    std::vector<double> values;
+    for (int p : points) {
+      if (point_plane_[p] == 0) values.push_back(points_(p, axis));
+    }
+    if (values.size() < 2) return 0.0;
+    extent = std::max(extent, Quantile(values, 0.99) - Quantile(values, 0.01));
+  }
+  return std::isfinite(extent) ? extent : 0.0;
 }
 
 double Reconstruction::Focal(int camera) const { return 0.5 * (cameras_[camera].K.fx + cameras_[camera].K.fy); }
@@ -836,6 +852,10 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   if (options_.estimate_noise && estimated && reference_sigma > 0.0) {
     data.camera_weights.resize(static_cast<int>(cameras.size()));
     for (size_t k = 0; k < cameras.size(); ++k) data.camera_weights(k) = reference_sigma / sigma[cameras[k]];
+  }
+  if (coplanar && options_.floor_relief > 0.0) {
+    const double extent = MainPlaneExtent(points);
+    if (extent > 0.0) data.relief_weight = reference_sigma / (options_.floor_relief * extent);
   }
   if (coplanar && HasProjector()) {
     data.projector.resize(static_cast<int>(points.size()), 2);

@@ -65,6 +65,11 @@ struct Options {
   // The correlation of one camera's centre errors (ba::Options::error_correlation): the
   // covariance counts a camera's N centres as N / (1 + (N - 1) * this) independent ones.
   double error_correlation = 0.005;
+  // COPLANAR: the expected root mean square height of the main plane's unevenness (a
+  // real floor's), as a share of the extent of the centres on it (0.001: 3 mm over a
+  // 3 m projection). Its points may leave the plane by a smooth relief with that prior
+  // (ba/relief_cost.h); 0: an exactly flat plane.
+  double floor_relief = 0.001;
 
   void Check() const;
 };
@@ -232,6 +237,9 @@ class Reconstruction {
   bool UpdateNoise(const NoiseEstimate& estimate);
   void CheckPlanarAmbiguity();
   bool NoiseSettled(const std::vector<double>& before, double projector_before) const;
+  // The largest range, along any axis, of the given points that lie on the main plane
+  // (between their 1st and 99th percentiles).
+  double MainPlaneExtent(const std::vector<int>& points) const;
   bool HasProjector() const { return options_.use_projector && projector_.rows() == num_points_ && options_.model == ba::Model::kCoplanar; }
 
   std::vector<Camera> cameras_;

@@ -304,10 +304,11 @@ def _held_focal(document: dict | None) -> dict[str, str]:
 def _summary(calibration: Calibration, views: list[CameraView], provenance: dict | None) -> str:
     registered = sum(1 for v in views if v.registered)
     unit = "metres" if calibration.unit == "m" else "arbitrary (first camera at height 1)"
-    if calibration.model == "coplanar":
+    floor = f"{calibration.floor_rms:.4g}" + (" m" if calibration.unit == "m" else "")
+    if calibration.model == "coplanar" and calibration.floor_rms < 1e-9:  # rounding, not a measurement
         floor = "0 by construction (the coplanar model puts the floor's points on the floor plane)"
-    else:
-        floor = f"{calibration.floor_rms:.4g}" + (" m" if calibration.unit == "m" else "")
+    elif calibration.model == "coplanar":
+        floor += " (the floor's relief, estimated: its points leave the plane by it alone)"
     rows = [
         ("registered cameras", f"{registered} of {len(views)}"),
         ("model", calibration.model),

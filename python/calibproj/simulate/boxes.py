@@ -1,4 +1,5 @@
-"""Rays and the room's surfaces: the floor z = 0 and the faces of the boxes on it.
+"""Rays and the room's surfaces: the floor (z = 0, or its relief) and the faces of the
+boxes on it.
 
 The projector's light lands on the first surface its ray meets (a table top rather
 than the floor beneath it, which lies in the table's shadow); a camera sees a point
@@ -15,7 +16,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from calibproj.simulate.scene import Box
+from calibproj.simulate.scene import Box, Floor
 
 FLOOR = 0
 FACES = ("top", "bottom", "-x", "+x", "-y", "+y")
@@ -49,13 +50,14 @@ def surface_plane(boxes: Sequence[Box], surface: int) -> tuple[np.ndarray, float
     return n, float(outward * value)
 
 
-def first_hits(origin: np.ndarray, directions: np.ndarray, boxes: Sequence[Box]) -> tuple[np.ndarray, np.ndarray]:
+def first_hits(origin: np.ndarray, directions: np.ndarray, boxes: Sequence[Box],
+               floor: Floor | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Where rays from ``origin`` first meet a surface: ``(points (N, 3), surfaces (N,))``;
-    NaN and -1 for rays that meet none (going up, or past the floor's plane never)."""
+    NaN and -1 for rays that meet none (going up, or past the floor never). The floor is
+    ``floor`` with its relief, or the plane z = 0 without one."""
     origin = np.asarray(origin, dtype=float)
     directions = np.asarray(directions, dtype=float).reshape(-1, 3)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = -origin[2] / directions[:, 2]
+    t = (floor or Floor()).ray_depths(origin, directions)
     t = np.where(t > 0, t, np.inf)
     surface = np.where(np.isfinite(t), FLOOR, -1)
     for k, box in enumerate(boxes):

@@ -1,7 +1,7 @@
 """Geometric simulation: where the cameras of a scene see the projected MSM centres.
 
 No images are rendered. The MSM centres of a layout (projector pixels) are cast
-through the projector onto the floor z = 0; a camera observes a centre when the
+through the projector onto the floor (z = 0, or its relief); a camera observes a centre when the
 marker, at one of its scales at least, would be decodable: its square, cast
 projector -> floor -> camera (with lens distortion), lies wholly inside the image
 and its shortest side is at least ``min_marker_px`` long. An observation is the
@@ -111,11 +111,11 @@ def projected_points(scene: Scene, pixels: np.ndarray) -> tuple[np.ndarray, np.n
     """Where projector pixels' rays land: ``(points (N, 3), surfaces (N,))``, the
     floor unless a box stands in the way (NaN and -1 for rays that land nowhere)."""
     if not scene.boxes:
-        points = scene.projector.pixels_to_floor(pixels)
+        points = scene.projector.pixels_to_floor(pixels, scene.floor)
         return points, np.where(np.isfinite(points[:, 0]), boxes.FLOOR, -1)
     pixels = scene.projector.ideal_pixels(pixels)
     rays = np.linalg.solve(scene.projector.K, np.column_stack([pixels, np.ones(len(pixels))]).T)
-    return boxes.first_hits(scene.projector.center, (scene.projector.R.T @ rays).T, scene.boxes)
+    return boxes.first_hits(scene.projector.center, (scene.projector.R.T @ rays).T, scene.boxes, scene.floor)
 
 
 def decodable_msms(

@@ -31,7 +31,9 @@ is a rolling shutter's readout time (row ``y`` of ``h`` starts exposing
 ``auto_exposure`` (``AutoExposure``'s fields) makes the camera adjust its gain, and
 ``crf`` is the camera's own x264 quality (cheap cameras compress harder; default:
 the renderer's).
-``floor.texture`` (``FloorTexture``'s fields) gives the floor tiles, grout and stains.
+``floor.texture`` (``FloorTexture``'s fields) gives the floor tiles, grout and stains;
+``floor.relief`` (``FloorRelief``'s fields: ``rms_m``, ``wavelength_m``, ``seed``)
+makes it slightly uneven, its height a smooth surface around z = 0.
 ``people`` (a list of ``Person``'s fields: ``start`` and ``end`` on the floor, ``start_s``,
 ``speed_mps``, ``radius_m``, ``height_m``, ``albedo``) walk through the room during the
 projection, hiding the floor and casting shadows.
@@ -84,6 +86,12 @@ def look_at_rotation(position: np.ndarray, target: np.ndarray) -> np.ndarray:
     return np.stack([right, down, forward])
 
 
+# Plane waves summed into a floor's relief, and fixed-point steps that meet it (each
+# step shrinks the error by the slope times the run per drop: below 0.05 in a room).
+RELIEF_WAVES = 8
+RELIEF_ITERATIONS = 8
+
+
 @dataclass(frozen=True)
 class FloorTexture:
     """What a real floor adds to the projected light: tiles of slightly different
@@ -112,12 +120,72 @@ class FloorTexture:
 
 
 @dataclass(frozen=True)
+class FloorRelief:
+    """A floor that is not quite flat, as a poured or tiled floor is: its height is a
+    smooth random surface, a sum of ``RELIEF_WAVES`` plane waves of random directions
+    and phases whose wavelengths spread around ``wavelength_m``, with a root mean
+    square height of ``rms_m`` (DIN 18202 allows 4 mm under a 1 m straightedge).
+
+    Attributes:
+        rms_m: root mean square height above and below z = 0 (metres).
+        wavelength_m: typical distance between a high and the next high.
+        seed: draws of the waves.
+    """
+
+    rms_m: float = 0.003
+    wavelength_m: float = 1.5
+    seed: int = 0
+
+    def _waves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Wave vectors ``(K, 2)`` (radians per metre), phases and amplitudes ``(K,)``."""
+        rng = np.random.default_rng(self.seed)
+        angles = rng.uniform(0.0, np.pi, RELIEF_WAVES)
+        wavelengths = self.wavelength_m * rng.uniform(0.7, 1.3, RELIEF_WAVES)
+        vectors = (2.0 * np.pi / wavelengths)[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+        phases = rng.uniform(0.0, 2.0 * np.pi, RELIEF_WAVES)
+        # Each cosine's mean square is half its amplitude squared.
+        amplitudes = np.full(RELIEF_WAVES, self.rms_m * np.sqrt(2.0 / RELIEF_WAVES))
+        return vectors, phases, amplitudes
+
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        """Height of the floor (metres) at floor points ``(N, 2)``; NaN stays NaN."""
+        vectors, phases, amplitudes = self._waves()
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        return np.cos(xy @ vectors.T + phases) @ amplitudes
+
+
+@dataclass(frozen=True)
 class Floor:
-    """The floor z = 0, a rectangle centred on the origin; plain (albedo 1) unless it
-    has a texture."""
+    """The floor, a rectangle centred on the origin: the plane z = 0, or a smooth
+    surface close to it when it has a relief; plain (albedo 1) unless it has a texture."""
 
     size_m: tuple[float, float] = (4.0, 3.0)
     texture: FloorTexture | None = None
+    relief: FloorRelief | None = None
+
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        """Height of the floor at floor points ``(N, 2)``: 0 where it is flat."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        return np.zeros(len(xy)) if self.relief is None else self.relief.height(xy)
+
+    def ray_depths(self, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Per ray from ``origin`` along ``directions`` ``(N, 3)``, the multiple of its
+        direction at which it meets the floor; NaN for rays that never go down to it.
+
+        A relief is met by fixed-point steps from the plane z = 0: each step moves the
+        depth by the relief's slope times the ray's horizontal run per unit drop, a
+        contraction for any ray not grazing the floor."""
+        origin = np.asarray(origin, dtype=float)
+        directions = np.asarray(directions, dtype=float).reshape(-1, 3)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            depth = -origin[2] / directions[:, 2]
+            depth[~(depth > 0)] = np.nan
+            if self.relief is not None:
+                for _ in range(RELIEF_ITERATIONS):
+                    xy = origin[:2] + depth[:, None] * directions[:, :2]
+                    depth = (self.relief.height(xy) - origin[2]) / directions[:, 2]
+                depth[~(depth > 0)] = np.nan
+        return depth
 
 
 @dataclass(frozen=True)
@@ -250,19 +318,17 @@ class Projector(LookAtPose):
         out[finite] = self.lens.distort_points(ideal[finite])
         return out
 
-    def pixels_to_floor(self, pixels: np.ndarray) -> np.ndarray:
-        """Floor points (z = 0), shape ``(N, 3)``, hit by the rays of projector pixels.
+    def pixels_to_floor(self, pixels: np.ndarray, floor: Floor | None = None) -> np.ndarray:
+        """Floor points, shape ``(N, 3)``, hit by the rays of projector pixels: on
+        ``floor`` (its relief included), or on the plane z = 0 without one.
 
         Rays that do not go down towards the floor give NaN rows.
         """
         pixels = self.ideal_pixels(pixels)
         rays_cam = np.linalg.solve(self.K, np.column_stack([pixels, np.ones(len(pixels))]).T)
         rays_world = (self.R.T @ rays_cam).T
-        origin = self.center
-        with np.errstate(divide="ignore", invalid="ignore"):
-            depth = -origin[2] / rays_world[:, 2]
-        depth[~(depth > 0)] = np.nan
-        return origin + depth[:, None] * rays_world
+        depth = (floor or Floor()).ray_depths(self.center, rays_world)
+        return self.center + depth[:, None] * rays_world
 
 
 @dataclass(frozen=True)
@@ -347,7 +413,8 @@ class Scene:
         """Body of ``scene.json`` (without the schema tag)."""
         return {
             "floor": _without_none({"size_m": list(self.floor.size_m),
-                                    "texture": None if self.floor.texture is None else asdict(self.floor.texture)}),
+                                    "texture": None if self.floor.texture is None else asdict(self.floor.texture),
+                                    "relief": None if self.floor.relief is None else asdict(self.floor.relief)}),
             "projector": {key: value for key, value in _plain(asdict(self.projector)).items()
                           if key != "dist" or any(self.projector.dist)},
             "cameras": [_without_none(_plain(asdict(camera))) for camera in self.cameras],
@@ -421,12 +488,31 @@ def scene_from_json(document: dict[str, Any], source: str = "scene") -> Scene:
 
 
 def _read_floor(reader: _FieldReader, entry: Any) -> Floor:
-    reader.no_unknown_keys(entry, {"size_m", "texture"}, "floor")
+    reader.no_unknown_keys(entry, {"size_m", "texture", "relief"}, "floor")
     size = tuple(reader.numbers(entry, "size_m", "floor", 2, positive=True))
-    if "texture" not in entry:
-        return Floor(size)
+    texture = _read_floor_texture(reader, entry["texture"]) if "texture" in entry else None
+    relief = _read_floor_relief(reader, entry["relief"]) if "relief" in entry else None
+    return Floor(size, texture, relief)
+
+
+def _read_floor_relief(reader: _FieldReader, entry: Any) -> FloorRelief:
+    where = "floor.relief"
+    values = _read_record(reader, entry, FloorRelief(), where)
+    # Beyond a few centimetres the floor is no longer "slightly uneven" and the
+    # fixed-point ray steps may stop contracting.
+    if not 0.0 <= values["rms_m"] <= 0.05:
+        reader.fail(f"{where}.rms_m", f"expected a number in [0, 0.05], got {values['rms_m']}")
+    if not values["wavelength_m"] >= 0.2:
+        reader.fail(f"{where}.wavelength_m", f"expected a number of at least 0.2, got {values['wavelength_m']}")
+    if values["seed"] != int(values["seed"]) or values["seed"] < 0:
+        reader.fail(f"{where}.seed", f"expected a non-negative integer, got {values['seed']}")
+    values.update(seed=int(values["seed"]))
+    return FloorRelief(**values)
+
+
+def _read_floor_texture(reader: _FieldReader, entry: Any) -> FloorTexture:
     where = "floor.texture"
-    values = _read_record(reader, entry["texture"], FloorTexture(), where)
+    values = _read_record(reader, entry, FloorTexture(), where)
     for key in ("grout_albedo", "stain_albedo"):
         if not 0.0 <= values[key] <= 1.0:
             reader.fail(f"{where}.{key}", f"expected a number in [0, 1], got {values[key]}")
@@ -442,7 +528,7 @@ def _read_floor(reader: _FieldReader, entry: Any) -> Floor:
     if values["seed"] != int(values["seed"]) or values["seed"] < 0:
         reader.fail(f"{where}.seed", f"expected a non-negative integer, got {values['seed']}")
     values.update(stains=int(values["stains"]), seed=int(values["seed"]))
-    return Floor(size, FloorTexture(**values))
+    return FloorTexture(**values)
 
 
 def _read_person(reader: _FieldReader, entry: Any, where: str) -> Person:

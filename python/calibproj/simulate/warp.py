@@ -5,7 +5,8 @@ homography ``H = K [r1 r2 t]`` (floor ``(x, y, 1)`` to homogeneous pixels). A ca
 pixel is first undistorted (OpenCV model, iterated to convergence), then carried to
 the projector image by ``H_projector @ inv(H_camera)``. Both homographies and
 ``cv2.remap`` use OpenCV's pixel convention (the centre of the top-left pixel is
-(0, 0)), so no half-pixel shift appears anywhere.
+(0, 0)), so no half-pixel shift appears anywhere. In a room with boxes or an uneven
+floor, each camera ray is traced to the first surface it meets instead.
 
 A camera pixel sees the floor through the lens's blur and integrates the light over
 its area. Both are applied before sampling, in the projector image: the pyramid of
@@ -105,8 +106,8 @@ def floor_view(camera: Camera, projector: Projector, floor: Floor, supersample: 
                scene_boxes: tuple = ()) -> FloorView:
     """Trace every sample of ``camera`` to the floor (or a box standing on it) and into
     the projector image."""
-    if scene_boxes:
-        return _view_with_boxes(camera, projector, floor, supersample, scene_boxes)
+    if scene_boxes or floor.relief is not None:
+        return _view_of_surfaces(camera, projector, floor, supersample, scene_boxes)
     grid_x, grid_y = sample_grid(camera.resolution, supersample)
     pixels = np.column_stack([grid_x.ravel(), grid_y.ravel()])
     intrinsics = camera.intrinsics
@@ -135,10 +136,12 @@ def floor_view(camera: Camera, projector: Projector, floor: Floor, supersample: 
                      floor_x, floor_y, footprint)
 
 
-def _view_with_boxes(camera: Camera, projector: Projector, floor: Floor, supersample: int,
-                     scene_boxes: tuple) -> FloorView:
-    """``floor_view`` in a room with boxes: each sample sees the first surface its ray
-    meets; a point the boxes hide from the projector is in shadow (no projected light)."""
+def _view_of_surfaces(camera: Camera, projector: Projector, floor: Floor, supersample: int,
+                      scene_boxes: tuple) -> FloorView:
+    """``floor_view`` ray by ray, in a room with boxes or an uneven floor: each sample
+    sees the first surface its ray meets; a point the boxes hide from the projector is
+    in shadow (no projected light). A relief's own shadows and shading are left out:
+    its slopes stay below a degree."""
     from calibproj.simulate import boxes
 
     grid_x, grid_y = sample_grid(camera.resolution, supersample)
@@ -148,7 +151,7 @@ def _view_with_boxes(camera: Camera, projector: Projector, floor: Floor, supersa
     undistorted = intrinsics.undistort_points(pixels)
     modelled = np.linalg.norm(intrinsics.distort_points(undistorted) - pixels, axis=1) < LENS_MODEL_TOLERANCE_PX
     rays = np.column_stack([intrinsics.normalize(undistorted), np.ones(len(pixels))]) @ camera.R
-    points, surface = boxes.first_hits(camera.center, rays, scene_boxes)
+    points, surface = boxes.first_hits(camera.center, rays, scene_boxes, floor)
     half_size = 0.5 * np.asarray(floor.size_m)
     with np.errstate(invalid="ignore"):
         seen = modelled & (surface >= 0) & ((surface != boxes.FLOOR) | np.all(np.abs(points[:, :2]) <= half_size, axis=1))

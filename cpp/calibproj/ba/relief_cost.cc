@@ -1,0 +1,106 @@
+#include "calibproj/ba/relief_cost.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "calibproj/common/quantile.h"
+
+namespace calibproj::ba {
+
+ReliefGrid ReliefGrid::Covering(const std::vector<Eigen::Vector2d>& ab, int cells) {
+  ReliefGrid grid;
+  if (ab.empty() || cells < 1) return grid;
+  // The central 98 % of the points along each axis: a stray point far out does not
+  // stretch the cells (it takes the height of the nearest edge).
+  Eigen::Vector2d lower, upper;
+  for (int axis = 0; axis < 2; ++axis) {
+    std::vector<double> values;
+    for (const Eigen::Vector2d& p : ab) values.push_back(p(axis));
+    lower(axis) = Quantile(values, 0.01);
+    upper(axis) = Quantile(values, 0.99);
+  }
+  const Eigen::Vector2d extent = upper - lower;
+  grid.spacing = std::max(extent.maxCoeff() / cells, 1e-12);
+  // Whole cells centred on the points' box.
+  const int columns = std::max(1, static_cast<int>(std::ceil(extent(0) / grid.spacing - 1e-9)));
+  const int rows = std::max(1, static_cast<int>(std::ceil(extent(1) / grid.spacing - 1e-9)));
+  grid.origin = 0.5 * (lower + upper) - 0.5 * grid.spacing * Eigen::Vector2d(columns, rows);
+  grid.columns = columns + 1;
+  grid.rows = rows + 1;
+  return grid;
+}
+
+ReliefGrid::Cell ReliefGrid::CellOf(const Eigen::Vector2d& ab, int* cell_index) const {
+  const Eigen::Vector2d local = (ab - origin) / spacing;
+  const int i = std::clamp(static_cast<int>(std::floor(local(0))), 0, columns - 2);
+  const int j = std::clamp(static_cast<int>(std::floor(local(1))), 0, rows - 2);
+  const int index = j * (columns - 1) + i;
+  if (cell_index != nullptr) *cell_index = index;
+  return CellAt(index, ab);
+}
+
+ReliefGrid::Cell ReliefGrid::CellAt(int cell_index, const Eigen::Vector2d& ab) const {
+  const int i = cell_index % (columns - 1);
+  const int j = cell_index / (columns - 1);
+  // Outside its cell a point takes the height of the cell's nearest edge: a point far
+  // off the grid (an outlier) must not see the cell's slope extrapolated.
+  const double s_free = (ab(0) - origin(0)) / spacing - i;
+  const double t_free = (ab(1) - origin(1)) / spacing - j;
+  const double s = std::clamp(s_free, 0.0, 1.0);
+  const double t = std::clamp(t_free, 0.0, 1.0);
+  Cell cell;
+  cell.nodes = {j * columns + i, j * columns + i + 1, (j + 1) * columns + i, (j + 1) * columns + i + 1};
+  cell.weights = {(1 - s) * (1 - t), s * (1 - t), (1 - s) * t, s * t};
+  const double ks = s == s_free ? 1.0 / spacing : 0.0;
+  const double kt = t == t_free ? 1.0 / spacing : 0.0;
+  cell.gradients = {Eigen::Vector2d(-(1 - t) * ks, -(1 - s) * kt), Eigen::Vector2d((1 - t) * ks, -s * kt),
+                    Eigen::Vector2d(-t * ks, (1 - s) * kt), Eigen::Vector2d(t * ks, s * kt)};
+  return cell;
+}
+
+ReliefReprojectionCost::ReliefReprojectionCost(ceres::CostFunction* plane_cost, const ReliefGrid& grid, int cell)
+    : plane_cost_(plane_cost), grid_(grid), cell_(cell) {
+  set_num_residuals(2);
+  *mutable_parameter_block_sizes() = {6, 4, 2, 1, 1, 1, 1};
+}
+
+bool ReliefReprojectionCost::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
+  const double* plane = parameters[1];
+  const Eigen::Map<const Eigen::Vector2d> ab(parameters[2]);
+  const ReliefGrid::Cell cell = grid_.CellAt(cell_, ab);
+  double h = 0.0;
+  for (int k = 0; k < 4; ++k) h += cell.weights[k] * parameters[3 + k][0];
+  const double moved_plane[4] = {plane[0], plane[1], plane[2], plane[3] + h};
+  const double* inner_parameters[3] = {parameters[0], moved_plane, parameters[2]};
+  if (jacobians == nullptr) return plane_cost_->Evaluate(inner_parameters, residuals, nullptr);
+
+  // d(residual)/d(plane) is needed for the plane, the point and the nodes alike.
+  bool height_moves = jacobians[1] != nullptr || jacobians[2] != nullptr;
+  for (int k = 0; k < 4; ++k) height_moves |= jacobians[3 + k] != nullptr;
+  Eigen::Matrix<double, 2, 4, Eigen::RowMajor> J_plane;
+  Eigen::Matrix<double, 2, 2, Eigen::RowMajor> J_ab;
+  double* inner_jacobians[3] = {jacobians[0], height_moves ? J_plane.data() : nullptr,
+                                jacobians[2] != nullptr ? J_ab.data() : nullptr};
+  if (!plane_cost_->Evaluate(inner_parameters, residuals, inner_jacobians)) return false;
+  using Map2x4 = Eigen::Map<Eigen::Matrix<double, 2, 4, Eigen::RowMajor>>;
+  using Map2x2 = Eigen::Map<Eigen::Matrix<double, 2, 2, Eigen::RowMajor>>;
+  if (jacobians[1] != nullptr) Map2x4{jacobians[1]} = J_plane;
+  const Eigen::Vector2d d_offset = J_plane.col(3);
+  if (jacobians[2] != nullptr) {
+    Eigen::Vector2d dh_dab = Eigen::Vector2d::Zero();
+    for (int k = 0; k < 4; ++k) dh_dab += parameters[3 + k][0] * cell.gradients[k];
+    Map2x2{jacobians[2]} = J_ab + d_offset * dh_dab.transpose();
+  }
+  for (int k = 0; k < 4; ++k) {
+    if (jacobians[3 + k] != nullptr) Eigen::Map<Eigen::Vector2d>{jacobians[3 + k]} = d_offset * cell.weights[k];
+  }
+  return true;
+}
+
+bool ReliefPriorCost::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
+  residuals[0] = weight_ * parameters[0][0];
+  if (jacobians != nullptr && jacobians[0] != nullptr) jacobians[0][0] = weight_;
+  return true;
+}
+
+}  // namespace calibproj::ba

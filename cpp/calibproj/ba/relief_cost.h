@@ -1,0 +1,79 @@
+#pragma once
+// A floor that is not quite flat. Real floors rise and fall by millimetres over a
+// metre or two; a camera zoomed onto a patch of it cannot tell that patch's tilt from
+// its own, so a model that holds every centre on one plane hands the camera the
+// patch's slope as a rotation error. The relief lets the main plane's points leave the
+// plane along its normal by a smooth height h(a, b), bilinear between the nodes of a
+// grid over the plane coordinates, with a Gaussian prior on every node's height: the
+// cameras that see a centre from several directions measure h there, and where none
+// does the prior keeps it near 0 and the covariance knows the tilt is uncertain.
+//
+// A point of the main plane [n, d] with relief is X = (d + h) n + a u1(n) + b u2(n):
+// the plane's point seen through a plane moved by h. ReliefReprojectionCost wraps a
+// COPLANAR reprojection cost (pose 6, plane 4, point 2) and adds the four node blocks
+// (1 each) of the point's cell; its Jacobians follow from the wrapped cost's by the
+// chain rule, so an analytic or an automatically differentiated cost serves alike.
+//
+// The projector term keeps reading the point's plane coordinates: a height h moves the
+// projector's view of a centre by h times the tangent of the projector ray's angle,
+// about 0.1 h at the middle of a ceiling projection.
+
+#include <ceres/cost_function.h>
+#include <ceres/sized_cost_function.h>
+
+#include <Eigen/Core>
+#include <array>
+#include <memory>
+#include <vector>
+
+namespace calibproj::ba {
+
+// Nodes on a regular grid over plane coordinates; node (i, j) is at origin +
+// spacing * (i, j), stored at index j * columns + i.
+struct ReliefGrid {
+  Eigen::Vector2d origin = Eigen::Vector2d::Zero();
+  double spacing = 1.0;
+  int columns = 0;
+  int rows = 0;
+
+  // A grid whose cells are `cells` across the larger extent of the central 98 % of
+  // `ab` along either axis, covering them.
+  static ReliefGrid Covering(const std::vector<Eigen::Vector2d>& ab, int cells);
+  int size() const { return columns * rows; }
+  // The cell holding ab (the nearest cell for a point outside the grid): its four
+  // node indices, and the bilinear weights of ab and their derivatives along a and b
+  // (outside the cell, the weights of its nearest edge point).
+  struct Cell {
+    std::array<int, 4> nodes;
+    std::array<double, 4> weights;
+    std::array<Eigen::Vector2d, 4> gradients;
+  };
+  Cell CellOf(const Eigen::Vector2d& ab, int* cell_index = nullptr) const;
+  Cell CellAt(int cell_index, const Eigen::Vector2d& ab) const;
+};
+
+class ReliefReprojectionCost final : public ceres::CostFunction {
+ public:
+  // Takes ownership of `plane_cost` (blocks pose 6, plane 4, point 2); `cell` is the
+  // index of the grid cell whose nodes the point is given (kept while it moves).
+  ReliefReprojectionCost(ceres::CostFunction* plane_cost, const ReliefGrid& grid, int cell);
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
+
+ private:
+  std::unique_ptr<ceres::CostFunction> plane_cost_;
+  const ReliefGrid grid_;
+  const int cell_;
+};
+
+// The prior on one node's height: weight * h, weight = reference noise (px) / the
+// expected root mean square height.
+class ReliefPriorCost final : public ceres::SizedCostFunction<1, 1> {
+ public:
+  explicit ReliefPriorCost(double weight) : weight_(weight) {}
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
+
+ private:
+  const double weight_;
+};
+
+}  // namespace calibproj::ba
