@@ -16,6 +16,7 @@ import pytest
 
 from calibproj.sequence import generate
 from calibproj.ingest_options import IngestOptions
+from calibproj.registration import RegistrationOptions
 from calibproj.simulate import simulate_tracks
 from calibproj.simulate.render import simulate_videos
 
@@ -314,6 +315,25 @@ def test_native_detect_bad_detector_options_and_exposures(room: Path, tmp_path: 
         python, native = run_python(*args), run_native(*args)
         assert python.returncode == 2 and native.returncode == 2, (case, python.stderr, native.stderr)
         assert error_line(native) == error_line(python), case
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--floor-relief", "5"), ("--min-pnp-points", "2"),
+                                             ("--error-correlation", "-0.1"), ("--ransac-confidence", "1.5")])
+def test_both_calibrate_commands_refuse_a_registration_value_alike(tmp_path: Path, flag: str, value: str) -> None:
+    """Checked by the core's one check before any input is read: the same line from both."""
+    native = run_native("calibrate", "--tracks", "none.json", "--intrinsics", "none", "--out", str(tmp_path / "a"),
+                        flag, value)
+    python = run_python("calibrate", "--tracks", "none.json", "--intrinsics", "none", "--out", str(tmp_path / "b"),
+                        flag, value)
+    assert native.returncode == python.returncode == 2
+    assert error_line(native) == error_line(python)
+    assert flag.lstrip("-").replace("-", "_") in error_line(native)
+
+
+def test_native_calibrate_takes_every_registration_option() -> None:
+    help_text = run_native("calibrate", "--help").stdout
+    for field in dataclasses.fields(RegistrationOptions):
+        assert "--" + field.name.replace("_", "-") in help_text, field.name
 
 
 def test_native_detect_takes_every_ingest_option() -> None:

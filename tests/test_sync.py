@@ -164,10 +164,6 @@ def test_a_truncated_recording_is_an_error():
         synchronise(signal[:cut], sequence, 30.0, source="cam1")
 
 
-def test_options_match_the_cpp_defaults():
-    assert _core.ingest.option_defaults() == IngestOptions().to_kwargs()
-
-
 # ------------------------------------------------------------------ rendered videos
 
 def sync_scene():

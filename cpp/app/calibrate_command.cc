@@ -1,9 +1,11 @@
 #include "calibrate_command.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <iostream>
 #include <map>
 #include <optional>
+#include <type_traits>
 
 #include "calibproj/formats/earlier_observations.h"
 #include "calibproj/formats/files.h"
@@ -14,6 +16,7 @@
 #include "calibproj/formats/scale.h"
 #include "calibproj/formats/sequence_file.h"
 #include "calibproj/registration/incremental.h"
+#include "calibproj/registration/option_table.h"
 #include "calibproj/registration/result.h"
 #include "calibproj/formats/tracks_file.h"
 
@@ -49,39 +52,29 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
                   "densified sequence.json; same intrinsics as the earlier results");
   cmd->add_option("--export", args->exports,
                   "also write the calibration as yaml, colmap and/or anipose (comma-separated)");
-  registration::Options& o = args->options;
-  const auto option = [cmd](const std::string& name, auto& value, const std::string& help) {
-    cmd->add_option(name, value, help)->capture_default_str();
-  };
-  cmd->add_option("--model", args->model, "coplanar (points on one refined plane) or free (3D points)")
-      ->check(CLI::IsMember({"free", "coplanar"}))
-      ->capture_default_str();
-  option("--homography-threshold-px", o.homography_threshold_px, "initial pair RANSAC threshold, each camera's px");
-  option("--pnp-threshold-px", o.pnp_threshold_px, "PnP RANSAC threshold, in the new camera's px");
-  option("--ransac-max-iterations", o.ransac_max_iterations, "upper bound of RANSAC iterations");
-  option("--ransac-confidence", o.ransac_confidence, "RANSAC stops once a better model is this unlikely");
-  option("--seed", o.seed, "RANSAC random seed");
-  option("--min-pair-points", o.min_pair_points, "common points for the initial pair and the third camera");
-  option("--min-pnp-points", o.min_pnp_points, "correspondences needed to register a camera");
-  option("--min-triangulation-angle-deg", o.min_triangulation_angle_deg, "FREE: parallax to triangulate a point");
-  option("--min-pair-parallax-deg", o.min_pair_parallax_deg, "median parallax of the initial pair's points");
-  option("--outlier-threshold-px", o.outlier_threshold_px, "smallest reprojection error at which an observation goes");
-  option("--outlier-sigma-factor", o.outlier_sigma_factor, "threshold = max(outlier-threshold-px, factor * sigma)");
-  option("--max-refine-rounds", o.max_refine_rounds, "bundle adjustment and outlier rounds at the end");
-  option("--view-score-levels", o.view_score_levels, "levels of the view score's visibility pyramid");
-  cmd->add_option("--loss", args->loss, "robust loss: none, huber, cauchy")
-      ->check(CLI::IsMember({"none", "huber", "cauchy"}))
-      ->capture_default_str();
-  option("--loss-scale-px", o.loss_scale_px, "scale of the robust loss in pixels");
-  option("--num-threads", o.num_threads, "threads of the bundle adjustment");
-  option("--intermediate-ba-iterations", o.intermediate_ba_iterations, "BA iterations after each camera");
-  option("--final-ba-iterations", o.final_ba_iterations, "iterations of the final bundle adjustments");
-  option("--weak-rotation-sigma-deg", o.weak_rotation_sigma_deg,
-         "cameras whose rotation is known worse than this (1 sigma) are reported as weak");
-  option("--error-correlation", o.error_correlation,
-         "correlation of one camera's centre errors: the uncertainty counts N centres as N / (1 + (N - 1) * this)");
-  option("--floor-relief", o.floor_relief,
-         "expected rms height of the floor's unevenness, a share of the extent of its centres (0: flat)");
+  // One flag per registration knob, from the table the Python options are made from,
+  // so that both commands take the same command lines with the same defaults.
+  registration::VisitRegistrationOptions(args->options, [cmd](const std::string& name, auto& field,
+                                                              const std::string& help) {
+    using T = std::decay_t<decltype(field)>;
+    std::string flag = name;
+    std::replace(flag.begin(), flag.end(), '_', '-');
+    const std::string group = "registration options";
+    if constexpr (std::is_same_v<T, bool>) {
+      cmd->add_flag("--" + flag + ",!--no-" + flag, field, help)->capture_default_str()->group(group);
+    } else if constexpr (std::is_enum_v<T>) {
+      std::vector<std::string> names;
+      for (const auto& [choice, unused] : registration::Choices<T>::All()) names.push_back(choice);
+      cmd->add_option_function<std::string>(
+             "--" + flag, [&field](const std::string& text) { registration::ChoiceFromName(text, &field); }, help)
+          ->check(CLI::IsMember(names))
+          ->type_name("CHOICE")
+          ->default_str(registration::ChoiceName(field))
+          ->group(group);
+    } else {
+      cmd->add_option("--" + flag, field, help)->capture_default_str()->group(group);
+    }
+  });
   *command = cmd;
   return args;
 }
@@ -144,12 +137,8 @@ registration::RegistrationResult Register(const Tracks& tracks, const std::map<s
     cameras.push_back(camera);
   }
   if (cameras.empty()) return {};  // every camera failed before registration
-  registration::Options options = arguments.options;
-  options.model = arguments.model == "free" ? ba::Model::kFree : ba::Model::kCoplanar;
-  options.loss = arguments.loss == "huber" ? ba::Loss::kHuber : arguments.loss == "cauchy" ? ba::Loss::kCauchy
-                                                                                           : ba::Loss::kNone;
   registration::Reconstruction reconstruction(cameras, static_cast<int>(tracks.point_ids.size()), tracks.camera_index,
-                                              tracks.point_index, tracks.xy, options);
+                                              tracks.point_index, tracks.xy, arguments.options);
   if (markers) reconstruction.SetProjector(markers->PixelsOf(tracks.point_ids), markers->projector_width, markers->projector_height);
   registration::Run(
       reconstruction, [](const std::string& message) { std::cerr << message << "\n"; }, tracks.cameras);
@@ -176,6 +165,11 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   if (!arguments.scale.empty()) measurement = formats::ParseScale(arguments.scale);
   if (measurement && measurement->kind == "marker-size" && arguments.sequence.empty()) {
     throw InputError("--scale " + arguments.scale + ": marker-size needs --sequence (the projection's sequence.json)");
+  }
+  try {
+    arguments.options.Check();
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
   }
   // Checked and locked before the inputs are read, as the Python command does.
   OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
@@ -208,7 +202,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
 
   formats::Calibration calibration =
       formats::FromRegistration(Register(tracks, intrinsics, arguments, markers), tracks.cameras, tracks.point_ids, left_out,
-                                arguments.model);
+                                registration::ChoiceName(arguments.options.model));
   std::string scale_error;
   if (measurement && !calibration.poses.empty()) {
     try {

@@ -20,8 +20,6 @@ struct CalibrateArguments {
   std::string exports;   // comma-separated export formats (formats/export.h)
   std::string merge;     // earlier results folder or tracks.json whose observations are added
   bool force = false;
-  std::string model = "coplanar";
-  std::string loss = "none";
   registration::Options options;
 };
 

@@ -8,6 +8,7 @@
 #include <pybind11/stl.h>
 
 #include <initializer_list>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
@@ -90,12 +91,20 @@ struct Expected<std::vector<Item>> {
   }
 };
 
-// value cast to T; TypeError naming `what` when it cannot be.
+// value cast to T; TypeError naming `what` when it cannot be, ValueError for an
+// integer that T cannot hold (a negative seed, a count beyond 2^31).
 template <typename T>
 T CastTo(const pybind11::handle& value, const std::string& what) {
   try {
     return value.cast<T>();
   } catch (const pybind11::cast_error&) {
+    if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
+      if (pybind11::isinstance<pybind11::int_>(value) && !pybind11::isinstance<pybind11::bool_>(value)) {
+        throw std::invalid_argument(what + ": " + std::string(pybind11::str(value)) + " is out of range (" +
+                                    std::to_string(std::numeric_limits<T>::min()) + " to " +
+                                    std::to_string(std::numeric_limits<T>::max()) + ")");
+      }
+    }
     throw pybind11::type_error(what + ": expected " + Expected<T>::Name() + ", got " + TypeName(value));
   }
 }

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "calibproj/ba/bundle_adjuster.h"
+#include "calibproj/registration/option_table.h"
 
 namespace calibproj::bindings {
 
@@ -19,9 +20,19 @@ Enum ParseChoice(const std::string& what, const std::string& value, const std::m
   throw std::invalid_argument(what + ": unknown value '" + value + "' (choose from " + names + ")");
 }
 
-inline ba::Model ParseModel(const std::string& value) {
-  return ParseChoice<ba::Model>("model", value, {{"free", ba::Model::kFree}, {"coplanar", ba::Model::kCoplanar}});
+// An enumerated knob of registration::Choices<> by name; std::invalid_argument naming
+// `what` and the choices otherwise.
+template <typename Enum>
+Enum ParseKnob(const std::string& what, const std::string& value) {
+  Enum out{};
+  if (!registration::ChoiceFromName(value, &out)) {
+    throw std::invalid_argument(what + ": unknown value '" + value + "' (choose from " +
+                                registration::ChoiceList<Enum>() + ")");
+  }
+  return out;
 }
+
+inline ba::Model ParseModel(const std::string& value) { return ParseKnob<ba::Model>("model", value); }
 
 using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
@@ -38,9 +49,6 @@ Matrix RowsOf(const RowMatrix& array, int cols, const std::string& what) {
   return out;
 }
 
-inline ba::Loss ParseLoss(const std::string& value) {
-  return ParseChoice<ba::Loss>("loss", value,
-                               {{"none", ba::Loss::kNone}, {"huber", ba::Loss::kHuber}, {"cauchy", ba::Loss::kCauchy}});
-}
+inline ba::Loss ParseLoss(const std::string& value) { return ParseKnob<ba::Loss>("loss", value); }
 
 }  // namespace calibproj::bindings

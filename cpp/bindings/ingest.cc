@@ -301,6 +301,9 @@ void register_ingest(py::module_& m) {
         "pixels) in a grey image, from straight edge lines fitted in undistorted pixels; None when an "
         "edge cannot be fitted.");
   m.def("option_defaults", &IngestOptionDefaults, "Every ingest option (sync ones included) with its default.");
+  m.def("option_table", &IngestOptionTable,
+        "Every ingest knob as {name, default, help}, in order: the one declaration "
+        "calibproj.ingest_options.IngestOptions and both command lines are made from.");
   m.def(
       "light_levels",
       [](const py::dict& sequence) {

@@ -4,6 +4,7 @@
 
 #include "calibproj/ingest/option_table.h"
 #include "checks.h"
+#include "knob_setter.h"
 
 #include <stdexcept>
 
@@ -20,20 +21,6 @@ void VisitSync(Options& o, Visitor&& visit) {
   visit("fixed_exposure", o.fit.fixed_exposure, "known exposure, camera frames (0: fit it)");
 }
 
-struct Setter {
-  const std::string& key;
-  const py::handle& value;
-  bool found = false;
-
-  template <typename T>
-  void operator()(const char* name, T& field, const char* /*help*/) {
-    if (key == name) {
-      field = CastTo<T>(value, "option '" + key + "'");
-      found = true;
-    }
-  }
-};
-
 struct Lister {
   py::dict out;
   template <typename T>
@@ -45,13 +32,13 @@ struct Lister {
 }  // namespace
 
 bool SetSyncOption(sync::SyncOptions* o, const std::string& key, const py::handle& value) {
-  Setter setter{key, value};
+  KnobSetter setter{key, value, "option '" + key + "'"};
   VisitSync(*o, setter);
   return setter.found;
 }
 
 bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const py::handle& value) {
-  Setter setter{key, value};
+  KnobSetter setter{key, value, "option '" + key + "'"};
   ingest::VisitIngestOptions(*o, setter);
   return setter.found;
 }
@@ -63,6 +50,19 @@ py::dict SyncOptionDefaults() {
   Lister lister;
   VisitSync(o, lister);
   return lister.out;
+}
+
+py::list IngestOptionTable() {
+  ingest::IngestOptions o;
+  py::list table;
+  ingest::VisitIngestOptions(o, [&table](const char* name, const auto& field, const char* help) {
+    py::dict entry;
+    entry["name"] = name;
+    entry["default"] = field;
+    entry["help"] = help;
+    table.append(entry);
+  });
+  return table;
 }
 
 py::dict IngestOptionDefaults() {

@@ -25,6 +25,9 @@ void CheckSyncOptionValues(sync::SyncOptions& o);
 // Every option name with its C++ default, for documentation and consistency tests.
 pybind11::dict SyncOptionDefaults();
 pybind11::dict IngestOptionDefaults();
+// Per ingest knob, in order: {name, default, help}; calibproj.ingest_options.IngestOptions
+// is made from it.
+pybind11::list IngestOptionTable();
 
 // Throws std::invalid_argument naming `key` and listing `known`.
 [[noreturn]] void ThrowUnknownOption(const std::string& what, const std::string& key, const pybind11::dict& known);

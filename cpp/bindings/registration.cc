@@ -7,13 +7,16 @@
 #include <pybind11/stl.h>
 
 #include <string>
+#include <type_traits>
 
 #include "calibproj/registration/incremental.h"
+#include "calibproj/registration/option_table.h"
 #include "calibproj/registration/reconstruction.h"
 #include "calibproj/registration/result.h"
 #include "calibproj/registration/view_score.h"
 #include "checks.h"
 #include "convert.h"
+#include "knob_setter.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -28,41 +31,35 @@ registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
   registration::Options o;
   for (const auto& item : kwargs) {
     const std::string key = py::str(item.first);
-    const py::handle value = item.second;
-    const std::string what = "registration option '" + key + "'";
-    if (key == "model") o.model = ParseModel(CastTo<std::string>(value, what));
-    else if (key == "loss") o.loss = ParseLoss(CastTo<std::string>(value, what));
-    else if (key == "loss_scale_px") o.loss_scale_px = CastTo<double>(value, what);
-    else if (key == "homography_threshold_px") o.homography_threshold_px = CastTo<double>(value, what);
-    else if (key == "pnp_threshold_px") o.pnp_threshold_px = CastTo<double>(value, what);
-    else if (key == "ransac_max_iterations") o.ransac_max_iterations = CastTo<int>(value, what);
-    else if (key == "ransac_confidence") o.ransac_confidence = CastTo<double>(value, what);
-    else if (key == "seed") o.seed = CastTo<std::uint64_t>(value, what);
-    else if (key == "min_pair_points") o.min_pair_points = CastTo<int>(value, what);
-    else if (key == "min_pnp_points") o.min_pnp_points = CastTo<int>(value, what);
-    else if (key == "min_triangulation_angle_deg") o.min_triangulation_angle_deg = CastTo<double>(value, what);
-    else if (key == "min_pair_parallax_deg") o.min_pair_parallax_deg = CastTo<double>(value, what);
-    else if (key == "outlier_threshold_px") o.outlier_threshold_px = CastTo<double>(value, what);
-    else if (key == "outlier_sigma_factor") o.outlier_sigma_factor = CastTo<double>(value, what);
-    else if (key == "max_refine_rounds") o.max_refine_rounds = CastTo<int>(value, what);
-    else if (key == "view_score_levels") o.view_score_levels = CastTo<int>(value, what);
-    else if (key == "num_threads") o.num_threads = CastTo<int>(value, what);
-    else if (key == "intermediate_ba_iterations") o.intermediate_ba_iterations = CastTo<int>(value, what);
-    else if (key == "final_ba_iterations") o.final_ba_iterations = CastTo<int>(value, what);
-    else if (key == "weak_rotation_sigma_deg") o.weak_rotation_sigma_deg = CastTo<double>(value, what);
-    else if (key == "max_planes") o.max_planes = CastTo<int>(value, what);
-    else if (key == "min_plane_points") o.min_plane_points = CastTo<int>(value, what);
-    else if (key == "plane_distance") o.plane_distance = CastTo<double>(value, what);
-    else if (key == "use_projector") o.use_projector = CastTo<bool>(value, what);
-    else if (key == "min_projector_pnp_points") o.min_projector_pnp_points = CastTo<int>(value, what);
-    else if (key == "estimate_noise") o.estimate_noise = CastTo<bool>(value, what);
-    else if (key == "projector_sigma_px") o.projector_sigma_px = CastTo<double>(value, what);
-    else if (key == "error_correlation") o.error_correlation = CastTo<double>(value, what);
-    else if (key == "floor_relief") o.floor_relief = CastTo<double>(value, what);
-    else throw std::invalid_argument("registration: unknown option '" + key + "'");
+    KnobSetter setter{key, item.second, "registration option '" + key + "'"};
+    registration::VisitRegistrationOptions(o, setter);
+    if (!setter.found) throw std::invalid_argument("registration: unknown option '" + key + "'");
   }
   o.Check();
   return o;
+}
+
+// Per knob: name, default (an enumerated one by name), help and, for an enumerated
+// one, its choices; the Python options class and flags are made from it.
+py::list OptionTable() {
+  py::list table;
+  registration::Options defaults;
+  registration::VisitRegistrationOptions(defaults, [&table](const char* name, const auto& field, const char* help) {
+    using T = std::decay_t<decltype(field)>;
+    py::dict entry;
+    entry["name"] = name;
+    entry["help"] = help;
+    if constexpr (std::is_enum_v<T>) {
+      entry["default"] = registration::ChoiceName(field);
+      py::list choices;
+      for (const auto& [choice, unused] : registration::Choices<T>::All()) choices.append(choice);
+      entry["choices"] = choices;
+    } else {
+      entry["default"] = field;
+    }
+    table.append(entry);
+  });
+  return table;
 }
 
 std::vector<registration::Camera> CamerasFromArrays(const py::array_t<double, py::array::c_style | py::array::forcecast>& K,
@@ -298,6 +295,12 @@ of calibproj.registration.RegistrationOptions.)doc")
       },
       py::arg("pixels"), py::arg("width"), py::arg("height"), py::arg("levels") = 3,
       "(score, max score) of the COLMAP visibility pyramid of the pixels (N, 2).");
+  m.def(
+      "check_options", [](const py::kwargs& kwargs) { OptionsFromKwargs(kwargs); },
+      "Raises ValueError naming the first registration option (keyword) that is unknown or out of range.");
+  m.def("option_table", &OptionTable,
+        "Every registration knob as {name, default, help[, choices]}, in order: the one declaration "
+        "calibproj.registration.RegistrationOptions and both command lines are made from.");
 }
 
 }  // namespace calibproj::bindings

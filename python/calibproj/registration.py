@@ -23,8 +23,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from calibproj import _core
-from calibproj.calibration import MODELS, Calibration
+from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics
+from calibproj.option_tables import options_class
 from calibproj.tracks import Tracks
 
 if TYPE_CHECKING:
@@ -32,110 +33,23 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-LOSSES = ("none", "huber", "cauchy")
+
+def _check_options(self) -> None:
+    # The core's own check: both tools refuse the same values.
+    _core.registration.check_options(**asdict(self))
 
 
-@dataclass
-class RegistrationOptions:
-    """Knobs of the registration; the defaults are those of the paper where it gives one.
+def _to_kwargs(self) -> dict[str, Any]:
+    return asdict(self)
 
-    Attributes:
-        model: ``"coplanar"`` (points on one refined plane, as in the paper's results) or
-            ``"free"`` (3D points).
-        homography_threshold_px: RANSAC threshold of the initial pair's homography, in
-            each camera's own pixels (3 px in the paper).
-        pnp_threshold_px: RANSAC threshold of PnP for each new camera, in its pixels.
-        ransac_max_iterations: upper bound of RANSAC iterations.
-        ransac_confidence: RANSAC stops once a better model is this unlikely.
-        seed: RANSAC random seed (results are reproducible for a given seed).
-        min_pair_points: common points needed for the initial pair and the third camera.
-        min_pnp_points: correspondences needed to register a camera.
-        min_triangulation_angle_deg: FREE model: parallax needed to triangulate a point.
-        min_pair_parallax_deg: median parallax the initial pair's points need (two cameras
-            at nearly the same place determine neither the plane nor the points).
-        outlier_threshold_px: smallest reprojection error at which an observation is
-            removed (1 px in the paper).
-        outlier_sigma_factor: the threshold is ``max(outlier_threshold_px, factor * sigma)``
-            with sigma a robust estimate of each camera's noise; 0 keeps the fixed threshold.
-        max_refine_rounds: bundle adjustment and outlier removal rounds at the end.
-        view_score_levels: levels of the visibility pyramid of the view score.
-        loss: robust loss of the bundle adjustment (``none``, ``huber``, ``cauchy``).
-        loss_scale_px: scale of the robust loss in pixels.
-        num_threads: threads of the bundle adjustment.
-        intermediate_ba_iterations: iterations of the bundle adjustment after each camera.
-        final_ba_iterations: iterations of the final bundle adjustments.
-        weak_rotation_sigma_deg: a camera whose rotation is known worse than this (1
-            sigma along the worst axis, from the final bundle adjustment's covariance)
-            is reported as weak: few points, a small or near-affine view.
-        max_planes: coplanar model: points off the floor (a table, a cart left in the
-            projection) are triangulated, and up to this many more planes are found
-            among them (RANSAC) and refined with the rest (0: none).
-        min_plane_points: points a plane needs to be found.
-        plane_distance: a point belongs to a plane within this distance, in units of
-            the first camera's height above the floor.
-        use_projector: coplanar model with the sequence known: tie every centre's
-            floor (or table) position to its projector pixel through each surface's
-            projector map (a homography and the projector lens's radial distortion,
-            refined with the rest), so that centres one camera alone sees count too,
-            and a camera can be registered on centres no other camera placed.
-        min_projector_pnp_points: centres a camera needs to be registered once the
-            projector places them.
-        estimate_noise: weight each camera by the noise its own centres show and the
-            projector by its maps' (variance components), and scale the pose
-            covariance with them; off: one noise for every camera.
-        projector_sigma_px: the projector maps' noise (projector pixels) until it is
-            estimated, or for good with estimate_noise off.
-        error_correlation: the correlation of one camera's centre errors (and of the
-            projector's): a share of each error that its centres have in common (the
-            lens model, blur, a floor's texture) is not averaged away by their number, so
-            the pose covariance counts a camera's N centres as N / (1 + (N - 1) *
-            error_correlation) independent ones. The poses do not depend on it.
-        floor_relief: coplanar: the expected root mean square height of the floor's
-            unevenness, as a share of the extent of the centres on it (0.001: 3 mm
-            over a 3 m projection). The floor's centres may leave its plane by a smooth
-            relief with that prior, which cameras seeing them from several directions
-            measure; a camera zoomed onto a patch of floor is then not handed the
-            patch's slope as its own tilt. 0: an exactly flat floor.
-    """
 
-    model: str = "coplanar"
-    homography_threshold_px: float = 3.0
-    pnp_threshold_px: float = 3.0
-    ransac_max_iterations: int = 2000
-    ransac_confidence: float = 0.9999
-    seed: int = 0
-    min_pair_points: int = 15
-    min_pnp_points: int = 6
-    min_triangulation_angle_deg: float = 1.0
-    min_pair_parallax_deg: float = 2.0
-    outlier_threshold_px: float = 1.0
-    outlier_sigma_factor: float = 3.0
-    max_refine_rounds: int = 10
-    view_score_levels: int = 6
-    loss: str = "none"
-    loss_scale_px: float = 1.0
-    num_threads: int = 1
-    intermediate_ba_iterations: int = 25
-    final_ba_iterations: int = 100
-    weak_rotation_sigma_deg: float = 0.05
-    max_planes: int = 3
-    min_plane_points: int = 30
-    plane_distance: float = 0.004
-    use_projector: bool = True
-    min_projector_pnp_points: int = 4
-    estimate_noise: bool = True
-    projector_sigma_px: float = 0.1
-    error_correlation: float = 0.005
-    floor_relief: float = 0.001
-
-    def __post_init__(self) -> None:
-        if self.model not in MODELS:
-            raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
-        if self.loss not in LOSSES:
-            raise ValueError(f"loss must be one of {LOSSES}, got {self.loss!r}")
-
-    def to_kwargs(self) -> dict[str, Any]:
-        return asdict(self)
+# Every knob of the registration, declared once in the C++ core with its default and
+# help (``_core.registration.option_table``); the command lines of both tools walk the
+# same table. An enumerated knob has its choices in ``metadata["choices"]``.
+RegistrationOptions = options_class(
+    "RegistrationOptions", _core.registration.option_table(),
+    "Knobs of the registration; the defaults are those of the paper where it gives one.", __name__,
+    methods={"__post_init__": _check_options, "to_kwargs": _to_kwargs})
 
 
 @dataclass

@@ -26,14 +26,18 @@ def attribute_docs(cls: type) -> dict[str, str]:
 
 
 def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, title: str) -> None:
-    """One ``--field-name`` flag per field of the dataclass ``cls``."""
+    """One ``--field-name`` flag per field of the dataclass ``cls``; its help is the
+    field's ``metadata["help"]`` or else its entry in the class docstring, and a field
+    with ``metadata["choices"]`` takes only those."""
     group = parser.add_argument_group(title)
     docs = attribute_docs(cls)
     for f in dataclasses.fields(cls):
         default = f.default
         flag = "--" + f.name.replace("_", "-")
-        help_text = f"{docs.get(f.name, '')} (default: {default})".replace("%", "%%")
-        if isinstance(default, bool):
+        help_text = f"{f.metadata.get('help') or docs.get(f.name, '')} (default: {default})".replace("%", "%%")
+        if f.metadata.get("choices"):
+            group.add_argument(flag, choices=f.metadata["choices"], default=default, help=help_text)
+        elif isinstance(default, bool):
             group.add_argument(flag, action=argparse.BooleanOptionalAction, default=default, help=help_text)
         elif isinstance(default, tuple):
             item_type = type(default[0]) if default else str
