@@ -1,16 +1,15 @@
 #include "calibrate_command.h"
 
-#include <algorithm>
 #include <filesystem>
 #include <iostream>
 #include <map>
 #include <optional>
-#include <type_traits>
 
 #include "calibproj/formats/earlier_observations.h"
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/intrinsics_file.h"
 #include "output_folder.h"
+#include "table_flags.h"
 #include "calibproj/formats/calibration.h"
 #include "calibproj/formats/export.h"
 #include "calibproj/formats/scale.h"
@@ -54,27 +53,7 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
                   "also write the calibration as yaml, colmap and/or anipose (comma-separated)");
   // One flag per registration knob, from the table the Python options are made from,
   // so that both commands take the same command lines with the same defaults.
-  registration::VisitRegistrationOptions(args->options, [cmd](const std::string& name, auto& field,
-                                                              const std::string& help) {
-    using T = std::decay_t<decltype(field)>;
-    std::string flag = name;
-    std::replace(flag.begin(), flag.end(), '_', '-');
-    const std::string group = "registration options";
-    if constexpr (std::is_same_v<T, bool>) {
-      cmd->add_flag("--" + flag + ",!--no-" + flag, field, help)->capture_default_str()->group(group);
-    } else if constexpr (std::is_enum_v<T>) {
-      std::vector<std::string> names;
-      for (const auto& [choice, unused] : registration::Choices<T>::All()) names.push_back(choice);
-      cmd->add_option_function<std::string>(
-             "--" + flag, [&field](const std::string& text) { registration::ChoiceFromName(text, &field); }, help)
-          ->check(CLI::IsMember(names))
-          ->type_name("CHOICE")
-          ->default_str(registration::ChoiceName(field))
-          ->group(group);
-    } else {
-      cmd->add_option("--" + flag, field, help)->capture_default_str()->group(group);
-    }
-  });
+  registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));
   *command = cmd;
   return args;
 }

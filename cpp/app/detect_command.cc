@@ -16,6 +16,7 @@
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/intrinsics_file.h"
 #include "output_folder.h"
+#include "table_flags.h"
 #include "calibproj/formats/sequence_file.h"
 #include "calibproj/formats/tracks_file.h"
 
@@ -353,20 +354,9 @@ std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** comm
       ->allow_extra_args(false);
   cmd->add_flag("--no-progress", args->no_progress, "no progress lines");
   cmd->add_flag("--json", args->json, "print the report as JSON instead of a table");
-  const std::string group = "ingest options";
-  // One flag per field of the Python IngestOptions, from the table the binding walks
-  // too, so that both commands take the same command lines; the defaults are those of
-  // the C++ structs.
-  ingest::VisitIngestOptions(args->options, [cmd, &group](const std::string& name, auto& field,
-                                                          const std::string& help) {
-    std::string flag = name;
-    std::replace(flag.begin(), flag.end(), '_', '-');
-    if constexpr (std::is_same_v<std::decay_t<decltype(field)>, bool>) {
-      cmd->add_flag("--" + flag + ",!--no-" + flag, field, help)->capture_default_str()->group(group);
-    } else {
-      cmd->add_option("--" + flag, field, help)->capture_default_str()->group(group);
-    }
-  });
+  // One flag per knob of the ingest's table, from which the Python IngestOptions and
+  // its flags are made too: both commands take the same command lines.
+  ingest::VisitIngestOptions(args->options, TableFlags(cmd, "ingest options"));
   *command = cmd;
   return args;
 }
