@@ -380,9 +380,8 @@ int BuildProblem(const Data& data, const Options& options, const Gauge& gauge, P
                                           data.observed.row(i).transpose(),
                                           rotations != nullptr ? rotations->Entry(camera) : nullptr);
     if (on_plane >= 0 && !params.relief_cell.empty() && params.relief_cell[p] >= 0) {
-      const ReliefGrid::Cell cell = params.relief_grid.CellAt(params.relief_cell[p], Eigen::Vector2d::Zero());
       std::vector<double*> blocks = {pose, params.Plane(on_plane), params.PointBlock(p)};
-      for (int node : cell.nodes) blocks.push_back(params.ReliefNode(node));
+      for (int node : params.relief_grid.NodesOf(params.relief_cell[p])) blocks.push_back(params.ReliefNode(node));
       problem->AddResidualBlock(new ReliefReprojectionCost(cost, params.relief_grid, params.relief_cell[p]),
                                 camera_loss, blocks);
     } else if (on_plane >= 0) {

@@ -39,6 +39,12 @@ ReliefGrid::Cell ReliefGrid::CellOf(const Eigen::Vector2d& ab, int* cell_index) 
   return CellAt(index, ab);
 }
 
+std::array<int, 4> ReliefGrid::NodesOf(int cell_index) const {
+  const int i = cell_index % (columns - 1);
+  const int j = cell_index / (columns - 1);
+  return {j * columns + i, j * columns + i + 1, (j + 1) * columns + i, (j + 1) * columns + i + 1};
+}
+
 ReliefGrid::Cell ReliefGrid::CellAt(int cell_index, const Eigen::Vector2d& ab) const {
   const int i = cell_index % (columns - 1);
   const int j = cell_index / (columns - 1);
@@ -49,7 +55,7 @@ ReliefGrid::Cell ReliefGrid::CellAt(int cell_index, const Eigen::Vector2d& ab) c
   const double s = std::clamp(s_free, 0.0, 1.0);
   const double t = std::clamp(t_free, 0.0, 1.0);
   Cell cell;
-  cell.nodes = {j * columns + i, j * columns + i + 1, (j + 1) * columns + i, (j + 1) * columns + i + 1};
+  cell.nodes = NodesOf(cell_index);
   cell.weights = {(1 - s) * (1 - t), s * (1 - t), (1 - s) * t, s * t};
   const double ks = s == s_free ? 1.0 / spacing : 0.0;
   const double kt = t == t_free ? 1.0 / spacing : 0.0;

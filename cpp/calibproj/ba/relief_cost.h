@@ -50,6 +50,8 @@ struct ReliefGrid {
   };
   Cell CellOf(const Eigen::Vector2d& ab, int* cell_index = nullptr) const;
   Cell CellAt(int cell_index, const Eigen::Vector2d& ab) const;
+  // The four nodes of a cell, in the order of Cell::nodes.
+  std::array<int, 4> NodesOf(int cell_index) const;
 };
 
 class ReliefReprojectionCost final : public ceres::CostFunction {
