@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 
 import numpy as np
 import pytest
@@ -464,3 +465,25 @@ def test_an_uneven_floor_is_not_taken_for_the_zoomed_cameras_tilt() -> None:
         assert error <= 3.0 * calibration.metrics[name].rotation_sigma_deg, name
     others = [name for name in errors if name != "ceiling"]
     assert max(errors[n] for n in others) < max(flat_errors[n] for n in others)
+    assert calibration.floor_rms > 0.001  # the relief was detected and estimated
+
+
+def test_a_flat_floor_keeps_the_flat_model_and_its_sigma(caplog) -> None:
+    """On a floor flat within the noise the relief explains nothing the noise would not
+    (the likelihood-ratio test of the core's Refine): the floor is kept exactly flat, so
+    the zoomed camera's sigma is the flat model's, several times narrower than with a
+    relief it would have to share its tilt with."""
+    sim, markers = demo_with_projector(noise_px=0.05, seed=3)
+
+    def calibrated(floor_relief: float) -> Calibration:
+        options = RegistrationOptions(error_correlation=0.0, floor_relief=floor_relief)
+        return RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
+
+    flat = calibrated(0.0)
+    with caplog.at_level(logging.INFO, logger="calibproj.registration"):
+        tested = calibrated(RegistrationOptions().floor_relief)
+    assert "floor flat within the noise: kept exactly flat" in caplog.text
+    assert tested.floor_rms < 1e-9
+    for name, metrics in tested.metrics.items():
+        assert metrics.rotation_sigma_deg == pytest.approx(flat.metrics[name].rotation_sigma_deg, rel=1e-6), name
+    assert not tested.metrics["ceiling"].weak

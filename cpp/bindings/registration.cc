@@ -125,9 +125,17 @@ py::dict ToDict(const registration::AdjustResult& r) {
   return d;
 }
 
+py::dict ToDict(const registration::ReliefTest& t) {
+  py::dict d;
+  d["tested"] = t.tested; d["detected"] = t.detected; d["nodes"] = t.nodes;
+  d["gain_chi2"] = t.gain_chi2; d["threshold_chi2"] = t.threshold_chi2; d["message"] = t.Describe();
+  return d;
+}
+
 py::dict ToDict(const registration::RefineResult& r) {
   py::dict d;
   d["rounds"] = r.rounds; d["changed"] = r.changed; d["removed"] = r.removed; d["planes_found"] = r.planes_found; d["last"] = ToDict(r.last); d["thresholds"] = r.thresholds;
+  d["relief"] = ToDict(r.relief);
   return d;
 }
 

@@ -68,6 +68,8 @@ def image_size(intrinsics: Intrinsics) -> tuple[float, float]:
     return 2.0 * float(intrinsics.K[0, 2]) + 1.0, 2.0 * float(intrinsics.K[1, 2]) + 1.0
 
 
+
+
 class RegistrationDriver:
     """Registers the cameras of ``tracks`` step by step (see the module docstring).
 
@@ -148,6 +150,8 @@ class RegistrationDriver:
             yield Step("register", self.name(camera), {**next_camera, **info, "adjust": adjusted})
         rec.fail_unregistered()
         refined = rec.refine()
+        if refined["relief"]["tested"]:
+            logger.info("%s", refined["relief"]["message"])
         logger.info("refined: %d rounds, %d observations left out as outliers, cost %.6g",
                     refined["rounds"], refined["removed"], refined["last"]["final_cost"])
         self._warn_weak_cameras()

@@ -729,6 +729,7 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
     double sum = 0.0;
     for (int node = 0; node < result.relief_nodes; ++node) sum += *params.ReliefNode(node) * *params.ReliefNode(node);
     result.relief_rms = std::sqrt(sum / result.relief_nodes);
+    result.relief_prior_cost = 0.5 * data.relief_weight * data.relief_weight * sum;
   }
   result.poses = params.poses;
   result.plane = params.plane;

@@ -145,9 +145,12 @@ struct Result {
   Eigen::Vector2d projector_lens = Eigen::Vector2d::Zero();
   PixelMatrix projector_residuals;
   int projector_terms = 0;
-  // With a relief: root mean square of its node heights (world units), and how many.
+  // With a relief: root mean square of its node heights (world units), how many, and
+  // the share of final_cost its prior holds (final_cost - relief_prior_cost is the
+  // cost of the observations alone).
   double relief_rms = 0.0;
   int relief_nodes = 0;
+  double relief_prior_cost = 0.0;
   std::string report;         // Ceres FullReport when requested, else BriefReport
 };
 

@@ -51,6 +51,7 @@ RunSummary Run(Reconstruction& reconstruction, const std::function<void(const st
   }
   reconstruction.FailUnregistered();
   summary.refined = reconstruction.Refine();
+  if (summary.refined.relief.tested) Log(log, summary.refined.relief.Describe());
   return summary;
 }
 

@@ -6,6 +6,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <random>
 #include <map>
@@ -64,6 +65,9 @@ constexpr double kNoiseStepTolerance = 1e-3;
 // Chi-square difference (in units of the camera's noise variance) below which the
 // mirror pose of a planar view is not ruled out: 5 sigma.
 constexpr double kAmbiguityEvidence = 25.0;
+// Standard normal quantile of the relief test (ReliefTest): 99.9 %, so that a flat
+// floor is taken for an uneven one in one calibration of a thousand.
+constexpr double kReliefTestZ = 3.09;
 
 // Robust standard deviation of 2D residuals from the median of their norms
 // (for isotropic Gaussian noise, median |r| = sigma * sqrt(2 ln 2)).
@@ -853,7 +857,7 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
     data.camera_weights.resize(static_cast<int>(cameras.size()));
     for (size_t k = 0; k < cameras.size(); ++k) data.camera_weights(k) = reference_sigma / sigma[cameras[k]];
   }
-  if (coplanar && options_.floor_relief > 0.0) {
+  if (coplanar && relief_on_ && options_.floor_relief > 0.0) {
     const double extent = MainPlaneExtent(points);
     if (extent > 0.0) data.relief_weight = reference_sigma / (options_.floor_relief * extent);
   }
@@ -901,6 +905,9 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   }
   result.initial_cost = solved.initial_cost;
   result.final_cost = solved.final_cost;
+  result.observation_cost = solved.final_cost - solved.relief_prior_cost;
+  result.reference_sigma_px = reference_sigma > 0.0 ? reference_sigma : 1.0;
+  result.relief_nodes = solved.relief_nodes;
   result.iterations = solved.iterations;
   result.termination = solved.termination;
   result.cameras = static_cast<int>(cameras.size());
@@ -1056,10 +1063,41 @@ int Reconstruction::FindPlanes() {
   return found;
 }
 
+std::string ReliefTest::Describe() const {
+  if (!tested) return "";
+  char figures[160];
+  std::snprintf(figures, sizeof figures, " (the relief takes %.1f off the chi-square, %.1f would be noise over its %d nodes)",
+                gain_chi2, threshold_chi2, nodes);
+  return std::string(detected ? "floor uneven: its relief is estimated" : "floor flat within the noise: kept exactly flat") +
+         figures;
+}
+
+ReliefTest Reconstruction::TestRelief() {
+  ReliefTest test;
+  if (options_.model != ba::Model::kCoplanar || options_.floor_relief <= 0.0) return test;
+  relief_on_ = true;
+  const AdjustResult uneven = Adjust(true);
+  if (uneven.relief_nodes == 0) return test;
+  relief_on_ = false;
+  const AdjustResult flat = Adjust(true);
+  test.tested = true;
+  test.nodes = uneven.relief_nodes;
+  // Both solves weigh the observations alike, so twice the cost difference over the
+  // reference noise squared is the likelihood ratio's chi-square.
+  const double unit = uneven.reference_sigma_px * uneven.reference_sigma_px;
+  test.gain_chi2 = std::max(0.0, 2.0 * (flat.observation_cost - uneven.observation_cost) / unit);
+  test.threshold_chi2 = ChiSquareQuantile(test.nodes, kReliefTestZ);
+  test.detected = test.gain_chi2 > test.threshold_chi2;
+  relief_on_ = test.detected;
+  return test;
+}
+
 RefineResult Reconstruction::Refine() {
   RefineResult result;
   pose_covariances_.clear();
   result.planes_found = FindPlanes();
+  relief_test_ = TestRelief();
+  result.relief = relief_test_;
   for (int round = 0; round < options_.max_refine_rounds; ++round) {
     result.last = Adjust(true, round + 1 == options_.max_refine_rounds);
     ++result.rounds;

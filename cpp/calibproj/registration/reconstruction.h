@@ -113,10 +113,32 @@ struct RegisterResult {
 
 struct AdjustResult {
   double initial_cost = 0.0, final_cost = 0.0;
+  // final_cost of the observations alone (a relief's prior left out), and the noise
+  // (px) one unit of weight stands for: 2 * observation_cost / reference_sigma_px^2 is
+  // their chi-square.
+  double observation_cost = 0.0;
+  double reference_sigma_px = 1.0;
+  int relief_nodes = 0;
   int iterations = 0;
   std::string termination;
   int cameras = 0, points = 0, observations = 0;
   double solve_time_s = 0.0;
+};
+
+// COPLANAR with a relief prior (Options::floor_relief): whether the main plane's relief
+// explains the observations better than their noise would, by the likelihood ratio of
+// the relief against an exactly flat plane. A relief that is not detected is left out:
+// on a flat floor it would only widen the zoomed camera's sigma, since that camera
+// cannot tell the slope of the patch it sees from its own tilt.
+struct ReliefTest {
+  bool tested = false;
+  bool detected = false;
+  int nodes = 0;
+  double gain_chi2 = 0.0;       // chi-square of the observations the relief takes off
+  double threshold_chi2 = 0.0;  // 99.9 % quantile of chi-square with `nodes` degrees of freedom
+
+  // One line for the log: the verdict and its figures ("" when not tested).
+  std::string Describe() const;
 };
 
 struct RefineResult {
@@ -124,6 +146,7 @@ struct RefineResult {
   int changed = 0;  // observations whose inlier status changed, over all rounds
   int removed = 0;  // inactive observations at the end
   int planes_found = 0;  // COPLANAR: planes found besides the main one (FindPlanes)
+  ReliefTest relief;
   AdjustResult last;
   std::vector<double> thresholds;  // per camera, pixels
 };
@@ -195,6 +218,7 @@ class Reconstruction {
   // Per camera after Refine(): the angle (deg) to the mirror pose its view of the floor
   // does not rule out (0 when it does); its rotation is known no better.
   const std::vector<double>& ambiguity_deg() const { return ambiguity_deg_; }
+  const ReliefTest& relief_test() const { return relief_test_; }
   // Residuals of the active observations of registered cameras and reconstructed
   // points; NaN elsewhere.
   PixelMatrix Residuals() const;
@@ -232,6 +256,8 @@ class Reconstruction {
   // Per camera noise used as weights: the estimate, else the robust sigma of its residuals.
   std::vector<double> WeightingSigmas() const;
   void EstimateNoise();
+  // Decides relief_on_ (ReliefTest); the state is left at the flat solution.
+  ReliefTest TestRelief();
   // One step of the noise estimate applied (with the prior towards the pooled noise);
   // false when no camera's residuals tell the noise.
   bool UpdateNoise(const NoiseEstimate& estimate);
@@ -270,6 +296,8 @@ class Reconstruction {
   bool projector_sigma_estimated_ = false;
   std::vector<double> camera_sigma_px_;  // NaN until estimated
   std::vector<double> ambiguity_deg_;
+  bool relief_on_ = true;  // until TestRelief finds the floor flat
+  ReliefTest relief_test_;
 };
 
 }  // namespace calibproj::registration

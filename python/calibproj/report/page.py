@@ -306,7 +306,8 @@ def _summary(calibration: Calibration, views: list[CameraView], provenance: dict
     unit = "metres" if calibration.unit == "m" else "arbitrary (first camera at height 1)"
     floor = f"{calibration.floor_rms:.4g}" + (" m" if calibration.unit == "m" else "")
     if calibration.model == "coplanar" and calibration.floor_rms < 1e-9:  # rounding, not a measurement
-        floor = "0 by construction (the coplanar model puts the floor's points on the floor plane)"
+        floor = ("0: kept flat (no relief beyond what the observations' noise explains, or --floor-relief 0): "
+                 "the floor's points lie on the floor plane")
     elif calibration.model == "coplanar":
         floor += " (the floor's relief, estimated: its points leave the plane by it alone)"
     rows = [

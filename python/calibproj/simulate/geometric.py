@@ -126,6 +126,7 @@ def decodable_msms(
     min_depth_m: float = DEFAULT_MIN_DEPTH_M,
     scene_boxes: tuple = (),
     surfaces: tuple[np.ndarray, np.ndarray] | None = None,
+    shown: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per MSM, whether the camera could decode it at one of its scales at least.
 
@@ -140,6 +141,7 @@ def decodable_msms(
         surfaces: the surfaces of the centres ``(P,)`` and corners ``(P, scales, 4)``:
             a marker whose corners do not all lie on its centre's surface is folded
             over an edge and not decoded at that scale.
+        shown: which scales each MSM is shown at ``(P, scales)``; None: all of them.
     """
     seen = project_points(camera, corners.reshape(-1, 3), min_depth_m)
     image = seen.distorted.reshape(*corners.shape[:3], 2)
@@ -154,6 +156,8 @@ def decodable_msms(
     if surfaces is not None:
         centre_surface, corner_surfaces = surfaces
         large_enough &= np.all(corner_surfaces == centre_surface[:, None, None], axis=2)
+    if shown is not None:
+        large_enough &= shown
     return large_enough.any(axis=1) & centre_visible
 
 
@@ -224,7 +228,7 @@ class GeometricSimulation:
     def truth(self) -> dict:
         """Body of ``truth.json``."""
         extra = {
-            "simulation": {"kind": "geometric", **self.settings, "layout": asdict(self.layout)},
+            "simulation": {"kind": "geometric", **self.settings, "layout": _layout_record(self.layout)},
             "outliers": {name: ids.tolist() for name, ids in self.outliers.items()},
         }
         msm_ids = np.arange(len(self.msm_points))
@@ -273,8 +277,9 @@ def simulate_tracks(
         outlier_fraction: share of MSM observations replaced by a uniform draw over the image.
         min_marker_px: shortest marker side, in image pixels, that a camera still decodes.
         layout: MSM layout; default ``MsmLayout`` at the projector's resolution. A
-            ``Sequence`` gives its own centres and the scales it shows, and only the
-            arrays it shows are observed (a densified sequence shows only its new ones).
+            ``Sequence`` gives its own centres and, per marker, the scales its patterns
+            show it at: an array it never shows is not observed (a densified sequence
+            shows only its new ones, each at the scales of the camera it is planned for).
         eval_points: evaluation points drawn uniformly in the working volume.
         eval_points_per_camera: extra evaluation points drawn inside each camera's view.
         eval_height_m: height of the working volume above the floor.
@@ -283,9 +288,7 @@ def simulate_tracks(
     _check_settings(noise_px, outlier_fraction, min_marker_px, eval_points, eval_points_per_camera, eval_height_m)
     if not isinstance(scene, Scene):
         scene = load_scene(scene, seed=seed)
-    shown = None
     if isinstance(layout, Sequence):
-        shown = np.unique([pattern.array for pattern in layout.patterns])
         layout = sequence_layout(layout)
     layout = layout or MsmLayout(projector=scene.projector.resolution)
     noise_rng, outlier_rng, eval_rng, eval_noise_rng = (
@@ -294,8 +297,6 @@ def simulate_tracks(
     msm_points = msm_floor_points(scene, layout)
     tracks, outliers = _msm_tracks(scene, layout, msm_points, noise_rng, outlier_rng, noise_px,
                                    outlier_fraction, min_marker_px, min_depth_m)
-    if shown is not None:
-        tracks = tracks.select(np.isin(tracks.point_ids[tracks.point_index] // layout.markers_per_array, shown))
     eval_xyz, eval_tracks = evaluation_tracks(scene, eval_rng, eval_noise_rng, noise_px, eval_points,
                                               eval_points_per_camera, eval_height_m, min_depth_m)
     settings = {"noise_px": noise_px, "seed": seed, "outlier_fraction": outlier_fraction,
@@ -313,19 +314,42 @@ class _PlacedLayout(MsmLayout):
     """A layout whose centres are given (as a sequence file holds them)."""
 
     placed: tuple = ()  # (arrays, markers, 2) as nested tuples: written into truth.json as they are
+    shown: tuple = ()  # (arrays, markers, scales) booleans: which scales each marker is shown at
 
     def centres(self) -> np.ndarray:
         return np.asarray(self.placed, dtype=np.float64)
+
+
+def _layout_record(layout: MsmLayout) -> dict:
+    """The layout as truth.json keeps it: its centres, without the per-marker scale mask."""
+    record = asdict(layout)
+    record.pop("shown", None)
+    return record
+
+
+def shown_scales(layout: MsmLayout) -> np.ndarray:
+    """Per MSM and scale, whether a pattern shows it ``(P, scales)``: a sequence shows
+    each array at its own scales (a densified one at the scales of the camera it is
+    planned for) and leaves out markers that would overlap or leave the image."""
+    if isinstance(layout, _PlacedLayout) and layout.shown:
+        return np.asarray(layout.shown, dtype=bool).reshape(-1, len(layout.scales))
+    return np.ones((layout.arrays * layout.markers_per_array, len(layout.scales)), dtype=bool)
 
 
 def sequence_layout(sequence: Sequence) -> MsmLayout:
     """The layout of ``sequence`` as the simulation needs it: its centres, wherever they
     are (a densified sequence places its own), and only the scales its patterns show."""
     layout = sequence.layout
-    shown = sorted({pattern.scale for pattern in sequence.patterns})
-    return _PlacedLayout(projector=layout.projector, grid=layout.grid, arrays=layout.arrays, scales=tuple(shown),
+    scales = sorted({pattern.scale for pattern in sequence.patterns})
+    shown = np.zeros((layout.arrays, layout.markers_per_array, len(scales)), dtype=bool)
+    for pattern in sequence.patterns:
+        column = scales.index(pattern.scale)
+        shown[pattern.array, :, column] = True
+        shown[pattern.array, list(pattern.omitted), column] = False
+    return _PlacedLayout(projector=layout.projector, grid=layout.grid, arrays=layout.arrays, scales=tuple(scales),
                          marker_px=layout.marker_px, margin_px=layout.margin, snap_to_pixels=layout.snap_to_pixels,
-                         placed=tuple(tuple(tuple(centre) for centre in array) for array in sequence.centres.tolist()))
+                         placed=tuple(tuple(tuple(centre) for centre in array) for array in sequence.centres.tolist()),
+                         shown=tuple(shown.ravel().tolist()))
 
 
 def _check_settings(noise_px: float, outlier_fraction: float, min_marker_px: float, eval_points: int,
@@ -347,9 +371,10 @@ def _msm_tracks(scene: Scene, layout: MsmLayout, msm_points: np.ndarray, noise_r
                 min_marker_px: float, min_depth_m: float) -> tuple[Tracks, dict[str, np.ndarray]]:
     corners, corner_surfaces = _marker_corners(scene, layout)
     surfaces = (msm_surfaces(scene, layout), corner_surfaces)
+    shown = shown_scales(layout)
     cameras, ids, xy = [], [], []
     for index, camera in enumerate(scene.cameras):
-        seen = decodable_msms(camera, msm_points, corners, min_marker_px, min_depth_m, scene.boxes, surfaces)
+        seen = decodable_msms(camera, msm_points, corners, min_marker_px, min_depth_m, scene.boxes, surfaces, shown)
         point_ids = np.flatnonzero(seen)
         pixels = project_points(camera, msm_points[point_ids], min_depth_m).undistorted
         cameras.append(np.full(len(point_ids), index))
