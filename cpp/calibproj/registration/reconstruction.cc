@@ -1096,8 +1096,7 @@ RefineResult Reconstruction::Refine() {
   RefineResult result;
   pose_covariances_.clear();
   result.planes_found = FindPlanes();
-  relief_test_ = TestRelief();
-  result.relief = relief_test_;
+  result.relief = TestRelief();
   for (int round = 0; round < options_.max_refine_rounds; ++round) {
     result.last = Adjust(true, round + 1 == options_.max_refine_rounds);
     ++result.rounds;

@@ -218,7 +218,6 @@ class Reconstruction {
   // Per camera after Refine(): the angle (deg) to the mirror pose its view of the floor
   // does not rule out (0 when it does); its rotation is known no better.
   const std::vector<double>& ambiguity_deg() const { return ambiguity_deg_; }
-  const ReliefTest& relief_test() const { return relief_test_; }
   // Residuals of the active observations of registered cameras and reconstructed
   // points; NaN elsewhere.
   PixelMatrix Residuals() const;
@@ -297,7 +296,6 @@ class Reconstruction {
   std::vector<double> camera_sigma_px_;  // NaN until estimated
   std::vector<double> ambiguity_deg_;
   bool relief_on_ = true;  // until TestRelief finds the floor flat
-  ReliefTest relief_test_;
 };
 
 }  // namespace calibproj::registration
