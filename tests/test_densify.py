@@ -132,6 +132,54 @@ def test_the_merged_calibration_knows_the_zoomed_camera_within_its_sigma(room, m
         assert_same_document(native_doc, python_doc, name)
 
 
+def test_a_texture_that_moves_large_markers_more_leaves_the_small_ones_their_weight(room) -> None:
+    """A floor texture moves a marker's apparent centre on the floor, the same way for
+    every camera, by a share of the marker's size. Simulated: every MSM centre moved by
+    0.2 % of the side of its largest marker (rms per axis, projector px), 0.29 px for the
+    first projection's markers, 0.07 px for the extra projection's small ones. The
+    registration estimates the projector's noise per marker size, and the zoomed camera,
+    whose points the small markers tie to the projector, keeps their weight."""
+    import dataclasses
+
+    from calibproj.comparison import rotation_errors_to_reference
+    from calibproj.registration import RegistrationDriver, RegistrationOptions
+    from calibproj.scale import ProjectedMarkers
+
+    scene, sequence, dense, intrinsics = room["scene"], room["sequence"], room["dense"], room["first"].intrinsics
+    rng = np.random.default_rng(0)
+
+    def displaced(seq):
+        sides = np.nan_to_num(ProjectedMarkers.from_sequence(seq).largest_side_px)
+        return dataclasses.replace(seq, centres=seq.centres + rng.normal(size=seq.centres.shape) * 0.002 * sides[..., None])
+
+    first = simulate_tracks(scene, None, noise_px=0.05, seed=31, layout=displaced(sequence)).tracks
+    extra = simulate_tracks(scene, None, noise_px=0.05, seed=131, layout=displaced(dense)).tracks
+    tracks = Tracks.from_observations(
+        first.camera_names, np.concatenate([first.camera_index, [first.camera_names.index(extra.camera_names[c])
+                                                                  for c in extra.camera_index]]),
+        np.concatenate([first.point_ids[first.point_index], extra.point_ids[extra.point_index]]),
+        np.concatenate([first.xy, extra.xy]), first.markers_per_array)
+    by_size = ProjectedMarkers.from_sequence(dense)
+    # The densified sequence draws only the new arrays: the first ones' sides are not known.
+    sides = np.unique(by_size.largest_side_px[~np.isnan(by_size.largest_side_px)])
+    assert len(sides) == 1 and np.all(np.isnan(by_size.largest_side_px[:sequence.layout.arrays]))
+    options = RegistrationOptions(error_correlation=0.0)  # independent simulated errors
+    sigma = {}
+    for name, markers in (("one noise", dataclasses.replace(by_size, largest_side_px=None)), ("by size", by_size)):
+        driver = RegistrationDriver(tracks, intrinsics, options, projector=markers)
+        calibration = driver.run()
+        sigma[name] = calibration.metrics["ceiling"].rotation_sigma_deg
+        reference = next(n for n in calibration.poses if calibration.metrics[n].rotation_sigma_deg == 0.0)
+        error = rotation_errors_to_reference(calibration.poses, reference, {c.name: c.R for c in scene.cameras})
+        assert error["ceiling"] <= 3.0 * sigma[name], name
+    groups = dict(zip(driver.reconstruction.projector_group_sides_px, driver.reconstruction.projector_sigma_px))
+    assert len(groups) == 2
+    first_sigma = next(value for side, value in groups.items() if np.isnan(side))
+    assert first_sigma == pytest.approx(0.002 * sequence.layout.marker_side(6.0), rel=0.2)
+    assert groups[sides[0]] == pytest.approx(0.002 * sides[0], rel=0.2)
+    assert sigma["by size"] < 0.85 * sigma["one noise"]
+
+
 def assert_same_document(a, b, where: str) -> None:
     """Equal JSON documents, floats to 1e-9 (relative) where their key names a sigma."""
     assert type(a) is type(b), where

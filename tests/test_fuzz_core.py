@@ -454,7 +454,8 @@ class Baselines:
             "_core.registration.Reconstruction.filter_outliers": Spec([("thresholds", [1.0, 1.0, 1.0, 1.0])]),
             "_core.registration.Reconstruction.view_score": Spec([("camera", 1)]),
             "_core.registration.Reconstruction.set_projector": Spec(
-                [("pixels", np.tile([960.0, 540.0], (len(s["points"]), 1))), ("width", 1920.0), ("height", 1080.0)]),
+                [("pixels", np.tile([960.0, 540.0], (len(s["points"]), 1))), ("width", 1920.0), ("height", 1080.0),
+                 ("marker_sides", [24.0, float("nan")] * (len(s["points"]) // 2) + [72.0] * (len(s["points"]) % 2))]),
             "_core.registration.Reconstruction.projector_prediction": Spec([("point", 0)]),
             "_core.registration.Reconstruction.run": Spec([("log", lambda message: None)]),
             "_core.registration.view_score": Spec([("pixels", s["observed"][:30]), ("width", 640.0),
@@ -552,6 +553,8 @@ class Baselines:
             "_core.formats.parse_export_formats": Spec([("text", "yaml,colmap")]),
             "_core.formats.projector_pixels": Spec([("markers", markers),
                                                    ("point_ids", np.array([0, 3, 10**9], dtype=np.int64))]),
+            "_core.formats.projector_marker_sides": Spec([("markers", markers),
+                                                         ("point_ids", np.array([0, 3, 10**9], dtype=np.int64))]),
             "_core.formats.colmap_camera": Spec([("intrinsics", intrinsics["a"])]),
             "_core.formats.quaternion_wxyz": Spec([("R", np.eye(3))]),
             "_core.formats.export": Spec([("calibration", calibration), ("format", "colmap"), ("directory", folder),

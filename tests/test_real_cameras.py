@@ -330,6 +330,14 @@ def test_a_static_pattern_read_as_one_marker_in_every_array_is_dropped():
     image = np.array([226.0, 525.0]) + rng.normal(0.0, 1.0, (15, 2))
     keep, checked, problem = _core.detect.check_floor_consistency(projector, image, positions=[17] * 15)
     assert checked and not keep.any() and "1 marker position(s), too few to check" in problem
+    # Too few to check (a far camera that sees 4 markers of a short extra projection,
+    # as in a rendered room with a strongly textured floor): the repeats are still
+    # dropped, and 4 markers at 4 places are kept unchecked.
+    keep, checked, problem = _core.detect.check_floor_consistency(projector[:4], image[:4], positions=[17] * 4)
+    assert not checked and not keep.any() and not problem
+    spread = image[:4] + np.array([[0.0, 0.0], [40.0, 0.0], [0.0, 40.0], [40.0, 40.0]])
+    keep, checked, _ = _core.detect.check_floor_consistency(projector[:4], spread, positions=[17] * 4)
+    assert not checked and keep.all()
     H = np.array([[0.6, 0.05, 120.0], [-0.02, 0.55, 80.0], [2e-5, 1e-5, 1.0]])
     grid = np.array([[x, y] for x in (300.0, 900.0, 1500.0) for y in (200.0, 800.0)])
     projector = np.repeat(grid, 5, axis=0) + rng.uniform(-30.0, 30.0, (30, 2))

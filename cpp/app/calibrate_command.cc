@@ -118,7 +118,10 @@ registration::RegistrationResult Register(const Tracks& tracks, const std::map<s
   if (cameras.empty()) return {};  // every camera failed before registration
   registration::Reconstruction reconstruction(cameras, static_cast<int>(tracks.point_ids.size()), tracks.camera_index,
                                               tracks.point_index, tracks.xy, arguments.options);
-  if (markers) reconstruction.SetProjector(markers->PixelsOf(tracks.point_ids), markers->projector_width, markers->projector_height);
+  if (markers) {
+    reconstruction.SetProjector(markers->PixelsOf(tracks.point_ids), markers->projector_width,
+                                markers->projector_height, markers->LargestSidesOf(tracks.point_ids));
+  }
   registration::Run(
       reconstruction, [](const std::string& message) { std::cerr << message << "\n"; }, tracks.cameras);
   return registration::Summarize(reconstruction);

@@ -148,6 +148,8 @@ std::optional<formats::ProjectedMarkers> MarkersFrom(const py::object& m) {
   const auto projector = m.attr("projector").cast<std::pair<int, int>>();
   markers.projector_width = projector.first;
   markers.projector_height = projector.second;
+  const py::object largest = py::getattr(m, "largest_side_px", py::none());
+  if (!largest.is_none()) markers.largest_side_px = largest.attr("reshape")(-1).cast<std::vector<double>>();
   markers.Check();
   return markers;
 }
@@ -319,6 +321,15 @@ void register_formats(py::module_& m) {
       },
       py::arg("markers"), py::arg("point_ids"),
       "Per point id its projector pixel (N, 2), NaN for an id beyond the sequence's MSMs");
+  m.def(
+      "projector_marker_sides",
+      [](const py::object& markers, const std::vector<std::int64_t>& point_ids) {
+        const auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
+        if (!projected) throw py::type_error("markers: expected a ProjectedMarkers, got None");
+        return projected->LargestSidesOf(point_ids);
+      },
+      py::arg("markers"), py::arg("point_ids"),
+      "Per point id the side of the largest marker drawn at it (projector px), NaN where not known");
   m.def("parse_export_formats", &formats::ParseExportFormats, py::arg("text"));
   m.def(
       "colmap_camera",

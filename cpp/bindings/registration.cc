@@ -274,20 +274,26 @@ of calibproj.registration.RegistrationOptions.)doc")
       .def_property_readonly("gauge_camera", &Reconstruction::gauge_camera)
       .def_property_readonly("registration_order", &Reconstruction::registration_order)
       .def("residuals", &Reconstruction::Residuals, "Residuals (N, 2) of the active observations, NaN elsewhere.")
-      .def("set_projector", [](Reconstruction& r, const RowMatrix& pixels, double width, double height) {
+      .def("set_projector", [](Reconstruction& r, const RowMatrix& pixels, double width, double height,
+                               const std::vector<double>& marker_sides) {
              if (pixels.cols() != 2 && pixels.size() > 0) throw std::invalid_argument("projector pixels: expected shape (N, 2)");
              ba::PixelMatrix p(pixels.rows(), 2);
              if (pixels.size() > 0) p = pixels;
-             r.SetProjector(p, width, height);
-           }, py::arg("pixels"), py::arg("width"), py::arg("height"),
-           "Projector pixel (N, 2) of every point, NaN where unknown, and the projector's image size.")
+             r.SetProjector(p, width, height, marker_sides);
+           }, py::arg("pixels"), py::arg("width"), py::arg("height"), py::arg("marker_sides") = std::vector<double>{},
+           "Projector pixel (N, 2) of every point, NaN where unknown, and the projector's image size; optionally per\n"
+           "point the side of the largest marker drawn at it (projector px, NaN unknown), which groups the\n"
+           "projector's noise.")
       .def("projector_prediction", [](const Reconstruction& r, int point) -> py::object {
              Eigen::Vector3d X;
              if (!r.ProjectorPrediction(point, &X)) return py::none();
              return py::cast(Eigen::VectorXd(X));
            }, py::arg("point"), "Where the projector draws the point on the main plane, or None.")
       .def_property_readonly("projector_lens", [](const Reconstruction& r) { return Eigen::VectorXd(r.projector_lens()); })
-      .def_property_readonly("projector_sigma_px", &Reconstruction::projector_sigma_px)
+      .def_property_readonly("projector_sigma_px", &Reconstruction::projector_sigma_px,
+                             "Per group of points the projector maps' noise (projector px, NaN until estimated).")
+      .def_property_readonly("projector_group_sides_px", &Reconstruction::projector_group_sides_px,
+                             "Per group the side of the largest marker drawn at its points (NaN: not known).")
       .def_property_readonly("camera_sigma_px", &Reconstruction::camera_sigma_px)
       .def("view_score", &Reconstruction::ViewScore, py::arg("camera"))
       .def("summarize", [](const Reconstruction& r) { return ToDict(registration::Summarize(r)); },

@@ -107,8 +107,9 @@ class RegistrationDriver:
             K, sizes, self.tracks.num_points, camera_index, point_index, xy, **self.options.to_kwargs()
         )
         if projector is not None:
-            pixels = _core.formats.projector_pixels(projector, np.asarray(self.tracks.point_ids, dtype=np.int64))
-            self.reconstruction.set_projector(pixels, *projector.projector)
+            ids = np.asarray(self.tracks.point_ids, dtype=np.int64)
+            self.reconstruction.set_projector(_core.formats.projector_pixels(projector, ids), *projector.projector,
+                                              _core.formats.projector_marker_sides(projector, ids))
 
     def name(self, camera: int) -> str:
         return self.tracks.camera_names[camera]

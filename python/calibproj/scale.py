@@ -99,11 +99,15 @@ class ProjectedMarkers:
             the MSM ``(array, marker)`` has point id ``array * markers_per_array + marker``.
         marker_side_px: side of a marker at scale 1 in projector pixels, border included.
         projector: projector resolution ``(width, height)``.
+        largest_side_px: per MSM ``(arrays, markers_per_array)`` the side of the largest
+            marker the sequence draws at its centre (projector pixels), NaN where it draws
+            none; None when not known. The registration groups the projector's noise by it.
     """
 
     centres_px: np.ndarray
     marker_side_px: float
     projector: tuple[int, int]
+    largest_side_px: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         centres = np.asarray(self.centres_px, dtype=float)
@@ -112,11 +116,21 @@ class ProjectedMarkers:
         if not self.marker_side_px > 0:
             raise ValueError(f"marker side must be positive, got {self.marker_side_px} px")
         object.__setattr__(self, "centres_px", centres)
+        if self.largest_side_px is not None:
+            sides = np.asarray(self.largest_side_px, dtype=float)
+            if sides.shape != centres.shape[:2]:
+                raise ValueError(f"largest marker sides must have shape {centres.shape[:2]}, got {sides.shape}")
+            object.__setattr__(self, "largest_side_px", sides)
 
     @classmethod
     def from_sequence(cls, sequence) -> ProjectedMarkers:
         """From a ``calibproj.sequence.Sequence`` (what ``sequence.json`` holds)."""
-        return cls(sequence.centres, sequence.layout.marker_side(1.0), tuple(sequence.projector))
+        largest = np.full(sequence.centres.shape[:2], np.nan)
+        for index, pattern in enumerate(sequence.patterns):
+            row = largest[pattern.array]
+            shown = sequence.markers_shown(index)
+            row[shown] = np.fmax(row[shown], pattern.marker_side_px)
+        return cls(sequence.centres, sequence.layout.marker_side(1.0), tuple(sequence.projector), largest)
 
     @classmethod
     def from_layout(cls, layout) -> ProjectedMarkers:

@@ -271,7 +271,9 @@ int AddProjectorTerms(const Data& data, Parameters& params, ceres::LossFunction*
   for (int p = 0; p < static_cast<int>(params.points.rows()); ++p) {
     const int k = params.point_plane[p];
     if (!HasProjectorMap(params, k) || !HasProjectorPixel(data, p)) continue;
-    problem->AddResidualBlock(new ProjectorSurfaceCost(data.projector.row(p).transpose(), data.projector_weight), loss,
+    const double weight =
+        data.projector_weight * (data.projector_point_weights.size() > 0 ? data.projector_point_weights(p) : 1.0);
+    problem->AddResidualBlock(new ProjectorSurfaceCost(data.projector.row(p).transpose(), weight), loss,
                               params.Map(k), params.lens.data(), params.PointBlock(p));
     ++terms;
   }
@@ -600,6 +602,10 @@ void ValidateData(const Data& data, const Options& options) {
   }
   Require(data.projector_lens.allFinite() && std::isfinite(data.projector_weight) && data.projector_weight >= 0.0,
           "projector: lens and weight must be finite, the weight >= 0");
+  Require(data.projector_point_weights.size() == 0 ||
+              (data.projector_point_weights.size() == num_points && data.projector_point_weights.allFinite() &&
+               (data.projector_point_weights.array() > 0.0).all()),
+          "projector: one finite positive weight factor per point, or none");
   Require(std::isfinite(data.relief_weight) && data.relief_weight >= 0.0, "relief: the weight must be finite and >= 0");
   Require(options.gauge_camera >= 0 && options.gauge_camera < num_cameras,
           "options: gauge camera " + Str(options.gauge_camera) + " out of range [0, " + Str(num_cameras) + ")");

@@ -97,6 +97,9 @@ struct Data {
   PixelMatrix projector;
   Eigen::Vector2d projector_lens = Eigen::Vector2d::Zero();
   double projector_weight = 0.0;  // see ProjectorSurfaceCost; <= 0: no projector term
+  // Per point, the factor its projector term's weight is multiplied by (its group's
+  // noise against the projector's reference); empty: 1 for every point.
+  Eigen::VectorXd projector_point_weights;
   // COPLANAR: the main plane's points may leave it by a smooth relief (relief_cost.h)
   // whose nodes have a prior of weight relief_weight = the reference noise (px) over the
   // expected root mean square height (world units); <= 0: the plane is flat.

@@ -152,6 +152,37 @@ int Places(const std::vector<int>& chosen, const std::vector<cv::Point2d>& image
   return static_cast<int>(std::max(positions.size(), spots.size()));
 }
 
+// Too few detections for a homography: drops those that repeat at one image place
+// (within threshold_px) for kStaticRepeats or more different projector centres. A
+// projection moves from array to array, so three MSMs decoded at one spot are a static
+// pattern of the room (a stain, a printed marker) read again in every array that shows
+// its id. Returns how many were dropped.
+constexpr int kStaticRepeats = 3;
+
+int DropStaticRepeats(const std::vector<cv::Point2d>& projector, const std::vector<cv::Point2d>& image,
+                      double threshold_px, std::vector<bool>* keep) {
+  const int n = static_cast<int>(image.size());
+  std::vector<bool> drop(n, false);
+  for (int i = 0; i < n; ++i) {
+    std::vector<cv::Point2d> centres;
+    for (int j = 0; j < n; ++j) {
+      if (cv::norm(image[j] - image[i]) > threshold_px) continue;
+      bool seen = false;
+      for (const cv::Point2d& c : centres) seen = seen || cv::norm(c - projector[j]) < 0.5;
+      if (!seen) centres.push_back(projector[j]);
+    }
+    drop[i] = static_cast<int>(centres.size()) >= kStaticRepeats;
+  }
+  int dropped = 0;
+  for (int i = 0; i < n; ++i) {
+    if (drop[i]) {
+      (*keep)[i] = false;
+      ++dropped;
+    }
+  }
+  return dropped;
+}
+
 }  // namespace
 
 ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projector,
@@ -169,7 +200,10 @@ ConsistencyResult CheckFloorConsistency(const std::vector<cv::Point2d>& projecto
   const int n = static_cast<int>(projector.size());
   ConsistencyResult result;
   result.keep.assign(n, true);
-  if (n < options.min_points) return result;
+  if (n < options.min_points) {
+    result.rejected = DropStaticRepeats(projector, image, options.threshold_px, &result.keep);
+    return result;
+  }
   result.checked = true;
   cv::setRNGSeed(static_cast<int>(options.seed));
   const double separation_px = 4.0 * options.threshold_px;

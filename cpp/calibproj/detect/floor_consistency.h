@@ -28,7 +28,9 @@ namespace calibproj::detect {
 
 struct ConsistencyOptions {
   double threshold_px = 3.0;  // largest distance from the homography's prediction
-  int min_points = 8;         // detections needed for a check (fewer: kept unchecked)
+  // Detections needed for a check; fewer are kept unchecked, but for those that repeat
+  // at one image place for three different MSMs or more (a static pattern).
+  int min_points = 8;
   double min_share = 0.3;     // share that must agree, else every detection is dropped
   // Distinct places the agreeing detections must cover (image points farther apart than
   // 4 threshold_px, or marker positions: whichever count is larger): a homography fits

@@ -272,8 +272,25 @@ ProjectedMarkers ProjectedMarkers::FromSequence(const ingest::SequenceDescriptio
   markers.marker_side_px = sequence.marker_px;
   markers.projector_width = sequence.projector_width;
   markers.projector_height = sequence.projector_height;
+  markers.largest_side_px.assign(markers.centres.size(), std::numeric_limits<double>::quiet_NaN());
+  for (const ingest::PatternSpec& pattern : sequence.patterns) {
+    for (int marker = 0; marker < sequence.markers_per_array; ++marker) {
+      if (std::count(pattern.omitted.begin(), pattern.omitted.end(), marker) > 0) continue;
+      double& side = markers.largest_side_px[static_cast<size_t>(pattern.array) * sequence.markers_per_array + marker];
+      side = std::fmax(side, pattern.marker_side_px);
+    }
+  }
   markers.Check();
   return markers;
+}
+
+std::vector<double> ProjectedMarkers::LargestSidesOf(const std::vector<std::int64_t>& point_ids) const {
+  std::vector<double> sides(point_ids.size(), std::numeric_limits<double>::quiet_NaN());
+  for (size_t p = 0; p < point_ids.size(); ++p) {
+    const std::int64_t id = point_ids[p];
+    if (id >= 0 && id < static_cast<std::int64_t>(largest_side_px.size())) sides[p] = largest_side_px[id];
+  }
+  return sides;
 }
 
 ba::PixelMatrix ProjectedMarkers::PixelsOf(const std::vector<std::int64_t>& point_ids) const {
@@ -297,6 +314,15 @@ void ProjectedMarkers::Check() const {
   }
   if (!(marker_side_px > 0)) {
     throw std::invalid_argument("marker side must be positive, got " + PythonFloat(marker_side_px) + " px");
+  }
+  if (!largest_side_px.empty() && largest_side_px.size() != centres.size()) {
+    throw std::invalid_argument("largest marker sides: " + std::to_string(largest_side_px.size()) + " for " +
+                                std::to_string(centres.size()) + " MSMs");
+  }
+  for (const double side : largest_side_px) {
+    if (!std::isnan(side) && !(side > 0.0 && std::isfinite(side))) {
+      throw std::invalid_argument("largest marker sides must be positive or NaN, got " + PythonFloat(side));
+    }
   }
 }
 

@@ -40,12 +40,17 @@ struct ProjectedMarkers {
   std::vector<cv::Point2d> centres;  // projector pixels
   double marker_side_px = 0.0;       // side at scale 1, border included
   int projector_width = 0, projector_height = 0;
+  // Per MSM the side of the largest marker the sequence draws at its centre (projector
+  // pixels), NaN where it draws none; empty when not known.
+  std::vector<double> largest_side_px;
 
   static ProjectedMarkers FromSequence(const ingest::SequenceDescription& sequence);
   // std::invalid_argument when the shapes or the side make no sense.
   void Check() const;
   // Per point id its projector pixel; NaN for an id beyond the sequence's MSMs.
   ba::PixelMatrix PixelsOf(const std::vector<std::int64_t>& point_ids) const;
+  // Per point id its largest marker's side; NaN where not known.
+  std::vector<double> LargestSidesOf(const std::vector<std::int64_t>& point_ids) const;
 };
 
 // Neighbourhood fitted around the measured marker, in marker sides (projector pixels).

@@ -69,6 +69,7 @@ NoiseProblem::NoiseProblem(const NoiseInputs& in)
   }
   if (has_projector_) {
     for (const auto& surface : *in.surfaces) projector_maps_ += surface.valid ? 1 : 0;
+    projector_groups_ = static_cast<int>(in.projector_sigma_px.size());
   }
   for (int p = 0; p < num_points; ++p) {
     if (observations[p].empty()) continue;
@@ -89,13 +90,15 @@ NoiseProblem::NoiseProblem(const NoiseInputs& in)
       point.observations.push_back({c, J * D, pixel - in.observed->row(i).transpose()});
     }
     Eigen::Matrix2d J_proj;
+    const int group = in.projector_group ? (*in.projector_group)[p] : 0;
     if (has_projector_ && k >= 0 && k < static_cast<int>(in.surfaces->size()) && (*in.surfaces)[k].valid &&
-        in.projector->row(p).allFinite()) {
+        in.projector->row(p).allFinite() && group >= 0 && group < projector_groups_) {
       const ba::ProjectorSurface& surface = (*in.surfaces)[k];
       Eigen::Vector3d predicted;
       if (ba::ProjectorPoint(surface, in.lens, in.projector->row(p).transpose(), &predicted) &&
           ProjectorJacobian(surface, X, D, &J_proj)) {
         point.has_projector = true;
+        point.projector_group = group;
         point.J_projector = J_proj;
         point.projector_error = J_proj * D.transpose() * (X - predicted);  // first order
       }
@@ -104,13 +107,16 @@ NoiseProblem::NoiseProblem(const NoiseInputs& in)
   }
 }
 
-NoiseEstimate NoiseProblem::Estimate(const std::vector<double>& camera_sigma_px, double projector_sigma_px) const {
+NoiseEstimate NoiseProblem::Estimate(const std::vector<double>& camera_sigma_px,
+                                     const std::vector<double>& projector_sigma_px) const {
   using Square = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 3, 3>;
   using Vector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 3, 1>;
   std::vector<double> camera_sum(num_cameras_, 0.0), camera_r(num_cameras_, 0.0);
-  double projector_sum = 0.0, projector_r = 0.0;
-  const double projector_var = projector_sigma_px * projector_sigma_px / (projector_width_ * projector_width_);
-  const bool weigh_projector = has_projector_ && projector_var > 0.0;
+  std::vector<double> projector_sum(projector_groups_, 0.0), projector_r(projector_groups_, 0.0);
+  std::vector<double> projector_var(projector_groups_, 0.0);
+  for (int g = 0; g < projector_groups_; ++g) {
+    projector_var[g] = projector_sigma_px[g] * projector_sigma_px[g] / (projector_width_ * projector_width_);
+  }
   for (const Point& point : points_) {
     Square N = Square::Zero(point.dof, point.dof);
     Vector gradient = Vector::Zero(point.dof);
@@ -119,10 +125,11 @@ NoiseEstimate NoiseProblem::Estimate(const std::vector<double>& camera_sigma_px,
       N.noalias() += o.J.transpose() * o.J / var;
       gradient.noalias() += o.J.transpose() * o.error / var;
     }
-    const bool projector_term = weigh_projector && point.has_projector;
+    const double p_var = point.has_projector ? projector_var[point.projector_group] : 0.0;
+    const bool projector_term = point.has_projector && p_var > 0.0;
     if (projector_term) {
-      N.noalias() += point.J_projector.transpose() * point.J_projector / projector_var;
-      gradient.noalias() += point.J_projector.transpose() * point.projector_error / projector_var;
+      N.noalias() += point.J_projector.transpose() * point.J_projector / p_var;
+      gradient.noalias() += point.J_projector.transpose() * point.projector_error / p_var;
     }
     const Eigen::FullPivLU<Square> lu(N);
     if (lu.rank() < point.dof) continue;
@@ -140,9 +147,10 @@ NoiseEstimate NoiseProblem::Estimate(const std::vector<double>& camera_sigma_px,
     // projector's variances, not how it splits (any split fits its residuals equally):
     // the projector's share is taken where cameras fix the point.
     if (projector_term && point.observations.size() >= 2) {
-      projector_sum += (point.projector_error + point.J_projector * step).squaredNorm() * projector_width_ *
-                       projector_width_;
-      projector_r += 2.0 - (point.J_projector * N_inv * point.J_projector.transpose()).trace() / projector_var;
+      const int g = point.projector_group;
+      projector_sum[g] += (point.projector_error + point.J_projector * step).squaredNorm() * projector_width_ *
+                          projector_width_;
+      projector_r[g] += 2.0 - (point.J_projector * N_inv * point.J_projector.transpose()).trace() / p_var;
     }
   }
   NoiseEstimate out;
@@ -153,9 +161,25 @@ NoiseEstimate NoiseProblem::Estimate(const std::vector<double>& camera_sigma_px,
     out.camera_redundancy[c] = r;
     if (r >= 1.0) out.camera_sigma_px[c] = std::sqrt(camera_sum[c] / r);
   }
-  if (has_projector_) {
-    out.projector_redundancy = projector_r - 8.0 * projector_maps_ - (projector_maps_ > 0 ? 2.0 : 0.0);
-    if (out.projector_redundancy >= 1.0) out.projector_sigma_px = std::sqrt(projector_sum / out.projector_redundancy);
+  out.projector_sigma_px.assign(projector_groups_, std::numeric_limits<double>::quiet_NaN());
+  out.projector_redundancy.assign(projector_groups_, 0.0);
+  if (has_projector_ && projector_groups_ > 0) {
+    // The maps' and lens's parameters take their redundancy from every group, each in
+    // proportion to its own.
+    const double spent = 8.0 * projector_maps_ + (projector_maps_ > 0 ? 2.0 : 0.0);
+    double total_r = 0.0, total_sum = 0.0;
+    for (int g = 0; g < projector_groups_; ++g) {
+      total_r += projector_r[g];
+      total_sum += projector_sum[g];
+    }
+    if (total_r > 0.0) {
+      for (int g = 0; g < projector_groups_; ++g) {
+        const double r = projector_r[g] * (1.0 - spent / total_r);
+        out.projector_redundancy[g] = r;
+        if (r >= 1.0) out.projector_sigma_px[g] = std::sqrt(projector_sum[g] / r);
+      }
+      if (total_r - spent >= 1.0) out.pooled_projector_sigma_px = std::sqrt(total_sum / (total_r - spent));
+    }
   }
   return out;
 }

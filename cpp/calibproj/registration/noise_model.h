@@ -16,6 +16,14 @@
 // bundle adjustment this converges to the weights under which every group's residuals
 // match their variance, so a camera whose centres are biased (a floor texture across
 // its markers) gets the sigma its residuals show, and its pose covariance widens.
+//
+// The projector's observations fall into groups of their own: a floor texture displaces
+// a marker's apparent centre on the floor, the same way for every camera, by a share of
+// the marker's size. The large markers of a first sequence then miss their projector
+// pixels by far more than the small ones of a densification, and one variance for both
+// would give the small ones the large ones' weight. So points are grouped by the side
+// of the largest marker drawn at their centre, each group with its variance; the
+// redundancy the maps and lens take is shared among the groups by their own.
 
 #include <Eigen/Core>
 #include <limits>
@@ -43,17 +51,22 @@ struct NoiseInputs {
   Eigen::Vector2d lens = Eigen::Vector2d::Zero();
   const std::vector<ba::ProjectorSurface>* surfaces = nullptr;
   double projector_width = 1.0;
+  // Per point its projector group (-1: none); null: every point in group 0.
+  const std::vector<int>* projector_group = nullptr;
   int gauge_camera = -1;
-  // Current sigmas: per camera (px) and the projector's (projector px).
+  // Current sigmas: per camera (px) and per projector group (projector px).
   std::vector<double> camera_sigma_px;
-  double projector_sigma_px = 0.0;
+  std::vector<double> projector_sigma_px;
 };
 
 struct NoiseEstimate {
   std::vector<double> camera_sigma_px;  // NaN where a camera has no redundancy
   std::vector<double> camera_redundancy;
-  double projector_sigma_px = std::numeric_limits<double>::quiet_NaN();
-  double projector_redundancy = 0.0;
+  // Per projector group; NaN where a group has no redundancy.
+  std::vector<double> projector_sigma_px;
+  std::vector<double> projector_redundancy;
+  // All groups as one: the variance the groups' residuals show together.
+  double pooled_projector_sigma_px = std::numeric_limits<double>::quiet_NaN();
 };
 
 // Every point's observations linearised once, under the adjustment's poses, maps and
@@ -61,7 +74,8 @@ struct NoiseEstimate {
 class NoiseProblem {
  public:
   explicit NoiseProblem(const NoiseInputs& in);
-  NoiseEstimate Estimate(const std::vector<double>& camera_sigma_px, double projector_sigma_px) const;
+  NoiseEstimate Estimate(const std::vector<double>& camera_sigma_px,
+                         const std::vector<double>& projector_sigma_px) const;
 
  private:
   using Block = Eigen::Matrix<double, 2, Eigen::Dynamic, 0, 2, 3>;  // d(residual)/d(point's free coordinates)
@@ -74,6 +88,7 @@ class NoiseProblem {
     int dof;
     std::vector<Observation> observations;
     bool has_projector = false;
+    int projector_group = 0;
     Block J_projector;
     Eigen::Vector2d projector_error;  // normalised projector units
   };
@@ -81,6 +96,7 @@ class NoiseProblem {
   int num_cameras_ = 0;
   int gauge_camera_ = -1;
   int projector_maps_ = 0;
+  int projector_groups_ = 0;
   bool has_projector_ = false;
   double projector_width_ = 1.0;
 };

@@ -180,8 +180,11 @@ class Reconstruction {
   RefineResult Refine();
   void FailUnregistered();
 
-  // The projector pixel of every point (NaN: not known) and the projector's image size.
-  void SetProjector(const PixelMatrix& pixels, double width, double height);
+  // The projector pixel of every point (NaN: not known) and the projector's image size;
+  // optionally per point the side (projector px) of the largest marker drawn at its
+  // centre (NaN: not known), which groups the projector's noise (noise_model.h).
+  void SetProjector(const PixelMatrix& pixels, double width, double height,
+                    const std::vector<double>& marker_side_px = {});
   // Where the projector draws point `point` on the main plane (false without a map).
   bool ProjectorPrediction(int point, Eigen::Vector3d* X) const;
 
@@ -208,12 +211,14 @@ class Reconstruction {
   // R_hat) relative to the gauge camera, scaled by the residuals' variance; empty when
   // not computed or not determined.
   const std::vector<ba::Matrix6d>& pose_covariances() const { return pose_covariances_; }
-  // Projector after an adjustment: per plane its map, the lens, the maps' noise
-  // (projector px; NaN until estimated); per camera its centres' noise (px, NaN until
-  // estimated).
+  // Projector after an adjustment: per plane its map, the lens; per group of points
+  // (projector_group_sides_px: the largest marker's side, NaN for the points whose side
+  // is not known) the maps' noise (projector px; NaN until estimated); per camera its
+  // centres' noise (px, NaN until estimated).
   const std::vector<ba::ProjectorSurface>& projector_surfaces() const { return projector_surfaces_; }
   const Eigen::Vector2d& projector_lens() const { return projector_lens_; }
-  double projector_sigma_px() const { return projector_sigma_estimated_ ? projector_sigma_px_ : std::numeric_limits<double>::quiet_NaN(); }
+  std::vector<double> projector_sigma_px() const;
+  const std::vector<double>& projector_group_sides_px() const { return projector_group_side_px_; }
   const std::vector<double>& camera_sigma_px() const { return camera_sigma_px_; }
   // Per camera after Refine(): the angle (deg) to the mirror pose its view of the floor
   // does not rule out (0 when it does); its rotation is known no better.
@@ -255,13 +260,16 @@ class Reconstruction {
   // Per camera noise used as weights: the estimate, else the robust sigma of its residuals.
   std::vector<double> WeightingSigmas() const;
   void EstimateNoise();
+  // Groups the points with a projector pixel by their marker side (SetProjector).
+  void GroupProjectorPoints(const std::vector<double>& marker_side_px);
   // Decides relief_on_ (ReliefTest); the state is left at the flat solution.
   ReliefTest TestRelief();
-  // One step of the noise estimate applied (with the prior towards the pooled noise);
-  // false when no camera's residuals tell the noise.
-  bool UpdateNoise(const NoiseEstimate& estimate);
+  // One step of the noise estimate applied (with the prior towards the pooled noise;
+  // pool_projector: every projector group gets the noise of all); false when no
+  // camera's residuals tell the noise.
+  bool UpdateNoise(const NoiseEstimate& estimate, bool pool_projector);
   void CheckPlanarAmbiguity();
-  bool NoiseSettled(const std::vector<double>& before, double projector_before) const;
+  bool NoiseSettled(const std::vector<double>& before, const std::vector<double>& projector_before) const;
   // The largest range, along any axis, of the given points that lie on the main plane
   // (between their 1st and 99th percentiles).
   double MainPlaneExtent(const std::vector<int>& points) const;
@@ -291,7 +299,9 @@ class Reconstruction {
   double projector_width_ = 1.0;
   Eigen::Vector2d projector_lens_ = Eigen::Vector2d::Zero();
   std::vector<ba::ProjectorSurface> projector_surfaces_;
-  double projector_sigma_px_ = 0.1;
+  std::vector<int> projector_group_;           // per point, -1: no projector pixel
+  std::vector<double> projector_group_side_px_;  // per group
+  std::vector<double> projector_sigma_px_;       // per group
   bool projector_sigma_estimated_ = false;
   std::vector<double> camera_sigma_px_;  // NaN until estimated
   std::vector<double> ambiguity_deg_;
