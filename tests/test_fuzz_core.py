@@ -397,8 +397,8 @@ class Baselines:
                             rcond=None)[0].T
         corners = np.array([[[10.0, 10], [50, 10], [50, 50], [10, 50]], [[60.0, 10], [90, 12], [88, 40], [62, 38]]])
         sequence = self.sequence
-        sync_options = _core.sync.option_defaults()
-        ingest_options = _core.ingest.option_defaults()
+        sync_options = {entry["name"]: entry["default"] for entry in _core.sync.option_table()}
+        ingest_options = {entry["name"]: entry["default"] for entry in _core.ingest.option_table()}
         marker_corners = np.array([[20.0, 20], [80, 20], [80, 80], [20, 80]])
         n = 12
         return {
@@ -481,7 +481,7 @@ class Baselines:
             "_core.video.frame_period": Spec([("times", [0.0, 0.04, 0.08, 0.16, 0.2])]),
             "_core.video.luma_signal": Spec([("path", f["tiny.mkv"]), ("gamma", 2.2), ("row_step", 2),
                                             ("use_timestamps", True), ("max_frame_gap_s", 2.0)]),
-            "_core.sync.option_defaults": Spec([]),
+            "_core.sync.option_table": Spec([]),
             "_core.registration.option_table": Spec([]),
             "_core.registration.check_options": Spec([], dict(REGISTRATION_OPTIONS)),
             "_core.ingest.option_table": Spec([]),
@@ -495,7 +495,6 @@ class Baselines:
                                                 ("start_code", self.start_code), ("end_code", self.end_code),
                                                 ("map", {"offset": 9.0, "rate": self.rate, "exposure": 0.5})],
                                                options=sync_options),
-            "_core.ingest.option_defaults": Spec([]),
             "_core.ingest.light_levels": Spec([("sequence", sequence)]),
             "_core.ingest.lens_tables_map": Spec([("K", self.K), ("dist", self.dist), ("resolution", (64, 48)),
                                                  ("points", s["observed"][:5] / 10), ("undistort", True)]),

@@ -105,7 +105,7 @@ ingest::IngestOptions IngestOptionsFromKwargs(const detect::ArucoOptions& aruco,
   options.detector = {aruco, apriltag};
   for (const auto& item : kwargs) {
     const std::string key = py::str(item.first);
-    if (!SetIngestOption(&options, key, item.second)) ThrowUnknownOption("ingest", key, IngestOptionDefaults());
+    if (!SetIngestOption(&options, key, item.second)) ThrowUnknownOption("ingest", key, IngestOptionTable());
   }
   return options;
 }
@@ -300,7 +300,6 @@ void register_ingest(py::module_& m) {
         "Undistorted corners (4, 2) of a marker `cells` modules wide detected at `corners` (distorted "
         "pixels) in a grey image, from straight edge lines fitted in undistorted pixels; None when an "
         "edge cannot be fitted.");
-  m.def("option_defaults", &IngestOptionDefaults, "Every ingest option (sync ones included) with its default.");
   m.def("option_table", &IngestOptionTable,
         "Every ingest knob as {name, default, help}, in order: the one declaration "
         "calibproj.ingest_options.IngestOptions and both command lines are made from.");
@@ -340,7 +339,7 @@ void register_ingest(py::module_& m) {
       py::arg("source"), py::arg("aruco"), py::arg("apriltag"), py::arg("progress") = py::none(),
       "Synchronise one camera's video with the sequence (dict of sequence.json) and detect its "
       "MSMs: sync, statistics, per-scale records and merged centres (undistorted pixels). "
-      "`progress(decoded, total)` is called now and then. Keyword options: see option_defaults().");
+      "`progress(decoded, total)` is called now and then. Keyword options: see option_table().");
 }
 
 }  // namespace calibproj::bindings

@@ -21,13 +21,20 @@ void VisitSync(Options& o, Visitor&& visit) {
   visit("fixed_exposure", o.fit.fixed_exposure, "known exposure, camera frames (0: fit it)");
 }
 
-struct Lister {
-  py::dict out;
-  template <typename T>
-  void operator()(const char* name, const T& field, const char* /*help*/) {
-    out[name] = field;
-  }
-};
+// Per knob, in order: {name, default, help}.
+template <typename Options, typename Visit>
+py::list Table(Visit&& visit) {
+  Options o;
+  py::list table;
+  visit(o, [&table](const char* name, const auto& field, const char* help) {
+    py::dict entry;
+    entry["name"] = name;
+    entry["default"] = field;
+    entry["help"] = help;
+    table.append(entry);
+  });
+  return table;
+}
 
 }  // namespace
 
@@ -45,36 +52,17 @@ bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const py:
 
 void CheckSyncOptionValues(sync::SyncOptions& o) { VisitSync(o, limits::OptionChecker{"sync options: "}); }
 
-py::dict SyncOptionDefaults() {
-  sync::SyncOptions o;
-  Lister lister;
-  VisitSync(o, lister);
-  return lister.out;
+py::list SyncOptionTable() {
+  return Table<sync::SyncOptions>([](auto& o, auto&& visit) { VisitSync(o, visit); });
 }
 
 py::list IngestOptionTable() {
-  ingest::IngestOptions o;
-  py::list table;
-  ingest::VisitIngestOptions(o, [&table](const char* name, const auto& field, const char* help) {
-    py::dict entry;
-    entry["name"] = name;
-    entry["default"] = field;
-    entry["help"] = help;
-    table.append(entry);
-  });
-  return table;
+  return Table<ingest::IngestOptions>([](auto& o, auto&& visit) { ingest::VisitIngestOptions(o, visit); });
 }
 
-py::dict IngestOptionDefaults() {
-  ingest::IngestOptions o;
-  Lister lister;
-  ingest::VisitIngestOptions(o, lister);
-  return lister.out;
-}
-
-void ThrowUnknownOption(const std::string& what, const std::string& key, const py::dict& known) {
+void ThrowUnknownOption(const std::string& what, const std::string& key, const py::list& table) {
   std::string names;
-  for (const auto& item : known) names += (names.empty() ? "" : ", ") + std::string(py::str(item.first));
+  for (const auto& entry : table) names += (names.empty() ? "" : ", ") + entry["name"].cast<std::string>();
   throw std::invalid_argument(what + ": unknown option '" + key + "' (choose from " + names + ")");
 }
 

@@ -22,14 +22,12 @@ bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const pyb
 // magnitude (limits::OptionChecker); the ingest's own Check() does this for its options.
 void CheckSyncOptionValues(sync::SyncOptions& o);
 
-// Every option name with its C++ default, for documentation and consistency tests.
-pybind11::dict SyncOptionDefaults();
-pybind11::dict IngestOptionDefaults();
-// Per ingest knob, in order: {name, default, help}; calibproj.ingest_options.IngestOptions
-// is made from it.
+// Per knob, in order: {name, default, help}; calibproj.ingest_options.IngestOptions is
+// made from the ingest's, which holds the sync's (but fixed_exposure, in seconds there).
+pybind11::list SyncOptionTable();
 pybind11::list IngestOptionTable();
 
-// Throws std::invalid_argument naming `key` and listing `known`.
-[[noreturn]] void ThrowUnknownOption(const std::string& what, const std::string& key, const pybind11::dict& known);
+// Throws std::invalid_argument naming `key` and listing the names of `table`.
+[[noreturn]] void ThrowUnknownOption(const std::string& what, const std::string& key, const pybind11::list& table);
 
 }  // namespace calibproj::bindings

@@ -29,7 +29,7 @@ sync::SyncOptions SyncOptionsFromKwargs(const py::kwargs& kwargs) {
   sync::SyncOptions options;
   for (const auto& item : kwargs) {
     const std::string key = py::str(item.first);
-    if (!SetSyncOption(&options, key, item.second)) ThrowUnknownOption("sync", key, SyncOptionDefaults());
+    if (!SetSyncOption(&options, key, item.second)) ThrowUnknownOption("sync", key, SyncOptionTable());
   }
   options.Check();
   CheckSyncOptionValues(options);
@@ -49,7 +49,7 @@ sync::FrameWindow CodeWindow(const sync::LightTimeline& timeline, const sync::Li
 }  // namespace
 
 void register_sync(py::module_& m) {
-  m.def("option_defaults", &SyncOptionDefaults, "Every sync option with its default.");
+  m.def("option_table", &SyncOptionTable, "Every sync knob as {name, default, help}, in order.");
   m.def(
       "synchronise",
       [](const DoubleArray& signal, const DoubleArray& levels, const py::dict& start, const py::dict& end,
@@ -71,7 +71,7 @@ void register_sync(py::module_& m) {
       "Frame map of a camera from its per-frame brightness `signal` (NaN = not measured), the "
       "projector's per-frame `levels` (0..1, NaN = unknown) and the light codes ({bits, "
       "frames_per_bit, first_frame}); `nominal_rate` = camera fps / projector fps. Keyword "
-      "options: see option_defaults(). RuntimeError naming `source` when a code is missing or "
+      "options: see option_table(). RuntimeError naming `source` when a code is missing or "
       "the codes disagree.");
   m.def(
       "locate_code",
