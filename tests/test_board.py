@@ -192,11 +192,57 @@ def test_the_command_writes_intrinsics_and_a_plot(chessboard_images: Path, tmp_p
     ("chessboard:1x6:0.03", "columns and rows"),
     ("charuco:5x7:0.04:0.05:4X4_50", "marker must be smaller"),
     ("charuco:5x7:0.04:0.03:9X9_1", "unknown ArUco dictionary"),
+    # Found by fuzzing: OpenCV raised on these (more than 2 inner corners each way; a
+    # marker of a denormal size).
+    ("chessboard:2x2:0.03", "columns and rows must be in [3, 200]"),
+    ("charuco:5x7:0.04:1e-320:4X4_50", "at least 5% of it"),
+    ("chessboard:9x6:1e-320", "the square size must be 0.0001 to 10 m"),
+    ("chessboard:9x6:30", "the square size must be 0.0001 to 10 m"),
 ])
 def test_bad_boards_are_one_line(board: str, message: str, tmp_path: Path, capsys) -> None:
     assert main(["intrinsics", str(tmp_path), "--board", board, "--out", str(tmp_path / "c.json")]) == 2
     error = capsys.readouterr().err.strip().splitlines()
     assert len(error) == 1 and message in error[0]
+
+
+def test_outputs_are_checked_before_the_calibration(tmp_path: Path, capsys) -> None:
+    """Found by probing: --out and --plot on one path wrote the picture over the
+    intrinsics and exited 0; an --out that cannot be written was found after the whole
+    calibration, named by its hidden temporary file. Both are one line naming the path,
+    before any image is read (the image folder here does not even exist)."""
+    images = tmp_path / "no-images"
+    out = tmp_path / "c.json"
+    assert main(["intrinsics", str(images), "--board", "chessboard:9x6:0.03", "--out", str(out),
+                 "--plot", str(out)]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "--plot and --out are the same file" in error[0] and not out.exists()
+    (tmp_path / "a-file").write_text("")
+    blocked = tmp_path / "a-file" / "c.json"
+    assert main(["intrinsics", str(images), "--board", "chessboard:9x6:0.03", "--out", str(blocked)]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and error[0].endswith(f"{blocked}: {blocked.parent} is not a folder")
+
+
+def test_a_bad_image_costs_that_image_only(chessboard_images: Path, tmp_path: Path, capsys) -> None:
+    """Found by probing: one PNG whose header claims 100000 x 100000 px aborted the run
+    (OpenCV refuses to decode it), and the 14 good images went unused."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    folder = tmp_path / "images"
+    folder.mkdir()
+    for path in sorted(chessboard_images.iterdir()):
+        (folder / path.name).write_bytes(path.read_bytes())
+    (folder / "huge.png").write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 100000, 100000, 8, 0, 0, 0, 0))
+                                      + chunk(b"IDAT", zlib.compress(b"\0" * 100)) + chunk(b"IEND", b""))
+    out = tmp_path / "far1.json"
+    assert main(["intrinsics", str(folder), "--board", "chessboard:9x6:0.03", "--out", str(out), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert f"{folder / 'huge.png'}: not an image OpenCV can read; skipped" in captured.err
+    assert json.loads(captured.out)["images"]["used"] == 14 and out.exists()
 
 
 def test_too_few_views_name_the_source(chessboard_images: Path, tmp_path: Path, capsys) -> None:

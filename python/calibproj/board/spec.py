@@ -22,6 +22,13 @@ import numpy as np
 # homography and its distortion): fewer, and the view is not used.
 MIN_CORNERS = 8
 MAX_BOARD_SIDE = 200
+# OpenCV's chessboard finders need more than 2 inner corners each way.
+MIN_CHESSBOARD_SIDE = 3
+# A square from a tenth of a millimetre (a microscope's target) to 10 m (a wall); a
+# ChArUco marker of at least 5 % of its square (smaller ones are too few pixels to
+# decode wherever the square is seen).
+SQUARE_RANGE_M = (1e-4, 10.0)
+MIN_MARKER_SHARE = 0.05
 
 
 @dataclass(frozen=True)
@@ -63,14 +70,17 @@ class BoardSpec:
         return spec
 
     def check(self, text: str) -> None:
-        least = 2 if self.kind == "chessboard" else 3
+        least = MIN_CHESSBOARD_SIDE
         if not (least <= self.columns <= MAX_BOARD_SIDE and least <= self.rows <= MAX_BOARD_SIDE):
             raise ValueError(f"board {text!r}: columns and rows must be in [{least}, {MAX_BOARD_SIDE}]")
-        if not (np.isfinite(self.square_m) and self.square_m > 0):
-            raise ValueError(f"board {text!r}: the square size must be a positive number of metres")
+        low, high = SQUARE_RANGE_M
+        if not (np.isfinite(self.square_m) and low <= self.square_m <= high):
+            raise ValueError(f"board {text!r}: the square size must be {low:g} to {high:g} m, "
+                             f"got {self.square_m:g}")
         if self.kind == "charuco":
-            if not (np.isfinite(self.marker_m) and 0 < self.marker_m < self.square_m):
-                raise ValueError(f"board {text!r}: the marker must be smaller than the square")
+            if not (np.isfinite(self.marker_m) and MIN_MARKER_SHARE * self.square_m <= self.marker_m < self.square_m):
+                raise ValueError(f"board {text!r}: the marker must be smaller than the square and at least "
+                                 f"{MIN_MARKER_SHARE:.0%} of it")
             _dictionary(self.dictionary, text)
 
     def __str__(self) -> str:

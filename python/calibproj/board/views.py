@@ -3,12 +3,15 @@ each with its sharpness, and the choice of the views that cover the image best."
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+logger = logging.getLogger(__name__)
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v", ".mts", ".webm")
@@ -43,20 +46,32 @@ def grey_images(source: str | os.PathLike, step: int = 1) -> Iterator[tuple[str,
         if not files:
             raise ValueError(f"{path}: no images ({', '.join(IMAGE_SUFFIXES)})")
         for file in files:
-            image = cv2.imread(str(file), cv2.IMREAD_GRAYSCALE)
-            if image is None:
-                raise ValueError(f"{file}: not an image OpenCV can read")
-            yield file.name, image
+            # One bad image among many costs that image only, named.
+            try:
+                yield file.name, _read_grey(file)
+            except ValueError as error:
+                logger.warning("%s; skipped", error)
         return
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such video, image or folder")
     if path.suffix.lower() in IMAGE_SUFFIXES:
-        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            raise ValueError(f"{path}: not an image OpenCV can read")
-        yield path.name, image
+        yield path.name, _read_grey(path)
         return
     yield from _video_frames(path, step)
+
+
+def _read_grey(path: Path) -> np.ndarray:
+    """The image as grey levels; ValueError naming it when OpenCV cannot read it (not an
+    image, or a header claiming more pixels than OpenCV decodes)."""
+    import cv2
+
+    try:
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    except cv2.error:
+        image = None
+    if image is None:
+        raise ValueError(f"{path}: not an image OpenCV can read")
+    return image
 
 
 def _video_frames(path: Path, step: int) -> Iterator[tuple[str, np.ndarray]]:

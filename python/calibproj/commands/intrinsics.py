@@ -31,25 +31,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import json
+    from contextlib import nullcontext
     from pathlib import Path
 
     from calibproj.board import BoardOptions, BoardSpec, calibrate_with_board
     from calibproj.commands.options import dataclass_from_args
     from calibproj.io.intrinsics import write_intrinsics
     from calibproj.io.jsonio import atomic_write_bytes
+    from calibproj.io.output_folder import OutputFile
 
     board = BoardSpec.parse(args.board)  # before reading the video: a typo is one line at once
     out = Path(args.out)
+    plot = Path(args.plot) if args.plot else None
     if out.exists() and not args.force:
         raise ValueError(f"{out}: exists (use --force to replace it)")
-    if out.is_dir() or (args.plot and Path(args.plot).is_dir()):
-        raise ValueError(f"{out if out.is_dir() else args.plot}: is a folder, not a file")
-    result = calibrate_with_board(args.source, board, name=out.stem, options=dataclass_from_args(BoardOptions, args))
-    write_intrinsics(out, result.intrinsics)
-    if args.plot:
-        from calibproj.board.figure import coverage_figure
+    if plot is not None and plot.resolve() == out.resolve():
+        raise ValueError(f"{plot}: --plot and --out are the same file; give the picture its own path")
+    # Both outputs checked and locked before the calibration; the picture drawn before
+    # anything is written, so a failure leaves both as they were.
+    with OutputFile(out) as out_file, (OutputFile(plot) if plot else nullcontext()) as plot_file:
+        result = calibrate_with_board(args.source, board, name=out.stem,
+                                      options=dataclass_from_args(BoardOptions, args))
+        if plot is not None:
+            from calibproj.board.figure import coverage_figure
 
-        atomic_write_bytes(args.plot, coverage_figure(result))
+            picture = coverage_figure(result)
+            with plot_file.writing():
+                atomic_write_bytes(plot, picture)
+        with out_file.writing():
+            write_intrinsics(out, result.intrinsics)
     if args.json:
         print(json.dumps(result.summary(), indent=1))
     else:
