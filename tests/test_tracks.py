@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import re
+
 import numpy as np
 import pytest
 
@@ -103,6 +105,20 @@ def test_invalid_observations():
         Tracks.from_observations(["a"], [0], [-1], np.zeros((1, 2)))
     with pytest.raises(ValueError, match="duplicate camera names"):
         Tracks.empty(["a", "a"])
+
+
+def test_a_pixel_that_is_not_finite_is_not_written(tmp_path):
+    """Found by probing: a NaN set into the xy array of a Tracks was written as a `NaN`
+    token, making a tracks.json that no reader (ours included) takes. The writer refuses
+    it, naming the file, which stays as it was."""
+    tracks = Tracks.from_observations(["a", "b"], [0, 1, 0, 1], [3, 3, 4, 4], np.arange(8.0).reshape(4, 2))
+    path = tmp_path / "tracks.json"
+    tracks.write(path)
+    before = path.read_bytes()
+    tracks.xy[2, 1] = np.nan
+    with pytest.raises(ValueError, match=rf"^{re.escape(str(path))}: cannot write tracks: observation 2 \(camera 'b'\) is not finite$"):
+        tracks.write(path)
+    assert path.read_bytes() == before
 
 
 @pytest.mark.parametrize(("document", "message"), [

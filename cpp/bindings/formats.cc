@@ -261,7 +261,6 @@ void register_formats(py::module_& m) {
       [](const std::filesystem::path& out, const py::object& tracks) {
         const auto given = Converted("tracks", [&] { return TracksFrom(tracks); });
         if (!given) throw py::type_error("tracks: expected a Tracks, got None");
-        given->Check();
         formats::WriteTracks(out, *given);
       },
       py::arg("out"), py::arg("tracks"), "tracks.json of a Tracks, written atomically");

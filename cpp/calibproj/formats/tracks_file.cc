@@ -55,6 +55,11 @@ void Tracks::Check() const {
         point_index[i] >= static_cast<int>(point_ids.size())) {
       throw std::invalid_argument("tracks: observation " + std::to_string(i) + " has no camera or point");
     }
+    // JSON has no NaN or infinity: such a pixel would make a file no reader takes.
+    if (!xy.row(i).allFinite()) {
+      throw std::invalid_argument("tracks: observation " + std::to_string(i) + " (camera '" +
+                                  cameras[camera_index[i]] + "') is not finite");
+    }
   }
 }
 
@@ -224,6 +229,11 @@ std::string CameraBlock(const Tracks& tracks, int camera) {
 }  // namespace
 
 void WriteTracks(const fs::path& path, const Tracks& tracks) {
+  try {
+    tracks.Check();
+  } catch (const std::invalid_argument& error) {
+    throw std::invalid_argument(path.string() + ": cannot write " + error.what());
+  }
   nlohmann::ordered_json header;
   header["markers_per_array"] = tracks.markers_per_array ? nlohmann::json(*tracks.markers_per_array) : nullptr;
   header["undistorted"] = true;

@@ -40,6 +40,8 @@ Tracks MergeTracks(const Tracks& first, const Tracks& second);
 // Writes tracks.json atomically in the Python writer's layout: the header indented,
 // then per camera its point ids and pixels on one line each (every camera listed,
 // those without observations with empty lists).
+// Atomically; std::invalid_argument naming the file when the tracks are inconsistent or
+// a pixel is not finite (JSON has no NaN), the file then untouched.
 void WriteTracks(const std::filesystem::path& path, const Tracks& tracks);
 
 // Builds tracks from unordered observations (checks duplicates, sorts, indexes points).
