@@ -106,6 +106,31 @@ def test_unwritable_outputs_give_the_python_line(small: Path, tmp_path: Path) ->
     assert a_file.read_text() == "x"
 
 
+def test_detect_replaces_an_existing_file_only_when_forced_and_never_its_sequence(tmp_path: Path) -> None:
+    """Found by probing: `detect --out` (both tools) overwrote any existing file, the
+    run's own --sequence included. Both now refuse in the same line, before the inputs
+    are read, and leave the file as it was."""
+    existing = tmp_path / "tracks.json"
+    existing.write_text("earlier")
+    sequence = tmp_path / "sequence.json"
+    sequence.write_text("the projection")
+    as_sequence = detect_args(tmp_path, sequence)
+    as_sequence[as_sequence.index("--sequence") + 1] = str(sequence)
+    cases = {
+        "an existing file": (detect_args(tmp_path, existing), "exists (use --force to replace it)"),
+        "the run's sequence, forced": ([*as_sequence, "--force"], "is an input of this run"),
+    }
+    for case, (args, message) in cases.items():
+        python, native = run_python(*args), run_native(*args)
+        assert python.returncode == native.returncode == EXIT_USAGE, (case, python.stderr, native.stderr)
+        assert error_line(native) == error_line(python), case
+        assert message in error_line(native), case
+    assert existing.read_text() == "earlier" and sequence.read_text() == "the projection"
+    # Forced, an existing file is replaced as before: here the missing inputs are next.
+    forced = run_native(*detect_args(tmp_path, existing), "--force")
+    assert forced.returncode == EXIT_USAGE and "no-sequence.json" in error_line(forced)
+
+
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
 def test_a_read_only_parent_is_named(small: Path, tmp_path: Path) -> None:
     locked = tmp_path / "locked"

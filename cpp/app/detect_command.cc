@@ -342,6 +342,7 @@ std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** comm
       ->required()
       ->type_name("DIR");
   cmd->add_option("--out", args->out, "tracks file to write (tracks.json)")->required()->type_name("FILE");
+  cmd->add_flag("--force", args->force, "replace an existing --out");
   cmd->add_option("--workers", args->workers, "cameras processed at once")->capture_default_str();
   cmd->add_option("--detector-option", args->detector_options,
                   "marker detector option as calibproj.detect_markers takes it, e.g. quad_decimate=2 (repeatable; "
@@ -364,7 +365,7 @@ std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** comm
 int RunDetect(const DetectArguments& arguments, Interrupts& interrupts) {
   // Checked and locked before the inputs are read and the long ingest, as the Python
   // command does.
-  OutputFile output(arguments.out, interrupts);
+  OutputFile output(arguments.out, interrupts, arguments.force, {arguments.sequence});
   output.Open();
   const ingest::SequenceDescription sequence = ReadSequence(arguments.sequence);
   const auto videos = VideoPaths(arguments.videos);

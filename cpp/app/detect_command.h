@@ -22,6 +22,7 @@ struct DetectArguments {
   int workers = kDefaultDetectWorkers;
   bool no_progress = false;
   bool json = false;
+  bool force = false;  // replace an existing --out
   std::vector<std::string> detector_options;  // NAME=VALUE, as calibproj.detect_markers takes them
   std::vector<std::string> exposures;         // CAMERA=SECONDS
   ingest::IngestOptions options;

@@ -321,12 +321,21 @@ void OutputFolder::Discard() noexcept {
 
 // -- a single file ---------------------------------------------------------------------------
 
-OutputFile::OutputFile(const std::string& path, Interrupts& interrupts)
-    : path_(PathlibPath(path)), interrupts_(interrupts) {}
+OutputFile::OutputFile(const std::string& path, Interrupts& interrupts, bool force, std::vector<std::string> inputs)
+    : path_(PathlibPath(path)), interrupts_(interrupts), force_(force), inputs_(std::move(inputs)) {}
 
 void OutputFile::Open() {
   const auto held = interrupts_.Hold();
   if (fs::is_directory(path_)) throw OutputError(path_.string() + ": is a folder; give the path of a file");
+  std::error_code error;
+  if (fs::exists(path_, error)) {
+    for (const std::string& input : inputs_) {
+      if (fs::equivalent(path_, input, error)) {
+        throw OutputError(path_.string() + ": is an input of this run; write the output elsewhere");
+      }
+    }
+    if (!force_) throw OutputError(path_.string() + ": exists (use --force to replace it)");
+  }
   const fs::path parent = CheckParent(path_);
   lock_.Acquire(LockFileOf(path_), path_);
   interrupts_.SetCleanup(held, [this] { lock_.Release(); });

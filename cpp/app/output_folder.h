@@ -112,13 +112,16 @@ class OutputFolder {
 
 class OutputFile {
  public:
-  OutputFile(const std::string& path, Interrupts& interrupts);
+  // force: an existing file may be replaced; inputs: files of the run that the output
+  // must never replace, force or not.
+  OutputFile(const std::string& path, Interrupts& interrupts, bool force = false,
+             std::vector<std::string> inputs = {});
   ~OutputFile() { Close(); }
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
 
-  // Checks that the file can be written (not a folder, its folder writable, the disk
-  // not full) and takes its lock.
+  // Checks that the file can be written (not a folder, not an input, not existing
+  // unless forced, its folder writable, the disk not full) and takes its lock.
   void Open();
   // Calls write(path); a filesystem error in it is an OutputError naming the file.
   void Write(const std::function<void(const std::filesystem::path& path)>& write);
@@ -130,6 +133,8 @@ class OutputFile {
  private:
   std::filesystem::path path_;
   Interrupts& interrupts_;
+  bool force_;
+  std::vector<std::string> inputs_;
   OutputLock lock_;
 };
 

@@ -11,7 +11,8 @@ Writes --out (tracks.json) and, next to it, detect_report.json (per camera: sync
 and rate, frames used, markers detected per scale, MSMs kept, or why the camera
 failed), and prints the summary. A camera that fails is reported; the others still
 give tracks. Exit status 1 when every camera failed. --out is checked (and locked
-against a second run writing it) before the videos are read.
+against a second run writing it) before the videos are read; an existing --out is
+replaced only with --force, and never when it is the run's --sequence.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sequence", required=True, metavar="FILE", help="sequence.json of the projection")
     parser.add_argument("--intrinsics", required=True, metavar="DIR", help="folder of per-camera intrinsics files")
     parser.add_argument("--out", required=True, metavar="FILE", help="tracks file to write (tracks.json)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out")
     parser.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                         help=f"cameras processed at once (default {DEFAULT_WORKERS})")
     parser.add_argument("--detector-option", action="append", default=[], metavar="NAME=VALUE",
@@ -52,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
     options = dataclass_from_args(IngestOptions, args)
     detector_options, exposures = _detector_options(args.detector_option), parse_exposures(args.exposure)
-    with OutputFile(args.out) as output:
+    with OutputFile(args.out, force=args.force, inputs=[args.sequence]) as output:
         result = ingest.ingest(args.videos, args.sequence, args.intrinsics, options=options,
                                detector_options=detector_options, workers=args.workers,
                                progress=not args.no_progress, exposures=exposures)

@@ -43,13 +43,12 @@ def run(args: argparse.Namespace) -> int:
     board = BoardSpec.parse(args.board)  # before reading the video: a typo is one line at once
     out = Path(args.out)
     plot = Path(args.plot) if args.plot else None
-    if out.exists() and not args.force:
-        raise ValueError(f"{out}: exists (use --force to replace it)")
     if plot is not None and plot.resolve() == out.resolve():
         raise ValueError(f"{plot}: --plot and --out are the same file; give the picture its own path")
     # Both outputs checked and locked before the calibration; the picture drawn before
     # anything is written, so a failure leaves both as they were.
-    with OutputFile(out) as out_file, (OutputFile(plot) if plot else nullcontext()) as plot_file:
+    with OutputFile(out, force=args.force) as out_file, \
+            (OutputFile(plot, force=True) if plot else nullcontext()) as plot_file:
         result = calibrate_with_board(args.source, board, name=out.stem,
                                       options=dataclass_from_args(BoardOptions, args))
         if plot is not None:

@@ -317,6 +317,13 @@ class OutputFolder:
             self.abort()
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.samefile(b)
+    except OSError:  # b is gone or unreadable: not the same file
+        return False
+
+
 def _sync_folder(folder: Path) -> None:
     """Make the renames in ``folder`` durable."""
     try:
@@ -335,17 +342,26 @@ class OutputFile:
     """The checks and the lock of ``OutputFolder`` for commands that write single files.
 
     ``open()`` fails in one line naming the path when ``path`` is an existing folder,
-    its folder cannot be written, the disk is full, or another run holds its lock;
-    ``writing()`` reports a failed write the same way; ``close()`` releases the lock.
+    one of the run's ``inputs``, an existing file and ``force`` is off, its folder
+    cannot be written, the disk is full, or another run holds its lock; ``writing()``
+    reports a failed write the same way; ``close()`` releases the lock.
     """
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike, *, force: bool = False,
+                 inputs: Sequence[str | os.PathLike] = ()) -> None:
         self.path = Path(path)
+        self.force = force
+        self.inputs = [Path(p) for p in inputs]
         self._lock: _Lock | None = None
 
     def open(self) -> OutputFile:
         if self.path.is_dir():
             raise OutputError(f"{self.path}: is a folder; give the path of a file")
+        if self.path.exists():
+            if any(_same_file(self.path, given) for given in self.inputs):
+                raise OutputError(f"{self.path}: is an input of this run; write the output elsewhere")
+            if not self.force:
+                raise OutputError(f"{self.path}: exists (use --force to replace it)")
         parent = _check_parent(self.path)
         self._lock = _Lock(parent / f".{self.path.name}.lock", self.path)
         self._lock.acquire()
