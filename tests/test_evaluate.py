@@ -114,6 +114,39 @@ def test_cli_json_with_the_results_intrinsics(results, capsys) -> None:
     assert "100 % under 2 px" in capsys.readouterr().out
 
 
+def test_save_is_a_transaction_on_the_results_folder(results, tmp_path, monkeypatch, capsys) -> None:
+    """Found by probing: `evaluate --save` took no lock (beside `calibrate --force` on the
+    same folder both exited 0 and evaluation.json was lost), and a failing report left
+    evaluation.json added without its report. Now the folder is locked before the
+    evaluation and replaced whole, or left as it was."""
+    import shutil
+
+    import calibproj.report
+    from calibproj.io.output_folder import OutputFolder
+
+    folder = tmp_path / "results"
+    shutil.copytree(results / "results", folder)
+    before = sorted(p.name for p in folder.iterdir())
+    save = ["evaluate", str(folder), "--tracks", str(results / "sim" / "eval_tracks.json"), "--save"]
+    holder = OutputFolder(folder, force=True).open()  # a calibrate --force writing it
+    assert main(save) == 1
+    assert "another calibproj run is writing it" in capsys.readouterr().err
+    holder.abort()
+    assert sorted(p.name for p in folder.iterdir()) == before
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(calibproj.report, "write_report", full_disk)
+    assert main(save) == 2
+    assert "cannot write" in capsys.readouterr().err
+    assert sorted(p.name for p in folder.iterdir()) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]  # no staging folder or lock left
+    monkeypatch.undo()
+    assert main(save) == 0
+    assert sorted(p.name for p in folder.iterdir()) == sorted([*before, "evaluation.json", "report", "report.html"])
+
+
 def test_a_camera_without_usable_intrinsics_fails_alone(results, tmp_path, capsys, caplog) -> None:
     """One camera's intrinsics file holds true in K: that camera is not evaluated, the
     file and the problem reported; the others are judged as ever (exit status 1)."""

@@ -44,13 +44,18 @@ def run(args: argparse.Namespace) -> int:
     if not Path(args.results).is_dir():
         raise FileNotFoundError(f"{args.results}: no such results folder")
     options = dataclass_from_args(EvaluationOptions, args)
-    evaluation = evaluate(args.results, args.tracks, args.intrinsics, options)
-    if args.save:
-        from calibproj.io.file_names import path_as_recorded
-        from calibproj.report import write_report
-
-        evaluation.save(args.results, path_as_recorded(args.tracks, args.results), options)
-        write_report(args.results, intrinsics=args.intrinsics)
+    # --save changes the results folder as calibrate writes it: locked before the
+    # evaluation (a calibrate --force beside it waits or fails at once), the folder
+    # copied with the evaluation and the new report into a staging folder that replaces
+    # it whole; a failure or an interruption leaves it as it was.
+    folder = _locked_results(args.results) if args.save else None
+    try:
+        evaluation = evaluate(args.results, args.tracks, args.intrinsics, options)
+        if folder is not None:
+            _save_into(folder, args, evaluation, options)
+    finally:
+        if folder is not None:
+            folder.abort()  # nothing left to do after a commit
     if args.json:
         print(json.dumps(evaluation.to_json(), indent=1))
     else:
@@ -61,6 +66,26 @@ def run(args: argparse.Namespace) -> int:
               f"{failures}", file=sys.stderr)
         return 1
     return 0
+
+
+def _locked_results(results: str):
+    from calibproj.io.output_folder import OutputFolder
+    from calibproj.results import CALIBRATION_FILES
+
+    return OutputFolder(results, force=True, signature=CALIBRATION_FILES).open()
+
+
+def _save_into(folder, args: argparse.Namespace, evaluation, options) -> None:
+    import shutil
+
+    from calibproj.io.file_names import path_as_recorded
+    from calibproj.report import write_report
+
+    with folder.writing() as staging:
+        shutil.copytree(folder.path, staging, symlinks=True, dirs_exist_ok=True)
+        evaluation.save(staging, path_as_recorded(args.tracks, args.results), options)
+        write_report(staging, intrinsics=args.intrinsics)
+    folder.commit()
 
 
 def format_table(evaluation) -> str:
