@@ -117,8 +117,12 @@ def test_scale_cameras_are_checked_against_the_videos_before_the_ingest(
 
 @pytest.mark.parametrize("extra, message", [
     (["--exposure", "far3=0.01"], "exposures given for camera(s) without a video: far3"),
-    (["--exposure", "far1=fast"], "--exposure expects CAMERA=SECONDS with SECONDS > 0, got 'far1=fast'"),
-    (["--exposure", "far1=0"], "--exposure expects CAMERA=SECONDS with SECONDS > 0, got 'far1=0'"),
+    (["--exposure", "far1=fast"], "--exposure expects CAMERA=SECONDS with 0 < SECONDS <= 1, got 'far1=fast'"),
+    (["--exposure", "far1=0"], "--exposure expects CAMERA=SECONDS with 0 < SECONDS <= 1, got 'far1=0'"),
+    # Found by probing: infinity passed this check and failed after the ingest, and 10 s
+    # (no video camera's frame) was taken by one tool and not the other.
+    (["--exposure", "far1=inf"], "--exposure expects CAMERA=SECONDS with 0 < SECONDS <= 1, got 'far1=inf'"),
+    (["--exposure", "far1=10"], "--exposure expects CAMERA=SECONDS with 0 < SECONDS <= 1, got 'far1=10'"),
 ])
 def test_exposures_are_checked_before_the_ingest(videos: Path, tmp_path: Path, capsys: pytest.CaptureFixture,
                                                  extra: list[str], message: str) -> None:

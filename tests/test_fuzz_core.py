@@ -482,6 +482,7 @@ class Baselines:
             "_core.video.luma_signal": Spec([("path", f["tiny.mkv"]), ("gamma", 2.2), ("row_step", 2),
                                             ("use_timestamps", True), ("max_frame_gap_s", 2.0)]),
             "_core.sync.option_table": Spec([]),
+            "_core.ingest.valid_known_exposure": Spec([("seconds", 0.01)]),
             "_core.registration.option_table": Spec([]),
             "_core.registration.check_options": Spec([], dict(REGISTRATION_OPTIONS)),
             "_core.ingest.option_table": Spec([]),

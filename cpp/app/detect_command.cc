@@ -168,8 +168,8 @@ std::map<std::string, double> ParseExposures(const std::vector<std::string>& ite
         seconds = -1.0;
       }
     }
-    if (!(seconds > 0.0)) {
-      throw InputError("--exposure expects CAMERA=SECONDS with SECONDS > 0, got " + Quoted(item));
+    if (!ingest::ValidKnownExposure(seconds)) {
+      throw InputError("--exposure expects CAMERA=SECONDS with 0 < SECONDS <= 1, got " + Quoted(item));
     }
     exposures[name] = seconds;
   }

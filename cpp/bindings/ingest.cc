@@ -300,6 +300,8 @@ void register_ingest(py::module_& m) {
         "Undistorted corners (4, 2) of a marker `cells` modules wide detected at `corners` (distorted "
         "pixels) in a grey image, from straight edge lines fitted in undistorted pixels; None when an "
         "edge cannot be fitted.");
+  m.def("valid_known_exposure", &ingest::ValidKnownExposure, py::arg("seconds"),
+        "Whether a camera's known exposure time (--exposure CAMERA=SECONDS) is one: 0 < seconds <= 1.");
   m.def("option_table", &IngestOptionTable,
         "Every ingest knob as {name, default, help}, in order: the one declaration "
         "calibproj.ingest_options.IngestOptions and both command lines are made from.");

@@ -697,6 +697,8 @@ class CameraIngest {
 
 }  // namespace
 
+bool ValidKnownExposure(double seconds) { return seconds > 0.0 && seconds <= kMaxExposureS; }
+
 void IngestOptions::Check() const {
   sync.Check();
   pick.Check();
@@ -708,7 +710,8 @@ void IngestOptions::Check() const {
   Require(mean_row_step >= 1 && mean_row_step <= limits::kMaxImageSide,
           "mean_row_step must be in [1, " + std::to_string(limits::kMaxImageSide) + "]");
   Require(luma_gamma > 0.0, "luma_gamma must be positive");
-  Require(exposure_s >= 0.0, "exposure_s must be non-negative (0: estimate it)");
+  Require(exposure_s == 0.0 || ValidKnownExposure(exposure_s),
+          "exposure_s must be 0 (estimate it) or a time of at most 1 s");
   Require(readout_bands == 0 || (readout_bands >= 3 && readout_bands <= 64),
           "readout_bands must be 0 or in [3, 64]");
   Require(readout_sigmas > 0.0, "readout_sigmas must be positive");

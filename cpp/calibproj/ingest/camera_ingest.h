@@ -125,6 +125,12 @@ struct IngestOptions {
   void Check() const;
 };
 
+// A camera's known exposure time (--exposure CAMERA=SECONDS): more than 0 and at most
+// kMaxExposureS (no video camera exposes a frame longer; one longer than its frame is
+// taken as the whole frame). The one check of both tools' command lines.
+constexpr double kMaxExposureS = 1.0;
+bool ValidKnownExposure(double seconds);
+
 // What happened to the patterns of one scale.
 struct ScaleStats {
   int patterns = 0;          // patterns of this scale in the sequence

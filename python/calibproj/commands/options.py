@@ -68,6 +68,8 @@ def add_exposure_argument(parser: argparse.ArgumentParser, default: str) -> None
 
 def parse_exposures(items: list[str]) -> dict[str, float]:
     """--exposure CAMERA=SECONDS values: camera name -> seconds."""
+    from calibproj import _core
+
     exposures = {}
     for item in items:
         name, separator, text = item.partition("=")
@@ -75,7 +77,7 @@ def parse_exposures(items: list[str]) -> dict[str, float]:
             seconds = float(text)
         except ValueError:
             seconds = -1.0
-        if not separator or not name or not seconds > 0:
-            raise ValueError(f"--exposure expects CAMERA=SECONDS with SECONDS > 0, got {item!r}")
+        if not separator or not name or not _core.ingest.valid_known_exposure(seconds):
+            raise ValueError(f"--exposure expects CAMERA=SECONDS with 0 < SECONDS <= 1, got {item!r}")
         exposures[name.strip()] = seconds
     return exposures
