@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         raise FileNotFoundError(f"{args.results}: no such results folder")
     options = dataclass_from_args(EvaluationOptions, args)
     # --save changes the results folder as calibrate writes it: locked before the
-    # evaluation (a calibrate --force beside it waits or fails at once), the folder
+    # evaluation (a calibrate --force on it fails at once, as this does beside one),
     # copied with the evaluation and the new report into a staging folder that replaces
     # it whole; a failure or an interruption leaves it as it was.
     folder = _locked_results(args.results) if args.save else None
