@@ -154,6 +154,13 @@ std::optional<formats::ProjectedMarkers> MarkersFrom(const py::object& m) {
   return markers;
 }
 
+// A ProjectedMarkers that must be given (TypeError for None).
+formats::ProjectedMarkers RequiredMarkers(const py::object& markers) {
+  auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
+  if (!projected) throw py::type_error("markers: expected a ProjectedMarkers, got None");
+  return *std::move(projected);
+}
+
 // From a calibproj.io.intrinsics.Intrinsics.
 formats::CameraIntrinsics CameraIntrinsicsFrom(const py::handle& camera) {
   formats::CameraIntrinsics in;
@@ -314,18 +321,14 @@ void register_formats(py::module_& m) {
   m.def(
       "projector_pixels",
       [](const py::object& markers, const std::vector<std::int64_t>& point_ids) {
-        const auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
-        if (!projected) throw py::type_error("markers: expected a ProjectedMarkers, got None");
-        return projected->PixelsOf(point_ids);
+        return RequiredMarkers(markers).PixelsOf(point_ids);
       },
       py::arg("markers"), py::arg("point_ids"),
       "Per point id its projector pixel (N, 2), NaN for an id beyond the sequence's MSMs");
   m.def(
       "projector_marker_sides",
       [](const py::object& markers, const std::vector<std::int64_t>& point_ids) {
-        const auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
-        if (!projected) throw py::type_error("markers: expected a ProjectedMarkers, got None");
-        return projected->LargestSidesOf(point_ids);
+        return RequiredMarkers(markers).LargestSidesOf(point_ids);
       },
       py::arg("markers"), py::arg("point_ids"),
       "Per point id the side of the largest marker drawn at it (projector px), NaN where not known");
