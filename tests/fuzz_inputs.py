@@ -272,6 +272,13 @@ def sequence_mutations(document: dict, rng: np.random.Generator, budget: int) ->
         ("marker family not a string", {**document, "markers": {**document["markers"], "spec": 3}}),
         ("inverted 1", {**document, "markers": {**document["markers"], "inverted": 1}}),
         ("schema of intrinsics", {**document, "schema": "calibproj.intrinsics/1"}),
+        ("frame_count a string", {**document, "frame_count": "lots"}),
+        ("frame_count missing", {k: v for k, v in document.items() if k != "frame_count"}),
+        ("frame_count off by one", {**document, "frame_count": document["frame_count"] + 1}),
+        ("scales true", {**document, "scales": True}),
+        ("layout.arrays missing", {**document, "layout": {k: v for k, v in document["layout"].items()
+                                                           if k != "arrays"}}),
+        ("grid_cells of another family", {**document, "markers": {**document["markers"], "grid_cells": 9}}),
     ]
     raw = [("fps NaN", "NaN"), ("fps 1e400", "1e400"), ("fps -Infinity", "-Infinity"), ("fps nested", deep(100_000))]
     out = [Mutation(label, dumps(doc), True) for label, doc in targeted]

@@ -533,6 +533,7 @@ class Baselines:
         folder = Path(self.files["tiny.mkv"]).parent / "formats"
         tracks.write(folder / "valid_tracks.json")
         write_intrinsics(folder / "a.json", intrinsics["a"])
+        (folder / "sequence.json").write_text(json.dumps({"schema": "calibproj.sequence/1", **self.sequence}))
         return {
             "_core.formats.write_calibration": Spec([("directory", folder), ("calibration", calibration)]),
             "_core.formats.write_intrinsics": Spec([("out", folder / "written.json"), ("intrinsics", intrinsics["a"])]),
@@ -540,6 +541,7 @@ class Baselines:
             "_core.formats.intrinsics_from_json": Spec([("text", json.dumps(intrinsics["a"].to_json())),
                                                        ("name", "a")]),
             "_core.formats.read_tracks": Spec([("path", str(folder / "valid_tracks.json"))]),
+            "_core.formats.read_sequence": Spec([("path", str(folder / "sequence.json"))]),
             "_core.formats.write_tracks": Spec([("out", folder / "tracks.json"), ("tracks", tracks)]),
             "_core.formats.with_earlier_observations": Spec([("earlier", folder / "valid_tracks.json"),
                                                             ("tracks", later), ("intrinsics", intrinsics)]),

@@ -16,6 +16,7 @@ Run alone (with -s for the summary line):
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import subprocess
 import time
 from pathlib import Path
@@ -41,19 +42,51 @@ PER_CAMERA_FORMATS = {"calibrate_intrinsics", "detect_intrinsics"}
 # Runs.
 
 
-def execute(native: Path, run: Run) -> str | None:
-    """None when the run behaved, else what went wrong."""
+def python_refuses_sequence(path: Path) -> str | None:
+    """The Python package's message for a sequence file it refuses (None: read)."""
+    from calibproj.io.jsonio import FormatError
+    from calibproj.sequence.sequence import Sequence
+
+    try:
+        Sequence.load(path)
+    except FormatError as error:
+        return str(error)
+    return None
+
+
+def tools_disagree(run: Run, refused_by_native: bool) -> str | None:
+    """None when calibproj-native's verdict on a sequence file is the Python package's,
+    else the difference."""
+    refused_by_python = python_refuses_sequence(run.file)
+    if (refused_by_python is not None) == refused_by_native:
+        return None
+    return f"Python {'refuses' if refused_by_python else 'reads'} it ({refused_by_python}), native does not"
+
+
+@dataclasses.dataclass
+class Outcome:
+    problem: str | None  # None when the run behaved, else what went wrong
+    refused: bool = False  # status 2 with one error line naming the mutated file
+
+
+def execute(native: Path, run: Run) -> Outcome:
     try:
         result = subprocess.run([str(native), *run.args], capture_output=True, timeout=RUN_TIMEOUT_S)
     except subprocess.TimeoutExpired:
-        return f"hang (no exit within {RUN_TIMEOUT_S:.0f} s)"
+        return Outcome(f"hang (no exit within {RUN_TIMEOUT_S:.0f} s)")
     stderr = result.stderr.decode(errors="replace")
     errors = [line for line in stderr.splitlines() if ": error: " in line]
-    if result.returncode < 0:
-        return f"killed by signal {-result.returncode}: {stderr[-300:]!r}"
-    if result.returncode not in (0, 1, 2):
-        return f"exit status {result.returncode}: {stderr[-300:]!r}"
-    if result.returncode == 2:
+    refused = result.returncode == 2 and len(errors) == 1 and str(run.file) in errors[0]
+    return Outcome(misbehaviour(run, result.returncode, stderr, errors), refused)
+
+
+def misbehaviour(run: Run, returncode: int, stderr: str, errors: list[str]) -> str | None:
+    """None when the run behaved, else what went wrong."""
+    if returncode < 0:
+        return f"killed by signal {-returncode}: {stderr[-300:]!r}"
+    if returncode not in (0, 1, 2):
+        return f"exit status {returncode}: {stderr[-300:]!r}"
+    if returncode == 2:
         if len(errors) != 1:
             return f"exit status 2 with {len(errors)} error lines: {stderr[-300:]!r}"
         if run.fmt in PER_CAMERA_FORMATS:
@@ -63,10 +96,10 @@ def execute(native: Path, run: Run) -> str | None:
         if len(errors[0]) > 2000:
             return f"error line of {len(errors[0])} characters"
     if run.fmt in PER_CAMERA_FORMATS:
-        if run.mutation.must_fail and (result.returncode != 1 or str(run.file) not in stderr):
-            return f"exit status {result.returncode} without naming {run.file.name}: {stderr[-300:]!r}"
-    elif run.mutation.must_fail and result.returncode != 2:
-        return f"accepted (exit status {result.returncode}): {stderr[-300:]!r}"
+        if run.mutation.must_fail and (returncode != 1 or str(run.file) not in stderr):
+            return f"exit status {returncode} without naming {run.file.name}: {stderr[-300:]!r}"
+    elif run.mutation.must_fail and returncode != 2:
+        return f"accepted (exit status {returncode}): {stderr[-300:]!r}"
     return None
 
 
@@ -84,12 +117,19 @@ def test_mutated_input_files_fail_cleanly(native: Path, tmp_path: Path) -> None:
     assert len(runs) >= MIN_FILES
     started = time.perf_counter()
     with concurrent.futures.ThreadPoolExecutor(WORKERS) as pool:
-        problems = list(pool.map(lambda run: execute(native, run), runs))
+        outcomes = list(pool.map(lambda run: execute(native, run), runs))
     elapsed = time.perf_counter() - started
-    failures = [f"{run.fmt} {run.mutation.label} ({run.file}): {problem}"
-                for run, problem in zip(runs, problems) if problem is not None]
+    failures = [f"{run.fmt} {run.mutation.label} ({run.file}): {outcome.problem}"
+                for run, outcome in zip(runs, outcomes) if outcome.problem is not None]
+    # One reader of sequence.json: the Python package refuses exactly the files native refuses.
+    sequences = [(run, outcome) for run, outcome in zip(runs, outcomes) if run.fmt == "sequence"]
+    failures += [f"sequence {run.mutation.label} ({run.file}): {disagreement}" for run, outcome in sequences
+                 if (disagreement := tools_disagree(run, outcome.refused)) is not None]
+    refused = sum(outcome.refused for _, outcome in sequences)
+    assert 0 < refused < len(sequences), "the sequence mutants must include files both tools read and refuse"
     print(f"\nran calibproj-native on {len(runs)} mutated files ("
-          + ", ".join(f"{fmt} {len(items)}" for fmt, items in mutations.items()) + f") in {elapsed:.1f} s")
+          + ", ".join(f"{fmt} {len(items)}" for fmt, items in mutations.items()) + f") in {elapsed:.1f} s; "
+          f"of the sequence files both tools refuse {refused} and read {len(sequences) - refused}")
     assert not failures, f"{len(failures)} of {len(runs)} runs misbehaved:\n" + "\n".join(failures)
 
 

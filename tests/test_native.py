@@ -196,9 +196,10 @@ def room(tmp_path_factory) -> Path:
     return out
 
 
-def detect_args(room: Path, videos: Path, out: Path) -> list[str]:
+def detect_args(room: Path, videos: Path, out: Path, intrinsics: Path | None = None) -> list[str]:
     return ["detect", str(videos), "--sequence", str(room / "sequence" / "sequence.json"),
-            "--intrinsics", str(room / "room" / "intrinsics"), "--out", str(out / "tracks.json"), "--no-progress"]
+            "--intrinsics", str(intrinsics or room / "room" / "intrinsics"), "--out", str(out / "tracks.json"),
+            "--no-progress"]
 
 
 def timed(run, *args: str) -> tuple[subprocess.CompletedProcess, float]:
@@ -213,12 +214,17 @@ def test_native_and_python_detect_the_same_tracks(room: Path, tmp_path: Path) ->
     shutil.copytree(room / "room" / "videos", videos)
     first = sorted(videos.iterdir())[0]
     shutil.copy(first, videos / f"stray{first.suffix}")
+    # Two intrinsics files for one camera (.json and .YAML): both tools fail that camera.
+    intrinsics = tmp_path / "intrinsics"
+    shutil.copytree(room / "room" / "intrinsics", intrinsics)
+    doubled = sorted(intrinsics.iterdir())[-1]
+    shutil.copy(doubled, doubled.with_suffix(".YAML"))
     # Default options (regions of interest): each pattern is planned from the detections
     # of the patterns before it, absorbed in order, so the result does not depend on
     # thread timing and both commands write the same bytes.
-    python, python_s = timed(run_python, *detect_args(room, videos, tmp_path / "python"))
+    python, python_s = timed(run_python, *detect_args(room, videos, tmp_path / "python", intrinsics))
     assert python.returncode == 0, python.stderr
-    native, native_s = timed(run_native, *detect_args(room, videos, tmp_path / "native"))
+    native, native_s = timed(run_native, *detect_args(room, videos, tmp_path / "native", intrinsics))
     assert native.returncode == 0, native.stderr
     print(f"detect on the small room: python {python_s:.2f} s, native {native_s:.2f} s")
 
@@ -246,6 +252,7 @@ def test_native_and_python_detect_the_same_tracks(room: Path, tmp_path: Path) ->
         for camera in report["cameras"].values():
             camera.pop("seconds", None)
     assert report_cc == report_py
+    assert "a second intrinsics file for camera" in report_cc["cameras"][doubled.stem]["error"]
     assert "camera stray: " in native.stderr
     # Written atomically under the lock: no temporary or lock file stays beside them.
     assert sorted(p.name for p in (tmp_path / "native").iterdir()) == ["detect_report.json", "tracks.json"]
@@ -340,3 +347,25 @@ def test_native_detect_takes_every_ingest_option() -> None:
     help_text = run_native("detect", "--help").stdout
     for field in dataclasses.fields(IngestOptions):
         assert "--" + field.name.replace("_", "-") in help_text, field.name
+
+
+def test_detect_runs_into_one_folder_keep_a_report_each(tmp_path: Path) -> None:
+    from fuzz_inputs import dumps, make_inputs
+
+    inputs = make_inputs(tmp_path / "inputs", seed=3)
+    (tmp_path / "sequence.json").write_bytes(dumps(inputs.sequence))
+    intrinsics = tmp_path / "intrinsics"
+    intrinsics.mkdir()
+    for name in ("cam0", "cam1"):
+        (intrinsics / f"{name}.json").write_bytes(dumps(inputs.detect_intrinsics))
+    out = tmp_path / "out"
+    for run, name in ((run_python, "first"), (run_native, "second"), (run_python, "tracks")):
+        # The noise videos hold no light code: every camera fails (status 1), all is written.
+        result = run("detect", str(inputs.videos), "--sequence", str(tmp_path / "sequence.json"),
+                     "--intrinsics", str(intrinsics), "--out", str(out / f"{name}.json"), "--no-progress")
+        assert result.returncode == 1, result.stderr
+    assert sorted(p.name for p in out.iterdir()) == [
+        "detect_report.json", "first.detect_report.json", "first.json", "second.detect_report.json", "second.json",
+        "tracks.json"]
+    for report in out.glob("*detect_report.json"):
+        assert json.loads(report.read_text())["schema"] == "calibproj.detect_report/1"

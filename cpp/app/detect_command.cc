@@ -40,8 +40,6 @@ namespace fs = std::filesystem;
 namespace {
 
 const std::vector<std::string> kVideoSuffixes = {".mp4", ".mov", ".mkv", ".avi", ".m4v", ".mts", ".webm"};
-const std::vector<std::string> kIntrinsicsSuffixes = {".json", ".yaml", ".yml", ".xml"};
-const char kReportName[] = "detect_report.json";
 
 std::string Trim(const std::string& text) {
   const auto first = text.find_first_not_of(" \t");
@@ -210,15 +208,9 @@ std::map<std::string, fs::path> VideoPaths(const fs::path& folder) {
 
 // The camera's intrinsics file, read; InputError with the message the camera reports.
 CameraIntrinsics IntrinsicsFor(const fs::path& folder, const std::string& name, std::string* source) {
-  if (!fs::is_directory(folder)) throw InputError(folder.string() + ": no such intrinsics folder");
-  std::vector<fs::path> candidates;
-  for (const auto& suffix : kIntrinsicsSuffixes) candidates.push_back(folder / (name + suffix));
-  const auto found = std::find_if(candidates.begin(), candidates.end(), [](const fs::path& p) {
-    return fs::is_regular_file(p);
-  });
-  if (found == candidates.end()) throw InputError(formats::MissingIntrinsicsFile(folder, name));
-  *source = found->string();
-  return ReadIntrinsics(*found);
+  const fs::path path = formats::IntrinsicsFileOf(folder, name);
+  *source = path.string();
+  return ReadIntrinsics(path);
 }
 
 ingest::CameraModel CameraModelFrom(const CameraIntrinsics& in, const std::string& source) {
@@ -334,7 +326,8 @@ std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** comm
   CLI::App* cmd = app.add_subcommand(
       "detect",
       "Synchronise camera videos with the projection sequence and detect the MSMs: writes --out (tracks.json) and, "
-      "next to it, detect_report.json. A camera that fails is reported; the others still give tracks. Exit status 1 "
+      "next to it, its report (detect_report.json beside tracks.json, NAME.detect_report.json beside any other "
+      "NAME.json). A camera that fails is reported; the others still give tracks. Exit status 1 "
       "when every camera failed.");
   cmd->add_option("videos", args->videos, "folder of camera videos (<camera>.mp4)")->required()->type_name("VIDEOS_DIR");
   cmd->add_option("--sequence", args->sequence, "sequence.json of the projection")->required()->type_name("FILE");
@@ -382,8 +375,7 @@ int RunDetect(const DetectArguments& arguments, Interrupts& interrupts) {
   const nlohmann::ordered_json report = DetectReport(outcomes, arguments.sequence, sequence);
   output.Write([&](const fs::path& out) {
     WriteTracks(out, TracksFrom(outcomes, sequence.markers_per_array));
-    const fs::path folder = out.has_parent_path() ? out.parent_path() : fs::path(".");
-    AtomicWrite(folder / kReportName, DumpSchemaJson("detect_report", 1, report));
+    AtomicWrite(formats::DetectReportPath(arguments.out), DumpSchemaJson("detect_report", 1, report));
   });
   output.Close();
   std::cout << (arguments.json ? report.dump(1) : FormatDetectReport(report)) << "\n";

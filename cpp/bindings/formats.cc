@@ -10,12 +10,15 @@
 #include <filesystem>
 
 #include "calibproj/formats/calibration.h"
+#include "calibproj/formats/detect_report.h"
 #include "calibproj/formats/export.h"
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/earlier_observations.h"
 #include "calibproj/formats/intrinsics_file.h"
 #include "calibproj/formats/scale.h"
+#include "calibproj/formats/sequence_file.h"
 #include "convert.h"
+#include "json_convert.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -260,6 +263,20 @@ void register_formats(py::module_& m) {
       },
       py::arg("text"), py::arg("name"),
       "The fields of an Intrinsics from the JSON text of our format's body; ValueError with the problem");
+  m.def("intrinsics_files", &formats::IntrinsicsFilesIn, py::arg("directory"),
+        "Camera name -> its intrinsics files in the folder (.json, .yaml, .yml, .xml; sorted); InputError when "
+        "the folder does not exist or holds none");
+  m.def("intrinsics_file", &formats::IntrinsicsFileOf, py::arg("directory"), py::arg("name"),
+        "The one intrinsics file of camera `name` in the folder; InputError naming the missing or second file");
+  m.def("detect_report_path", &formats::DetectReportPath, py::arg("tracks"),
+        "The detect report beside a tracks file: detect_report.json for tracks.json, NAME.detect_report.json "
+        "for any other NAME.json");
+  m.def(
+      "read_sequence",
+      [](const std::filesystem::path& path) { return JsonToPython(formats::ReadSequenceFile(path).document); },
+      py::arg("path"),
+      "The document of a sequence.json that the core accepts (the one reader of the format); InputError "
+      "naming the file and the problem");
   m.def(
       "read_tracks", [](const std::filesystem::path& path) { return TracksDict(formats::ReadTracks(path)); },
       py::arg("path"), "The fields of a Tracks from tracks.json; InputError naming the file and the problem");

@@ -11,10 +11,11 @@
 #include <vector>
 
 #include "calibproj/formats/detect_report.h"
+#include "calibproj/formats/sequence_file.h"
 #include "calibproj/ingest/camera_ingest.h"
 #include "checks.h"
 #include "ingest_options.h"
-#include "calibproj/formats/detect_report.h"
+#include "json_convert.h"
 #include "registry.h"
 #include "sync_convert.h"
 
@@ -24,62 +25,15 @@ namespace calibproj::bindings {
 
 namespace {
 
-ingest::PatternSpec PatternFromDict(const py::handle& d, const std::string& what) {
-  ingest::PatternSpec p;
-  p.array = DictItem<int>(d, "array", what);
-  p.scale_index = DictItem<int>(d, "scale_index", what);
-  p.scale = DictItem<double>(d, "scale", what);
-  p.marker_side_px = DictItem<double>(d, "marker_side_px", what);
-  p.first_frame = DictItem<int>(d, "first_frame", what);
-  p.last_frame = DictItem<int>(d, "last_frame", what);
-  p.omitted = DictItem<std::vector<int>>(d, "omitted", what);
-  return p;
-}
-
-// The items of d[key], which must be a list.
-py::list ListItem(const py::handle& d, const char* key, const std::string& what) {
-  return DictItem<py::list>(d, key, what);
-}
-
+// The body of sequence.json as Sequence.to_dict() gives it, read by the one reader of
+// the format (the messages say "sequence: at patterns/0: ...").
 ingest::SequenceDescription SequenceFromDict(const py::dict& d) {
-  ingest::SequenceDescription s;
-  const py::dict markers = DictItem<py::dict>(d, "markers", "sequence");
-  const py::dict projector = DictItem<py::dict>(d, "projector", "sequence");
-  const py::dict layout = DictItem<py::dict>(d, "layout", "sequence");
-  const py::dict codes = DictItem<py::dict>(d, "codes", "sequence");
-  s.markers = DictItem<std::string>(markers, "spec", "sequence['markers']");
-  s.inverted = DictItem<bool>(markers, "inverted", "sequence['markers']");
-  const auto resolution = DictItem<std::vector<int>>(projector, "resolution", "sequence['projector']");
-  if (resolution.size() != 2) throw std::invalid_argument("sequence: projector resolution must be [width, height]");
-  s.projector_width = resolution[0];
-  s.projector_height = resolution[1];
-  s.fps = DictItem<double>(projector, "fps", "sequence['projector']");
-  s.scales = DictItem<std::vector<double>>(layout, "scales", "sequence['layout']");
-  s.marker_px = DictItem<double>(layout, "marker_px", "sequence['layout']");
-  const auto centres = DictItem<std::vector<std::vector<std::vector<double>>>>(d, "centres", "sequence");
-  s.arrays = static_cast<int>(centres.size());
-  s.markers_per_array = centres.empty() ? 0 : static_cast<int>(centres[0].size());
-  for (const auto& array : centres) {
-    if (static_cast<int>(array.size()) != s.markers_per_array) {
-      throw std::invalid_argument("sequence: every array needs the same number of centres");
-    }
-    for (const auto& xy : array) {
-      if (xy.size() != 2) throw std::invalid_argument("sequence: centres must be [x, y] pairs");
-      s.centres.emplace_back(xy[0], xy[1]);
-    }
+  const nlohmann::json document = PythonToJson(d, "sequence");
+  try {
+    return formats::SequenceFromDocument(document);
+  } catch (const std::invalid_argument& error) {
+    throw std::invalid_argument(std::string("sequence: ") + error.what());
   }
-  for (const auto& p : ListItem(d, "patterns", "sequence")) {
-    s.patterns.push_back(PatternFromDict(p, "sequence['patterns'][" + std::to_string(s.patterns.size()) + "]"));
-  }
-  for (const auto& seg : ListItem(d, "segments", "sequence")) {
-    const std::string what = "sequence['segments'][" + std::to_string(s.segments.size()) + "]";
-    s.segments.push_back({DictItem<std::string>(seg, "kind", what), DictItem<int>(seg, "first_frame", what),
-                          DictItem<int>(seg, "last_frame", what)});
-  }
-  s.start_code = LightCodeFromDict(DictItem<py::dict>(codes, "start", "sequence['codes']"), "sequence start code");
-  s.end_code = LightCodeFromDict(DictItem<py::dict>(codes, "end", "sequence['codes']"), "sequence end code");
-  s.Check();
-  return s;
 }
 
 ingest::CameraModel CameraFromArrays(const DoubleArray& K, const DoubleArray& dist,
@@ -192,7 +146,7 @@ py::dict ResultDict(const ingest::CameraIngestResult& r, const ingest::SequenceD
   py::dict d;
   // The camera's entry of detect_report.json, built where calibproj-native builds it
   // (JSON text: doubles written to 17 digits read back exactly).
-  d["report"] = py::module_::import("json").attr("loads")(formats::CameraResultSummary(r, sequence).dump());
+  d["report"] = JsonToPython(formats::CameraResultSummary(r, sequence));
   d["video"] = py::dict(py::arg("path") = r.video.path, py::arg("width") = r.video.width,
                         py::arg("height") = r.video.height, py::arg("fps") = r.video.fps,
                         py::arg("declared_fps") = r.video.declared_fps, py::arg("timed") = r.video.timed,

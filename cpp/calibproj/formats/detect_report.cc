@@ -140,4 +140,10 @@ std::string FormatDetectReport(const ordered_json& report) {
   return text;
 }
 
+std::filesystem::path DetectReportPath(const std::filesystem::path& tracks) {
+  const std::filesystem::path folder = tracks.has_parent_path() ? tracks.parent_path() : std::filesystem::path(".");
+  const std::string stem = tracks.stem().string();
+  return folder / (stem == "tracks" ? std::string("detect_report.json") : stem + ".detect_report.json");
+}
+
 }  // namespace calibproj::formats

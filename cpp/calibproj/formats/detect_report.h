@@ -2,6 +2,7 @@
 // detect_report.json (calibproj.detect_report/1) and the printed summary of the detect
 // command, in the layout of the Python package (calibproj.ingest.CameraIngest.summary).
 
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -30,6 +31,11 @@ nlohmann::ordered_json CameraResultSummary(const ingest::CameraIngestResult& res
 // The body of detect_report.json.
 nlohmann::ordered_json DetectReport(const std::vector<CameraOutcome>& cameras, const std::string& sequence_source,
                                     const ingest::SequenceDescription& sequence);
+
+// The report beside a tracks file: detect_report.json for tracks.json (a results
+// folder's name), <stem>.detect_report.json for any other, so that detect runs into
+// one folder keep a report each.
+std::filesystem::path DetectReportPath(const std::filesystem::path& tracks);
 
 // Per camera: sync, frames, markers per scale, MSMs kept (or the error).
 std::string FormatDetectReport(const nlohmann::ordered_json& report);

@@ -210,7 +210,7 @@ std::string MissingIntrinsicsFile(const fs::path& folder, const std::string& nam
          " (also looked for " + others + ")";
 }
 
-IntrinsicsDir LoadIntrinsicsDir(const fs::path& directory) {
+std::map<std::string, std::vector<fs::path>> IntrinsicsFilesIn(const fs::path& directory) {
   if (!fs::is_directory(directory)) throw InputError(directory.string() + ": no such intrinsics directory");
   std::vector<fs::path> files;
   for (const auto& entry : fs::directory_iterator(directory)) {
@@ -220,18 +220,37 @@ IntrinsicsDir LoadIntrinsicsDir(const fs::path& directory) {
       files.push_back(entry.path());
     }
   }
-  std::sort(files.begin(), files.end());
   if (files.empty()) throw InputError(directory.string() + ": no intrinsics files (*.json, *.yaml, *.yml, *.xml)");
+  std::sort(files.begin(), files.end());
+  std::map<std::string, std::vector<fs::path>> by_camera;
+  for (const auto& path : files) by_camera[path.stem().string()].push_back(path);
+  return by_camera;
+}
+
+namespace {
+
+fs::path OnlyFile(const fs::path& directory, const std::string& name,
+                  const std::map<std::string, std::vector<fs::path>>& files) {
+  const auto found = files.find(name);
+  if (found == files.end()) throw InputError(MissingIntrinsicsFile(directory, name));
+  if (found->second.size() > 1) {
+    throw InputError(found->second[1].string() + ": a second intrinsics file for camera " + PythonRepr(name));
+  }
+  return found->second.front();
+}
+
+}  // namespace
+
+fs::path IntrinsicsFileOf(const fs::path& directory, const std::string& name) {
+  return OnlyFile(directory, name, IntrinsicsFilesIn(directory));
+}
+
+IntrinsicsDir LoadIntrinsicsDir(const fs::path& directory) {
+  const auto files = IntrinsicsFilesIn(directory);
   IntrinsicsDir out;
-  for (const auto& path : files) {
-    const std::string name = path.stem().string();
-    if (out.cameras.count(name) || out.unusable.count(name)) {
-      out.cameras.erase(name);
-      out.unusable[name] = path.string() + ": a second intrinsics file for camera '" + name + "'";
-      continue;
-    }
+  for (const auto& [name, unused] : files) {
     try {
-      out.cameras[name] = ReadIntrinsics(path);
+      out.cameras[name] = ReadIntrinsics(OnlyFile(directory, name, files));
     } catch (const InputError& error) {
       out.unusable[name] = error.what();
     }

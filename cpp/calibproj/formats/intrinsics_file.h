@@ -39,6 +39,15 @@ CameraIntrinsics IntrinsicsFromDocument(const nlohmann::json& document, const st
 // camera '<name>' (also looked for <name>.yaml, <name>.yml, <name>.xml)".
 std::string MissingIntrinsicsFile(const std::filesystem::path& folder, const std::string& name);
 
+// The intrinsics files of a folder (.json, .yaml, .yml, .xml, the suffix in any case),
+// sorted, keyed by camera name (the file stem; one file per camera, normally).
+// InputError when the folder does not exist or holds no intrinsics file at all.
+std::map<std::string, std::vector<std::filesystem::path>> IntrinsicsFilesIn(const std::filesystem::path& directory);
+
+// The one intrinsics file of camera `name` in `directory` (the one lookup of both tools);
+// InputError naming the folder, the missing file or the second file of that camera.
+std::filesystem::path IntrinsicsFileOf(const std::filesystem::path& directory, const std::string& name);
+
 // The intrinsics files of a folder, keyed by camera name (the file stem). A file that
 // cannot be used (malformed, or a second file for one camera) fails its own camera only.
 struct IntrinsicsDir {

@@ -7,7 +7,8 @@ markers are detected (in regions of interest once the camera's projector-to-imag
 homography is known), undistorted with --intrinsics DIR/<camera>.json and their centres
 merged over the scales.
 
-Writes --out (tracks.json) and, next to it, detect_report.json (per camera: sync offset
+Writes --out (tracks.json) and, next to it, its report (detect_report.json beside
+tracks.json, NAME.detect_report.json beside any other NAME.json; per camera: sync offset
 and rate, frames used, markers detected per scale, MSMs kept, or why the camera
 failed), and prints the summary. A camera that fails is reported; the others still
 give tracks. Exit status 1 when every camera failed. --out is checked (and locked
@@ -21,9 +22,6 @@ import argparse
 
 from calibproj.commands.options import (add_dataclass_arguments, add_exposure_argument, dataclass_from_args,
                                         parse_exposures)
-
-REPORT_NAME = "detect_report.json"
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from calibproj.ingest import DEFAULT_WORKERS
@@ -48,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from calibproj import ingest
+    from calibproj import _core, ingest
     from calibproj.ingest_options import IngestOptions
     from calibproj.io.output_folder import OutputFile
 
@@ -60,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
                                progress=not args.no_progress, exposures=exposures)
         with output.writing() as out:
             result.tracks.write(out)
-            result.write_report(out.parent / REPORT_NAME)
+            result.write_report(_core.formats.detect_report_path(out))
     report = result.report()
     print(json.dumps(report, indent=1) if args.json else format_report(report))
     return 0 if len(result.failed) < len(result.cameras) else 1

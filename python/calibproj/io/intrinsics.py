@@ -38,8 +38,6 @@ DISTORTION_LENGTHS = (4, 5, 8, 12, 14)
 UNDISTORT_EPS_PX = 1e-9
 UNDISTORT_MAX_ITERATIONS = 200
 
-YAML_SUFFIXES = (".yaml", ".yml", ".xml")
-INTRINSICS_SUFFIXES = (".json", *YAML_SUFFIXES)
 
 # Image sides the C++ core takes (calibproj/common/limits.h, kMaxImageSide), pixels.
 MAX_IMAGE_SIDE = 1 << 16
@@ -269,12 +267,12 @@ def intrinsics_of_cameras(
         return found, {name: f"no intrinsics for camera {name!r} (cameras with intrinsics: {known})"
                        for name in names if name not in source}
     directory = Path(source)
-    files = _intrinsics_files(directory)
+    _intrinsics_files(directory)  # the folder exists and holds intrinsics files
     cameras: dict[str, Intrinsics] = {}
     unusable: dict[str, str] = {}
     for name in names:
         try:
-            cameras[name] = read_intrinsics(_only_file(directory, name, files.get(name, [])), name)
+            cameras[name] = read_intrinsics(intrinsics_file(directory, name), name)
         except FormatError as error:
             unusable[name] = str(error)
     return cameras, unusable
@@ -284,39 +282,33 @@ def has_intrinsics_file(source: Mapping[str, Intrinsics] | str | os.PathLike, na
     """Whether ``source`` (a mapping or a folder) has intrinsics, good or bad, for ``name``."""
     if isinstance(source, Mapping):
         return name in source
-    directory = Path(source)
-    return directory.is_dir() and any((directory / f"{name}{suffix}").is_file() for suffix in INTRINSICS_SUFFIXES)
+    try:
+        return name in _intrinsics_files(source)
+    except FormatError:  # no folder, or none of its files is an intrinsics file
+        return False
 
 
 def intrinsics_file(directory: str | os.PathLike, name: str) -> Path:
-    """The one intrinsics file of camera ``name`` in ``directory``; FormatError naming
-    the folder or the file when there is none, or more than one."""
-    directory = Path(directory)
-    return _only_file(directory, name, _intrinsics_files(directory).get(name, []))
+    """The one intrinsics file of camera ``name`` in ``directory`` (the C++ core's lookup,
+    which calibproj-native uses too); FormatError naming the folder or the file when
+    there is none, or more than one."""
+    from calibproj import _core
+
+    try:
+        return Path(_core.formats.intrinsics_file(Path(directory), name))
+    except ValueError as error:
+        raise FormatError(str(error)) from None
 
 
 def _intrinsics_files(directory: str | os.PathLike) -> dict[str, list[Path]]:
     """Camera name -> its intrinsics files in ``directory`` (one, normally)."""
-    directory = Path(directory)
-    if not directory.is_dir():
-        raise FormatError(f"{directory}: no such intrinsics directory")
-    files: dict[str, list[Path]] = {}
-    for path in sorted(directory.iterdir()):
-        if path.is_file() and path.suffix.lower() in INTRINSICS_SUFFIXES:
-            files.setdefault(path.stem, []).append(path)
-    if not files:
-        raise FormatError(f"{directory}: no intrinsics files (*.json, *.yaml, *.yml, *.xml)")
-    return files
+    from calibproj import _core
 
-
-def _only_file(directory: Path, name: str, paths: list[Path]) -> Path:
-    if len(paths) == 1:
-        return paths[0]
-    if paths:
-        raise FormatError(f"{paths[1]}: a second intrinsics file for camera {name!r}")
-    others = ", ".join(f"{name}{suffix}" for suffix in INTRINSICS_SUFFIXES[1:])
-    raise FormatError(f"{directory / f'{name}.json'}: no intrinsics file for camera {name!r} "
-                      f"(also looked for {others})")
+    try:
+        files = _core.formats.intrinsics_files(Path(directory))
+    except ValueError as error:
+        raise FormatError(str(error)) from None
+    return {name: [Path(path) for path in paths] for name, paths in files.items()}
 
 
 def intrinsics_from_json(document: Any, name: str, where: str | os.PathLike) -> Intrinsics:

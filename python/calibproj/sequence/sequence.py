@@ -16,6 +16,7 @@ import bisect
 import functools
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,16 +24,14 @@ import numpy as np
 from calibproj.sequence.codes import LightCode
 from calibproj.sequence.layout import MsmLayout
 from calibproj.sequence.raster import draw_cells
-from calibproj.sequence.schema import KIND, MAJOR, SEQUENCE_SCHEMA
-from calibproj.io.json_values import describe
-from calibproj.io.jsonio import FormatError, read_json, write_json
+from calibproj.io.jsonio import FormatError, write_json
 
+KIND = "sequence"  # the schema tag calibproj.sequence/1
+MAJOR = 1
 SEGMENT_KINDS = ("white", "black", "start_code", "end_code", "patterns")
 # Patterns kept rendered per sequence: consecutive frames mostly share one pattern, so
 # a few suffice for renderers that walk the timeline (one 1080p pattern is 2 MB).
 DEFAULT_PATTERN_CACHE = 8
-# Longest schema message kept, in characters (a message is one line to read).
-MAX_MESSAGE = 300
 
 
 @dataclass(frozen=True)
@@ -284,22 +283,18 @@ class Sequence:
     @classmethod
     def load(cls, path: str | os.PathLike) -> Sequence:
         """Read and check a ``sequence.json``; :class:`FormatError` (a ValueError) naming
-        the file for another kind of file, a newer schema or inconsistent content."""
-        import jsonschema
+        the file for another kind of file, a newer schema or inconsistent content.
 
-        document = read_json(path, KIND, MAJOR)
+        The C++ core reads and checks the file (the one reader of the format, which
+        ``calibproj-native`` uses too), so both tools accept exactly the same files.
+        """
+        from calibproj import _core
+
         try:
-            jsonschema.validate(document, SEQUENCE_SCHEMA)
-        except jsonschema.ValidationError as error:
-            where = "/".join(str(p) for p in error.absolute_path) or "top level"
-            raise FormatError(f"{path}: invalid sequence file at {where}: {_schema_message(error)}") from None
-        try:
-            sequence = cls.from_dict(document)
-            sequence.validate()
-            _check_with_core(sequence)
+            document = _core.formats.read_sequence(Path(path))
         except ValueError as error:
-            raise FormatError(f"{path}: invalid sequence file: {error}") from None
-        return sequence
+            raise FormatError(str(error)) from None
+        return cls.from_dict(document)
 
     # --------------------------------------------------------------- validation
 
@@ -309,25 +304,6 @@ class Sequence:
         _check_segments(self.segments)
         _check_codes(self)
         _check_patterns(self)
-
-
-def _schema_message(error: Any) -> str:
-    """jsonschema's message with the offending value as JSON writes it, shortened (it
-    may be megabytes)."""
-    message = error.message.replace(repr(error.instance), describe(error.instance))
-    return message if len(message) <= MAX_MESSAGE else message[:MAX_MESSAGE] + "..."
-
-
-def _check_with_core(sequence: Sequence) -> None:
-    """The C++ core's checks of a sequence (its limits: projector frame rate and size,
-    frame count, marker family, ...), so that a file the ingest would refuse for every
-    camera is refused once, here, naming the file."""
-    from calibproj import _core
-
-    try:
-        _core.ingest.light_levels(sequence.to_dict())
-    except (ValueError, TypeError) as error:
-        raise ValueError(str(error).removeprefix("sequence: ")) from None
 
 
 def _check_centres(sequence: Sequence) -> None:
