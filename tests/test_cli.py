@@ -172,3 +172,29 @@ def test_readme_documents_the_exit_status() -> None:
     assert section, "README has no Exit status section"
     for code in (EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED):
         assert re.search(rf"^- `{code}`", section.group(1), re.MULTILINE), code
+
+
+def test_ctrl_c_at_any_moment_of_the_start_gives_one_line(tmp_path: Path) -> None:
+    """Found by probing: Ctrl-C in the first 0.3 s (while the package was imported)
+    printed a traceback."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    for index, delay in enumerate((0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 0.8)):
+        process = subprocess.Popen([sys.executable, "-m", "calibproj", "generate", "--out", str(tmp_path / str(index))],
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        time.sleep(delay)
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=120)
+        # The interpreter's own start (its import machinery) may still report the signal
+        # it could not deliver ("Exception ignored in ..."); no frame of the package may.
+        assert 'calibproj' not in "".join(line for line in stderr.splitlines() if line.strip().startswith("File ")), \
+            (delay, stderr)
+        if "Fatal Python error: init_import_site" in stderr:
+            continue  # the interpreter's own start, before any of the package runs
+        # Before the interpreter has its handler the signal ends it as it ends any program.
+        assert process.returncode in (EXIT_INTERRUPTED, -signal.SIGINT, EXIT_OK), (delay, stderr)
+        if process.returncode == EXIT_INTERRUPTED:
+            assert stderr.strip().splitlines()[-1].endswith("interrupted"), (delay, stderr)

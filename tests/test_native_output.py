@@ -4,13 +4,17 @@ on one output exclude each other), the same refusals in one line, the same exit 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import resource
 import shutil
 import signal
 import subprocess
+import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -268,3 +272,66 @@ def test_bad_invocations_exit_with_status_2() -> None:
     assert run_native("calibrate", "--no-such-option").returncode == EXIT_USAGE
     assert run_native().returncode == EXIT_USAGE
     assert run_native("calibrate", "--help").returncode == 0
+
+
+@contextlib.contextmanager
+def immutable(path: Path) -> Iterator[None]:
+    """``path`` with the immutable flag (chattr +i) for the block; the test is skipped
+    where the flag cannot be set (no CAP_LINUX_IMMUTABLE, a file system without it)."""
+    if shutil.which("chattr") is None:
+        pytest.skip("no chattr")
+    if subprocess.run(["chattr", "+i", str(path)], capture_output=True).returncode != 0:
+        pytest.skip("chattr +i is not permitted here")
+    try:
+        yield
+    finally:
+        subprocess.run(["chattr", "-i", str(path)], check=True)
+
+
+def test_an_output_that_cannot_be_replaced_is_found_before_the_work(small: Path, tmp_path: Path) -> None:
+    """Found by probing: an immutable results folder was found after the ingest,
+    registration and report, in both tools. The inputs here do not exist, so a message
+    about them would mean the work had started."""
+    out = tmp_path / "results"
+    assert run_native(*calibrate_args(small, out)).returncode == 0
+    tracks = tmp_path / "tracks.json"
+    tracks.write_text("{}")
+    missing_tracks = ["calibrate", "--tracks", str(tmp_path / "none.json"), "--intrinsics", str(small / "intrinsics"),
+                      "--out", str(out), "--force"]
+    with immutable(out), immutable(tracks):
+        for args in (missing_tracks, [*detect_args(tmp_path, tracks), "--force"]):
+            python, native = run_python(*args), run_native(*args)
+            assert python.returncode == native.returncode == EXIT_USAGE, (python.stderr, native.stderr)
+            assert error_line(native) == error_line(python)
+            assert error_line(native).endswith("cannot be replaced (it is immutable or append-only; "
+                                               "chattr -i -a lifts that)"), error_line(native)
+        assert siblings(out) == [] and siblings(tracks) == []
+
+
+def test_a_file_size_limit_fails_the_run_cleanly(small: Path, tmp_path: Path) -> None:
+    """Found by probing: under `ulimit -f` calibproj-native died of SIGXFSZ, leaving its
+    lock and staging folder."""
+    def limited() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096))
+
+    for tool in (NATIVE, None):
+        out = tmp_path / ("native" if tool else "python")
+        command = [str(tool)] if tool else [sys.executable, "-m", "calibproj"]
+        result = subprocess.run([*command, *calibrate_args(small, out)], capture_output=True, text=True,
+                                preexec_fn=limited, timeout=300)
+        assert result.returncode == EXIT_USAGE, result.stderr
+        assert "File too large" in error_line(result), result.stderr
+        assert not out.exists() and siblings(out) == []
+
+
+def test_a_failed_run_leaves_no_folder_it_made_for_its_output(small: Path, tmp_path: Path) -> None:
+    """Found by probing: a failed `detect` left its empty output folder behind."""
+    (tmp_path / "kept").mkdir()
+    for tool in (run_python, run_native):
+        for out in (tmp_path / "new" / "deeper" / "tracks.json", tmp_path / "kept" / "new" / "tracks.json"):
+            result = tool(*detect_args(tmp_path, out))
+            assert result.returncode == EXIT_USAGE and "no-" in error_line(result), result.stderr
+        result = tool("calibrate", "--tracks", str(tmp_path / "none.json"), "--intrinsics", str(small / "intrinsics"),
+                      "--out", str(tmp_path / "made" / "results"))
+        assert result.returncode == EXIT_USAGE and "none.json" in error_line(result), result.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["kept"] and not any((tmp_path / "kept").iterdir())

@@ -144,6 +144,15 @@ def relabel_points(tracks: Tracks, cameras: list[str], offset: int) -> Tracks:
     )
 
 
+def test_a_lone_camera_is_told_it_needs_a_second() -> None:
+    sim = simulate_tracks("small", None, noise_px=0.5, seed=5)
+    names = np.asarray(sim.tracks.camera_names)[sim.tracks.camera_index]
+    lone = sim.tracks.camera_names[0]
+    calibration = calibrate(sim.tracks.select(names == lone), sim.intrinsics)
+    assert calibration.failed[lone].startswith("the only camera with observations (a calibration needs two")
+    assert all(calibration.failed[name] == "no observations" for name in sim.tracks.camera_names[1:])
+
+
 def test_disconnected_group_and_camera_with_too_few_points_are_reported() -> None:
     sim = simulate_tracks("paper", None, noise_px=0.5, seed=5)
     tracks = relabel_points(sim.tracks, ["far5", "far6"], offset=1_000_000)

@@ -149,6 +149,8 @@ def test_refine_request_parsing() -> None:
         RefineRequest.parse("focal,k9")
     with pytest.raises(ValueError, match="given twice"):
         RefineRequest.parse(["far1=focal", "far1=k1"])
+    with pytest.raises(ValueError, match="'none' stands alone"):
+        RefineRequest.parse("focal,none")
     with pytest.raises(ValueError, match="no entry named"):
         RefineRequest.parse("far1=")
     with pytest.raises(ValueError, match="no camera named 'nobody'"):

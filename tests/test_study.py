@@ -50,8 +50,10 @@ def square(value: int) -> int:
 def test_local_pool_keeps_the_order_and_cluster_addresses_are_checked() -> None:
     assert run_all(square, list(range(7)), workers=2) == [v * v for v in range(7)]
     assert run_all(square, [3], workers=1) == [9]
-    with pytest.raises(ValueError, match="expected ray://HOST:PORT"):
-        run_all(square, [1], cluster="http://scheduler:8786")
+    for address in ("http://scheduler:8786", "tcp://scheduler:port", "tcp://scheduler", "ray://:10001",
+                    "tcp://scheduler:70000"):
+        with pytest.raises(ValueError, match="expected ray://HOST:PORT"):  # not the engine's own parse error
+            run_all(square, [1], cluster=address)
 
 
 def test_recommendation_follows_the_measurements() -> None:

@@ -5,6 +5,7 @@ is the grey level of the frames that were encoded, whatever the pixel format and
 from __future__ import annotations
 
 import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -90,3 +91,19 @@ def test_a_truncated_video_gives_the_frames_before_the_cut(tmp_path: Path) -> No
     # The frames before the cut are intact (the last one may be partly decoded).
     whole = _core.video.luma_signal(str(path), 1.0, 1)
     np.testing.assert_allclose(signal[:-1], whole[: len(signal) - 1], rtol=0, atol=1e-12)
+
+
+def test_ffmpeg_speaks_only_through_the_one_error_line(tmp_path: Path) -> None:
+    """Found by probing: FFmpeg's own log lines ("moov atom not found") reached the user
+    beside calibproj's message. Its last error is now part of that message."""
+    mp4 = tmp_path / "cut.mp4"
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "lavfi", "-i", "testsrc=size=64x48:rate=25", "-frames:v",
+                    "10", "-c:v", "mpeg4", str(tmp_path / "whole.mp4")], check=True)
+    mp4.write_bytes((tmp_path / "whole.mp4").read_bytes()[:200])  # the header without its moov atom
+    script = ("from calibproj import _core\n"
+              f"try:\n    _core.video.probe({str(mp4)!r})\n"
+              "except RuntimeError as error:\n    print(error)\n")
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert result.stderr == ""
+    assert result.stdout.strip() == (f"{mp4}: cannot open the video (corrupt, truncated or not a video FFmpeg reads; "
+                                     "FFmpeg: moov atom not found)")

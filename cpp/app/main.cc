@@ -6,6 +6,7 @@
 // invocation or input, reported in one line; 130 interrupted (interrupts.h).
 
 #include <CLI/CLI.hpp>
+#include <csignal>
 #include <exception>
 #include <iostream>
 
@@ -23,6 +24,10 @@ constexpr int kExitUsage = 2;
 }  // namespace
 
 int main(int argc, char** argv) {
+  // A file size limit (ulimit -f) then fails the write with EFBIG, reported and cleaned
+  // up as a full disk is, instead of killing the process with its lock and staging
+  // folder left behind (Python ignores the signal the same way).
+  std::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{"calibproj-native: external calibration of camera networks from projected multi-scale markers"};
   app.require_subcommand(1);
   CLI::App* calibrate = nullptr;

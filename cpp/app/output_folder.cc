@@ -1,6 +1,8 @@
 #include "output_folder.h"
 
 #include <fcntl.h>
+#include <linux/fs.h>
+#include <sys/ioctl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/statvfs.h>
@@ -20,6 +22,24 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// Whether the file or folder carries the immutable or append-only flag (chattr +i, +a):
+// it cannot then be renamed or replaced, which the final move of a run would find only
+// after all the work.
+bool Unreplaceable(const fs::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC | O_NONBLOCK);
+  if (fd < 0) return false;
+  int flags = 0;
+  const bool got = ::ioctl(fd, FS_IOC_GETFLAGS, &flags) == 0;
+  ::close(fd);
+  return got && (flags & (FS_IMMUTABLE_FL | FS_APPEND_FL)) != 0;
+}
+
+void RequireReplaceable(const fs::path& path) {
+  if (Unreplaceable(path)) {
+    throw OutputError(path.string() + ": cannot be replaced (it is immutable or append-only; chattr -i -a lifts that)");
+  }
+}
+
 constexpr const char* kProbePrefix = ".calibproj-probe-";
 constexpr size_t kProbeBytes = 64 * 1024;
 constexpr const char* kPrevious = "previous";  // the previous folder, inside the folder it is moved aside to
@@ -32,6 +52,28 @@ fs::filesystem_error ErrnoError(const std::string& what, const fs::path& path) {
 
 // Python's Path.parent: "." for a name without a folder.
 fs::path ParentOf(const fs::path& path) { return path.has_parent_path() ? path.parent_path() : fs::path("."); }
+
+// The folders on the way to `folder` that do not exist yet, deepest first: those a run
+// creates for its output, and removes again when it ends without writing into them.
+std::vector<fs::path> MissingFolders(fs::path folder) {
+  std::vector<fs::path> missing;
+  std::error_code error;
+  while (!folder.empty() && !fs::exists(folder, error) && folder != folder.parent_path()) {
+    missing.push_back(folder);
+    folder = folder.parent_path();
+  }
+  return missing;
+}
+
+// Removes the folders that are still empty, deepest first (a folder that holds the
+// output, or anything else, stays, and so do those above it).
+void RemoveEmptyFolders(const std::vector<fs::path>& folders) noexcept {
+  for (const fs::path& folder : folders) {
+    std::error_code error;
+    if (!fs::is_directory(folder, error) || !fs::is_empty(folder, error) || error) return;
+    if (!fs::remove(folder, error)) return;
+  }
+}
 
 // The file mode bits a plain mkdir() or open() would clear.
 mode_t CurrentUmask() {
@@ -70,6 +112,16 @@ fs::path CheckParent(const fs::path& target) {
     throw OutputError(prefix + line);
   }
   return parent;
+}
+
+// CheckParent, the folders it made (`created`) removed again when it fails.
+fs::path CheckParentMade(const fs::path& target, const std::vector<fs::path>& created) {
+  try {
+    return CheckParent(target);
+  } catch (...) {
+    RemoveEmptyFolders(created);
+    throw;
+  }
 }
 
 // Writes, syncs and deletes a small file in `folder`: OutputError naming `target` if
@@ -199,7 +251,8 @@ void OutputFolder::Open() {
   const auto held = interrupts_.Hold();
   if (fs::is_symlink(path_)) path_ = Resolved(path_);
   if (fs::exists(path_) && !fs::is_directory(path_)) throw OutputError(path_.string() + ": exists and is not a folder");
-  const fs::path parent = CheckParent(path_);
+  created_ = MissingFolders(ParentOf(path_));
+  const fs::path parent = CheckParentMade(path_, created_);
   lock_.Acquire(LockFileOf(path_), path_);
   interrupts_.SetCleanup(held, [this] { Discard(); });
   try {
@@ -236,7 +289,7 @@ void OutputFolder::CheckExisting() const {
   if (!fs::is_directory(path_)) return;
   std::vector<std::string> content;
   for (const auto& entry : fs::directory_iterator(path_)) content.push_back(entry.path().filename().string());
-  if (content.empty()) return;
+  if (content.empty()) return RequireReplaceable(path_);
   std::sort(content.begin(), content.end());
   std::vector<std::string> found;
   for (const auto& name : signature_) {
@@ -247,7 +300,7 @@ void OutputFolder::CheckExisting() const {
     throw OutputError(path_.string() + ": is not empty (" + Joined(shown) + (content.size() > 4 ? ", ..." : "") +
                       ") and holds no output of this command; choose another folder");
   }
-  if (force_) return;
+  if (force_) return RequireReplaceable(path_);
   if (signature_.empty()) throw OutputError(path_.string() + ": already exists; use --force to replace it");
   throw OutputError(path_.string() + ": already holds results (" + Joined(found) + "); use --force to overwrite them");
 }
@@ -317,6 +370,7 @@ void OutputFolder::Discard() noexcept {
     staging_.clear();
   }
   lock_.Release();
+  RemoveEmptyFolders(created_);
 }
 
 // -- a single file ---------------------------------------------------------------------------
@@ -335,14 +389,16 @@ void OutputFile::Open() {
       }
     }
     if (!force_) throw OutputError(path_.string() + ": exists (use --force to replace it)");
+    RequireReplaceable(path_);
   }
-  const fs::path parent = CheckParent(path_);
+  created_ = MissingFolders(ParentOf(path_));
+  const fs::path parent = CheckParentMade(path_, created_);
   lock_.Acquire(LockFileOf(path_), path_);
-  interrupts_.SetCleanup(held, [this] { lock_.Release(); });
+  interrupts_.SetCleanup(held, [this] { Release(); });
   try {
     Probe(parent, path_);
   } catch (...) {
-    lock_.Release();
+    Release();
     interrupts_.SetCleanup(held, {});
     throw;
   }
@@ -359,8 +415,13 @@ void OutputFile::Write(const std::function<void(const fs::path& path)>& write) {
 
 void OutputFile::Close() noexcept {
   const auto held = interrupts_.Hold();
-  lock_.Release();
+  Release();
   interrupts_.SetCleanup(held, {});
+}
+
+void OutputFile::Release() noexcept {
+  lock_.Release();
+  RemoveEmptyFolders(created_);
 }
 
 }  // namespace calibproj::app

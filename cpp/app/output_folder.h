@@ -107,6 +107,7 @@ class OutputFolder {
   std::vector<std::string> signature_;
   Interrupts& interrupts_;
   OutputLock lock_;
+  std::vector<std::filesystem::path> created_;  // folders made for it, deepest first
   std::filesystem::path staging_;  // empty when there is none
 };
 
@@ -131,11 +132,15 @@ class OutputFile {
   const std::filesystem::path& path() const { return path_; }
 
  private:
+  // Releases the lock and removes the folders made for the file if it was not written.
+  void Release() noexcept;
+
   std::filesystem::path path_;
   Interrupts& interrupts_;
   bool force_;
   std::vector<std::string> inputs_;
   OutputLock lock_;
+  std::vector<std::filesystem::path> created_;  // folders made for it, deepest first
 };
 
 }  // namespace calibproj::app

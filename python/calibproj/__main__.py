@@ -1,8 +1,20 @@
-"""``python -m calibproj``: the ``calibproj`` command line."""
+"""``python -m calibproj`` and the ``calibproj`` command: the command line.
+
+The command line's module is imported here, under a handler of its own, so that Ctrl-C
+at any moment of the start gives the one line every interruption gives.
+"""
 
 import sys
 
-from calibproj.cli import main
+
+def run() -> int:
+    try:
+        from calibproj.cli import main
+    except KeyboardInterrupt:
+        print("calibproj: interrupted", file=sys.stderr)
+        return 130
+    return main()
+
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run())

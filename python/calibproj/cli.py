@@ -108,7 +108,27 @@ def _terminate_interrupts() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+def _caused_by_interrupt(error: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is among the causes of ``error``."""
+    seen: set[int] = set()
+    cause: BaseException | None = error
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False
+
+
 def main(argv: list[str] | None = None) -> int:
+    try:
+        return _run(argv)
+    except KeyboardInterrupt:  # while the command line is read, before its command runs
+        print("calibproj: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parse_arguments(parser, argv)
     # Recorded in the outputs that say how they were made (provenance.json).
@@ -132,6 +152,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{prefix}: error: {error}", file=sys.stderr)
         return EXIT_FAILURE
     except Exception as error:
+        if _caused_by_interrupt(error):  # e.g. an extension module whose start was interrupted
+            print(f"{prefix}: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
         traceback.print_exc()
         print(f"{prefix}: internal error: {type(error).__name__}: {error}", file=sys.stderr)
         return EXIT_FAILURE

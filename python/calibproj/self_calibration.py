@@ -81,6 +81,9 @@ class RefineRequest:
                 raise ValueError(f"--refine-intrinsics {item!r}: no entry named (use e.g. focal,k1,k2)")
             if chosen == ("none",):
                 chosen = ()
+            elif "none" in chosen:
+                raise ValueError(f"--refine-intrinsics {item!r}: 'none' stands alone (CAMERA=none holds that "
+                                 f"camera's intrinsics)")
             unknown = [n for n in chosen if n not in REFINABLE]
             if unknown:
                 raise ValueError(f"--refine-intrinsics {item!r}: unknown entry {unknown[0]!r} "

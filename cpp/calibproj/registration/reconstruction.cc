@@ -1319,6 +1319,8 @@ bool Reconstruction::UpdateNoise(const NoiseEstimate& estimate, bool pool_projec
 }
 
 void Reconstruction::FailUnregistered() {
+  int observing = 0;
+  for (int c = 0; c < num_cameras(); ++c) observing += camera_observations_[c].empty() ? 0 : 1;
   for (int c = 0; c < num_cameras(); ++c) {
     if (registered_[c] || !failure_[c].empty()) continue;
     int shared = 0;
@@ -1328,6 +1330,9 @@ void Reconstruction::FailUnregistered() {
     }
     if (camera_observations_[c].empty()) {
       failure_[c] = "no observations";
+    } else if (observing == 1) {
+      failure_[c] = "the only camera with observations (a calibration needs two or more cameras that see "
+                    "common points)";
     } else if (shared == 0) {
       failure_[c] = "no point in common with the registered cameras (disconnected)";
     } else {

@@ -3,6 +3,7 @@
 extern "C" {
 #include <libavcodec/avcodec.h>
 #include <libavformat/avformat.h>
+#include <libavutil/log.h>
 #include <libavutil/pixdesc.h>
 #include <libswscale/swscale.h>
 }
@@ -10,6 +11,9 @@ extern "C" {
 #include <opencv2/core.hpp>
 
 #include <algorithm>
+#include <cctype>
+#include <cstdarg>
+#include <mutex>
 #include <cmath>
 #include <deque>
 #include <filesystem>
@@ -19,6 +23,32 @@ extern "C" {
 namespace calibproj::video {
 
 namespace {
+
+// FFmpeg's own messages do not reach the user's terminal: its last error on this thread
+// is kept and named in the one error line of a video that cannot be read.
+thread_local std::string last_ffmpeg_error;
+
+void KeepError(void* context, int level, const char* format, va_list arguments) {
+  if (level > AV_LOG_ERROR) return;
+  char line[512];
+  int print_prefix = 0;  // without FFmpeg's "[component @ 0x...]" prefix
+  av_log_format_line2(context, level, format, arguments, line, sizeof line, &print_prefix);
+  std::string text(line);
+  while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
+  if (!text.empty()) last_ffmpeg_error = text;
+}
+
+void KeepFfmpegErrors() {
+  static std::once_flag once;
+  std::call_once(once, [] { av_log_set_callback(KeepError); });
+}
+
+// "; FFmpeg: <its last error>" (and forgets it), or "" when it said nothing.
+std::string FfmpegSaid() {
+  std::string said;
+  said.swap(last_ffmpeg_error);
+  return said.empty() ? "" : "; FFmpeg: " + said;
+}
 
 double Rate(AVRational r) { return r.num > 0 && r.den > 0 ? av_q2d(r) : 0.0; }
 
@@ -144,10 +174,14 @@ struct VideoReader::Decoder {
 VideoReader::VideoReader(const std::string& path) : decoder_(std::make_unique<Decoder>()) {
   info_.path = path;
   if (!std::filesystem::is_regular_file(path)) throw std::runtime_error(path + ": no such video file");
-  const std::string unreadable = path + ": cannot open the video (corrupt, truncated or not a video FFmpeg reads)";
+  KeepFfmpegErrors();
+  const auto unreadable = [&path] {
+    return std::runtime_error(path + ": cannot open the video (corrupt, truncated or not a video FFmpeg reads" +
+                              FfmpegSaid() + ")");
+  };
   Decoder& d = *decoder_;
-  if (avformat_open_input(&d.format, path.c_str(), nullptr, nullptr) < 0) throw std::runtime_error(unreadable);
-  if (avformat_find_stream_info(d.format, nullptr) < 0) throw std::runtime_error(unreadable);
+  if (avformat_open_input(&d.format, path.c_str(), nullptr, nullptr) < 0) throw unreadable();
+  if (avformat_find_stream_info(d.format, nullptr) < 0) throw unreadable();
   const AVCodec* codec = nullptr;
   d.stream = av_find_best_stream(d.format, AVMEDIA_TYPE_VIDEO, -1, -1, &codec, 0);
   if (d.stream < 0 || codec == nullptr) throw std::runtime_error(path + ": no video stream FFmpeg can decode");
@@ -156,10 +190,11 @@ VideoReader::VideoReader(const std::string& path) : decoder_(std::make_unique<De
   d.packet = av_packet_alloc();
   d.frame = av_frame_alloc();
   if (d.codec == nullptr || d.packet == nullptr || d.frame == nullptr) throw std::bad_alloc();
-  if (avcodec_parameters_to_context(d.codec, stream->codecpar) < 0) throw std::runtime_error(unreadable);
+  if (avcodec_parameters_to_context(d.codec, stream->codecpar) < 0) throw unreadable();
   d.codec->thread_count = 0;  // one per core, as the ffmpeg program decodes
   d.codec->thread_type = FF_THREAD_FRAME | FF_THREAD_SLICE;
-  if (avcodec_open2(d.codec, codec, nullptr) < 0) throw std::runtime_error(unreadable);
+  if (avcodec_open2(d.codec, codec, nullptr) < 0) throw unreadable();
+  FfmpegSaid();  // what it said while opening a video it then read is not this video's error
 
   info_.width = stream->codecpar->width;
   info_.height = stream->codecpar->height;

@@ -40,6 +40,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         raise ValueError("--workers must be at least 1")
+    if args.cluster:
+        from calibproj.study.executor import check_cluster_address
+
+        check_cluster_address(args.cluster)
     if args.recordings:
         from calibproj.study import study_recordings
 

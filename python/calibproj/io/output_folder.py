@@ -27,6 +27,7 @@ single files (``detect``), whose files are each written atomically.
 
 from __future__ import annotations
 
+import array
 import errno
 import fcntl
 import os
@@ -44,6 +45,10 @@ from types import TracebackType
 MIN_FREE_BYTES = 8 * 1024 * 1024
 PROBE_PREFIX = ".calibproj-probe-"
 PROBE_BYTES = 64 * 1024
+# Linux's inode flags (linux/fs.h): FS_IOC_GETFLAGS reads them.
+_FS_IOC_GETFLAGS = 0x80086601
+_FS_IMMUTABLE_FL = 0x10
+_FS_APPEND_FL = 0x20
 PREVIOUS = "previous"  # the previous folder, inside the folder it is moved aside to
 
 
@@ -119,6 +124,54 @@ class _Lock:
             self.fd = None
 
 
+def _require_replaceable(path: Path) -> None:
+    """OutputError when ``path`` carries the immutable or append-only flag (chattr +i,
+    +a): it could not be renamed or replaced, which the final move of a run would find
+    only after all the work."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
+    except OSError:
+        return
+    try:
+        flags = array.array("i", [0])
+        fcntl.ioctl(fd, _FS_IOC_GETFLAGS, flags, True)
+    except OSError:  # a file system without these flags
+        return
+    finally:
+        os.close(fd)
+    if flags[0] & (_FS_IMMUTABLE_FL | _FS_APPEND_FL):
+        raise OutputError(f"{path}: cannot be replaced (it is immutable or append-only; chattr -i -a lifts that)")
+
+
+def _missing_folders(folder: Path) -> list[Path]:
+    """The folders on the way to ``folder`` that do not exist yet, deepest first: those a
+    run creates for its output, and removes again when it ends without writing into them."""
+    missing = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
+def _remove_empty_folders(folders: list[Path]) -> None:
+    """Remove the folders that are still empty, deepest first (one that holds the output,
+    or anything else, stays, and so do those above it)."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            return
+
+
+def _check_parent_made(target: Path, created: list[Path]) -> Path:
+    """``_check_parent``, the folders it made (``created``) removed again when it fails."""
+    try:
+        return _check_parent(target)
+    except BaseException:
+        _remove_empty_folders(created)
+        raise
+
+
 def _check_parent(target: Path) -> Path:
     """Create the parent folder if needed; OutputError when it cannot be written or the disk is full."""
     parent = target.parent
@@ -190,6 +243,7 @@ class OutputFolder:
         self.staging: Path | None = None
         self.committed = False
         self._lock: _Lock | None = None
+        self._created: list[Path] = []  # folders made for it, deepest first
 
     # -- opening ----------------------------------------------------------------------
 
@@ -199,7 +253,8 @@ class OutputFolder:
             self.path = self.path.resolve()
         if self.path.exists() and not self.path.is_dir():
             raise OutputError(f"{self.path}: exists and is not a folder")
-        parent = _check_parent(self.path)
+        self._created = _missing_folders(self.path.parent)
+        parent = _check_parent_made(self.path, self._created)
         self._lock = _Lock(parent / f".{self.path.name}.lock", self.path)
         self._lock.acquire()
         try:
@@ -233,6 +288,7 @@ class OutputFolder:
             return
         content = sorted(p.name for p in self.path.iterdir())
         if not content:
+            _require_replaceable(self.path)
             return
         if self.signature:
             found = [name for name in self.signature if (self.path / name).exists()]
@@ -245,6 +301,7 @@ class OutputFolder:
                                   f"use --force to overwrite them")
         elif not self.force:
             raise OutputError(f"{self.path}: already exists; use --force to replace it")
+        _require_replaceable(self.path)
 
     # -- writing ----------------------------------------------------------------------
 
@@ -305,6 +362,7 @@ class OutputFolder:
         if self._lock is not None:
             self._lock.release()
             self._lock = None
+        _remove_empty_folders(self._created)
 
     def __enter__(self) -> OutputFolder:
         return self if self.staging is not None else self.open()
@@ -353,6 +411,7 @@ class OutputFile:
         self.force = force
         self.inputs = [Path(p) for p in inputs]
         self._lock: _Lock | None = None
+        self._created: list[Path] = []  # folders made for it, deepest first
 
     def open(self) -> OutputFile:
         if self.path.is_dir():
@@ -362,7 +421,9 @@ class OutputFile:
                 raise OutputError(f"{self.path}: is an input of this run; write the output elsewhere")
             if not self.force:
                 raise OutputError(f"{self.path}: exists (use --force to replace it)")
-        parent = _check_parent(self.path)
+            _require_replaceable(self.path)
+        self._created = _missing_folders(self.path.parent)
+        parent = _check_parent_made(self.path, self._created)
         self._lock = _Lock(parent / f".{self.path.name}.lock", self.path)
         self._lock.acquire()
         try:
@@ -387,6 +448,7 @@ class OutputFile:
         if self._lock is not None:
             self._lock.release()
             self._lock = None
+        _remove_empty_folders(self._created)
 
     def __enter__(self) -> OutputFile:
         return self.open()

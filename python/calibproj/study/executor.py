@@ -13,6 +13,7 @@ on a one-node Ray cluster (``ray start --head``, then ``ray:auto``).
 from __future__ import annotations
 
 import logging
+import urllib.parse
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
@@ -23,6 +24,8 @@ logger = logging.getLogger(__name__)
 def run_all(function: Callable[[Any], Any], tasks: Sequence[Any], workers: int = 2,
             cluster: str | None = None, what: str = "task") -> list[Any]:
     """``[function(task) for task in tasks]``, run in parallel (module docstring)."""
+    if cluster:
+        check_cluster_address(cluster)
     if not tasks:
         return []
     if cluster:
@@ -36,6 +39,23 @@ def run_all(function: Callable[[Any], Any], tasks: Sequence[Any], workers: int =
 def _logged(result: Any, index: int, total: int, what: str) -> Any:
     logger.info("%s %d/%d done", what, index + 1, total)
     return result
+
+
+def check_cluster_address(address: str) -> None:
+    """ValueError naming ``address`` unless it is ray:auto, ray://HOST:PORT or
+    tcp://HOST:PORT with a port in 1..65535 (before the engine's own parser sees it)."""
+    expected = f"--cluster {address}: expected ray://HOST:PORT, ray:auto or tcp://HOST:PORT (Dask)"
+    if address == "ray:auto":
+        return
+    parts = urllib.parse.urlsplit(address)
+    if parts.scheme not in ("ray", "tcp") or not address.startswith(f"{parts.scheme}://"):
+        raise ValueError(expected)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if not parts.hostname or port is None or not 1 <= port <= 65535 or parts.path or parts.query:
+        raise ValueError(expected)
 
 
 def _on_cluster(function: Callable[[Any], Any], tasks: Sequence[Any], address: str, what: str) -> list[Any]:
