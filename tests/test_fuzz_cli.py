@@ -2,7 +2,7 @@
 (tests/fuzz_inputs.py) fed through ``calibproj calibrate --tracks`` (tracks.json and
 intrinsics files) and ``calibproj detect`` (sequence.json and intrinsics files, two tiny
 videos), and mutated results through ``calibproj evaluate`` (its evaluation tracks, a
-results folder's metrics.json and points.ply) and ``calibproj compare`` (a
+results folder's metrics.json and points.ply, the latter two with --save) and ``calibproj compare`` (a
 camera_poses.json).
 
 Every run must end by itself within RUN_TIMEOUT_S with exit status 0, 1 or 2, without a
@@ -326,7 +326,8 @@ def prepare_results_run(root: Path, results: Path, fmt: str, index: int, mutatio
         shutil.copytree(results, copy)
         target = copy / ("metrics.json" if fmt == "metrics" else "points.ply")
         target.write_bytes(mutation.data)
-        return Run(fmt, mutation, target, ["evaluate", str(copy), "--tracks", str(results / "tracks.json")])
+        # --save: the evaluation is written into the copy, as a transaction.
+        return Run(fmt, mutation, target, ["evaluate", str(copy), "--tracks", str(results / "tracks.json"), "--save"])
     target = folder / ("eval_tracks.json" if fmt == "eval_tracks" else "camera_poses.json")
     target.write_bytes(mutation.data)
     if fmt == "eval_tracks":
@@ -368,6 +369,8 @@ def problem_of(run: Run, answer: dict[str, Any]) -> str | None:
             return f"exit status {status} without naming {run.file.name}: {stderr[-300:]!r}"
         if run.fmt not in PER_CAMERA and status != 2:
             return f"accepted (exit status {status}): {stderr[-300:]!r}"
+    if "--save" in run.args and status != 0 and (run.file.parent / "evaluation.json").exists():
+        return f"exit status {status} but evaluation.json was saved: {stderr[-300:]!r}"
     return None
 
 

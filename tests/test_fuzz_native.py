@@ -42,22 +42,27 @@ PER_CAMERA_FORMATS = {"calibrate_intrinsics", "detect_intrinsics"}
 # Runs.
 
 
-def python_refuses_sequence(path: Path) -> str | None:
-    """The Python package's message for a sequence file it refuses (None: read)."""
+def python_refuses(run: Run) -> str | None:
+    """The Python package's message for a mutated file its reader refuses (None: read)."""
+    from calibproj.io.intrinsics import read_intrinsics
     from calibproj.io.jsonio import FormatError
     from calibproj.sequence.sequence import Sequence
+    from calibproj.tracks import Tracks
 
+    readers = {"sequence": Sequence.load, "tracks": Tracks.read}
     try:
-        Sequence.load(path)
+        readers.get(run.fmt, read_intrinsics)(run.file)
     except FormatError as error:
         return str(error)
     return None
 
 
-def tools_disagree(run: Run, refused_by_native: bool) -> str | None:
-    """None when calibproj-native's verdict on a sequence file is the Python package's,
-    else the difference."""
-    refused_by_python = python_refuses_sequence(run.file)
+def tools_disagree(run: Run, outcome: Outcome) -> str | None:
+    """None when calibproj-native's verdict on a mutated file is the Python package's,
+    else the difference. Native refuses a tracks or sequence file with status 2 naming
+    it, and fails the camera of an intrinsics file naming it."""
+    refused_by_python = python_refuses(run)
+    refused_by_native = outcome.refused if run.fmt not in PER_CAMERA_FORMATS else outcome.names_file
     if (refused_by_python is not None) == refused_by_native:
         return None
     return f"Python {'refuses' if refused_by_python else 'reads'} it ({refused_by_python}), native does not"
@@ -67,6 +72,7 @@ def tools_disagree(run: Run, refused_by_native: bool) -> str | None:
 class Outcome:
     problem: str | None  # None when the run behaved, else what went wrong
     refused: bool = False  # status 2 with one error line naming the mutated file
+    names_file: bool = False  # the mutated file named anywhere on stderr
 
 
 def execute(native: Path, run: Run) -> Outcome:
@@ -77,7 +83,7 @@ def execute(native: Path, run: Run) -> Outcome:
     stderr = result.stderr.decode(errors="replace")
     errors = [line for line in stderr.splitlines() if ": error: " in line]
     refused = result.returncode == 2 and len(errors) == 1 and str(run.file) in errors[0]
-    return Outcome(misbehaviour(run, result.returncode, stderr, errors), refused)
+    return Outcome(misbehaviour(run, result.returncode, stderr, errors), refused, str(run.file) in stderr)
 
 
 def misbehaviour(run: Run, returncode: int, stderr: str, errors: list[str]) -> str | None:
@@ -121,10 +127,10 @@ def test_mutated_input_files_fail_cleanly(native: Path, tmp_path: Path) -> None:
     elapsed = time.perf_counter() - started
     failures = [f"{run.fmt} {run.mutation.label} ({run.file}): {outcome.problem}"
                 for run, outcome in zip(runs, outcomes) if outcome.problem is not None]
-    # One reader of sequence.json: the Python package refuses exactly the files native refuses.
+    # One reader per format: the Python package refuses exactly the files native refuses.
+    failures += [f"{run.fmt} {run.mutation.label} ({run.file}): {disagreement}" for run, outcome in zip(runs, outcomes)
+                 if (disagreement := tools_disagree(run, outcome)) is not None]
     sequences = [(run, outcome) for run, outcome in zip(runs, outcomes) if run.fmt == "sequence"]
-    failures += [f"sequence {run.mutation.label} ({run.file}): {disagreement}" for run, outcome in sequences
-                 if (disagreement := tools_disagree(run, outcome.refused)) is not None]
     refused = sum(outcome.refused for _, outcome in sequences)
     assert 0 < refused < len(sequences), "the sequence mutants must include files both tools read and refuse"
     print(f"\nran calibproj-native on {len(runs)} mutated files ("
