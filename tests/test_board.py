@@ -295,3 +295,56 @@ def test_opencv_sample_chessboards_give_what_opencv_gives(tmp_path: Path, capsys
     np.testing.assert_allclose(ours.K, K, rtol=1e-7)
     np.testing.assert_allclose(ours.dist, dist.ravel(), rtol=1e-5, atol=1e-8)
     assert document["rms_px"] == pytest.approx(rms, rel=1e-7)
+
+
+def mutated_images(data: bytes, rng: np.random.Generator, count: int) -> list[tuple[str, bytes]]:
+    """A PNG truncated, with flipped bytes, emptied, replaced by text or by random bytes."""
+    out = [("empty", b""), ("text", b"not an image\n"), ("random", rng.bytes(4096)),
+           ("header only", data[:64]), ("half", data[: len(data) // 2])]
+    while len(out) < count:
+        flipped = bytearray(data)
+        for position in rng.integers(0, len(data), int(rng.integers(1, 40))):
+            flipped[position] = int(rng.integers(0, 256))
+        out.append((f"{len(out)}: bytes flipped", bytes(flipped)))
+    return out
+
+
+def mutated_boards(rng: np.random.Generator, count: int) -> list[str]:
+    """Board specs with wrong kinds, sizes, numbers and dictionaries."""
+    values = ["0", "-1", "1e-320", "1e308", "nan", "inf", "x", "", "9x", "x6", "2x2", "201x3", "9x6x2", "0.03e"]
+    out = ["", "chessboard", "charuco", "circles:9x6:0.03", "chessboard:9x6", "charuco:5x7:0.04:0.03",
+           "charuco:5x7:0.04:0.03:NOPE_50", "chessboard:9x6:0.03:extra", ":::", "chessboard:9×6:0.03"]
+    while len(out) < count:
+        kind = rng.choice(["chessboard", "charuco"])
+        # The size is always one of the bad values; square and marker may be good ones.
+        size, square, marker = (str(rng.choice(values)), str(rng.choice(values + ["0.03"])),
+                                str(rng.choice(values + ["0.02"])))
+        out.append(f"{kind}:{size}:{square}" + (f":{marker}:4X4_50" if kind == "charuco" else ""))
+    return out
+
+
+def test_mutated_intrinsics_inputs_fail_cleanly(chessboard_images: Path, tmp_path: Path, capsys) -> None:
+    """Fuzzing of `calibproj intrinsics`: one of the board images mutated (the run goes
+    on with the others, the image named), or the board spec mutated (one error line).
+    No traceback, no internal error, the documented exit statuses."""
+    rng = np.random.default_rng(20251126)
+    good = sorted(chessboard_images.iterdir())
+    problems = []
+    for index, (label, data) in enumerate(mutated_images(good[0].read_bytes(), rng, 16)):
+        folder = tmp_path / f"images{index}"
+        folder.mkdir()
+        for path in good[:9]:
+            (folder / path.name).write_bytes(path.read_bytes())
+        (folder / good[0].name).write_bytes(data)
+        status = main(["intrinsics", str(folder), "--board", "chessboard:9x6:0.03", "--out",
+                       str(tmp_path / f"c{index}.json")])
+        err = capsys.readouterr().err
+        if status not in (0, 1) or "Traceback" in err or "internal error" in err:
+            problems.append(f"image {label}: status {status}: {err[-300:]!r}")
+    for index, board in enumerate(mutated_boards(rng, 40)):
+        status = main(["intrinsics", str(chessboard_images), "--board", board, "--out",
+                       str(tmp_path / f"b{index}.json")])
+        err = capsys.readouterr().err.strip().splitlines()
+        if status != 2 or len(err) != 1 or "Traceback" in err[0] or "internal error" in err[0]:
+            problems.append(f"board {board!r}: status {status}: {err[-3:]!r}")
+    assert not problems, "\n".join(problems)
