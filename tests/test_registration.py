@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 
 import numpy as np
 import pytest
@@ -475,6 +476,23 @@ def test_an_uneven_floor_is_not_taken_for_the_zoomed_cameras_tilt() -> None:
     others = [name for name in errors if name != "ceiling"]
     assert max(errors[n] for n in others) < max(flat_errors[n] for n in others)
     assert calibration.floor_rms > 0.001  # the relief was detected and estimated
+
+
+def test_the_relief_grid_has_the_cells_asked_for(caplog) -> None:
+    sim, markers = demo_with_projector(noise_px=0.05, relief=FloorRelief(rms_m=0.003, seed=1))
+    nodes = {}
+    for cells in (4, 12):
+        caplog.clear()
+        with caplog.at_level(logging.INFO, logger="calibproj.registration"):
+            options = RegistrationOptions(error_correlation=0.0, relief_cells=cells)
+            RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
+        found = re.search(r"over its (\d+) nodes", caplog.text)
+        assert found, caplog.text
+        nodes[cells] = int(found.group(1))
+    # (cells + 1) nodes along the longer extent, fewer along the other.
+    assert 5 < nodes[4] <= 25 and 13 * 2 < nodes[12] <= 13 * 13, nodes
+    with pytest.raises(ValueError, match="relief_cells"):
+        RegistrationOptions(relief_cells=17)
 
 
 def test_a_flat_floor_keeps_the_flat_model_and_its_sigma(caplog) -> None:

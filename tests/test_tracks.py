@@ -136,3 +136,12 @@ def test_malformed_files_name_the_file(tmp_path, document, message):
     with pytest.raises(ValueError, match=message) as error:
         Tracks.read(path)
     assert str(path) in str(error.value)
+
+
+def test_a_json_writer_names_its_file_for_a_value_json_cannot_hold(tmp_path):
+    from calibproj.io.jsonio import write_json
+
+    path = tmp_path / "metrics.json"
+    with pytest.raises(ValueError, match=f"^{re.escape(str(path))}: cannot write the metrics file: a value is NaN"):
+        write_json(path, "metrics", 1, {"rms": float("nan")})
+    assert not path.exists() and list(tmp_path.iterdir()) == []

@@ -148,6 +148,10 @@ void VisitRegistrationOptions(OptionsT& o, Visitor&& visit) {
         "may leave its plane by a smooth relief with that prior, which cameras seeing them from "
         "several directions measure; a camera zoomed onto a patch of floor is then not handed the "
         "patch's slope as its own tilt. 0: an exactly flat floor.");
+  visit("relief_cells", o.relief_cells,
+        "coplanar, with a relief: the relief grid's cells across the larger extent of the floor's "
+        "centres; its height is bilinear between their corners, so a floor that rises and falls "
+        "over shorter distances than a cell needs more.");
 }
 
 }  // namespace calibproj::registration

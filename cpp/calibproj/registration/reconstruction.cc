@@ -128,6 +128,7 @@ void Options::Check() const {
   limits::RequireInRange(projector_sigma_px, 1e-6, 100.0, "registration: projector_sigma_px");
   limits::RequireInRange(error_correlation, 0.0, 1.0, "registration: error_correlation");
   limits::RequireInRange(floor_relief, 0.0, 0.1, "registration: floor_relief");
+  limits::RequireInRange(relief_cells, 1, ba::kMaxReliefCells, "registration: relief_cells");
 }
 
 namespace {
@@ -918,6 +919,7 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   if (!final) ba_options.function_tolerance = 1e-6;
   ba_options.compute_covariance = covariance;
   ba_options.error_correlation = options_.error_correlation;
+  ba_options.relief_cells = options_.relief_cells;
   if (cameras.size() < 2 && options_.model == ba::Model::kFree) return result;
   ba::Result solved;
   try {

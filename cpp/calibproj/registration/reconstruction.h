@@ -70,6 +70,9 @@ struct Options {
   // 3 m projection). Its points may leave the plane by a smooth relief with that prior
   // (ba/relief_cost.h); 0: an exactly flat plane.
   double floor_relief = 0.001;
+  // COPLANAR with a relief: the relief grid's cells across the larger extent of the
+  // main plane's centres (its nodes are bilinear between them).
+  int relief_cells = 8;
 
   void Check() const;
 };

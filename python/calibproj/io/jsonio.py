@@ -65,9 +65,15 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 
 
 def write_json(path: str | os.PathLike, kind: str, major: int, body: dict[str, Any]) -> None:
-    """Write ``body`` with its schema tag first, atomically."""
+    """Write ``body`` with its schema tag first, atomically; ValueError naming the file
+    for a value JSON cannot hold (NaN, infinity), with nothing written."""
     document = {"schema": schema_tag(kind, major), **body}
-    atomic_write_text(path, json.dumps(document, indent=1, allow_nan=False) + "\n")
+    try:
+        text = json.dumps(document, indent=1, allow_nan=False)
+    except ValueError:
+        raise ValueError(f"{path}: cannot write the {kind} file: a value is NaN or infinite, which JSON "
+                         f"cannot hold") from None
+    atomic_write_text(path, text + "\n")
 
 
 def read_json_value(path: str | os.PathLike) -> Any:
