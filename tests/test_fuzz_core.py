@@ -346,7 +346,8 @@ class Baselines:
         self.scene = plane_scene()
         sequence = build_sequence(arrays=3, scales=(1.0, 2.0), grid=(2, 4), code_degree=4, reference_frames=8)
         self.sequence = json.loads(json.dumps(sequence.to_dict()))
-        self.levels = np.asarray(_core.ingest.light_levels(self.sequence))
+        self.core_sequence = _core.ingest.Sequence(self.sequence)
+        self.levels = np.asarray(_core.ingest.light_levels(self.core_sequence))
         self.start_code = self.sequence["codes"]["start"]
         self.end_code = self.sequence["codes"]["end"]
         light = self.levels.copy()
@@ -496,7 +497,8 @@ class Baselines:
                                                 ("start_code", self.start_code), ("end_code", self.end_code),
                                                 ("map", {"offset": 9.0, "rate": self.rate, "exposure": 0.5})],
                                                options=sync_options),
-            "_core.ingest.light_levels": Spec([("sequence", sequence)]),
+            "_core.ingest.Sequence": Spec([("document", sequence)]),
+            "_core.ingest.light_levels": Spec([("sequence", self.core_sequence)]),
             "_core.ingest.lens_tables_map": Spec([("K", self.K), ("dist", self.dist), ("resolution", (64, 48)),
                                                  ("points", s["observed"][:5] / 10), ("undistort", True)]),
             "_core.ingest.refine_undistorted_corners": Spec([
@@ -504,7 +506,7 @@ class Baselines:
                 ("cells", 6), ("outward_fraction", 0.45), ("passes", 6)]),
             **self.format_specs(),
             "_core.ingest.ingest_camera": Spec(
-                [("video", f["tiny.mkv"]), ("sequence", sequence), ("K", self.K), ("dist", self.dist),
+                [("video", f["tiny.mkv"]), ("sequence", self.core_sequence), ("K", self.K), ("dist", self.dist),
                  ("resolution", (64, 48)), ("source", "cam"), ("aruco", _core.detect.ArucoOptions()),
                  ("apriltag", _core.detect.AprilTagOptions()), ("progress", lambda decoded, total: None)],
                 options=ingest_options),
@@ -580,6 +582,7 @@ class Baselines:
                 "aruco": lambda: _core.detect.MarkerDetector("aruco:4X4_50"),
                 "apriltag": lambda: _core.detect.MarkerDetector(self.apriltag_spec)},
             "_core.detect.ArucoOptions": {"default": _core.detect.ArucoOptions},
+            "_core.ingest.Sequence": {"read": lambda: self.core_sequence},
             "_core.detect.AprilTagOptions": {"default": _core.detect.AprilTagOptions},
             "_core.detect.CornerRefinementOptions": {"default": _core.detect.CornerRefinementOptions},
             "_core.detect.CornerRefinement": {"edges": lambda: _core.detect.CornerRefinement.edges},

@@ -29,7 +29,7 @@ def short_sequence(**overrides):
 
 def projector_light(sequence, rng) -> np.ndarray:
     """Level of every projector frame; patterns get random brightness of their own."""
-    levels = _core.ingest.light_levels(sequence.to_dict())
+    levels = _core.ingest.light_levels(sequence.core())
     for pattern in sequence.patterns:
         levels[pattern.first_frame:pattern.last_frame + 1] = rng.uniform(0.05, 0.3)
     return levels
@@ -131,7 +131,7 @@ def test_correlation_peaks_at_the_code():
     sequence = short_sequence()
     rng = np.random.default_rng(2)
     signal, _ = record(sequence, 25.0, 12.4, 0.5, rng)
-    levels = _core.ingest.light_levels(sequence.to_dict())
+    levels = _core.ingest.light_levels(sequence.core())
     start = _core.sync.locate_code(signal, levels, sequence.start_code.to_dict(), 25.0 / PROJECTOR_FPS)
     expected = 12.4 + 25.0 / PROJECTOR_FPS * sequence.start_code.first_frame
     assert start["correlation"] > 0.99

@@ -259,10 +259,20 @@ void register_ingest(py::module_& m) {
   m.def("option_table", &IngestOptionTable,
         "Every ingest knob as {name, default, help}, in order: the one declaration "
         "calibproj.ingest_options.IngestOptions and both command lines are made from.");
+  py::class_<ingest::SequenceDescription>(
+      m, "Sequence",
+      "A projection sequence as the core holds it: the body of sequence.json (Sequence.to_dict()) read and "
+      "checked once by the format's one reader, then given to every camera's ingest_camera.")
+      .def(py::init([](const py::dict& document) { return SequenceFromDict(document); }), py::arg("document"))
+      .def_property_readonly("frame_count", &ingest::SequenceDescription::FrameCount)
+      .def_readonly("arrays", &ingest::SequenceDescription::arrays)
+      .def_readonly("markers_per_array", &ingest::SequenceDescription::markers_per_array)
+      .def_readonly("markers", &ingest::SequenceDescription::markers, "marker family spec")
+      .def_readonly("fps", &ingest::SequenceDescription::fps, "projector frame rate");
   m.def(
       "light_levels",
-      [](const py::dict& sequence) {
-        const sync::LightTimeline timeline = SequenceFromDict(sequence).LightLevels();
+      [](const ingest::SequenceDescription& sequence) {
+        const sync::LightTimeline timeline = sequence.LightLevels();
         py::array_t<double> out(timeline.frame_count());
         for (int k = 0; k < timeline.frame_count(); ++k) out.mutable_data()[k] = timeline.Level(k);
         return out;
@@ -270,11 +280,11 @@ void register_ingest(py::module_& m) {
       py::arg("sequence"), "Projector level of every sequence frame (1 white, 0 black, NaN for patterns).");
   m.def(
       "ingest_camera",
-      [](const std::string& video, const py::dict& sequence, const DoubleArray& K, const DoubleArray& dist,
+      [](const std::string& video, const ingest::SequenceDescription& description, const DoubleArray& K,
+         const DoubleArray& dist,
          const std::optional<std::pair<int, int>>& resolution, const std::string& source,
          const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
          const std::optional<py::function>& progress, const py::kwargs& kwargs) {
-        const ingest::SequenceDescription description = SequenceFromDict(sequence);
         const ingest::CameraModel camera = CameraFromArrays(K, dist, resolution, source);
         const ingest::IngestOptions options = IngestOptionsFromKwargs(aruco, apriltag, kwargs);
         ingest::ProgressCallback callback;
@@ -293,7 +303,7 @@ void register_ingest(py::module_& m) {
       },
       py::arg("video"), py::arg("sequence"), py::arg("K"), py::arg("dist"), py::arg("resolution"),
       py::arg("source"), py::arg("aruco"), py::arg("apriltag"), py::arg("progress") = py::none(),
-      "Synchronise one camera's video with the sequence (dict of sequence.json) and detect its "
+      "Synchronise one camera's video with the sequence (a Sequence) and detect its "
       "MSMs: sync, statistics, per-scale records and merged centres (undistorted pixels). "
       "`progress(decoded, total)` is called now and then. Keyword options: see option_table().");
 }

@@ -218,7 +218,7 @@ def ingest(
     options = options or IngestOptions()
     video_paths = _video_paths(videos)
     aruco, apriltag = _detector_options(sequence.markers.system, detector_options or {})
-    document = sequence.to_dict()
+    core_sequence = sequence.core()  # read by the core once, for every camera
     names = list(video_paths)
     bars = _Progress(names, enabled=progress)
     exposures = dict(exposures or {})
@@ -226,7 +226,7 @@ def ingest(
 
     def run(name: str) -> CameraIngest:
         camera_options = options.replace(exposure_s=exposures.get(name, options.exposure_s))
-        job = _CameraJob(document, camera_options, aruco, apriltag, bars)
+        job = _CameraJob(core_sequence, camera_options, aruco, apriltag, bars)
         return job.run(name, video_paths[name], _intrinsics_for(intrinsics, name))
 
     try:
@@ -248,9 +248,9 @@ def ingest(
 class _CameraJob:
     """Runs the C++ ingest of one camera and turns failures into reports."""
 
-    def __init__(self, document: dict[str, Any], options: IngestOptions, aruco: Any, apriltag: Any,
+    def __init__(self, sequence: Any, options: IngestOptions, aruco: Any, apriltag: Any,
                  bars: _Progress) -> None:
-        self.document = document
+        self.sequence = sequence  # the core's (Sequence.core())
         self.kwargs = options.to_kwargs()
         self.aruco = aruco
         self.apriltag = apriltag
@@ -266,7 +266,7 @@ class _CameraJob:
                 raise ValueError(source)
             resolution = camera_intrinsics.resolution
             report.raw = _core.ingest.ingest_camera(
-                str(video), self.document, camera_intrinsics.K, camera_intrinsics.dist, resolution, source,
+                str(video), self.sequence, camera_intrinsics.K, camera_intrinsics.dist, resolution, source,
                 self.aruco, self.apriltag, self.bars.callback(name), **self.kwargs)
         except (ValueError, RuntimeError, OSError) as error:
             if self.bars.cancelled.is_set():  # the C++ core reports the interruption as its error
@@ -365,7 +365,7 @@ def synchronise(signal: np.ndarray, sequence: Any, camera_fps: float, options: I
 
     sequence, _ = _load_sequence(sequence)
     document = sequence.to_dict()
-    levels = _core.ingest.light_levels(document)
+    levels = _core.ingest.light_levels(sequence.core())
     return _core.sync.synchronise(np.asarray(signal, dtype=float), levels, document["codes"]["start"],
                                   document["codes"]["end"], float(camera_fps) / float(sequence.fps), source,
                                   **sync_kwargs(options or IngestOptions(), camera_fps))

@@ -28,7 +28,6 @@ from calibproj.io.jsonio import FormatError, write_json
 
 KIND = "sequence"  # the schema tag calibproj.sequence/1
 MAJOR = 1
-SEGMENT_KINDS = ("white", "black", "start_code", "end_code", "patterns")
 # Patterns kept rendered per sequence: consecutive frames mostly share one pattern, so
 # a few suffice for renderers that walk the timeline (one 1080p pattern is 2 MB).
 DEFAULT_PATTERN_CACHE = 8
@@ -102,6 +101,7 @@ class Sequence:
     _cache: Any = field(default=None, init=False, repr=False, compare=False)
     _bits: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     _flats: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _core_sequence: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.centres = np.asarray(self.centres, dtype=np.float64)
@@ -201,6 +201,16 @@ class Sequence:
             self._flats[level] = image
         return self._flats[level]
 
+    def core(self) -> Any:
+        """The sequence as the C++ core holds it (``_core.ingest.Sequence``): read and
+        checked once, then kept for every camera's ingest. A sequence is not changed once
+        built, so the kept one stays its twin."""
+        if self._core_sequence is None:
+            from calibproj import _core
+
+            self._core_sequence = _core.ingest.Sequence(self.to_dict())
+        return self._core_sequence
+
     # ------------------------------------------------------------------- files
 
     def to_dict(self) -> dict[str, Any]:
@@ -299,77 +309,12 @@ class Sequence:
     # --------------------------------------------------------------- validation
 
     def validate(self) -> None:
-        """Raise ValueError if the parts of the sequence disagree with each other."""
-        _check_centres(self)
-        _check_segments(self.segments)
-        _check_codes(self)
-        _check_patterns(self)
+        """Raise ValueError if the parts of the sequence disagree with each other: the
+        C++ core's one reader of the format checks it (and keeps it for the ingest)."""
+        self._core_sequence = None
+        try:
+            self.core()
+        except (TypeError, ValueError) as error:
+            raise ValueError(str(error).removeprefix("sequence: ")) from None
 
 
-def _check_centres(sequence: Sequence) -> None:
-    layout = sequence.layout
-    expected = (layout.arrays, layout.markers_per_array, 2)
-    if sequence.centres.shape != expected:
-        raise ValueError(f"centres have shape {sequence.centres.shape}, expected {expected} (arrays, markers, 2)")
-    if not np.isfinite(sequence.centres).all():
-        raise ValueError("centres must be finite")
-    if sequence.markers.id_count and layout.markers_per_array > sequence.markers.id_count:
-        raise ValueError(f"{layout.markers_per_array} markers per array but {sequence.markers.spec} "
-                         f"has only {sequence.markers.id_count} ids")
-    if tuple(sequence.projector) != tuple(layout.projector):
-        raise ValueError(f"projector {sequence.projector} differs from the layout's {layout.projector}")
-
-
-def _check_segments(segments: list[Segment]) -> None:
-    expected_first = 0
-    for segment in segments:
-        if segment.kind not in SEGMENT_KINDS:
-            raise ValueError(f"unknown segment kind {segment.kind!r} (choose from {', '.join(SEGMENT_KINDS)})")
-        if segment.first_frame != expected_first or segment.last_frame < segment.first_frame:
-            raise ValueError(f"segments must tile the frames from 0 without gaps; {segment.kind} segment "
-                             f"{segment.first_frame}..{segment.last_frame} should start at {expected_first}")
-        expected_first = segment.last_frame + 1
-    for kind in ("start_code", "end_code", "patterns"):
-        if sum(segment.kind == kind for segment in segments) != 1:
-            raise ValueError(f"expected exactly one {kind} segment")
-
-
-def _check_codes(sequence: Sequence) -> None:
-    segments = {s.kind: s for s in sequence.segments if s.kind in ("start_code", "end_code", "patterns")}
-    for kind, code in (("start_code", sequence.start_code), ("end_code", sequence.end_code)):
-        segment = segments[kind]
-        if (segment.first_frame, segment.last_frame) != (code.first_frame, code.last_frame):
-            raise ValueError(f"{kind} spans frames {code.first_frame}..{code.last_frame} but its segment "
-                             f"{segment.first_frame}..{segment.last_frame}")
-    if sequence.start_code.bits == sequence.end_code.bits:
-        raise ValueError("start and end light codes must differ")
-    if not segments["start_code"].last_frame < segments["patterns"].first_frame <= \
-            segments["patterns"].last_frame < segments["end_code"].first_frame:
-        raise ValueError("expected the start code, then the patterns, then the end code")
-
-
-def _check_patterns(sequence: Sequence) -> None:
-    layout = sequence.layout
-    span = next(s for s in sequence.segments if s.kind == "patterns")
-    previous_last = span.first_frame - 1
-    for index, pattern in enumerate(sequence.patterns):
-        where = f"pattern {index}"
-        if pattern.first_frame <= previous_last or pattern.last_frame > span.last_frame:
-            raise ValueError(f"{where} (frames {pattern.first_frame}..{pattern.last_frame}) overlaps another "
-                             f"pattern or leaves the patterns segment {span.first_frame}..{span.last_frame}")
-        if pattern.last_frame - pattern.first_frame + 1 != sequence.frames_per_pattern:
-            raise ValueError(f"{where} lasts {pattern.last_frame - pattern.first_frame + 1} frames, "
-                             f"expected frames_per_pattern = {sequence.frames_per_pattern}")
-        if not 0 <= pattern.array < layout.arrays:
-            raise ValueError(f"{where} shows array {pattern.array}; the layout has {layout.arrays}")
-        if not 0 <= pattern.scale_index < len(layout.scales) or \
-                not np.isclose(pattern.scale, layout.scales[pattern.scale_index]):
-            raise ValueError(f"{where}: scale {pattern.scale} (index {pattern.scale_index}) is not in the "
-                             f"layout's scales {list(layout.scales)}")
-        if not np.isclose(pattern.marker_side_px, layout.marker_side(pattern.scale)):
-            raise ValueError(f"{where}: marker side {pattern.marker_side_px} px, expected "
-                             f"{layout.marker_side(pattern.scale)} px at scale {pattern.scale}")
-        if any(not 0 <= m < layout.markers_per_array for m in pattern.omitted):
-            raise ValueError(f"{where}: omitted markers {list(pattern.omitted)} outside "
-                             f"0..{layout.markers_per_array - 1}")
-        previous_last = pattern.last_frame
