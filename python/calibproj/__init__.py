@@ -14,8 +14,8 @@ comparison in ``calibproj.comparison``, the evaluation in ``calibproj.evaluation
 from __future__ import annotations
 
 import importlib
-import logging
-from typing import TYPE_CHECKING, Any
+
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing at start
 
 if TYPE_CHECKING:
     from calibproj.version import __version__
@@ -32,8 +32,8 @@ if TYPE_CHECKING:
     from calibproj.tracks import Tracks
 
 # Each exported name and the module that defines it, imported on first use: the
-# command line starts without numpy, OpenCV and the C++ core loaded, so that Ctrl-C at
-# its start meets its own handler.
+# command line starts without numpy, OpenCV, the C++ core (or even logging) loaded, so
+# that Ctrl-C at its start meets its own handler.
 _EXPORTS = {
     "__version__": "calibproj.version",
     "Calibration": "calibproj.calibration",
@@ -49,15 +49,19 @@ _EXPORTS = {
     "simulate_tracks": "calibproj.simulate",
 }
 
-logging.getLogger(__name__).addHandler(logging.NullHandler())
-
 __all__ = list(_EXPORTS)
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'calibproj' has no attribute {name!r}")
+    import logging
+
+    # The library's log is the application's to show (the command line configures it).
+    logger = logging.getLogger(__name__)
+    if not any(isinstance(handler, logging.NullHandler) for handler in logger.handlers):
+        logger.addHandler(logging.NullHandler())
     value = getattr(importlib.import_module(module), name)
     globals()[name] = value
     return value
