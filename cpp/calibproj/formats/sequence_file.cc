@@ -129,9 +129,11 @@ struct Layout {
   int frame_count = 0;
   int start_last_frame = 0;
   int end_last_frame = 0;
+  int id_count = 0;  // the marker family's ids
 };
 
-void ReadMarkers(const json& document, ingest::SequenceDescription* s) {
+// The marker family, checked against the geometry the file gives; returns its id count.
+int ReadMarkers(const json& document, ingest::SequenceDescription* s) {
   const json& markers = Member(document, "", "markers");
   s->markers = String(markers, "markers", "spec");
   const std::string system = Choice(Member(markers, "markers", "system"), "markers/system", {"aruco", "apriltag"});
@@ -159,9 +161,9 @@ void ReadMarkers(const json& document, ingest::SequenceDescription* s) {
   require(family_name == family.name, "family", family.name);
   require(grid_cells == geometry.grid_cells, "grid_cells", std::to_string(geometry.grid_cells));
   require(quad_cells == geometry.quad_cells, "quad_cells", std::to_string(geometry.quad_cells));
-  if (markers.contains("id_count")) {
-    require(id_count == detect::MarkerIdCount(family), "id_count", std::to_string(detect::MarkerIdCount(family)));
-  }
+  const int family_ids = detect::MarkerIdCount(family);
+  if (markers.contains("id_count")) require(id_count == family_ids, "id_count", std::to_string(family_ids));
+  return family_ids;
 }
 
 void ReadProjector(const json& document, ingest::SequenceDescription* s) {
@@ -303,9 +305,9 @@ void CheckConsistent(const ingest::SequenceDescription& s, const Layout& layout)
           "centres have shape (" + std::to_string(s.arrays) + ", " + std::to_string(s.markers_per_array) +
               ", 2), expected (" + std::to_string(layout.arrays) + ", " + std::to_string(per_array) +
               ", 2) (arrays, markers, 2)");
-  const int id_count = detect::MarkerIdCount(detect::ParseMarkerFamily(s.markers));
-  Require(s.markers_per_array <= id_count, std::to_string(s.markers_per_array) + " markers per array but " +
-                                               s.markers + " has only " + std::to_string(id_count) + " ids");
+  Require(s.markers_per_array <= layout.id_count, std::to_string(s.markers_per_array) + " markers per array but " +
+                                                      s.markers + " has only " + std::to_string(layout.id_count) +
+                                                      " ids");
   Require(layout.frame_count == s.FrameCount(), "frame_count " + std::to_string(layout.frame_count) +
                                                     " differs from the segments' " + std::to_string(s.FrameCount()));
   const ingest::SegmentSpec& start = OnlySegment(s, "start_code");
@@ -357,9 +359,10 @@ std::string WithoutPrefix(const std::string& message, const std::string& prefix)
 ingest::SequenceDescription SequenceFromDocument(const nlohmann::json& document) {
   RequireObject(document, "");
   ingest::SequenceDescription s;
-  ReadMarkers(document, &s);
+  const int id_count = ReadMarkers(document, &s);
   ReadProjector(document, &s);
   Layout layout = ReadLayout(document, &s);
+  layout.id_count = id_count;
   ReadCentres(document, &s);
   ReadScaleTable(document);
   ReadPatterns(document, &s);
