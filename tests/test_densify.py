@@ -75,6 +75,13 @@ def test_the_plan_fills_the_camera_view_with_markers_sized_for_it(room) -> None:
         diagonal, other = image[2] - image[0], image[3] - image[1]
         seen = np.sqrt(0.5 * abs(diagonal[0] * other[1] - diagonal[1] * other[0]))  # the square's area
         assert seen == pytest.approx(bound * min(width, height), rel=0.3)
+    # Markers of one extra array keep min_gap_modules of the largest marker between
+    # them: an oblique camera sees them small, and closer ones blur into each other.
+    module = plan.sides_px[-1] / room["sequence"].markers.grid_cells
+    for centres in plan.centres:
+        apart = np.abs(centres[:, None, :] - centres[None, :, :]).max(axis=-1)
+        np.fill_diagonal(apart, np.inf)
+        assert apart.min() >= plan.sides_px[-1] + options.min_gap_modules * module - 1e-6
 
 
 def test_the_densified_sequence_keeps_the_first_arrays_and_shows_only_new_ones(room, tmp_path) -> None:

@@ -27,6 +27,7 @@ import functools
 import json
 import logging
 import math
+import shutil
 import sys
 import tempfile
 import time
@@ -121,6 +122,8 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         scene = replace(scene, floor=replace(scene.floor, relief=replace(scene.floor.relief, seed=seed)))
     room = work / f"{condition}-{seed}"
     if not (args.reuse and rendered(room, scene)):
+        for kept in ("first_tracks.json", "first_detect_report.json"):  # of another rendering
+            (room / kept).unlink(missing_ok=True)
         simulate_videos(scene, sequence, room, seed=seed, options=replace(RenderOptions(), **render_changes))
     marker_side_m = marker_side_on_floor(room / "scene.json", sequence)
     results = room / "results"
@@ -128,7 +131,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         calibrate_scaled, intrinsics=room / "intrinsics", scale=f"marker-size:{marker_side_m:.9f}",
         options=RegistrationOptions(model=args.model, use_projector=not args.no_projector),
         exposures=locked_exposures(scene) if args.locked_exposures else None, label=f"{condition} seed {seed}")
-    calibration = calibrate_room(room / "videos", sequence_path, results)
+    calibration = calibrate_first(calibrate_room, room, sequence_path, results, reused=args.reuse_detections)
     extra_s = 0.0
     if args.densify:
         dense, _ = densify(results, Sequence.load(sequence_path), DensifyOptions(max_seconds=args.densify_seconds))
@@ -178,6 +181,21 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     row["readout_ms"] = max_readout_error(report, truth)
     row["wrong"] = wrong_assignments(room / "results" / "tracks.json", truth, args.wrong_px)
     return row
+
+
+def calibrate_first(calibrate_room, room: Path, sequence_path: Path, results: Path, reused: bool):
+    """The first calibration of ``room``: from its videos, or with ``reused`` from the
+    detections an earlier run kept of the same rendering (the ingest does not depend on
+    the registration's options). Its detections and detect report are kept beside."""
+    kept_tracks, kept_report = room / "first_tracks.json", room / "first_detect_report.json"
+    if reused and kept_tracks.is_file() and kept_report.is_file():
+        calibration = calibrate_room(kept_tracks, sequence_path, results)
+        shutil.copyfile(kept_report, results / "detect_report.json")
+        return calibration
+    calibration = calibrate_room(room / "videos", sequence_path, results)
+    shutil.copyfile(results / "tracks.json", kept_tracks)
+    shutil.copyfile(results / "detect_report.json", kept_report)
+    return calibration
 
 
 def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics: Path, scale: str,
@@ -328,6 +346,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--reuse", action="store_true",
                         help="with --work: calibrate the renderings already there again where their scene is the "
                              "condition's (same --arrays and --markers assumed) instead of rendering them anew")
+    parser.add_argument("--reuse-detections", action="store_true",
+                        help="with --reuse: calibrate a reused rendering from the detections of its first projection "
+                             "that an earlier run kept (they depend on the rendering and the ingest only)")
     parser.add_argument("--densify", action="store_true",
                         help="after the first calibration, render the extra projection `calibproj generate --densify` "
                              "plans for its weak cameras and calibrate again with --merge")

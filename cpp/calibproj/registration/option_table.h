@@ -151,7 +151,9 @@ void VisitRegistrationOptions(OptionsT& o, Visitor&& visit) {
   visit("relief_cells", o.relief_cells,
         "coplanar, with a relief: the relief grid's cells across the larger extent of the floor's "
         "centres; its height is bilinear between their corners, so a floor that rises and falls "
-        "over shorter distances than a cell needs more.");
+        "over shorter distances than a cell needs more. A zoomed camera sees its patch's slope as its "
+        "own tilt: on the rendered demo room (a floor 3 mm uneven) 12 cells hold the slope under its "
+        "0.5 m patch to 0.014 deg where 8 leave 0.19 deg.");
 }
 
 }  // namespace calibproj::registration

@@ -72,7 +72,7 @@ struct Options {
   double floor_relief = 0.001;
   // COPLANAR with a relief: the relief grid's cells across the larger extent of the
   // main plane's centres (its nodes are bilinear between them).
-  int relief_cells = 8;
+  int relief_cells = 12;
 
   void Check() const;
 };

@@ -79,6 +79,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "fewer than --densify-min-points inliers)")
     densify.add_argument("--densify-min-points", type=int, default=DensifyOptions.min_points,
                          help="inliers below which a camera is densified for (default: %(default)s)")
+    densify.add_argument("--densify-gap-modules", type=float, default=DensifyOptions.min_gap_modules,
+                         help="smallest gap between two extra markers, in modules of the largest: room for "
+                              "oblique cameras to see them apart (default: %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -151,7 +154,8 @@ def _run_densify(args: argparse.Namespace) -> int:
     if not results.is_dir():
         raise CommandError(f"{results}: no such results folder")
     cameras = tuple(n.strip() for n in args.densify_cameras.split(",") if n.strip()) if args.densify_cameras else None
-    options = DensifyOptions(max_seconds=args.densify_seconds, cameras=cameras, min_points=args.densify_min_points)
+    options = DensifyOptions(max_seconds=args.densify_seconds, cameras=cameras, min_points=args.densify_min_points,
+                             min_gap_modules=args.densify_gap_modules)
     sequence_path = Path(args.sequence) if args.sequence else _calibrated_sequence(results)
     dense, plans = densify(results, Sequence.load(sequence_path), options)
     summary = {"sequence": None, "video": None, "extra_seconds": 0.0, "cameras": {}}
