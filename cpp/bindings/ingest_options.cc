@@ -21,21 +21,6 @@ void VisitSync(Options& o, Visitor&& visit) {
   visit("fixed_exposure", o.fit.fixed_exposure, "known exposure, camera frames (0: fit it)");
 }
 
-// Per knob, in order: {name, default, help}.
-template <typename Options, typename Visit>
-py::list Table(Visit&& visit) {
-  Options o;
-  py::list table;
-  visit(o, [&table](const char* name, const auto& field, const char* help) {
-    py::dict entry;
-    entry["name"] = name;
-    entry["default"] = field;
-    entry["help"] = help;
-    table.append(entry);
-  });
-  return table;
-}
-
 }  // namespace
 
 bool SetSyncOption(sync::SyncOptions* o, const std::string& key, const py::handle& value) {
@@ -53,11 +38,11 @@ bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const py:
 void CheckSyncOptionValues(sync::SyncOptions& o) { VisitSync(o, limits::OptionChecker{"sync options: "}); }
 
 py::list SyncOptionTable() {
-  return Table<sync::SyncOptions>([](auto& o, auto&& visit) { VisitSync(o, visit); });
+  return KnobTable<sync::SyncOptions>([](auto& o, auto&& visit) { VisitSync(o, visit); });
 }
 
 py::list IngestOptionTable() {
-  return Table<ingest::IngestOptions>([](auto& o, auto&& visit) { ingest::VisitIngestOptions(o, visit); });
+  return KnobTable<ingest::IngestOptions>([](auto& o, auto&& visit) { ingest::VisitIngestOptions(o, visit); });
 }
 
 void ThrowUnknownOption(const std::string& what, const std::string& key, const py::list& table) {

@@ -30,4 +30,20 @@ struct KnobSetter {
   }
 };
 
+// Per knob of an option struct, in order: {name, default, help}; `visit(options,
+// visitor)` walks its table.
+template <typename Options, typename Visit>
+pybind11::list KnobTable(Visit&& visit) {
+  Options o;
+  pybind11::list table;
+  visit(o, [&table](const char* name, const auto& field, const char* help) {
+    pybind11::dict entry;
+    entry["name"] = name;
+    entry["default"] = field;
+    entry["help"] = help;
+    table.append(entry);
+  });
+  return table;
+}
+
 }  // namespace calibproj::bindings

@@ -31,6 +31,8 @@ PYBIND11_MODULE(_core, m) {
   calibproj::bindings::register_ingest(ingest);
   auto selfcal = m.def_submodule("selfcal", "Lenses refined with the poses from points on the floor");
   calibproj::bindings::register_selfcal(selfcal);
+  auto check = m.def_submodule("check", "A stored calibration tested camera by camera against a short check projection");
+  calibproj::bindings::register_check(check);
   auto formats = m.def_submodule("formats", "Results files, metric scale and exports (as calibproj-native writes them)");
   calibproj::bindings::register_formats(formats);
 }

@@ -15,6 +15,7 @@ void register_video(pybind11::module_& m);
 void register_sync(pybind11::module_& m);
 void register_ingest(pybind11::module_& m);
 void register_selfcal(pybind11::module_& m);
+void register_check(pybind11::module_& m);
 void register_formats(pybind11::module_& m);
 
 // Defines m.<name>(...) solving with the given costs; register_ba uses the analytic

@@ -1,0 +1,322 @@
+#include "calibproj/check/camera_check.h"
+
+#include <ceres/autodiff_cost_function.h>
+#include <ceres/problem.h>
+#include <ceres/rotation.h>
+#include <ceres/solver.h>
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+#include <vector>
+
+#include "calibproj/common/limits.h"
+#include "calibproj/common/quantile.h"
+
+namespace calibproj::check {
+
+namespace {
+
+constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
+// The noise never taken below this (px): a fit to a few exact points would otherwise
+// call any change significant.
+constexpr double kMinNoisePx = 0.01;
+// Inlier selection rounds (fit, keep the observations near it, fit again).
+constexpr int kInlierRounds = 3;
+
+// Which of the camera's parameters a fit frees.
+enum class Freed { kPose, kFocal, kBoth };
+
+// One observation of a held point: x_cam = exp(w) R_stored (X - c), pixel with the
+// focal lengths (and skew) scaled by s about the principal point.
+struct HeldPointResidual {
+  HeldPointResidual(const ba::Intrinsics& K, const Eigen::Matrix3d& R_stored, const Eigen::Vector3d& X,
+                    const Eigen::Vector2d& observed)
+      : K_(K), observed_(observed) {
+    // The stored rotation applied once: only the update is a parameter.
+    Eigen::Map<Eigen::Vector3d>(rotated_, 3) = R_stored * X;
+    Eigen::Map<Eigen::Matrix3d>(R_, 3, 3) = R_stored;
+  }
+
+  template <typename T>
+  bool operator()(const T* w, const T* c, const T* s, T* residual) const {
+    T relative[3];
+    for (int i = 0; i < 3; ++i) {
+      relative[i] = T(rotated_[i]) - (T(R_[i]) * c[0] + T(R_[i + 3]) * c[1] + T(R_[i + 6]) * c[2]);
+    }
+    T p[3];
+    ceres::AngleAxisRotatePoint(w, relative, p);
+    if (!(p[2] > T(ba::kMinDepth))) return false;
+    const T xn = p[0] / p[2];
+    const T yn = p[1] / p[2];
+    residual[0] = s[0] * (T(K_.fx) * xn + T(K_.skew) * yn) + T(K_.cx) - T(observed_.x());
+    residual[1] = s[0] * T(K_.fy) * yn + T(K_.cy) - T(observed_.y());
+    return true;
+  }
+
+  ba::Intrinsics K_;
+  Eigen::Vector2d observed_;
+  double rotated_[3];
+  double R_[9];  // column-major
+};
+
+struct Fit {
+  double w[3] = {0.0, 0.0, 0.0};
+  double c[3] = {0.0, 0.0, 0.0};
+  double s = 1.0;
+  double ssr = 0.0;  // sum of squared residuals (px^2) over the fitted observations
+  bool converged = false;
+  Eigen::MatrixXd information;  // J^T J of the freed parameters (w, c, s order), unscaled
+};
+
+Eigen::Vector3d Centre(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) { return -R.transpose() * t; }
+
+Fit Solve(const CameraCheckInput& input, const std::vector<int>& used, Freed freed, const Fit& start,
+          const CheckOptions& options) {
+  Fit fit = start;
+  ceres::Problem problem;
+  for (int i : used) {
+    auto* cost = new ceres::AutoDiffCostFunction<HeldPointResidual, 2, 3, 3, 1>(
+        new HeldPointResidual(input.K, input.R, input.points.col(i), input.observed.col(i)));
+    problem.AddResidualBlock(cost, nullptr, fit.w, fit.c, &fit.s);
+  }
+  if (freed == Freed::kFocal) {
+    problem.SetParameterBlockConstant(fit.w);
+    problem.SetParameterBlockConstant(fit.c);
+  }
+  if (freed == Freed::kPose) problem.SetParameterBlockConstant(&fit.s);
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = options.max_iterations;
+  solver.num_threads = 1;
+  solver.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+  fit.converged = summary.IsSolutionUsable();
+  fit.ssr = 2.0 * summary.final_cost;
+  // The information of the freed parameters, from the Jacobian at the solution.
+  ceres::CRSMatrix jacobian;
+  problem.Evaluate(ceres::Problem::EvaluateOptions(), nullptr, nullptr, nullptr, &jacobian);
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(jacobian.num_rows, jacobian.num_cols);
+  for (int row = 0; row < jacobian.num_rows; ++row) {
+    for (int k = jacobian.rows[row]; k < jacobian.rows[row + 1]; ++k) J(row, jacobian.cols[k]) = jacobian.values[k];
+  }
+  fit.information = J.transpose() * J;
+  return fit;
+}
+
+// The inverse of an information matrix whose parameters differ in scale by orders of
+// magnitude (radians, world units, a focal ratio): equilibrated first, so that the
+// weakly determined direction of a narrow camera (rotation against centre) keeps its
+// large variance instead of being cut off as numerically null.
+Eigen::MatrixXd Inverse(const Eigen::MatrixXd& information) {
+  const Eigen::VectorXd scale = information.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+  const Eigen::MatrixXd balanced = scale.asDiagonal() * information * scale.asDiagonal();
+  const Eigen::MatrixXd inverse = balanced.ldlt().solve(Eigen::MatrixXd::Identity(balanced.rows(), balanced.cols()));
+  return scale.asDiagonal() * inverse * scale.asDiagonal();
+}
+
+Eigen::Vector2d Residual(const CameraCheckInput& input, const Fit& fit, int i) {
+  const HeldPointResidual cost(input.K, input.R, input.points.col(i), input.observed.col(i));
+  double r[2] = {1e9, 1e9};
+  if (!cost(fit.w, fit.c, &fit.s, r)) return {1e9, 1e9};
+  return {r[0], r[1]};
+}
+
+double SumSquares(const CameraCheckInput& input, const Fit& fit, const std::vector<int>& used) {
+  double sum = 0.0;
+  for (int i : used) sum += Residual(input, fit, i).squaredNorm();
+  return sum;
+}
+
+Eigen::Matrix3d RotationOf(const double* w, const Eigen::Matrix3d& stored) {
+  Eigen::Matrix3d update;
+  ceres::AngleAxisToRotationMatrix(w, ceres::ColumnMajorAdapter3x3(update.data()));
+  return update * stored;
+}
+
+// Pixel of X for the camera (R, t) with K's focal part scaled by s; false behind it.
+bool Project(const ba::Intrinsics& K, const Eigen::Matrix3d& R, const Eigen::Vector3d& t, double s,
+             const Eigen::Vector3d& X, Eigen::Vector2d* pixel) {
+  const Eigen::Vector3d p = R * X + t;
+  if (!(p.z() > ba::kMinDepth)) return false;
+  const double xn = p.x() / p.z(), yn = p.y() / p.z();
+  *pixel << s * (K.fx * xn + K.skew * yn) + K.cx, s * K.fy * yn + K.cy;
+  return true;
+}
+
+// Largest move in the image of a working-volume point the stored camera sees (the
+// observed points when none of the volume is in view).
+double VolumeShift(const CameraCheckInput& input, const Eigen::Matrix3d& R, const Eigen::Vector3d& t, double s) {
+  const auto largest = [&](const Eigen::Matrix3Xd& points, bool inside_only) {
+    double shift = -1.0;
+    for (int i = 0; i < points.cols(); ++i) {
+      Eigen::Vector2d before, after;
+      if (!Project(input.K, input.R, input.t, 1.0, points.col(i), &before)) continue;
+      if (inside_only && !(before.x() >= 0 && before.y() >= 0 && before.x() <= input.width && before.y() <= input.height)) {
+        continue;
+      }
+      if (!Project(input.K, R, t, s, points.col(i), &after)) continue;
+      shift = std::max(shift, (after - before).norm());
+    }
+    return shift;
+  };
+  const double shift = largest(input.volume, input.width > 0 && input.height > 0);
+  return shift >= 0.0 ? shift : std::max(0.0, largest(input.points, false));
+}
+
+void CheckInput(const CameraCheckInput& input) {
+  if (input.points.cols() != input.observed.cols()) {
+    throw std::invalid_argument("check: points and observations differ in number (" +
+                                std::to_string(input.points.cols()) + " and " + std::to_string(input.observed.cols()) +
+                                ")");
+  }
+  if (!input.points.allFinite() || !input.observed.allFinite() || !input.volume.allFinite()) {
+    throw std::invalid_argument("check: points, observations and volume must be finite");
+  }
+  if (!input.R.allFinite() || !input.t.allFinite()) throw std::invalid_argument("check: the stored pose is not finite");
+  limits::RequireInRange(input.K.fx, 1e-9, limits::kMaxMagnitude, "check: fx");
+  limits::RequireInRange(input.K.fy, 1e-9, limits::kMaxMagnitude, "check: fy");
+  limits::RequireInRange(input.rotation_sigma, 0.0, 10.0, "check: rotation_sigma");
+  limits::RequireInRange(input.centre_sigma, 0.0, limits::kMaxMagnitude, "check: centre_sigma");
+  limits::RequireInRange(input.width, 0.0, limits::kMaxImageSide, "check: width");
+  limits::RequireInRange(input.height, 0.0, limits::kMaxImageSide, "check: height");
+}
+
+std::string Figures(const char* format, double a, double b = 0.0, double c = 0.0, double d = 0.0) {
+  char text[240];
+  std::snprintf(text, sizeof text, format, a, b, c, d);
+  return text;
+}
+
+}  // namespace
+
+void CheckOptions::Check() const {
+  limits::RequireInRange(tolerance_px, 0.0, 1e6, "check: tolerance_px");
+  limits::RequireInRange(significance_z, 0.0, 40.0, "check: significance_z");
+  limits::RequireInRange(min_points, 6, limits::kMaxPoints, "check: min_points");
+  limits::RequireInRange(outlier_px, 1e-3, 1e6, "check: outlier_px");
+  limits::RequireInRange(max_iterations, 1, limits::kMaxIterations, "check: max_iterations");
+}
+
+const char* StatusName(Status status) {
+  switch (status) {
+    case Status::kUnchanged: return "unchanged";
+    case Status::kMoved: return "moved";
+    case Status::kRezoomed: return "rezoomed";
+    case Status::kUnknown: return "unknown";
+  }
+  return "unknown";
+}
+
+CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& options) {
+  options.Check();
+  CheckInput(input);
+  CameraCheck out;
+  out.R = input.R;
+  out.t = input.t;
+  out.points = static_cast<int>(input.points.cols());
+  if (out.points < options.min_points) {
+    out.reason = "only " + std::to_string(out.points) + " of its observations are of calibrated points (need " +
+                 std::to_string(options.min_points) + ")";
+    return out;
+  }
+  Fit stored;
+  const Eigen::Vector3d stored_centre = Centre(input.R, input.t);
+  std::copy(stored_centre.data(), stored_centre.data() + 3, stored.c);
+
+  // The inliers: observations near the fit of pose and focal length together, from
+  // plain least squares (a moved zoomed camera starts hundreds of pixels off, where a
+  // robust loss has no gradient left).
+  std::vector<int> used(out.points);
+  for (int i = 0; i < out.points; ++i) used[i] = i;
+  Fit both = stored;
+  for (int round = 0; round < kInlierRounds; ++round) {
+    both = Solve(input, used, Freed::kBoth, stored, options);
+    std::vector<int> kept;
+    for (int i = 0; i < out.points; ++i) {
+      if (Residual(input, both, i).norm() <= options.outlier_px) kept.push_back(i);
+    }
+    if (kept == used) break;
+    used = kept;
+    if (static_cast<int>(used.size()) < options.min_points) break;
+  }
+  out.inliers = static_cast<int>(used.size());
+  if (out.inliers < options.min_points || !both.converged) {
+    out.reason = "only " + std::to_string(out.inliers) + " of its " + std::to_string(out.points) +
+                 " observations agree with one camera (need " + std::to_string(options.min_points) + ")";
+    return out;
+  }
+  const Fit pose = Solve(input, used, Freed::kPose, stored, options);
+  const Fit focal = Solve(input, used, Freed::kFocal, stored, options);
+  const int n = out.inliers;
+  out.noise_px = std::max(kMinNoisePx, std::sqrt(both.ssr / std::max(1, 2 * n - 7)));
+  const double variance = out.noise_px * out.noise_px;
+  out.rms_before_px = std::sqrt(SumSquares(input, stored, used) / n);
+
+  // The change (w, centre, focal scale) against its covariance: the fit's and the
+  // stored pose's.
+  Eigen::Matrix<double, 7, 1> change;
+  change << both.w[0], both.w[1], both.w[2], both.c[0] - stored.c[0], both.c[1] - stored.c[1],
+      both.c[2] - stored.c[2], both.s - 1.0;
+  Eigen::Matrix<double, 7, 7> covariance = Inverse(both.information) * variance;
+  for (int k = 0; k < 3; ++k) {
+    covariance(k, k) += input.rotation_sigma * input.rotation_sigma;
+    covariance(3 + k, 3 + k) += input.centre_sigma * input.centre_sigma;
+  }
+  out.chi2 = change.dot(covariance.completeOrthogonalDecomposition().solve(change));
+  out.chi2_threshold = ChiSquareQuantile(7, options.significance_z);
+
+  // The simplest fit that explains the observations as well as both together.
+  const double pose_gain = (focal.ssr - both.ssr) / variance;  // what the pose adds to the focal length
+  const double focal_gain = (pose.ssr - both.ssr) / variance;  // what the focal length adds to the pose
+  const Fit* chosen = &both;
+  Status changed = Status::kRezoomed;
+  std::string kind = "its focal length and pose changed";
+  if (pose_gain <= ChiSquareQuantile(6, options.significance_z)) {
+    chosen = &focal;
+    kind = "its focal length changed (re-zoomed)";
+  } else if (focal_gain <= ChiSquareQuantile(1, options.significance_z)) {
+    chosen = &pose;
+    changed = Status::kMoved;
+    kind = "it moved";
+  }
+  const Eigen::Matrix3d R = RotationOf(chosen->w, input.R);
+  const Eigen::Vector3d t = -R * Eigen::Vector3d(chosen->c[0], chosen->c[1], chosen->c[2]);
+  out.volume_shift_px = VolumeShift(input, R, t, chosen->s);
+  out.rotation_change_deg = Eigen::Vector3d(chosen->w[0], chosen->w[1], chosen->w[2]).norm() * kRadToDeg;
+  out.centre_change = (Eigen::Vector3d(chosen->c[0], chosen->c[1], chosen->c[2]) - stored_centre).norm();
+  out.focal_change = chosen->s - 1.0;
+  out.rotation_sigma_deg =
+      std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance.block<3, 3>(0, 0)).eigenvalues().maxCoeff()) *
+      kRadToDeg;
+  out.centre_sigma =
+      std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance.block<3, 3>(3, 3)).eigenvalues().maxCoeff());
+  out.focal_sigma = std::sqrt(std::max(0.0, covariance(6, 6)));
+
+  const bool significant = out.chi2 > out.chi2_threshold;
+  const bool visible = out.volume_shift_px > options.tolerance_px;
+  const std::string figures =
+      Figures("rotation %.3g deg, centre %.3g, focal %+.2g %%; the working volume moves up to %.2f px in its image",
+              out.rotation_change_deg, out.centre_change, 100.0 * out.focal_change, out.volume_shift_px) +
+      Figures(" (tolerance %.2g px), chi-square %.1f (%.1f is noise at 99.9 %%)", options.tolerance_px, out.chi2,
+              out.chi2_threshold);
+  if (significant && visible) {
+    out.status = changed;
+    out.R = R;
+    out.t = t;
+    out.focal_scale = chosen->s;
+    out.rms_after_px = std::sqrt(SumSquares(input, *chosen, used) / n);
+    out.reason = kind + ": " + figures;
+  } else {
+    out.status = Status::kUnchanged;
+    out.rms_after_px = out.rms_before_px;
+    out.reason = std::string(significant ? "a change within the tolerance: " : "no significant change: ") + figures;
+  }
+  return out;
+}
+
+}  // namespace calibproj::check

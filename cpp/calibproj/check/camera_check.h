@@ -1,0 +1,93 @@
+#pragma once
+// Does a stored calibration still hold for one camera? A short check projection gives
+// the camera new observations of points whose 3D positions the stored calibration
+// knows (the check sequence shows some of the calibrated arrays again, so its points
+// keep their ids). Against those fixed points the camera is fitted three ways: its
+// pose alone, its focal length alone (a PTZ camera re-zoomed about its principal
+// point), and both. Each fit is compared with the stored camera:
+//
+// - statistically: the change, with the covariance of the fit plus the stored pose's,
+//   as a chi-square (Mahalanobis distance) against its 99.9 % quantile, so that a
+//   camera whose stored pose was uncertain is not called moved for that uncertainty;
+// - practically: how far the change moves the points of the working volume (given by
+//   the caller) in the camera's image, against a tolerance in pixels.
+//
+// A camera has changed when both say so. It is `rezoomed` when the focal length alone
+// explains the observations as well as the focal length and pose together (the
+// likelihood ratio of the six pose parameters is not significant), `moved` when the
+// pose alone does. Points are held fixed: they were placed by the unchanged cameras
+// and the projector, so re-fitting against them is the repair, with every other
+// camera and the planes held.
+
+#include <Eigen/Core>
+
+#include <string>
+
+#include "calibproj/ba/camera.h"
+
+namespace calibproj::check {
+
+struct CheckOptions {
+  // A change that moves no point of the working volume by more than this in the
+  // camera's image is not one, however significant.
+  double tolerance_px = 0.5;
+  // Standard normal quantile of the statistical tests (3.09: 99.9 %, one false alarm
+  // in a thousand unchanged cameras).
+  double significance_z = 3.09;
+  // Observations a camera needs to be tested (a pose has six parameters).
+  int min_points = 6;
+  // Observations farther than this from the best fit are left out (a marker decoded
+  // with a wrong id, a person's shadow).
+  double outlier_px = 3.0;
+  // Ceres iterations per fit.
+  int max_iterations = 50;
+
+  // Throws std::invalid_argument naming the first bad field.
+  void Check() const;
+};
+
+enum class Status { kUnchanged, kMoved, kRezoomed, kUnknown };
+
+const char* StatusName(Status status);
+
+// One camera as stored and its new observations of stored points.
+struct CameraCheckInput {
+  ba::Intrinsics K;                    // undistorted pinhole of the stored intrinsics
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // stored cam_from_world
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  // The stored pose's uncertainty: rotation (rad, per axis) and centre (world units).
+  double rotation_sigma = 0.0;
+  double centre_sigma = 0.0;
+  Eigen::Matrix3Xd points;    // world positions of the observed points (stored, held)
+  Eigen::Matrix2Xd observed;  // their new undistorted pixels
+  Eigen::Matrix3Xd volume;    // points of the working volume (world), for the practical test
+  double width = 0.0, height = 0.0;  // image size: volume points outside it are left out
+};
+
+struct CameraCheck {
+  Status status = Status::kUnknown;
+  std::string reason;  // one sentence: why this status, with its figures
+  int points = 0;      // observations of stored points
+  int inliers = 0;     // within outlier_px of the best fit
+  double noise_px = 0.0;          // the noise the tests assume (from the fit's residuals)
+  double rms_before_px = 0.0;     // stored camera, over the inliers
+  double rms_after_px = 0.0;      // chosen fit, over the inliers
+  double rotation_change_deg = 0.0;
+  double rotation_sigma_deg = 0.0;   // of the change (fit and stored)
+  double centre_change = 0.0;        // world units
+  double centre_sigma = 0.0;
+  double focal_change = 0.0;         // relative: new focal / stored - 1
+  double focal_sigma = 0.0;
+  double chi2 = 0.0;                 // Mahalanobis distance of the change, squared
+  double chi2_threshold = 0.0;
+  double volume_shift_px = 0.0;      // largest move of a working-volume point in the image
+  // The camera as it is now (the stored one when unchanged).
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  double focal_scale = 1.0;
+};
+
+// Throws std::invalid_argument for inconsistent input (sizes, non-finite values).
+CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& options);
+
+}  // namespace calibproj::check

@@ -1,0 +1,145 @@
+"""The camera check against truth: a simulated camera kept, moved, re-zoomed or nudged
+below the tolerance, tested on new noisy observations of the stored points."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from calibproj import _core
+
+WIDTH, HEIGHT = 1280, 720
+
+
+def look_at(centre: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """cam_from_world rotation of a camera at ``centre`` looking at ``target`` (x right, y down)."""
+    forward = (target - centre) / np.linalg.norm(target - centre)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    return np.stack([right, down, forward])
+
+
+def rotation(axis, degrees: float) -> np.ndarray:
+    import cv2
+
+    vector = np.asarray(axis, float) / np.linalg.norm(axis) * math.radians(degrees)
+    return cv2.Rodrigues(vector)[0]
+
+
+def project(K, R, t, points):
+    camera = points @ R.T + t
+    pixels = camera @ K.T
+    return pixels[:, :2] / pixels[:, 2:]
+
+
+@pytest.fixture
+def stored():
+    """A camera 2.8 m up, looking at the floor 2.5 m away, and the floor points it sees."""
+    K = np.array([[1100.0, 0, 640], [0, 1100.0, 360], [0, 0, 1]])
+    centre = np.array([0.0, -2.5, 2.8])
+    R = look_at(centre, np.array([0.0, 0.0, 0.0]))
+    t = -R @ centre
+    xs, ys = np.meshgrid(np.linspace(-1.0, 1.0, 9), np.linspace(-0.7, 0.7, 7))
+    floor = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+    inside = project(K, R, t, floor)
+    assert np.all((inside >= 0) & (inside <= [WIDTH, HEIGHT]))
+    volume = np.concatenate([floor + [0, 0, h] for h in (0.0, 0.9, 1.7)])
+    return {"K": K, "R": R, "t": t, "points": floor, "volume": volume}
+
+
+def turned(stored, axis, degrees: float) -> tuple[np.ndarray, np.ndarray]:
+    """The stored camera turned about its own centre by ``degrees`` about ``axis`` (its frame)."""
+    R = rotation(axis, degrees) @ stored["R"]
+    return R, -R @ (-stored["R"].T @ stored["t"])
+
+
+def check(stored, K, R, t, noise_px=0.1, seed=0, rotation_sigma=1e-4, centre_sigma=1e-3, **options):
+    """The stored camera tested on observations made by the camera (K, R, t)."""
+    rng = np.random.default_rng(seed)
+    observed = project(K, R, t, stored["points"]) + rng.normal(0.0, noise_px, (len(stored["points"]), 2))
+    return _core.check.check_camera(stored["K"], stored["R"], stored["t"], rotation_sigma, centre_sigma,
+                                    stored["points"], observed, stored["volume"], WIDTH, HEIGHT, **options)
+
+
+def test_an_unchanged_camera_is_unchanged_over_many_noise_draws(stored) -> None:
+    verdicts = [check(stored, stored["K"], stored["R"], stored["t"], seed=seed) for seed in range(40)]
+    assert all(v.status == "unchanged" for v in verdicts)
+    assert np.mean([v.noise_px for v in verdicts]) == pytest.approx(0.1, rel=0.15)
+
+
+def test_a_moved_camera_is_moved_with_its_new_pose(stored) -> None:
+    R = rotation([0.3, 1.0, 0.2], 0.3) @ stored["R"]
+    centre = -stored["R"].T @ stored["t"] + [0.01, -0.02, 0.005]
+    t = -R @ centre
+    verdict = check(stored, stored["K"], R, t)
+    assert verdict.status == "moved", verdict.reason
+    assert verdict.focal_scale == 1.0
+    # The pose found is the true one, to a small share of the change.
+    error = np.degrees(np.arccos(np.clip((np.trace(verdict.R @ R.T) - 1) / 2, -1, 1)))
+    assert error < 0.02 and verdict.rotation_change_deg == pytest.approx(0.3, abs=0.05)
+    assert np.linalg.norm(-verdict.R.T @ verdict.t - centre) < 0.005
+    assert verdict.rms_after_px < 0.2 < verdict.rms_before_px
+    assert verdict.volume_shift_px > 5.0
+
+
+def test_a_rezoomed_camera_is_rezoomed_with_its_focal_length(stored) -> None:
+    K = stored["K"].copy()
+    K[0, 0] *= 1.03
+    K[1, 1] *= 1.03
+    verdict = check(stored, K, stored["R"], stored["t"])
+    assert verdict.status == "rezoomed", verdict.reason
+    assert verdict.focal_change == pytest.approx(0.03, abs=0.002)
+    assert "re-zoomed" in verdict.reason
+
+
+def test_a_change_below_the_tolerance_leaves_the_camera_unchanged(stored) -> None:
+    R, t = turned(stored, [1.0, 0.0, 0.0], 0.02)
+    exact = {"noise_px": 0.02, "rotation_sigma": 1e-6, "centre_sigma": 1e-6}
+    verdict = check(stored, stored["K"], R, t, **exact)
+    assert verdict.chi2 > verdict.chi2_threshold  # significant, yet
+    assert verdict.volume_shift_px < 0.5 and verdict.status == "unchanged"
+    assert verdict.reason.startswith("a change within the tolerance")
+    # The same change counts with a tolerance below it.
+    assert check(stored, stored["K"], R, t, tolerance_px=0.2, **exact).status == "moved"
+
+
+def test_the_stored_uncertainty_is_not_taken_for_a_move(stored) -> None:
+    """A weak stored pose (0.1 deg off, known to 0.1 deg) is not called moved."""
+    R, t = turned(stored, [0.0, 1.0, 0.0], 0.1)
+    assert check(stored, stored["K"], R, t, rotation_sigma=math.radians(0.1)).status == "unchanged"
+    assert check(stored, stored["K"], R, t, rotation_sigma=1e-5).status == "moved"
+
+
+def test_too_few_points_and_outliers(stored) -> None:
+    few = {**stored, "points": stored["points"][:5]}
+    verdict = check(few, stored["K"], stored["R"], stored["t"])
+    assert verdict.status == "unknown" and "only 5" in verdict.reason
+    # Wrong observations (ids decoded wrongly) are left out of the test.
+    rng = np.random.default_rng(3)
+    observed = project(stored["K"], stored["R"], stored["t"], stored["points"]) + rng.normal(0, 0.1, (63, 2))
+    observed[:4] += 40.0
+    verdict = _core.check.check_camera(stored["K"], stored["R"], stored["t"], 1e-4, 1e-3, stored["points"], observed,
+                                       stored["volume"], WIDTH, HEIGHT)
+    assert verdict.status == "unchanged" and verdict.inliers == 59
+
+
+@pytest.mark.parametrize("case", ["shape", "nan", "option", "value"])
+def test_bad_input_is_one_clear_error(stored, case: str) -> None:
+    points, observed = stored["points"], project(stored["K"], stored["R"], stored["t"], stored["points"])
+    kwargs = {}
+    if case == "shape":
+        observed = observed[:, :1]
+    elif case == "nan":
+        observed = observed.copy()
+        observed[0, 0] = np.nan
+    elif case == "option":
+        kwargs = {"tolerance": 1.0}
+    else:
+        kwargs = {"min_points": 2}
+    with pytest.raises(ValueError, match={"shape": "observed", "nan": "finite", "option": "tolerance_px",
+                                          "value": "min_points"}[case]):
+        _core.check.check_camera(stored["K"], stored["R"], stored["t"], 0.0, 0.0, points, observed,
+                                 stored["volume"], WIDTH, HEIGHT, **kwargs)
