@@ -3,6 +3,7 @@ below the tolerance, tested on new noisy observations of the stored points."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -143,3 +144,100 @@ def test_bad_input_is_one_clear_error(stored, case: str) -> None:
                                           "value": "min_points"}[case]):
         _core.check.check_camera(stored["K"], stored["R"], stored["t"], 0.0, 0.0, points, observed,
                                  stored["volume"], WIDTH, HEIGHT, **kwargs)
+
+
+# -- a stored calibration checked with a second recording of the room ----------------
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory) -> dict:
+    """The demo room calibrated (metric), then recorded again with far2 turned by 0.5 deg
+    and the ceiling camera zoomed 3 % in: the check's observations of the same arrays."""
+    from calibproj.pipeline import calibrate
+    from calibproj.sequence import build_sequence
+    from calibproj.simulate import simulate_tracks
+    from calibproj.simulate.scene import CameraChange, load_scene
+
+    folder = tmp_path_factory.mktemp("check")
+    scene = load_scene("demo")
+    sequence = build_sequence(arrays=24, scales=(1.0, 3.0, 6.0))
+    sequence.save(folder / "sequence.json")
+    first = simulate_tracks(scene, folder / "first", noise_px=0.1, seed=5, layout=sequence)
+    height = scene.camera("far1").position[2]
+    calibrate(first.tracks, first.intrinsics, sequence=folder / "sequence.json", out=folder / "results",
+              scale=f"camera-height:far1={height}", report=False)
+    changes = {"far2": CameraChange(pan_deg=0.5), "ceiling": CameraChange(zoom=1.03)}
+    changed = scene.changed(changes)
+    again = simulate_tracks(changed, folder / "again", noise_px=0.1, seed=6, layout=sequence)
+    kept = simulate_tracks(scene, folder / "kept", noise_px=0.1, seed=7, layout=sequence)
+    return {"folder": folder, "scene": scene, "changed": changed, "again": again, "kept": kept}
+
+
+def test_a_second_recording_of_an_unchanged_room_confirms_every_camera(room) -> None:
+    from calibproj.check_and_repair import check
+
+    result = check(room["folder"] / "results", room["kept"].tracks)
+    assert result.trusted and not result.changed
+    assert {verdict.status for verdict in result.cameras.values()} == {"unchanged"}
+
+
+def test_the_moved_and_rezoomed_cameras_are_found_and_repaired(room) -> None:
+    from calibproj.calibration import Calibration
+    from calibproj.check_and_repair import CHECK_FILE, check
+    from calibproj.comparison import CameraPoses, compare
+    from calibproj.io.intrinsics import load_intrinsics_dir
+
+    out = room["folder"] / "repaired"
+    result = check(room["folder"] / "results", room["again"].tracks, out=out, report=False)
+    statuses = {name: verdict.status for name, verdict in result.cameras.items()}
+    assert statuses == {"far1": "unchanged", "far2": "moved", "far4": "unchanged", "far5": "unchanged",
+                        "near1": "unchanged", "ceiling": "rezoomed"}, {n: v.reason for n, v in result.cameras.items()}
+    assert result.cameras["far2"].rotation_change_deg == pytest.approx(0.5, abs=0.03)
+    assert result.cameras["ceiling"].focal_change == pytest.approx(0.03, abs=0.003)
+    # The repaired folder holds the room as it is now: every camera as close to the
+    # changed room's truth as the stored calibration was to the first room's (the
+    # repaired far2 included), the ceiling's focal length the new one.
+    def errors(folder, scene) -> dict[str, float]:
+        calibration = Calibration.load(folder)
+        truth = CameraPoses({c.name: (c.R, c.t) for c in scene.cameras}, "m")
+        return {n: e.rotation_deg for n, e in compare(CameraPoses(calibration.poses, "m"), truth).cameras.items()}
+
+    before, after = errors(room["folder"] / "results", room["scene"]), errors(out, room["changed"])
+    assert all(after[name] <= 1.5 * before[name] + 0.003 for name in before), (before, after)
+    assert after["far2"] < 0.01
+    K = load_intrinsics_dir(out / "intrinsics")["ceiling"].K
+    assert K[0, 0] == pytest.approx(room["changed"].camera("ceiling").fx, rel=0.002)
+    document = json.loads((out / CHECK_FILE).read_text())
+    assert document["schema"] == "calibproj.check/1" and document["cameras"]["far2"]["status"] == "moved"
+
+
+def test_a_moved_floor_or_projector_is_not_repaired_against(room, tmp_path) -> None:
+    """Every camera moved (as when the projector or the floor did): no majority agrees
+    with the stored calibration, so nothing is repaired and the message says why."""
+    from calibproj.check_and_repair import check
+    from calibproj.simulate import simulate_tracks
+    from calibproj.simulate.scene import CameraChange
+    from calibproj.sequence import Sequence
+
+    everything = room["scene"].changed({name: CameraChange(pan_deg=0.4) for name in room["scene"].camera_names})
+    tracks = simulate_tracks(everything, tmp_path / "moved", noise_px=0.1, seed=8,
+                             layout=Sequence.load(room["folder"] / "sequence.json")).tracks
+    result = check(room["folder"] / "results", tracks)
+    assert not result.trusted and "run a full calibration" in result.message
+    with pytest.raises(ValueError, match="nothing was repaired"):
+        check(room["folder"] / "results", tracks, out=tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_covered_camera_is_not_seen_and_keeps_its_pose(room) -> None:
+    from calibproj.check_and_repair import check
+    from calibproj.tracks import Tracks
+
+    kept = room["kept"].tracks
+    others = kept.camera_index != kept.camera_names.index("near1")
+    covered = Tracks.from_observations(kept.camera_names, kept.camera_index[others],
+                                       kept.point_ids[kept.point_index[others]], kept.xy[others],
+                                       kept.markers_per_array)
+    result = check(room["folder"] / "results", covered)
+    assert result.cameras["near1"].status == "not seen" and "keeps its stored pose" in result.cameras["near1"].reason
+    assert result.trusted

@@ -168,13 +168,13 @@ def calibrate(
             markers_spec = ingest_result.markers if ingest_result is not None else None
             record = provenance(folder.path, command=command, source=source, sequence=sequence,
                                 intrinsics=intrinsics_source, markers=markers_spec, model=calibration.model,
-                                options=options, scale=scale_source, videos=_video_files(ingest_result),
+                                options=options, scale=scale_source, videos=video_files(ingest_result),
                                 merged=merge)
             with folder.writing() as staging:
                 write_provenance(staging, record)  # first, as the self-calibration: the report shows them
                 if self_calibration is not None:
                     write_self_calibration(staging / SELF_CALIBRATION_FILE, *self_calibration)
-                _write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,
+                write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,
                                ingest_result)
             folder.commit()
             logger.info("results written to %s", folder.path)
@@ -313,7 +313,7 @@ def _with_earlier(merge: str | os.PathLike, tracks: Tracks, intrinsics: Mapping[
     return merged, still_failed
 
 
-def _video_files(ingest_result: Any) -> dict[str, str]:
+def video_files(ingest_result: Any) -> dict[str, str]:
     return {} if ingest_result is None else {n: c.video for n, c in ingest_result.cameras.items()}
 
 
@@ -334,8 +334,11 @@ def _projected_markers(sequence: Any, markers_per_array: int | None) -> Any:
     return ProjectedMarkers.from_sequence(sequence)
 
 
-def _write_results(out: Path, final: Path, calibration: Calibration, tracks: Tracks,
-                   intrinsics: Mapping[str, Intrinsics], formats: list[str], report: bool, ingest_result: Any) -> None:
+def write_results(out: Path, final: Path, calibration: Calibration, tracks: Tracks,
+                  intrinsics: Mapping[str, Intrinsics], formats: list[str], report: bool, ingest_result: Any) -> None:
+    """Everything of a results folder but provenance.json, into the staging folder ``out``
+    that becomes ``final``: intrinsics/, tracks.json, the detect report and frames (with
+    ``ingest_result``), the calibration files, the exports and the report."""
     from calibproj.export import export_all
     from calibproj.report import write_report
 

@@ -82,6 +82,7 @@ def provenance(
     scale: Mapping[str, Any] | None = None,
     videos: Mapping[str, str | os.PathLike] | None = None,
     merged: Any = None,
+    checked: Any = None,
 ) -> dict[str, Any]:
     """The body of ``provenance.json``.
 
@@ -98,6 +99,7 @@ def provenance(
         scale: where the metric scale came from (measurement, factor), or None.
         videos: camera -> video file, each identified by size and time (or hash).
         merged: the earlier results (or tracks file) whose observations were added.
+        checked: the stored results a check repaired (``calibproj check --out``).
     """
     folder = Path(folder)
     return {
@@ -112,6 +114,7 @@ def provenance(
             "intrinsics": _input_entry(intrinsics, folder),
             "videos": {name: file_identity(path, folder) for name, path in (videos or {}).items()},
             "merged": _input_entry(merged, folder) if merged is not None else None,
+            **({"checked": _input_entry(checked, folder)} if checked is not None else {}),
         },
         "markers": markers,
         "model": model,

@@ -44,7 +44,8 @@ from __future__ import annotations
 import math
 import os
 import re
-from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -363,6 +364,51 @@ class Camera(LookAtPose):
 
 
 @dataclass(frozen=True)
+class CameraChange:
+    """What happens to one camera between two recordings of a room: a lamp camera moved,
+    a ceiling camera bumped, a PTZ camera re-zoomed.
+
+    Attributes:
+        pan_deg: turn about the vertical through its centre, degrees (positive: to its left).
+        tilt_deg: turn about its horizontal image axis, degrees (positive: it looks up).
+        shift_m: move of its centre (x, y, z), metres.
+        zoom: its focal lengths multiplied by this (the principal point kept).
+    """
+
+    pan_deg: float = 0.0
+    tilt_deg: float = 0.0
+    shift_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    zoom: float = 1.0
+
+    def __post_init__(self) -> None:
+        values = (self.pan_deg, self.tilt_deg, *self.shift_m, self.zoom)
+        if len(self.shift_m) != 3 or not all(math.isfinite(v) for v in values):
+            raise ValueError("a camera change needs finite pan_deg, tilt_deg, zoom and three shift_m values")
+        if not 0.1 <= self.zoom <= 10.0 or abs(self.tilt_deg) >= 80.0:
+            raise ValueError(f"zoom must be in [0.1, 10] and |tilt_deg| < 80, got {self.zoom} and {self.tilt_deg}")
+
+    def applied(self, camera: Camera) -> Camera:
+        """``camera`` after this change."""
+        position = np.asarray(camera.position, float)
+        view = np.asarray(camera.look_at, float) - position
+        pan = math.radians(self.pan_deg)
+        turn = np.array([[math.cos(pan), -math.sin(pan), 0.0], [math.sin(pan), math.cos(pan), 0.0], [0.0, 0.0, 1.0]])
+        view = turn @ view
+        # Tilt about the camera's own horizontal axis (its image x axis, the first row of R).
+        axis = look_at_rotation(position, position + view)[0]
+        view = _rotated(view, axis, -math.radians(self.tilt_deg))
+        moved = position + np.asarray(self.shift_m, float)
+        return replace(camera, position=tuple(moved.tolist()), look_at=tuple((moved + view).tolist()),
+                       fx=camera.fx * self.zoom, fy=camera.fy * self.zoom)
+
+
+def _rotated(vector: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """``vector`` turned by ``angle`` (radians) about the unit ``axis`` (Rodrigues)."""
+    return (vector * math.cos(angle) + np.cross(axis, vector) * math.sin(angle)
+            + axis * (axis @ vector) * (1.0 - math.cos(angle)))
+
+
+@dataclass(frozen=True)
 class Photometric:
     """How rendered frames look (used by the video renderer, ignored by the geometric simulator).
 
@@ -408,6 +454,15 @@ class Scene:
         """The same room with only the named cameras, in the given order."""
         return Scene(self.floor, self.projector, tuple(self.camera(name) for name in names), self.photometric,
                      self.people, self.boxes)
+
+    def changed(self, changes: Mapping[str, CameraChange]) -> Scene:
+        """The same room with the named cameras changed (a check's second recording);
+        ValueError naming a camera the scene does not have."""
+        unknown = sorted(set(changes) - set(self.camera_names))
+        if unknown:
+            raise ValueError(f"no camera {', '.join(unknown)} in the scene (cameras: {', '.join(self.camera_names)})")
+        return replace(self, cameras=tuple(changes[c.name].applied(c) if c.name in changes else c
+                                           for c in self.cameras))
 
     def to_json(self) -> dict[str, Any]:
         """Body of ``scene.json`` (without the schema tag)."""
