@@ -241,3 +241,24 @@ def test_a_covered_camera_is_not_seen_and_keeps_its_pose(room) -> None:
     result = check(room["folder"] / "results", covered)
     assert result.cameras["near1"].status == "not seen" and "keeps its stored pose" in result.cameras["near1"].reason
     assert result.trusted
+
+
+def test_the_command_prints_the_verdicts_and_exits_by_them(room, tmp_path) -> None:
+    from test_pipeline import run_cli
+
+    results, again = room["folder"] / "results", room["folder"] / "again" / "tracks.json"
+    checked = run_cli("check", str(results), "--tracks", str(again))
+    assert checked.returncode == 3, checked.stderr
+    lines = {line.split()[0]: line for line in checked.stdout.splitlines() if line.split()}
+    assert lines["far2"].split()[1] == "moved" and lines["ceiling"].split()[1] == "rezoomed"
+    assert lines["far1"].split()[1] == "unchanged"
+    repaired = run_cli("check", str(results), "--tracks", str(again), "--out", str(tmp_path / "new"), "--json",
+                       "--no-report")
+    assert repaired.returncode == 0, repaired.stderr
+    assert json.loads(repaired.stdout)["cameras"]["far2"]["status"] == "moved"
+    assert (tmp_path / "new" / "check.json").is_file() and (tmp_path / "new" / "camera_poses.json").is_file()
+    # A tolerance no change reaches confirms every camera.
+    lenient = run_cli("check", str(results), "--tracks", str(again), "--tolerance-px", "1000")
+    assert lenient.returncode == 0 and "moved" not in lenient.stdout
+    kept = run_cli("check", str(results), "--tracks", str(room["folder"] / "kept" / "tracks.json"))
+    assert kept.returncode == 0 and "6 of 6 cameras unchanged" in kept.stdout

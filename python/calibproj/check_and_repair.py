@@ -112,6 +112,15 @@ class CheckResult:
                 "cameras": {name: verdict.summary() for name, verdict in self.cameras.items()}}
 
 
+class UntrustedReference(ValueError):
+    """The cameras that agree with the stored calibration are not a clear majority:
+    nothing is repaired against it. ``result`` holds every camera's verdict."""
+
+    def __init__(self, result: CheckResult, message: str) -> None:
+        super().__init__(message)
+        self.result = result
+
+
 def check_cameras(calibration: Calibration, intrinsics: dict[str, Intrinsics], tracks: Tracks,
                   options: CheckOptions | None = None) -> CheckResult:
     """Test every camera of ``calibration`` on ``tracks`` (new undistorted observations
@@ -129,7 +138,7 @@ def check_cameras(calibration: Calibration, intrinsics: dict[str, Intrinsics], t
         verdicts[name] = CameraVerdict("unknown", f"not in the stored calibration ({reason})")
     trusted, message = _majority(verdicts)
     for name, verdict in verdicts.items():
-        log.info("%s %s: %s", name, verdict.status, verdict.reason)
+        log.debug("%s %s: %s", name, verdict.status, verdict.reason)
     return CheckResult(verdicts, trusted, message, calibration.unit)
 
 
@@ -262,6 +271,8 @@ def check(
         exports, report, workers, progress, command: as ``calibrate`` takes them.
 
     Raises:
+        UntrustedReference: with ``out``, when the stored calibration cannot be trusted
+            (its ``result`` has every verdict); nothing is written.
         ValueError: unreadable results, a source without any calibrated point, bad options.
     """
     from calibproj.ingest import ingest
@@ -290,7 +301,7 @@ def check(
     if out is None:
         return result
     if not result.trusted:
-        raise ValueError(f"{result.message} ({Path(out)} not written)")
+        raise UntrustedReference(result, f"{result.message} ({Path(out)} not written)")
     stored_tracks = Tracks.read(folder_in / TRACKS_FILE)
     fixed, fixed_intrinsics, fixed_tracks = repaired(calibration, intrinsics, stored_tracks, tracks, result,
                                                      RegistrationOptions().weak_rotation_sigma_deg)

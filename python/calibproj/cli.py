@@ -39,6 +39,7 @@ COMMANDS = {
     "calibrate": "calibproj.commands.calibrate",
     "compare": "calibproj.commands.compare",
     "evaluate": "calibproj.commands.evaluate",
+    "check": "calibproj.commands.check",
     "demo": "calibproj.commands.demo",
     "study": "calibproj.commands.study",
 }

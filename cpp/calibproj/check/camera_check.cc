@@ -287,9 +287,14 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   const Eigen::Matrix3d R = RotationOf(chosen->w, input.R);
   const Eigen::Vector3d t = -R * Eigen::Vector3d(chosen->c[0], chosen->c[1], chosen->c[2]);
   out.volume_shift_px = VolumeShift(input, R, t, chosen->s);
-  out.rotation_change_deg = Eigen::Vector3d(chosen->w[0], chosen->w[1], chosen->w[2]).norm() * kRadToDeg;
-  out.centre_change = (Eigen::Vector3d(chosen->c[0], chosen->c[1], chosen->c[2]) - stored_centre).norm();
-  out.focal_change = chosen->s - 1.0;
+  const bool significant = out.chi2 > out.chi2_threshold;
+  const bool visible = out.volume_shift_px > options.tolerance_px;
+  // A change is described by the fit that explains it; no change by the fit of both,
+  // whose figures bound what may have changed unseen.
+  const Fit& described = significant && visible ? *chosen : both;
+  out.rotation_change_deg = Eigen::Vector3d(described.w[0], described.w[1], described.w[2]).norm() * kRadToDeg;
+  out.centre_change = (Eigen::Vector3d(described.c[0], described.c[1], described.c[2]) - stored_centre).norm();
+  out.focal_change = described.s - 1.0;
   out.rotation_sigma_deg =
       std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance.block<3, 3>(0, 0)).eigenvalues().maxCoeff()) *
       kRadToDeg;
@@ -297,10 +302,8 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
       std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance.block<3, 3>(3, 3)).eigenvalues().maxCoeff());
   out.focal_sigma = std::sqrt(std::max(0.0, covariance(6, 6)));
 
-  const bool significant = out.chi2 > out.chi2_threshold;
-  const bool visible = out.volume_shift_px > options.tolerance_px;
   const std::string figures =
-      Figures("rotation %.3g deg, centre %.3g, focal %+.2g %%; the working volume moves up to %.2f px in its image",
+      Figures("rotation %.3g deg, centre %.3g (calibration units), focal %+.2g %%; the working volume moves up to %.2f px in its image",
               out.rotation_change_deg, out.centre_change, 100.0 * out.focal_change, out.volume_shift_px) +
       Figures(" (tolerance %.2g px), chi-square %.1f (%.1f is noise at 99.9 %%)", options.tolerance_px, out.chi2,
               out.chi2_threshold);

@@ -1,0 +1,106 @@
+"""Check a calibration with a short projection; with --out, repair the cameras that changed.
+
+    calibproj generate --check RESULTS --out CHECK/          # at most 12 s of projection
+    calibproj check RESULTS CHECK_VIDEOS_DIR --sequence CHECK/sequence.json [--out NEW_RESULTS]
+
+Each camera of RESULTS is tested on its new observations of the calibrated points
+(the check projection shows some of the calibrated arrays again): its pose, its focal
+length and both are fitted with the points held, and the change is judged twice, by a
+chi-square with the stored sigmas (99.9 %) and by how far it moves the working volume
+(floor to 2 m) in the camera's image (--tolerance-px, default 0.5 px). Statuses:
+
+    unchanged   no change both significant and above the tolerance
+    moved       its pose changed (the new pose is given)
+    rezoomed    its focal length changed (a PTZ camera's zoom), perhaps its pose too
+    not seen    no calibrated point seen (covered, off, turned away): keeps its stored pose
+    unknown     too few observations to test (said with how many)
+
+If the cameras that agree with RESULTS are not a clear majority of those tested, the
+floor, the projector or most cameras changed: nothing is repaired, run a full
+calibration. With --out, the moved and re-zoomed cameras get their new poses (and focal
+lengths) and a complete results folder is written, as calibrate writes one, with
+check.json (each camera's status, change with its sigma, residuals before and after).
+
+Exit status: 0 every camera confirmed (or repaired, with --out); 3 some camera changed
+(without --out), or was not seen or could not be tested; 4 the stored calibration
+cannot be trusted as a reference (run a full calibration); 1 and 2 as for every command.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from calibproj.commands.options import add_dataclass_arguments, dataclass_from_args
+
+EXIT_NOT_CONFIRMED = 3
+EXIT_UNTRUSTED = 4
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from calibproj.check_and_repair import CheckOptions
+
+    parser.add_argument("results", metavar="RESULTS", help="results folder of calibproj calibrate")
+    parser.add_argument("videos", nargs="?", metavar="VIDEOS_DIR", help="folder of the check projection's videos")
+    parser.add_argument("--tracks", metavar="FILE", help="tracks.json of the check projection, instead of videos")
+    parser.add_argument("--sequence", metavar="FILE", help="sequence.json of the check projection (with videos)")
+    parser.add_argument("--out", metavar="DIR", help="write the repaired results folder here")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out folder (the whole folder)")
+    parser.add_argument("--export", metavar="FORMATS", help="with --out: also write yaml, colmap and/or anipose")
+    parser.add_argument("--no-report", action="store_true", help="with --out: no report.html")
+    parser.add_argument("--json", action="store_true", help="print every camera's verdict as JSON")
+    parser.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_dataclass_arguments(parser, CheckOptions, "check options")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    from calibproj.check_and_repair import CheckOptions, UntrustedReference, check
+
+    if (args.videos is None) == (args.tracks is None):
+        raise ValueError("give either VIDEOS_DIR (with --sequence) or --tracks FILE")
+    if args.videos is not None and args.sequence is None:
+        raise ValueError(f"{args.videos}: checking from videos needs --sequence (the check projection's sequence.json)")
+    try:
+        result = check(args.results, args.tracks or args.videos, sequence=args.sequence, out=args.out,
+                       options=dataclass_from_args(CheckOptions, args), force=args.force,
+                       exports=[args.export] if args.export else [], report=not args.no_report,
+                       workers=args.workers, progress=not args.no_progress,
+                       command=getattr(args, "command_line", None))
+        untrusted = None
+    except UntrustedReference as error:
+        result, untrusted = error.result, error
+    if args.json:
+        print(json.dumps(result.summary(), indent=1))
+    else:
+        print(format_verdicts(result))
+        print(str(untrusted) if untrusted else result.message)
+        if args.out and not untrusted:
+            print(f"repaired results in {args.out}")
+    if not result.trusted:
+        return EXIT_UNTRUSTED
+    open_cameras = [n for n, v in result.cameras.items() if v.status in ("not seen", "unknown")]
+    if open_cameras or (result.changed and not args.out):
+        return EXIT_NOT_CONFIRMED
+    return 0
+
+
+def format_verdicts(result) -> str:
+    """One line per camera: status, change with its sigma, shift of the working volume."""
+    unit = "mm" if result.unit == "m" else result.unit
+    scale = 1000.0 if result.unit == "m" else 1.0
+    header = (f"{'camera':<12}{'status':<11}{'rotation deg':>16}{'centre ' + unit:>18}{'focal %':>9}"
+              f"{'volume px':>11}{'rms px before/after':>22}")
+    lines = [header, "-" * len(header)]
+    for name, verdict in result.cameras.items():
+        if verdict.rotation_change_deg is None:
+            lines.append(f"{name:<12}{verdict.status:<11}{verdict.reason}")
+            continue
+        lines.append(
+            f"{name:<12}{verdict.status:<11}"
+            f"{verdict.rotation_change_deg:8.3f} +-{verdict.rotation_sigma_deg:6.3f}"
+            f"{verdict.centre_change * scale:9.2f} +-{verdict.centre_sigma * scale:6.2f}"
+            f"{100 * verdict.focal_change:9.2f}{verdict.volume_shift_px:11.2f}"
+            f"{verdict.rms_before_px:13.3f} / {verdict.rms_after_px:.3f}")
+    return "\n".join(lines)
