@@ -262,3 +262,27 @@ def test_the_command_prints_the_verdicts_and_exits_by_them(room, tmp_path) -> No
     assert lenient.returncode == 0 and "moved" not in lenient.stdout
     kept = run_cli("check", str(results), "--tracks", str(room["folder"] / "kept" / "tracks.json"))
     assert kept.returncode == 0 and "6 of 6 cameras unchanged" in kept.stdout
+
+
+def test_the_check_projection_is_short_and_tests_every_camera(room, tmp_path) -> None:
+    from test_pipeline import run_cli
+
+    from calibproj.check_and_repair import check
+    from calibproj.sequence import Sequence
+    from calibproj.simulate import simulate_tracks
+
+    planned = run_cli("generate", "--check", str(room["folder"] / "results"), "--sequence",
+                      str(room["folder"] / "sequence.json"), "--out", str(tmp_path / "check"), "--no-video", "--json")
+    assert planned.returncode == 0, planned.stderr
+    summary = json.loads(planned.stdout)
+    assert summary["seconds"] <= 12.0
+    assert min(summary["points"][name] for name in ("far1", "far2", "far4", "far5", "near1")) >= 30
+    assert summary["points"]["ceiling"] >= 6  # of the few its first projection gave it
+    sequence = Sequence.load(tmp_path / "check" / "sequence.json")
+    first = Sequence.load(room["folder"] / "sequence.json")
+    assert len(sequence.patterns) < len(first.patterns)
+    # Recorded in the changed room, it finds the changes as the full projection does.
+    tracks = simulate_tracks(room["changed"], tmp_path / "recorded", noise_px=0.1, seed=9, layout=sequence).tracks
+    result = check(room["folder"] / "results", tracks)
+    assert {n: v.status for n, v in result.cameras.items() if v.status != "unchanged"} == {
+        "far2": "moved", "ceiling": "rezoomed"}, {n: v.reason for n, v in result.cameras.items()}

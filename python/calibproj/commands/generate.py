@@ -19,6 +19,14 @@ provenance.json names) and shows only the new ones. Record it with the cameras a
 they are, then: calibproj calibrate DENSE_VIDEOS --sequence SEQ_DIR/sequence.json
 --merge RESULTS ... The marker family, projector, frame rates and codes are the
 sequence's; the layout options above do not apply.
+
+Check (--check RESULTS): the projection `calibproj check` tests a calibration with, at
+most --check-seconds (12 s) long: some of the arrays RESULTS were calibrated from,
+chosen so that every camera, the zoomed one included, sees --check-points of its
+calibrated points again. The sequences default to the one RESULTS' provenance names
+and, for a merged calibration, the one the merged results were calibrated from;
+--sequence (repeatable) gives them. Then: calibproj check RESULTS CHECK_VIDEOS
+--sequence SEQ_DIR/sequence.json [--out NEW_RESULTS].
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ import argparse
 import json
 
 from calibproj.cli import CommandError
+from calibproj.sequence.check_sequence import CheckSequenceOptions
 from calibproj.sequence.densify import DensifyOptions
 
 
@@ -69,9 +78,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     densify = parser.add_argument_group("densification (see above)")
     densify.add_argument("--densify", metavar="RESULTS",
                          help="plan an extra projection for the weak cameras of this results folder")
-    densify.add_argument("--sequence", metavar="FILE",
-                         help="with --densify: the sequence.json RESULTS were calibrated from "
-                              "(default: the one its provenance.json names)")
+    densify.add_argument("--sequence", metavar="FILE", action="append",
+                         help="with --densify or --check: the sequence.json RESULTS were calibrated from "
+                              "(default: the one its provenance.json names); repeatable with --check")
     densify.add_argument("--densify-seconds", type=float, default=DensifyOptions.max_seconds,
                          help="longest extra projection, codes included (default: %(default)s)")
     densify.add_argument("--densify-cameras", metavar="NAMES",
@@ -79,16 +88,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                               "fewer than --densify-min-points inliers)")
     densify.add_argument("--densify-min-points", type=int, default=DensifyOptions.min_points,
                          help="inliers below which a camera is densified for (default: %(default)s)")
+    check = parser.add_argument_group("check projection (see above)")
+    check.add_argument("--check", metavar="RESULTS", help="plan the short projection `calibproj check` tests RESULTS with")
+    check.add_argument("--check-seconds", type=float, default=CheckSequenceOptions.max_seconds,
+                       help="longest check projection, codes included (default: %(default)s)")
+    check.add_argument("--check-points", type=int, default=CheckSequenceOptions.points_per_camera,
+                       help="calibrated points each camera should see again (default: %(default)s)")
     densify.add_argument("--densify-gap-modules", type=float, default=DensifyOptions.min_gap_modules,
                          help="smallest gap between two extra markers, in modules of the largest: room for "
                               "oblique cameras to see them apart (default: %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.densify is not None and args.check is not None:
+        raise CommandError("--densify and --check plan different projections: give one")
     if args.densify is not None:
         return _run_densify(args)
+    if args.check is not None:
+        return _run_check(args)
     if args.sequence is not None:
-        raise CommandError("--sequence applies to --densify")
+        raise CommandError("--sequence applies to --densify and --check")
     from calibproj.io.output_folder import OutputFolder
     from calibproj.sequence import SequenceOptions, generate
     from calibproj.sequence.builder import SEQUENCE_FILE
@@ -156,7 +175,9 @@ def _run_densify(args: argparse.Namespace) -> int:
     cameras = tuple(n.strip() for n in args.densify_cameras.split(",") if n.strip()) if args.densify_cameras else None
     options = DensifyOptions(max_seconds=args.densify_seconds, cameras=cameras, min_points=args.densify_min_points,
                              min_gap_modules=args.densify_gap_modules)
-    sequence_path = Path(args.sequence) if args.sequence else _calibrated_sequence(results)
+    if args.sequence and len(args.sequence) > 1:
+        raise CommandError("--densify takes one --sequence: the one RESULTS were calibrated from")
+    sequence_path = Path(args.sequence[0]) if args.sequence else _calibrated_sequence(results)
     dense, plans = densify(results, Sequence.load(sequence_path), options)
     summary = {"sequence": None, "video": None, "extra_seconds": 0.0, "cameras": {}}
     if dense is not None:
@@ -186,6 +207,53 @@ def _run_densify(args: argparse.Namespace) -> int:
         print(f"{summary['sequence']}: extra projection of {dense.duration_s:.1f} s; record it, then calibrate "
               f"with --sequence {summary['sequence']} --merge {results}")
     return 0
+
+
+def _run_check(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from calibproj.io.output_folder import OutputFolder
+    from calibproj.sequence import Sequence
+    from calibproj.sequence.builder import SEQUENCE_FILE, write_sequence
+    from calibproj.sequence.check_sequence import plan_check
+    from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET
+
+    results = Path(args.check)
+    if not results.is_dir():
+        raise CommandError(f"{results}: no such results folder")
+    paths = [Path(p) for p in args.sequence] if args.sequence else _calibrated_sequences(results)
+    options = CheckSequenceOptions(max_seconds=args.check_seconds, points_per_camera=args.check_points)
+    sequence, seen = plan_check(results, [Sequence.load(path) for path in paths], options)
+    with OutputFolder(args.out, force=args.force, signature=[SEQUENCE_FILE]) as folder, folder.writing() as staging:
+        write_sequence(staging, sequence, video=args.video, png=args.png,
+                       crf=DEFAULT_CRF if args.crf is None else args.crf, preset=args.preset or DEFAULT_PRESET,
+                       progress=args.progress and not args.json)
+    summary = {"sequence": f"{args.out}/sequence.json", "video": f"{args.out}/projection.mp4" if args.video else None,
+               "seconds": round(sequence.duration_s, 3), "points": seen}
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        for name, points in seen.items():
+            print(f"{name}: {points} calibrated points shown again")
+        print(f"{summary['sequence']}: check projection of {sequence.duration_s:.1f} s; record it with every camera, "
+              f"then: calibproj check {results} VIDEOS --sequence {summary['sequence']}")
+    return 0
+
+
+def _calibrated_sequences(results) -> list:
+    """The sequences a results folder was calibrated from: its own and, when it merged an
+    earlier calibration, that one's (recursively)."""
+    from pathlib import Path
+
+    from calibproj.provenance import read_provenance
+
+    paths = [_calibrated_sequence(results)]
+    merged = (((read_provenance(results) or {}).get("inputs") or {}).get("merged") or {}).get("path")
+    if isinstance(merged, str):
+        earlier = Path(merged) if Path(merged).is_absolute() else Path(results) / merged
+        if earlier.is_dir():
+            paths += _calibrated_sequences(earlier)
+    return paths
 
 
 def _calibrated_sequence(results) -> "Path":

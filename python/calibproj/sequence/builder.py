@@ -161,6 +161,35 @@ def overhead_frames(code_degree: int, code_frames_per_bit: int, reference_frames
     return 6 * reference_frames + 2 * (2 ** code_degree - 1) * code_frames_per_bit
 
 
+def overhead_seconds(sequence: Sequence) -> float:
+    """Seconds of ``sequence`` besides its patterns (reference frames and light codes)."""
+    start = sequence.start_code
+    return overhead_frames(_code_degree(start), start.frames_per_bit, sequence.segments[0].frame_count) / sequence.fps
+
+
+def pattern_budget(sequence: Sequence, max_seconds: float) -> int:
+    """Patterns a sequence with ``sequence``'s timing, light codes and reference frames
+    can show within ``max_seconds`` (0 when the rest alone takes longer)."""
+    frames = math.floor(max_seconds * sequence.fps + 1e-9) - round(overhead_seconds(sequence) * sequence.fps)
+    return max(0, frames // sequence.frames_per_pattern)
+
+
+def reassembled(sequence: Sequence, layout: MsmLayout, centres: np.ndarray, shown: list[ShownPattern],
+                min_gap_modules: float | None = None) -> Sequence:
+    """A sequence of ``sequence``'s markers, frame rate, timing and codes that shows
+    ``shown`` of ``layout`` and ``centres`` (a densified or check projection)."""
+    start = sequence.start_code
+    return assemble_sequence(sequence.markers, layout, centres, shown, fps=sequence.fps,
+                             frames_per_pattern=sequence.frames_per_pattern, code_degree=_code_degree(start),
+                             code_frames_per_bit=start.frames_per_bit,
+                             reference_frames=sequence.segments[0].frame_count,
+                             min_gap_modules=sequence.min_gap_modules if min_gap_modules is None else min_gap_modules)
+
+
+def _code_degree(code: LightCode) -> int:
+    return int(round(math.log2(len(code.bits) + 1)))
+
+
 def generate(
     out_dir: str | os.PathLike,
     options: SequenceOptions | None = None,

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.sequence.builder import ShownPattern, assemble_sequence, overhead_frames
+from calibproj.sequence.builder import ShownPattern, overhead_seconds, pattern_budget, reassembled
 from calibproj.sequence.layout import MsmLayout, outside_image, snap_centres
 from calibproj.sequence.sequence import Sequence
 
@@ -210,11 +210,7 @@ def densified_sequence(sequence: Sequence, plans: list[DensePlan]) -> Sequence:
                 outside = tuple(int(m) for m in np.flatnonzero(outside_image(used, side, layout.projector)))
                 shown.append(ShownPattern(array, scale_index, tuple(sorted(set(outside + unused)))))
             array += 1
-    start = sequence.start_code
-    return assemble_sequence(sequence.markers, dense_layout, np.concatenate(centres), shown, fps=sequence.fps,
-                             frames_per_pattern=sequence.frames_per_pattern, code_degree=_degree(start),
-                             code_frames_per_bit=start.frames_per_bit, reference_frames=_reference_frames(sequence),
-                             min_gap_modules=sequence.min_gap_modules)
+    return reassembled(sequence, dense_layout, np.concatenate(centres), shown)
 
 
 def densify(results: str | os.PathLike, sequence: Sequence,
@@ -396,18 +392,8 @@ def _offset_arrays(polygon: np.ndarray, pitch: float, offsets: int, sides: tuple
 
 
 def _pattern_budget(sequence: Sequence, options: DensifyOptions) -> int:
-    start = sequence.start_code
-    fixed = overhead_frames(_degree(start), start.frames_per_bit, _reference_frames(sequence))
-    frames = math.floor(options.max_seconds * sequence.fps + 1e-9) - fixed
-    if frames < sequence.frames_per_pattern * options.scales_per_msm:
+    budget = pattern_budget(sequence, options.max_seconds)
+    if budget < options.scales_per_msm:
         raise ValueError(f"{options.max_seconds:g} s leave no time for patterns: the light codes and reference "
-                         f"frames alone take {fixed / sequence.fps:.1f} s")
-    return frames // sequence.frames_per_pattern
-
-
-def _degree(code) -> int:
-    return int(round(math.log2(len(code.bits) + 1)))
-
-
-def _reference_frames(sequence: Sequence) -> int:
-    return sequence.segments[0].frame_count
+                         f"frames alone take {overhead_seconds(sequence):.1f} s")
+    return budget
