@@ -188,7 +188,7 @@ def test_the_moved_and_rezoomed_cameras_are_found_and_repaired(room) -> None:
     from calibproj.io.intrinsics import load_intrinsics_dir
 
     out = room["folder"] / "repaired"
-    result = check(room["folder"] / "results", room["again"].tracks, out=out, report=False)
+    result = check(room["folder"] / "results", room["again"].tracks, out=out)
     statuses = {name: verdict.status for name, verdict in result.cameras.items()}
     assert statuses == {"far1": "unchanged", "far2": "moved", "far4": "unchanged", "far5": "unchanged",
                         "near1": "unchanged", "ceiling": "rezoomed"}, {n: v.reason for n, v in result.cameras.items()}
@@ -209,6 +209,11 @@ def test_the_moved_and_rezoomed_cameras_are_found_and_repaired(room) -> None:
     assert K[0, 0] == pytest.approx(room["changed"].camera("ceiling").fx, rel=0.002)
     document = json.loads((out / CHECK_FILE).read_text())
     assert document["schema"] == "calibproj.check/1" and document["cameras"]["far2"]["status"] == "moved"
+    # The report shows the check: which cameras changed and the residuals before and after.
+    page = (out / "report.html").read_text()
+    assert "Check against the stored calibration" in page
+    row = page[page.index('<td class="name">far2</td>'):][:400]
+    assert "moved" in row and "&rarr;" in row
 
 
 def test_a_moved_floor_or_projector_is_not_repaired_against(room, tmp_path) -> None:

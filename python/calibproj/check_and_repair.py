@@ -37,11 +37,11 @@ from calibproj.calibration import Calibration, CameraMetrics
 from calibproj.io.intrinsics import Intrinsics
 from calibproj.io.jsonio import write_json
 from calibproj.option_tables import options_class
+from calibproj.results import CHECK_FILE
 from calibproj.tracks import Tracks
 
 log = logging.getLogger(__name__)
 
-CHECK_FILE = "check.json"
 CHECK_KIND = "check"
 CHECK_MAJOR = 1
 CHANGED = ("moved", "rezoomed")

@@ -32,6 +32,7 @@ DETECT_REPORT_FILE = "detect_report.json"
 INTRINSICS_DIR = "intrinsics"
 FRAMES_DIR = "frames"
 EVALUATION_FILE = "evaluation.json"
+CHECK_FILE = "check.json"  # of a folder `calibproj check --out` repaired
 
 
 def load_results(results: Calibration | str | os.PathLike) -> Calibration:

@@ -26,7 +26,8 @@ from calibproj.report import figures
 from calibproj.report.data import CameraView, camera_views
 from calibproj.provenance import read_provenance
 from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
-from calibproj.results import DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, intrinsics_source, load_results
+from calibproj.results import (CHECK_FILE, DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, intrinsics_source,
+                               load_results)
 from calibproj.tracks import Tracks
 from calibproj.version import __version__
 
@@ -102,7 +103,8 @@ def write_report(
     inputs = ReportInputs(detect_report=_optional_json(results_dir / DETECT_REPORT_FILE, "sync and detection"),
                           provenance=read_provenance(results_dir),
                           evaluation=_optional_json(results_dir / EVALUATION_FILE, "evaluation"),
-                          self_calibration=_optional_json(results_dir / SELF_CALIBRATION_FILE, "self-calibration"))
+                          self_calibration=_optional_json(results_dir / SELF_CALIBRATION_FILE, "self-calibration"),
+                          check=_optional_json(results_dir / CHECK_FILE, "check"))
     scene, cameras = draw_plots(calibration, views, dpi, _thumbnails(results_dir, inputs.detect_report))
     sync = sync_plots(inputs.detect_report, dpi)
     folder = results_dir / FIGURES_DIR
@@ -122,6 +124,7 @@ class ReportInputs:
     provenance: dict | None = None
     evaluation: dict | None = None
     self_calibration: dict | None = None
+    check: dict | None = None  # check.json of a folder `calibproj check --out` repaired
 
 
 @dataclass(frozen=True, eq=False)  # numpy field
@@ -230,6 +233,8 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         _meta_line(inputs.provenance),
         _warnings(views, inputs.self_calibration),
         _scroll(_summary(calibration, views, inputs.provenance)),
+        *(["<h2>Check against the stored calibration</h2>", check_table(inputs.check, calibration.unit)]
+          if inputs.check else []),
         "<h2>Cameras</h2>",
         "<p>Fit residual: reprojection error of the observations the calibration was made from "
         "(inliers). It measures how well the model fits, not how accurate the pose is: a camera "
@@ -426,6 +431,40 @@ def evaluation_table(document: dict) -> str:
                     f"</td><td>{html.escape(str(camera.get('n', '-')))}</td></tr>")
     intro = ("<p>Reprojection error on points that took no part in the calibration"
              + (f" ({html.escape(str(source))})" if source else "") + f": success {line}.</p>")
+    return intro + _scroll("<table>" + "".join(rows) + "</table>")
+
+
+def check_table(document: dict, unit: str) -> str:
+    """``check.json`` (``calibproj check --out``): which cameras changed, by how much (with
+    the sigma of the change), and the residuals before and after the repair."""
+    metric = unit == "m"
+    rows = ["<tr><th class=\"name\">camera</th><th class=\"name\">status</th><th>rotation [deg]</th>"
+            f"<th>centre [{'mm' if metric else html.escape(unit)}]</th><th>focal [%]</th>"
+            "<th>working volume moved [px]</th><th>residual before &rarr; after [px]</th>"
+            "<th class=\"name\">why</th></tr>"]
+    cameras = document.get("cameras") if isinstance(document.get("cameras"), dict) else {}
+    scale = 1000.0 if metric else 1.0
+    for name, camera in cameras.items():
+        camera = camera if isinstance(camera, dict) else {}
+        status = str(camera.get("status", "-"))
+        css = "failed" if status in ("moved", "rezoomed") else ""
+
+        def change(value: str, sigma: str, factor: float = 1.0, digits: int = 3) -> str:
+            if camera.get(value) is None:
+                return "-"
+            return f"{_number(camera[value] * factor, digits)} &plusmn; {_number((camera.get(sigma) or 0) * factor, digits)}"
+
+        rows.append(
+            f'<tr><td class="name">{html.escape(str(name))}</td><td class="name {css}">{html.escape(status)}</td>'
+            f"<td>{change('rotation_change_deg', 'rotation_sigma_deg')}</td>"
+            f"<td>{change('centre_change', 'centre_sigma', scale, 2)}</td>"
+            f"<td>{change('focal_change', 'focal_sigma', 100.0, 2)}</td>"
+            f"<td>{_number(camera.get('volume_shift_px'), 2)}</td>"
+            f"<td>{_number(camera.get('rms_before_px'), 3)} &rarr; {_number(camera.get('rms_after_px'), 3)}</td>"
+            f'<td class="name">{html.escape(str(camera.get("reason", "")))}</td></tr>')
+    intro = (f"<p>{html.escape(str(document.get('message', '')))}. The moved and re-zoomed cameras were fitted "
+             "again to the calibrated points (every other camera and the floor held); the others keep the "
+             "stored calibration.</p>")
     return intro + _scroll("<table>" + "".join(rows) + "</table>")
 
 

@@ -1,0 +1,251 @@
+"""Check and repair on rendered rooms: cameras moved, turned and re-zoomed between the
+calibration and a check projection, with the renderer's realistic effects on.
+
+Per scene and seed the room is rendered with the full projection and calibrated; the
+check projection (`calibproj generate --check`) is planned from that calibration. Each
+trial then changes 0-3 cameras (rotations 0.02-2 deg, centre moves 1-50 mm, both
+log-uniform) and at most one camera's zoom (1-5 %), renders the check projection in the
+changed room, and runs `calibproj check --out` on it. With --full, the changed room is
+also rendered with the full projection and calibrated from scratch: the reference
+for the repaired poses' accuracy and for the time.
+
+Per trial it prints the truth (each changed camera: rotation, centre move, zoom, and how
+far the change moves the working volume in its image) and the verdicts. A camera
+should be flagged when its true change moves the working volume (floor to 2 m) by
+more than the tolerance in its image. The last line:
+``check: false_moved=.. missed_moved=.. missed_below_tolerance=.. repaired_rot_ratio=..
+check_time_ratio=..``: unchanged cameras flagged, cameras over the tolerance not flagged
+with the right status, changes under the tolerance not flagged (expected), the worst
+ratio of the repaired calibration's rotation RMSE to the full calibration's (and the
+same for centres in the row), and the check's wall time over the full calibration's.
+
+    python tools/bench/check_repair.py --scenes demo,or-full --seeds 3 --trials 5 --full
+    python tools/bench/check_repair.py --scenes demo --seeds 1 --trials 2 --arrays 12
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from realism import CONDITIONS, calibrate_scaled  # noqa: E402
+
+from calibproj.check_and_repair import CheckOptions, UntrustedReference, check  # noqa: E402
+from calibproj.comparison import CameraPoses, compare  # noqa: E402
+from calibproj.demo import marker_side_on_floor  # noqa: E402
+from calibproj.registration import RegistrationOptions  # noqa: E402
+from calibproj.sequence import Sequence, generate  # noqa: E402
+from calibproj.sequence.check_sequence import plan_check  # noqa: E402
+from calibproj.simulate.render import RenderOptions, simulate_videos  # noqa: E402
+from calibproj.simulate.scene import CameraChange, Scene, load_scene  # noqa: E402
+
+EFFECTS = ("rolling-15ms", "room-light", "floor")
+VOLUME_HEIGHT_M = 2.0
+
+
+def realistic(scene: Scene) -> Scene:
+    for name in EFFECTS:
+        scene = CONDITIONS[name][0](scene)
+    return scene
+
+
+def draw_changes(names: list[str], rng: np.random.Generator) -> dict[str, CameraChange]:
+    """0-3 cameras moved (rotation 0.02-2 deg, centre 1-50 mm) and at most one re-zoomed (1-5 %)."""
+    changes: dict[str, CameraChange] = {}
+    for name in rng.choice(names, size=int(rng.integers(0, 4)), replace=False):
+        angle = math.exp(rng.uniform(math.log(0.02), math.log(2.0)))
+        direction = rng.uniform(0.0, 2.0 * math.pi)
+        shift = math.exp(rng.uniform(math.log(0.001), math.log(0.05)))
+        axis = rng.normal(size=3)
+        changes[str(name)] = CameraChange(pan_deg=angle * math.cos(direction), tilt_deg=angle * math.sin(direction),
+                                          shift_m=tuple((shift * axis / np.linalg.norm(axis)).tolist()))
+    if rng.random() < 0.5:
+        name = str(rng.choice(names))
+        zoom = 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(0.01, 0.05)
+        changes[name] = replace(changes.get(name, CameraChange()), zoom=zoom)
+    return changes
+
+
+def volume_shift_px(before, after, floor_size_m: tuple[float, float]) -> float:
+    """How far a change moves the working volume (the floor, up to 2 m) in the camera's
+    image, at most: the truth the check's practical test estimates."""
+    xs = np.linspace(-floor_size_m[0] / 2, floor_size_m[0] / 2, 25)
+    ys = np.linspace(-floor_size_m[1] / 2, floor_size_m[1] / 2, 25)
+    zs = np.linspace(0.0, VOLUME_HEIGHT_M, 5)
+    points = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), axis=-1).reshape(-1, 3)
+
+    def pixels(camera) -> np.ndarray:
+        local = points @ camera.R.T + camera.t
+        projected = local @ camera.K.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = projected[:, :2] / projected[:, 2:]
+        return np.where(local[:, 2:] > 0.1, xy, np.nan)
+
+    first, second = pixels(before), pixels(after)
+    width, height = before.resolution
+    inside = np.all(np.isfinite(first), axis=1) & (first[:, 0] >= 0) & (first[:, 1] >= 0) & \
+        (first[:, 0] <= width) & (first[:, 1] <= height) & np.all(np.isfinite(second), axis=1)
+    return float(np.max(np.linalg.norm(first[inside] - second[inside], axis=1))) if inside.any() else 0.0
+
+
+def rotation_deg(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(a @ b.T) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+def accuracy(folder: Path, scene: Scene) -> tuple[float, float]:
+    """Rotation (deg) and centre (mm) RMSE of a results folder against the scene's truth."""
+    from calibproj.calibration import Calibration
+
+    calibration = Calibration.load(folder)
+    truth = CameraPoses({c.name: (c.R, c.t) for c in scene.cameras}, "m")
+    comparison = compare(CameraPoses(calibration.poses, calibration.unit, calibration.failed), truth)
+    return comparison.rotation_rmse_deg, comparison.translation_rmse_mm
+
+
+def first_calibration(scene: Scene, sequence, sequence_path: Path, room: Path, seed: int, reuse: bool) -> Path:
+    results = room / "results"
+    if not (reuse and (results / "camera_poses.json").is_file()):
+        simulate_videos(scene, sequence, room, seed=seed, options=RenderOptions())
+        calibrate_scaled(room / "videos", sequence_path, results, intrinsics=room / "intrinsics",
+                         scale=f"marker-size:{marker_side_on_floor(room / 'scene.json', sequence):.9f}",
+                         options=RegistrationOptions(), exposures=None, label=room.name)
+    return results
+
+
+def trial(scene: Scene, changes: dict[str, CameraChange], results: Path, check_path: Path, sequence,
+          sequence_path: Path, folder: Path, seed: int, args) -> dict:
+    changed = scene.changed(changes)
+    check_sequence = Sequence.load(check_path)
+    simulate_videos(changed, check_sequence, folder / "check", seed=seed, options=RenderOptions())
+    options = CheckOptions(tolerance_px=args.tolerance_px)
+    started = time.perf_counter()
+    try:
+        result = check(results, folder / "check" / "videos", sequence=check_path, out=folder / "repaired",
+                       options=options, force=True, report=False, progress=False)
+        repaired = folder / "repaired"
+    except UntrustedReference as error:
+        result, repaired = error.result, None
+    check_s = time.perf_counter() - started
+    row = {"changes": {}, "verdicts": {n: v.status for n, v in result.cameras.items()}, "check_s": check_s,
+           "trusted": result.trusted}
+    for camera in scene.cameras:
+        change = changes.get(camera.name)
+        after = changed.camera(camera.name)
+        row["changes"][camera.name] = {
+            "rotation_deg": rotation_deg(camera.R, after.R),
+            "centre_mm": 1000.0 * float(np.linalg.norm(camera.center - after.center)),
+            "zoom": after.fx / camera.fx, "shift_px": volume_shift_px(camera, after, scene.floor.size_m),
+            "changed": change is not None}
+    if repaired is not None:
+        row["repaired_rot"], row["repaired_mm"] = accuracy(repaired, changed)
+    if args.full:
+        simulate_videos(changed, sequence, folder / "full", seed=seed + 500, options=RenderOptions())
+        started = time.perf_counter()
+        calibrate_scaled(folder / "full" / "videos", sequence_path, folder / "full_results",
+                         intrinsics=folder / "full" / "intrinsics",
+                         scale=f"marker-size:{marker_side_on_floor(folder / 'full' / 'scene.json', sequence):.9f}",
+                         options=RegistrationOptions(), exposures=None, label=folder.name)
+        row["full_s"] = time.perf_counter() - started
+        row["full_rot"], row["full_mm"] = accuracy(folder / "full_results", changed)
+    return row
+
+
+def score(row: dict, tolerance_px: float) -> dict[str, int]:
+    counts = {"false_moved": 0, "missed_moved": 0, "missed_below_tolerance": 0}
+    for name, truth in row["changes"].items():
+        status = row["verdicts"].get(name)
+        flagged = status in ("moved", "rezoomed")
+        if not truth["changed"]:
+            counts["false_moved"] += flagged
+            continue
+        expected = "rezoomed" if abs(truth["zoom"] - 1.0) > 1e-9 else "moved"
+        if truth["shift_px"] > tolerance_px:
+            counts["missed_moved"] += status != expected
+        else:
+            counts["missed_below_tolerance"] += not flagged
+    return counts
+
+
+def format_trial(label: str, row: dict) -> str:
+    parts = []
+    for name, truth in row["changes"].items():
+        if truth["changed"]:
+            parts.append(f"{name} {truth['rotation_deg']:.3f} deg {truth['centre_mm']:.1f} mm "
+                         f"zoom {100 * (truth['zoom'] - 1):+.1f} % ({truth['shift_px']:.2f} px) -> "
+                         f"{row['verdicts'].get(name)}")
+    others = [name for name, truth in row["changes"].items() if not truth["changed"]]
+    flagged = [name for name in others if row["verdicts"].get(name) in ("moved", "rezoomed")]
+    line = f"{label}: " + ("; ".join(parts) or "nothing changed")
+    line += f" | unchanged {len(others) - len(flagged)}/{len(others)}" + (f" (flagged: {flagged})" if flagged else "")
+    if "repaired_rot" in row:
+        line += f" | repaired {row['repaired_rot']:.4f} deg {row['repaired_mm']:.2f} mm"
+    if "full_rot" in row:
+        line += f" | full {row['full_rot']:.4f} deg {row['full_mm']:.2f} mm | time {row['check_s']:.0f}/{row['full_s']:.0f} s"
+    return line + ("" if row["trusted"] else " | untrusted")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenes", default="demo,or-full", help="scene presets (default demo,or-full)")
+    parser.add_argument("--seeds", type=int, default=3, help="seeds per scene (default 3)")
+    parser.add_argument("--trials", type=int, default=5, help="trials per scene and seed (default 5)")
+    parser.add_argument("--arrays", type=int, default=48, help="MSM arrays of the full projection (default 48)")
+    parser.add_argument("--tolerance-px", type=float, default=CheckOptions.tolerance_px,
+                        help="the check's tolerance (default %(default)s)")
+    parser.add_argument("--full", action="store_true",
+                        help="also render and calibrate every changed room with the full projection (slow)")
+    parser.add_argument("--work", type=Path, default=None, help="keep renderings here (default: a temporary folder)")
+    parser.add_argument("--reuse", action="store_true", help="with --work: reuse the first calibration of each room")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    with tempfile.TemporaryDirectory(prefix="check-") as temporary:
+        work = args.work or Path(temporary)
+        sequence = generate(work / "sequence", arrays=args.arrays, scales=(1.0, 3.0, 6.0), video=False)
+        sequence_path = work / "sequence" / "sequence.json"
+        totals = {"false_moved": 0, "missed_moved": 0, "missed_below_tolerance": 0}
+        rot_ratios, time_ratios, rows = [], [], []
+        for scene_name in args.scenes.split(","):
+            for seed in range(args.seeds):
+                scene = realistic(load_scene(scene_name, seed=seed))
+                room = work / f"{scene_name}-{seed}"
+                results = first_calibration(scene, sequence, sequence_path, room, seed, args.reuse)
+                check_sequence, _ = plan_check(results, [Sequence.load(sequence_path)])
+                check_path = room / "check_sequence.json"
+                check_sequence.save(check_path)
+                print(f"{scene_name} seed {seed}: check projection {check_sequence.duration_s:.1f} s "
+                      f"(full {sequence.duration_s:.1f} s)", flush=True)
+                for k in range(args.trials):
+                    rng = np.random.default_rng([seed, k, len(scene_name)])
+                    changes = draw_changes(scene.camera_names, rng)
+                    row = trial(scene, changes, results, check_path, sequence, sequence_path, room / f"trial-{k}",
+                                seed * 100 + k + 1, args)
+                    rows.append(row)
+                    for key, value in score(row, args.tolerance_px).items():
+                        totals[key] += value
+                    if "full_rot" in row and "repaired_rot" in row:
+                        rot_ratios.append(row["repaired_rot"] / max(row["full_rot"], 1e-9))
+                        time_ratios.append(row["check_s"] / row["full_s"])
+                    print(format_trial(f"{scene_name} seed {seed} trial {k}", row), flush=True)
+        if args.work:
+            (args.work / "check_repair.json").write_text(json.dumps(rows, indent=1))
+        ratio = max(rot_ratios) if rot_ratios else math.nan
+        time_ratio = max(time_ratios) if time_ratios else math.nan
+        print(f"check: false_moved={totals['false_moved']} missed_moved={totals['missed_moved']} "
+              f"missed_below_tolerance={totals['missed_below_tolerance']} repaired_rot_ratio={ratio:.2f} "
+              f"check_time_ratio={time_ratio:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
