@@ -2,8 +2,9 @@
 (tests/fuzz_inputs.py) fed through ``calibproj calibrate --tracks`` (tracks.json and
 intrinsics files) and ``calibproj detect`` (sequence.json and intrinsics files, two tiny
 videos), and mutated results through ``calibproj evaluate`` (its evaluation tracks, a
-results folder's metrics.json and points.ply, the latter two with --save) and ``calibproj compare`` (a
-camera_poses.json).
+results folder's metrics.json and points.ply, the latter two with --save), ``calibproj check``
+(its check tracks with --out, a results folder's metrics.json and points.ply) and
+``calibproj compare`` (a camera_poses.json).
 
 Every run must end by itself within RUN_TIMEOUT_S with exit status 0, 1 or 2, without a
 traceback or an "internal error"; status 2 (a bad input) with exactly one error line
@@ -50,7 +51,8 @@ STARTUP_TIMEOUT_S = 60.0
 WORKERS = 2
 # Mutated files per input format.
 BUDGET = {"tracks": 200, "calibrate_intrinsics": 120, "sequence": 200, "detect_intrinsics": 80,
-          "eval_tracks": 80, "evaluate_intrinsics": 60, "camera_poses": 100, "metrics": 80, "points": 60}
+          "eval_tracks": 80, "evaluate_intrinsics": 60, "camera_poses": 100, "metrics": 80, "points": 60,
+          "check_tracks": 60, "check_metrics": 30, "check_points": 30}
 MIN_FILES = 500
 MAX_ERROR_LINE = 1000  # characters: one line a person reads
 # A camera's own file: a bad one fails that camera, not the run.
@@ -189,7 +191,10 @@ def results_mutations(results: Path, rng: np.random.Generator) -> dict[str, list
                                                         BUDGET["evaluate_intrinsics"]),
             "camera_poses": poses_mutations(read("camera_poses.json"), rng, BUDGET["camera_poses"]),
             "metrics": metrics_mutations(read("metrics.json"), rng, BUDGET["metrics"]),
-            "points": points_mutations((results / "points.ply").read_bytes(), rng, BUDGET["points"])}
+            "points": points_mutations((results / "points.ply").read_bytes(), rng, BUDGET["points"]),
+            "check_tracks": tracks_mutations(read("tracks.json"), rng, BUDGET["check_tracks"]),
+            "check_metrics": metrics_mutations(read("metrics.json"), rng, BUDGET["check_metrics"]),
+            "check_points": points_mutations((results / "points.ply").read_bytes(), rng, BUDGET["check_points"])}
 
 
 def points_mutations(data: bytes, rng: np.random.Generator, budget: int) -> list[Mutation]:
@@ -321,6 +326,17 @@ def prepare_results_run(root: Path, results: Path, fmt: str, index: int, mutatio
         target.write_bytes(mutation.data)
         return Run(fmt, mutation, target, ["evaluate", str(results), "--tracks", str(results / "tracks.json"),
                                            "--intrinsics", str(intrinsics)])
+    if fmt in ("check_metrics", "check_points"):
+        copy = folder / "results"
+        shutil.copytree(results, copy)
+        target = copy / ("metrics.json" if fmt == "check_metrics" else "points.ply")
+        target.write_bytes(mutation.data)
+        return Run(fmt, mutation, target, ["check", str(copy), "--tracks", str(results / "tracks.json")])
+    if fmt == "check_tracks":
+        target = folder / "check_tracks.json"
+        target.write_bytes(mutation.data)
+        return Run(fmt, mutation, target, ["check", str(results), "--tracks", str(target), "--out",
+                                           str(folder / "repaired")])
     if fmt in ("metrics", "points"):
         copy = folder / "results"
         shutil.copytree(results, copy)
@@ -352,7 +368,8 @@ def problem_of(run: Run, answer: dict[str, Any]) -> str | None:
     status, stderr = answer["status"], answer["stderr"]
     if "Traceback" in stderr or "internal error" in stderr:
         return f"exit status {status} with a traceback: {stderr[-600:]!r}"
-    if status not in (0, 1, 2):
+    # check's own statuses: a camera not confirmed (3), no trusted majority (4).
+    if status not in (0, 1, 2) + ((3, 4) if run.args[0] == "check" else ()):
         return f"exit status {status}: {stderr[-300:]!r}"
     errors = [line for line in stderr.splitlines() if ": error: " in line]
     if status == 2:
@@ -371,6 +388,8 @@ def problem_of(run: Run, answer: dict[str, Any]) -> str | None:
             return f"accepted (exit status {status}): {stderr[-300:]!r}"
     if "--save" in run.args and status != 0 and (run.file.parent / "evaluation.json").exists():
         return f"exit status {status} but evaluation.json was saved: {stderr[-300:]!r}"
+    if run.args[0] == "check" and status in (1, 2, 4) and (run.file.parent / "repaired").exists():
+        return f"exit status {status} but a repaired folder was written: {stderr[-300:]!r}"
     return None
 
 
