@@ -291,3 +291,24 @@ def test_the_check_projection_is_short_and_tests_every_camera(room, tmp_path) ->
     result = check(room["folder"] / "results", tracks)
     assert {n: v.status for n, v in result.cameras.items() if v.status != "unchanged"} == {
         "far2": "moved", "ceiling": "rezoomed"}, {n: v.reason for n, v in result.cameras.items()}
+
+
+def test_against_its_own_observations_a_weak_camera_is_tested_as_closely_as_the_others(stored) -> None:
+    """A stored pose known only to 0.1 deg relative to the other cameras still fits its
+    own calibration's observations closely: against those, a 0.1 deg turn is a move,
+    and many unchanged recordings are all unchanged."""
+    rng = np.random.default_rng(11)
+    reference = project(stored["K"], stored["R"], stored["t"], stored["points"]) + rng.normal(0, 0.1, (63, 2))
+    weak = {"rotation_sigma": math.radians(0.1), "centre_sigma": 0.01}
+
+    def verdict(R, t, seed):
+        observed = project(stored["K"], R, t, stored["points"]) + np.random.default_rng(seed).normal(0, 0.1, (63, 2))
+        return _core.check.check_camera(stored["K"], stored["R"], stored["t"], weak["rotation_sigma"],
+                                        weak["centre_sigma"], stored["points"], observed, stored["volume"], WIDTH,
+                                        HEIGHT, stored["points"], reference)
+
+    R, t = turned(stored, [0.0, 1.0, 0.0], 0.1)
+    moved = verdict(R, t, 1)
+    assert moved.status == "moved" and moved.reference == "its calibration's observations"
+    assert moved.rotation_change_deg == pytest.approx(0.1, abs=0.02)
+    assert all(verdict(stored["R"], stored["t"], seed).status == "unchanged" for seed in range(2, 42))

@@ -45,6 +45,7 @@ Eigen::Matrix3Xd Columns3(const RowMatrix& rows, const char* what) {
 check::CameraCheck CheckCameraPy(const RowMatrix& K, const RowMatrix& R, const Eigen::VectorXd& t,
                                  double rotation_sigma, double centre_sigma, const RowMatrix& points,
                                  const RowMatrix& observed, const RowMatrix& volume, double width, double height,
+                                 const RowMatrix& reference_points, const RowMatrix& reference_observed,
                                  const py::kwargs& kwargs) {
   const check::CheckOptions options = CheckOptionsFromKwargs(kwargs);
   if (K.rows() != 3 || K.cols() != 3) throw std::invalid_argument("K: expected shape (3, 3)");
@@ -59,6 +60,10 @@ check::CameraCheck CheckCameraPy(const RowMatrix& K, const RowMatrix& R, const E
   input.points = Columns3(points, "points");
   input.observed = RowsOf<Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>>(observed, 2, "observed").transpose();
   input.volume = Columns3(volume, "volume");
+  input.reference_points = Columns3(reference_points, "reference_points");
+  input.reference_observed =
+      RowsOf<Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>>(reference_observed, 2, "reference_observed")
+          .transpose();
   input.width = width;
   input.height = height;
   py::gil_scoped_release release;
@@ -84,6 +89,7 @@ void register_check(py::module_& m) {
       .def_readonly("centre_sigma", &CameraCheck::centre_sigma, "of the change (largest axis), world units")
       .def_readonly("focal_change", &CameraCheck::focal_change, "new focal length / stored - 1")
       .def_readonly("focal_sigma", &CameraCheck::focal_sigma)
+      .def_readonly("reference", &CameraCheck::reference, "what the change is measured against")
       .def_readonly("chi2", &CameraCheck::chi2, "squared Mahalanobis distance of the change")
       .def_readonly("chi2_threshold", &CameraCheck::chi2_threshold)
       .def_readonly("volume_shift_px", &CameraCheck::volume_shift_px,
@@ -93,10 +99,13 @@ void register_check(py::module_& m) {
       .def_readonly("focal_scale", &CameraCheck::focal_scale, "its focal length over the stored one");
   m.def("check_camera", &CheckCameraPy, py::arg("K"), py::arg("R"), py::arg("t"), py::arg("rotation_sigma"),
         py::arg("centre_sigma"), py::arg("points"), py::arg("observed"), py::arg("volume"), py::arg("width"),
-        py::arg("height"),
+        py::arg("height"), py::arg("reference_points") = RowMatrix(0, 3),
+        py::arg("reference_observed") = RowMatrix(0, 2),
         "Tests one stored camera (K, R, t; pose sigmas in rad and world units) against its new undistorted\n"
         "observations (N, 2) of stored points (N, 3), the working volume (M, 3) and image size giving the\n"
-        "practical test; keyword options as option_table() lists them.");
+        "practical test; the camera's observations (M, 2) of stored points (M, 3) that the calibration was made\n"
+        "from are the reference of the change (without them, the stored sigmas); keyword options as\n"
+        "option_table() lists them.");
   m.def(
       "check_options", [](const py::kwargs& kwargs) { CheckOptionsFromKwargs(kwargs); },
       "Raises ValueError naming the first check option (keyword) that is unknown or out of range.");

@@ -122,9 +122,11 @@ class UntrustedReference(ValueError):
 
 
 def check_cameras(calibration: Calibration, intrinsics: dict[str, Intrinsics], tracks: Tracks,
-                  options: CheckOptions | None = None) -> CheckResult:
+                  options: CheckOptions | None = None, stored_tracks: Tracks | None = None) -> CheckResult:
     """Test every camera of ``calibration`` on ``tracks`` (new undistorted observations
-    of its points, undistorted with ``intrinsics``)."""
+    of its points, undistorted with ``intrinsics``). ``stored_tracks``, the observations
+    the calibration was made from, give each camera's reference: the same fit to its
+    own calibration's observations (without them, its stored pose and sigmas)."""
     options = options or CheckOptions()
     stored = dict(zip(calibration.point_ids.tolist(), calibration.points))
     if not any(int(i) in stored for i in tracks.point_ids):
@@ -133,7 +135,8 @@ def check_cameras(calibration: Calibration, intrinsics: dict[str, Intrinsics], t
     volume = working_volume(calibration)
     verdicts = {}
     for name in calibration.registered:
-        verdicts[name] = _check_camera(name, calibration, intrinsics.get(name), tracks, stored, volume, options)
+        verdicts[name] = _check_camera(name, calibration, intrinsics.get(name), tracks, stored, volume, options,
+                                       stored_tracks)
     for name, reason in calibration.failed.items():
         verdicts[name] = CameraVerdict("unknown", f"not in the stored calibration ({reason})")
     trusted, message = _majority(verdicts)
@@ -157,21 +160,33 @@ def working_volume(calibration: Calibration) -> np.ndarray:
     return grid
 
 
+def _held(tracks: Tracks | None, name: str, stored: dict[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The camera's observations of stored points in ``tracks``: the points (N, 3) and
+    their pixels (N, 2)."""
+    if tracks is None or name not in tracks.camera_names:
+        return np.zeros((0, 3)), np.zeros((0, 2))
+    ids, xy = tracks.observations(name)
+    known = np.array([int(i) in stored for i in ids], dtype=bool)
+    return np.array([stored[int(i)] for i in ids[known]]).reshape(-1, 3), xy[known].reshape(-1, 2)
+
+
 def _check_camera(name: str, calibration: Calibration, intrinsics: Intrinsics | None, tracks: Tracks,
-                  stored: dict[int, np.ndarray], volume: np.ndarray, options: CheckOptions) -> CameraVerdict:
+                  stored: dict[int, np.ndarray], volume: np.ndarray, options: CheckOptions,
+                  stored_tracks: Tracks | None) -> CameraVerdict:
     if intrinsics is None:
         return CameraVerdict("unknown", "no intrinsics in the stored results")
-    ids, xy = tracks.observations(name) if name in tracks.camera_names else (np.zeros(0, np.int64), np.zeros((0, 2)))
-    known = np.array([int(i) in stored for i in ids], dtype=bool)
-    if not known.any():
+    ids, _ = tracks.observations(name) if name in tracks.camera_names else (np.zeros(0, np.int64), None)
+    points, observed = _held(tracks, name, stored)
+    if not len(points):
         seen = f"{len(ids)} observations, none of a calibrated point" if len(ids) else "no marker"
         return CameraVerdict("not seen", f"{seen}: it keeps its stored pose")
     metrics = calibration.metrics[name]
     R, t = calibration.poses[name]
     width, height = intrinsics.resolution or (0, 0)
+    reference_points, reference_observed = _held(stored_tracks, name, stored)
     result = _core.check.check_camera(
         intrinsics.K, R, t, np.radians(metrics.rotation_sigma_deg or 0.0), metrics.centre_sigma or 0.0,
-        np.array([stored[int(i)] for i in ids[known]]), xy[known], volume, float(width), float(height),
+        points, observed, volume, float(width), float(height), reference_points, reference_observed,
         **asdict(options))
     figures = {key: getattr(result, key) for key in (
         "points", "inliers", "noise_px", "rms_before_px", "rms_after_px", "rotation_change_deg", "rotation_sigma_deg",
@@ -293,7 +308,8 @@ def check(
             raise ValueError(f"{source}: checking from videos needs the check projection's sequence.json")
         ingest_result = ingest(source, sequence, folder_in / INTRINSICS_DIR, workers=workers, progress=progress)
         tracks = ingest_result.tracks
-    result = check_cameras(calibration, intrinsics, tracks, options)
+    stored_tracks = Tracks.read(folder_in / TRACKS_FILE)
+    result = check_cameras(calibration, intrinsics, tracks, options, stored_tracks)
     if ingest_result is not None:
         for name, error in ingest_result.failed.items():
             if name in result.cameras and result.cameras[name].status == "not seen":
@@ -302,7 +318,6 @@ def check(
         return result
     if not result.trusted:
         raise UntrustedReference(result, f"{result.message} ({Path(out)} not written)")
-    stored_tracks = Tracks.read(folder_in / TRACKS_FILE)
     fixed, fixed_intrinsics, fixed_tracks = repaired(calibration, intrinsics, stored_tracks, tracks, result,
                                                      RegistrationOptions().weak_rotation_sigma_deg)
     from calibproj.export import parse_formats

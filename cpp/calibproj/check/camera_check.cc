@@ -74,7 +74,17 @@ struct Fit {
 
 Eigen::Vector3d Centre(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) { return -R.transpose() * t; }
 
-Fit Solve(const CameraCheckInput& input, const std::vector<int>& used, Freed freed, const Fit& start,
+// One set of observations of held points by the camera (the new ones, or those the
+// stored calibration was made from), with the stored camera they are fitted from.
+struct Observations {
+  const ba::Intrinsics& K;
+  const Eigen::Matrix3d& R;  // stored rotation: the fits are updates of it
+  const Eigen::Matrix3Xd& points;
+  const Eigen::Matrix2Xd& observed;
+  int size() const { return static_cast<int>(points.cols()); }
+};
+
+Fit Solve(const Observations& input, const std::vector<int>& used, Freed freed, const Fit& start,
           const CheckOptions& options) {
   Fit fit = start;
   ceres::Problem problem;
@@ -119,17 +129,41 @@ Eigen::MatrixXd Inverse(const Eigen::MatrixXd& information) {
   return scale.asDiagonal() * inverse * scale.asDiagonal();
 }
 
-Eigen::Vector2d Residual(const CameraCheckInput& input, const Fit& fit, int i) {
+Eigen::Vector2d Residual(const Observations& input, const Fit& fit, int i) {
   const HeldPointResidual cost(input.K, input.R, input.points.col(i), input.observed.col(i));
   double r[2] = {1e9, 1e9};
   if (!cost(fit.w, fit.c, &fit.s, r)) return {1e9, 1e9};
   return {r[0], r[1]};
 }
 
-double SumSquares(const CameraCheckInput& input, const Fit& fit, const std::vector<int>& used) {
+double SumSquares(const Observations& input, const Fit& fit, const std::vector<int>& used) {
   double sum = 0.0;
   for (int i : used) sum += Residual(input, fit, i).squaredNorm();
   return sum;
+}
+
+// The fit of pose and focal length together and the observations near it, from plain
+// least squares (a moved zoomed camera starts hundreds of pixels off, where a robust
+// loss has no gradient left), dropping those beyond outlier_px and fitting again.
+Fit RobustFit(const Observations& input, const Fit& start, const CheckOptions& options, std::vector<int>* used) {
+  used->resize(input.size());
+  for (int i = 0; i < input.size(); ++i) (*used)[i] = i;
+  Fit both = start;
+  for (int round = 0; round < kInlierRounds; ++round) {
+    both = Solve(input, *used, Freed::kBoth, start, options);
+    std::vector<int> kept;
+    for (int i = 0; i < input.size(); ++i) {
+      if (Residual(input, both, i).norm() <= options.outlier_px) kept.push_back(i);
+    }
+    if (kept == *used) break;
+    *used = kept;
+    if (static_cast<int>(used->size()) < options.min_points) break;
+  }
+  return both;
+}
+
+double NoiseOf(const Fit& fit, int observations) {
+  return std::max(kMinNoisePx, std::sqrt(fit.ssr / std::max(1, 2 * observations - 7)));
 }
 
 Eigen::Matrix3d RotationOf(const double* w, const Eigen::Matrix3d& stored) {
@@ -148,19 +182,34 @@ bool Project(const ba::Intrinsics& K, const Eigen::Matrix3d& R, const Eigen::Vec
   return true;
 }
 
-// Largest move in the image of a working-volume point the stored camera sees (the
-// observed points when none of the volume is in view).
-double VolumeShift(const CameraCheckInput& input, const Eigen::Matrix3d& R, const Eigen::Vector3d& t, double s) {
+// A camera as a fit gives it: rotation, translation and focal scale.
+struct Pinhole {
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  double s = 1.0;
+};
+
+Pinhole PinholeOf(const Fit& fit, const Eigen::Matrix3d& stored) {
+  const Eigen::Matrix3d R = RotationOf(fit.w, stored);
+  return {R, -R * Eigen::Vector3d(fit.c[0], fit.c[1], fit.c[2]), fit.s};
+}
+
+// Largest move in the image, from camera `before` to `after`, of a working-volume point
+// the stored camera sees (of the observed points when none of the volume is in view).
+double VolumeShift(const CameraCheckInput& input, const Pinhole& before, const Pinhole& after) {
   const auto largest = [&](const Eigen::Matrix3Xd& points, bool inside_only) {
     double shift = -1.0;
     for (int i = 0; i < points.cols(); ++i) {
-      Eigen::Vector2d before, after;
-      if (!Project(input.K, input.R, input.t, 1.0, points.col(i), &before)) continue;
-      if (inside_only && !(before.x() >= 0 && before.y() >= 0 && before.x() <= input.width && before.y() <= input.height)) {
+      Eigen::Vector2d seen, from, to;
+      if (!Project(input.K, input.R, input.t, 1.0, points.col(i), &seen)) continue;
+      if (inside_only && !(seen.x() >= 0 && seen.y() >= 0 && seen.x() <= input.width && seen.y() <= input.height)) {
         continue;
       }
-      if (!Project(input.K, R, t, s, points.col(i), &after)) continue;
-      shift = std::max(shift, (after - before).norm());
+      if (!Project(input.K, before.R, before.t, before.s, points.col(i), &from) ||
+          !Project(input.K, after.R, after.t, after.s, points.col(i), &to)) {
+        continue;
+      }
+      shift = std::max(shift, (to - from).norm());
     }
     return shift;
   };
@@ -174,7 +223,13 @@ void CheckInput(const CameraCheckInput& input) {
                                 std::to_string(input.points.cols()) + " and " + std::to_string(input.observed.cols()) +
                                 ")");
   }
-  if (!input.points.allFinite() || !input.observed.allFinite() || !input.volume.allFinite()) {
+  if (input.reference_points.cols() != input.reference_observed.cols()) {
+    throw std::invalid_argument("check: the reference points and observations differ in number (" +
+                                std::to_string(input.reference_points.cols()) + " and " +
+                                std::to_string(input.reference_observed.cols()) + ")");
+  }
+  if (!input.points.allFinite() || !input.observed.allFinite() || !input.volume.allFinite() ||
+      !input.reference_points.allFinite() || !input.reference_observed.allFinite()) {
     throw std::invalid_argument("check: points, observations and volume must be finite");
   }
   if (!input.R.allFinite() || !input.t.allFinite()) throw std::invalid_argument("check: the stored pose is not finite");
@@ -228,45 +283,51 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   const Eigen::Vector3d stored_centre = Centre(input.R, input.t);
   std::copy(stored_centre.data(), stored_centre.data() + 3, stored.c);
 
-  // The inliers: observations near the fit of pose and focal length together, from
-  // plain least squares (a moved zoomed camera starts hundreds of pixels off, where a
-  // robust loss has no gradient left).
-  std::vector<int> used(out.points);
-  for (int i = 0; i < out.points; ++i) used[i] = i;
-  Fit both = stored;
-  for (int round = 0; round < kInlierRounds; ++round) {
-    both = Solve(input, used, Freed::kBoth, stored, options);
-    std::vector<int> kept;
-    for (int i = 0; i < out.points; ++i) {
-      if (Residual(input, both, i).norm() <= options.outlier_px) kept.push_back(i);
-    }
-    if (kept == used) break;
-    used = kept;
-    if (static_cast<int>(used.size()) < options.min_points) break;
-  }
+  const Observations now{input.K, input.R, input.points, input.observed};
+  std::vector<int> used;
+  const Fit both = RobustFit(now, stored, options, &used);
   out.inliers = static_cast<int>(used.size());
   if (out.inliers < options.min_points || !both.converged) {
     out.reason = "only " + std::to_string(out.inliers) + " of its " + std::to_string(out.points) +
                  " observations agree with one camera (need " + std::to_string(options.min_points) + ")";
     return out;
   }
-  const Fit pose = Solve(input, used, Freed::kPose, stored, options);
-  const Fit focal = Solve(input, used, Freed::kFocal, stored, options);
+  const Fit pose = Solve(now, used, Freed::kPose, stored, options);
+  const Fit focal = Solve(now, used, Freed::kFocal, stored, options);
   const int n = out.inliers;
-  out.noise_px = std::max(kMinNoisePx, std::sqrt(both.ssr / std::max(1, 2 * n - 7)));
+  out.noise_px = NoiseOf(both, n);
   const double variance = out.noise_px * out.noise_px;
-  out.rms_before_px = std::sqrt(SumSquares(input, stored, used) / n);
+  out.rms_before_px = std::sqrt(SumSquares(now, stored, used) / n);
 
-  // The change (w, centre, focal scale) against its covariance: the fit's and the
-  // stored pose's.
-  Eigen::Matrix<double, 7, 1> change;
-  change << both.w[0], both.w[1], both.w[2], both.c[0] - stored.c[0], both.c[1] - stored.c[1],
-      both.c[2] - stored.c[2], both.s - 1.0;
-  Eigen::Matrix<double, 7, 7> covariance = Inverse(both.information) * variance;
-  for (int k = 0; k < 3; ++k) {
-    covariance(k, k) += input.rotation_sigma * input.rotation_sigma;
-    covariance(3 + k, 3 + k) += input.centre_sigma * input.centre_sigma;
+  // The change (w, centre, focal scale) against its covariance. Its reference is the
+  // same fit to the observations the calibration was made from, when given: the stored
+  // camera fits its own points far better than its sigma (relative to the other
+  // cameras) says, and it is against those points that the new observations are
+  // tested. Otherwise the stored camera, with its sigmas.
+  Fit reference = stored;
+  Eigen::Matrix<double, 7, 7> reference_covariance = Eigen::Matrix<double, 7, 7>::Zero();
+  const Observations then{input.K, input.R, input.reference_points, input.reference_observed};
+  std::vector<int> reference_used;
+  bool measured_reference = false;
+  const Fit earlier = then.size() >= options.min_points ? RobustFit(then, stored, options, &reference_used) : stored;
+  if (then.size() >= options.min_points && earlier.converged &&
+      static_cast<int>(reference_used.size()) >= options.min_points) {
+    reference = earlier;
+    const double noise = NoiseOf(earlier, static_cast<int>(reference_used.size()));
+    reference_covariance = Inverse(earlier.information) * noise * noise;
+    measured_reference = true;
+    out.reference = "its calibration's observations";
+  } else {
+    for (int k = 0; k < 3; ++k) {
+      reference_covariance(k, k) = input.rotation_sigma * input.rotation_sigma;
+      reference_covariance(3 + k, 3 + k) = input.centre_sigma * input.centre_sigma;
+    }
+    out.reference = "the stored pose's sigmas";
   }
+  Eigen::Matrix<double, 7, 1> change;
+  change << both.w[0] - reference.w[0], both.w[1] - reference.w[1], both.w[2] - reference.w[2],
+      both.c[0] - reference.c[0], both.c[1] - reference.c[1], both.c[2] - reference.c[2], both.s - reference.s;
+  const Eigen::Matrix<double, 7, 7> covariance = Inverse(both.information) * variance + reference_covariance;
   out.chi2 = change.dot(covariance.completeOrthogonalDecomposition().solve(change));
   out.chi2_threshold = ChiSquareQuantile(7, options.significance_z);
 
@@ -274,27 +335,36 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   const double pose_gain = (focal.ssr - both.ssr) / variance;  // what the pose adds to the focal length
   const double focal_gain = (pose.ssr - both.ssr) / variance;  // what the focal length adds to the pose
   const Fit* chosen = &both;
+  Freed freed = Freed::kBoth;
   Status changed = Status::kRezoomed;
   std::string kind = "its focal length and pose changed";
   if (pose_gain <= ChiSquareQuantile(6, options.significance_z)) {
     chosen = &focal;
+    freed = Freed::kFocal;
     kind = "its focal length changed (re-zoomed)";
   } else if (focal_gain <= ChiSquareQuantile(1, options.significance_z)) {
     chosen = &pose;
+    freed = Freed::kPose;
     changed = Status::kMoved;
     kind = "it moved";
   }
-  const Eigen::Matrix3d R = RotationOf(chosen->w, input.R);
-  const Eigen::Vector3d t = -R * Eigen::Vector3d(chosen->c[0], chosen->c[1], chosen->c[2]);
-  out.volume_shift_px = VolumeShift(input, R, t, chosen->s);
+  // The chosen fit's own reference: the same parameters fitted to the calibration's
+  // observations (a weak camera's focal length and depth trade off there too).
+  const Fit chosen_reference =
+      measured_reference ? Solve(then, reference_used, freed, stored, options) : stored;
+  const Pinhole now_camera = PinholeOf(*chosen, input.R);
+  out.volume_shift_px = VolumeShift(input, PinholeOf(chosen_reference, input.R), now_camera);
   const bool significant = out.chi2 > out.chi2_threshold;
   const bool visible = out.volume_shift_px > options.tolerance_px;
-  // A change is described by the fit that explains it; no change by the fit of both,
-  // whose figures bound what may have changed unseen.
+  // A change is described by the fit that explains it against its reference; no change
+  // by the fit of both, whose figures bound what may have changed unseen.
   const Fit& described = significant && visible ? *chosen : both;
-  out.rotation_change_deg = Eigen::Vector3d(described.w[0], described.w[1], described.w[2]).norm() * kRadToDeg;
-  out.centre_change = (Eigen::Vector3d(described.c[0], described.c[1], described.c[2]) - stored_centre).norm();
-  out.focal_change = described.s - 1.0;
+  const Fit& from = significant && visible ? chosen_reference : reference;
+  const Eigen::Matrix3d turn = RotationOf(described.w, input.R) * RotationOf(from.w, input.R).transpose();
+  out.rotation_change_deg = Eigen::AngleAxisd(turn).angle() * kRadToDeg;
+  out.centre_change = (Eigen::Vector3d(described.c[0], described.c[1], described.c[2]) -
+                       Eigen::Vector3d(from.c[0], from.c[1], from.c[2])).norm();
+  out.focal_change = described.s / from.s - 1.0;
   out.rotation_sigma_deg =
       std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance.block<3, 3>(0, 0)).eigenvalues().maxCoeff()) *
       kRadToDeg;
@@ -309,10 +379,10 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
               out.chi2_threshold);
   if (significant && visible) {
     out.status = changed;
-    out.R = R;
-    out.t = t;
+    out.R = now_camera.R;
+    out.t = now_camera.t;
     out.focal_scale = chosen->s;
-    out.rms_after_px = std::sqrt(SumSquares(input, *chosen, used) / n);
+    out.rms_after_px = std::sqrt(SumSquares(now, *chosen, used) / n);
     out.reason = kind + ": " + figures;
   } else {
     out.status = Status::kUnchanged;

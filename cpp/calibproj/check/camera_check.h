@@ -60,6 +60,10 @@ struct CameraCheckInput {
   double centre_sigma = 0.0;
   Eigen::Matrix3Xd points;    // world positions of the observed points (stored, held)
   Eigen::Matrix2Xd observed;  // their new undistorted pixels
+  // The camera's observations the calibration was made from, of held points: the
+  // reference of the change (the stored sigmas are, without them).
+  Eigen::Matrix3Xd reference_points;
+  Eigen::Matrix2Xd reference_observed;
   Eigen::Matrix3Xd volume;    // points of the working volume (world), for the practical test
   double width = 0.0, height = 0.0;  // image size: volume points outside it are left out
 };
@@ -78,6 +82,7 @@ struct CameraCheck {
   double centre_sigma = 0.0;
   double focal_change = 0.0;         // relative: new focal / stored - 1
   double focal_sigma = 0.0;
+  std::string reference;             // what the change is measured against
   double chi2 = 0.0;                 // Mahalanobis distance of the change, squared
   double chi2_threshold = 0.0;
   double volume_shift_px = 0.0;      // largest move of a working-volume point in the image
