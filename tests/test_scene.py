@@ -230,3 +230,37 @@ def test_a_bad_floor_relief_is_named(field, value, message) -> None:
     document["floor"]["relief"] = {field: value}
     with pytest.raises(FormatError, match=message):
         scene_from_json(document, source="room.json")
+
+
+def test_a_camera_change_turns_moves_and_zooms_only_the_named_camera(tmp_path) -> None:
+    import subprocess
+    import sys
+
+    from calibproj.simulate.scene import CameraChange, load_scene
+
+    scene = load_scene("demo")
+    changed = scene.changed({"far2": CameraChange(pan_deg=0.5, tilt_deg=-0.3, shift_m=(0.01, 0.0, -0.02), zoom=1.04)})
+    before, after = scene.camera("far2"), changed.camera("far2")
+    turn = np.degrees(np.arccos(np.clip((np.trace(after.R @ before.R.T) - 1) / 2, -1, 1)))
+    assert turn == pytest.approx(np.hypot(0.5, 0.3), abs=0.01)
+    np.testing.assert_allclose(after.center - before.center, [0.01, 0.0, -0.02], atol=1e-12)
+    assert after.fx == pytest.approx(1.04 * before.fx) and after.cx == before.cx
+    assert all(changed.camera(c.name) == c for c in scene.cameras if c.name != "far2")
+    # Tilting up raises the line of sight.
+    up = scene.changed({"far1": CameraChange(tilt_deg=1.0)}).camera("far1")
+    sight = lambda camera: np.asarray(camera.look_at) - np.asarray(camera.position)  # noqa: E731
+    assert np.degrees(np.arcsin(sight(up)[2] / np.linalg.norm(sight(up)))) == pytest.approx(
+        np.degrees(np.arcsin(sight(scene.camera("far1"))[2] / np.linalg.norm(sight(scene.camera("far1"))))) + 1.0,
+        abs=1e-6)
+    with pytest.raises(ValueError, match="no camera far9"):
+        scene.changed({"far9": CameraChange(pan_deg=1.0)})
+    # The command line: the changed room's truth.
+    run = subprocess.run([sys.executable, "-m", "calibproj", "simulate", "--scene", "demo", "--tracks-only",
+                          "--arrays", "4", "--change", "far2:pan=0.5,tilt=-0.3,shift=0.01/0/-0.02,zoom=1.04",
+                          "--out", str(tmp_path / "room")], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    truth = json.loads((tmp_path / "room" / "truth.json").read_text())
+    np.testing.assert_allclose(truth["cameras"]["far2"]["R"], after.R, atol=1e-9)
+    bad = subprocess.run([sys.executable, "-m", "calibproj", "simulate", "--scene", "demo", "--tracks-only",
+                          "--change", "far2:roll=3", "--out", str(tmp_path / "bad")], capture_output=True, text=True)
+    assert bad.returncode == 2 and "roll=3" in bad.stderr and not (tmp_path / "bad").exists()

@@ -20,6 +20,13 @@ eval_tracks.json (evaluation points in the working volume, observed with --eval-
 and truth.json (poses, plane, projector, MSM centres in every image, timing); a table of
 frames, sizes and the render speed is printed.
 
+--change NAME:pan=DEG,tilt=DEG,shift=X/Y/Z,zoom=FACTOR (repeatable) changes a camera of
+the scene before it is simulated: turned about the vertical (pan) or its image's
+horizontal axis (tilt, positive up), its centre moved by shift metres, its focal length
+multiplied by zoom. Two runs with the same --scene and --seed, one without and one with
+--change, are the same room before and after a lamp camera was moved: what `calibproj
+check` is for (each run's truth.json holds its own poses).
+
 OUT is written beside itself and moved into place at the end; an existing folder is
 only replaced, whole, with --force.
 """
@@ -77,6 +84,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ideal", action="store_true",
                         help="videos: no ambient light, noise, blur, vignetting or gamma")
     parser.add_argument("--no-progress", action="store_true", help="videos: no progress bars")
+    parser.add_argument("--change", action="append", metavar="NAME:KEY=VALUE,...",
+                        help="change a camera first: pan=DEG, tilt=DEG, shift=X/Y/Z (metres), zoom=FACTOR "
+                             "(repeatable; see above)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--force", action="store_true", help="replace an existing output folder (the whole folder)")
 
@@ -86,7 +96,40 @@ def run(args: argparse.Namespace) -> int:
         return _render_videos(args)
     from calibproj.simulate.scene import load_scene
 
-    return _simulate_tracks(load_scene(args.scene, seed=args.seed), args)
+    return _simulate_tracks(_changed(load_scene(args.scene, seed=args.seed), args.change), args)
+
+
+def parse_change(text: str) -> tuple[str, object]:
+    """``NAME:pan=DEG,tilt=DEG,shift=X/Y/Z,zoom=FACTOR`` as (name, CameraChange)."""
+    from calibproj.simulate.scene import CameraChange
+
+    name, colon, settings = text.partition(":")
+    if not colon or not name or not settings:
+        raise ValueError(f"--change {text!r}: expected NAME:KEY=VALUE,... (pan, tilt, shift, zoom)")
+    values: dict[str, object] = {}
+    keys = {"pan": "pan_deg", "tilt": "tilt_deg", "shift": "shift_m", "zoom": "zoom"}
+    for item in settings.split(","):
+        key, equals, value = item.partition("=")
+        if key not in keys or not equals:
+            raise ValueError(f"--change {text!r}: {item!r} is not one of pan=, tilt=, shift=X/Y/Z, zoom=")
+        try:
+            values[keys[key]] = (tuple(float(v) for v in value.split("/")) if key == "shift" else float(value))
+        except ValueError:
+            raise ValueError(f"--change {text!r}: {value!r} is not a number") from None
+    shift = values.get("shift_m")
+    if shift is not None and len(shift) != 3:
+        raise ValueError(f"--change {text!r}: shift takes three values X/Y/Z in metres")
+    try:
+        return name, CameraChange(**values)
+    except ValueError as error:
+        raise ValueError(f"--change {text!r}: {error}") from None
+
+
+def _changed(scene, changes: list[str] | None):
+    if not changes:
+        return scene
+    parsed = dict(parse_change(text) for text in changes)
+    return scene.changed(parsed)
 
 
 def _render_videos(args: argparse.Namespace) -> int:
@@ -102,9 +145,14 @@ def _render_videos(args: argparse.Namespace) -> int:
     options = render.RenderOptions(crf=args.crf, preset=args.preset, supersample=args.supersample,
                                    tail_s=args.tail, threads=args.threads, eval_noise_px=args.eval_noise,
                                    photometric=render.IDEAL_PHOTOMETRIC if args.ideal else None)
-    # The scene goes by name or path so that errors name the file.
+    # The scene goes by name or path so that errors name the file (changed: loaded first).
+    scene = args.scene
+    if args.change:
+        from calibproj.simulate.scene import load_scene
+
+        scene = _changed(load_scene(args.scene, seed=args.seed), args.change)
     with OutputFolder(args.out, force=args.force, signature=SIGNATURE) as folder, folder.writing() as staging:
-        simulation = render.simulate_videos(args.scene, Path(args.sequence), staging, seed=args.seed,
+        simulation = render.simulate_videos(scene, Path(args.sequence), staging, seed=args.seed,
                                             options=options, progress=not args.no_progress)
     print(_video_summary(simulation, args.out))
     return 0

@@ -396,7 +396,7 @@ class CameraChange:
         view = turn @ view
         # Tilt about the camera's own horizontal axis (its image x axis, the first row of R).
         axis = look_at_rotation(position, position + view)[0]
-        view = _rotated(view, axis, -math.radians(self.tilt_deg))
+        view = _rotated(view, axis, math.radians(self.tilt_deg))
         moved = position + np.asarray(self.shift_m, float)
         return replace(camera, position=tuple(moved.tolist()), look_at=tuple((moved + view).tolist()),
                        fx=camera.fx * self.zoom, fy=camera.fy * self.zoom)
