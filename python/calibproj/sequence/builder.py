@@ -174,16 +174,24 @@ def pattern_budget(sequence: Sequence, max_seconds: float) -> int:
     return max(0, frames // sequence.frames_per_pattern)
 
 
-def reassembled(sequence: Sequence, layout: MsmLayout, centres: np.ndarray, shown: list[ShownPattern],
-                min_gap_modules: float | None = None) -> Sequence:
-    """A sequence of ``sequence``'s markers, frame rate, timing and codes that shows
-    ``shown`` of ``layout`` and ``centres`` (a densified or check projection)."""
+def reassembled(sequence: Sequence, layout: MsmLayout, centres: np.ndarray, shown: list[ShownPattern], *,
+                code_degree: int | None = None, reference_frames: int | None = None) -> Sequence:
+    """A sequence of ``sequence``'s markers, frame rate and timing that shows ``shown`` of
+    ``layout`` and ``centres`` (a densified or check projection), with its codes and
+    reference blocks unless others are given."""
     start = sequence.start_code
     return assemble_sequence(sequence.markers, layout, centres, shown, fps=sequence.fps,
-                             frames_per_pattern=sequence.frames_per_pattern, code_degree=_code_degree(start),
+                             frames_per_pattern=sequence.frames_per_pattern,
+                             code_degree=_code_degree(start) if code_degree is None else code_degree,
                              code_frames_per_bit=start.frames_per_bit,
-                             reference_frames=sequence.segments[0].frame_count,
-                             min_gap_modules=sequence.min_gap_modules if min_gap_modules is None else min_gap_modules)
+                             reference_frames=sequence.segments[0].frame_count if reference_frames is None
+                             else reference_frames,
+                             min_gap_modules=sequence.min_gap_modules)
+
+
+def overhead_seconds_with(sequence: Sequence, code_degree: int, reference_frames: int) -> float:
+    """Seconds besides the patterns of a sequence with ``sequence``'s timing and these codes."""
+    return overhead_frames(code_degree, sequence.start_code.frames_per_bit, reference_frames) / sequence.fps
 
 
 def _code_degree(code: LightCode) -> int:
