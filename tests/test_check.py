@@ -280,7 +280,7 @@ def test_the_check_projection_is_short_and_tests_every_camera(room, tmp_path) ->
                       str(room["folder"] / "sequence.json"), "--out", str(tmp_path / "check"), "--no-video", "--json")
     assert planned.returncode == 0, planned.stderr
     summary = json.loads(planned.stdout)
-    assert summary["seconds"] <= 12.0
+    assert summary["seconds"] <= 8.0
     assert min(summary["points"][name] for name in ("far1", "far2", "far4", "far5", "near1")) >= 30
     assert summary["points"]["ceiling"] >= 6  # of the few its first projection gave it
     sequence = Sequence.load(tmp_path / "check" / "sequence.json")

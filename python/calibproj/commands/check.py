@@ -1,6 +1,6 @@
 """Check a calibration with a short projection; with --out, repair the cameras that changed.
 
-    calibproj generate --check RESULTS --out CHECK/          # at most 12 s of projection
+    calibproj generate --check RESULTS --out CHECK/          # at most 8 s of projection
     calibproj check RESULTS CHECK_VIDEOS_DIR --sequence CHECK/sequence.json [--out NEW_RESULTS]
 
 Each camera of RESULTS is tested on its new observations of the calibrated points

@@ -21,7 +21,7 @@ they are, then: calibproj calibrate DENSE_VIDEOS --sequence SEQ_DIR/sequence.jso
 sequence's; the layout options above do not apply.
 
 Check (--check RESULTS): the projection `calibproj check` tests a calibration with, at
-most --check-seconds (12 s) long: some of the arrays RESULTS were calibrated from,
+most --check-seconds (8 s) long, with shorter light codes (15 bits) and reference blocks: some of the arrays RESULTS were calibrated from,
 chosen so that every camera, the zoomed one included, sees --check-points of its
 calibrated points again. The sequences default to the one RESULTS' provenance names
 and, for a merged calibration, the one the merged results were calibrated from;

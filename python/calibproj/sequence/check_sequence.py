@@ -1,4 +1,4 @@
-"""The check projection: a few of the calibrated arrays shown again, in at most 12 s.
+"""The check projection: a few of the calibrated arrays shown again, in at most 8 s.
 
 ``calibproj check`` tests each camera of a stored calibration on new observations of
 points whose 3D positions the calibration knows, so the check projection shows arrays
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.sequence.builder import ShownPattern, overhead_seconds, pattern_budget, reassembled
+from calibproj.sequence.builder import ShownPattern, overhead_seconds_with, reassembled
 from calibproj.sequence.sequence import Sequence
 
 log = logging.getLogger(__name__)
@@ -35,16 +35,26 @@ class CheckSequenceOptions:
         points_per_camera: calibrated points each camera should see in it (enough to
             test a pose, its six parameters, many times over); a camera that had fewer
             in the calibration gets all the arrays it saw that fit the time.
+        code_degree: its light codes are m-sequences of 2^code_degree - 1 bits: 4 (15
+            bits, 1.5 s each at 30 fps) where a calibration's 5 take 3.1 s, since a check
+            projection is short and its patterns few.
+        reference_frames: frames of each white and black block around the codes (8 where
+            a calibration's sequence has 15): with the codes, 4.6 s of the check's time
+            instead of 9.2 s.
     """
 
-    max_seconds: float = 12.0
+    max_seconds: float = 8.0
     points_per_camera: int = 30
+    code_degree: int = 4
+    reference_frames: int = 8
 
     def __post_init__(self) -> None:
         if not 0.0 < self.max_seconds <= 600.0:
             raise ValueError(f"max_seconds must be in (0, 600], got {self.max_seconds}")
         if not 6 <= self.points_per_camera <= 100_000:
             raise ValueError(f"points_per_camera must be in [6, 100000], got {self.points_per_camera}")
+        if not 1 <= self.reference_frames <= 300:
+            raise ValueError(f"reference_frames must be in [1, 300], got {self.reference_frames}")
 
 
 def plan_check(results: str | os.PathLike, sequences: list[Sequence],
@@ -63,16 +73,18 @@ def plan_check(results: str | os.PathLike, sequences: list[Sequence],
     base = _common_base(sequences)
     candidates = _patterns_by_array(sequences, base)
     counts = _calibrated_points_per_array(calibration, tracks, base)
-    budget = pattern_budget(base, options.max_seconds)
+    overhead = overhead_seconds_with(base, options.code_degree, options.reference_frames)
+    budget = int((options.max_seconds - overhead) * base.fps + 1e-9) // base.frames_per_pattern
     if budget < 1:
         raise ValueError(f"{options.max_seconds:g} s leave no time for patterns: the light codes and reference "
-                         f"frames alone take {overhead_seconds(base):.1f} s")
+                         f"frames alone take {overhead:.1f} s")
     chosen = _choose_arrays(counts, candidates, budget, options.points_per_camera)
     if not chosen:
         raise ValueError(f"{folder}: no array of these sequences holds a calibrated point; give the sequence "
                          f"the results were calibrated from")
     shown = [pattern for array in sorted(chosen) for pattern in candidates[array]]
-    sequence = reassembled(base, base.layout, base.centres, shown)
+    sequence = reassembled(base, base.layout, base.centres, shown, code_degree=options.code_degree,
+                           reference_frames=options.reference_frames)
     seen = {name: int(sum(per_array.get(array, 0) for array in chosen)) for name, per_array in counts.items()}
     for name, points in seen.items():
         if points < min(options.points_per_camera, 6):
