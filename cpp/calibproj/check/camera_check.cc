@@ -217,6 +217,22 @@ double VolumeShift(const CameraCheckInput& input, const Pinhole& before, const P
   return shift >= 0.0 ? shift : std::max(0.0, largest(input.points, false));
 }
 
+// The farthest a pixel of the image (or, without its size, an observation) lies from
+// the principal point: how far a focal change of 1 moves a pixel at most.
+double LargestRadius(const CameraCheckInput& input) {
+  double radius = 0.0;
+  if (input.width > 0 && input.height > 0) {
+    for (const double x : {0.0, input.width}) {
+      for (const double y : {0.0, input.height}) radius = std::max(radius, std::hypot(x - input.K.cx, y - input.K.cy));
+    }
+    return radius;
+  }
+  for (int i = 0; i < input.observed.cols(); ++i) {
+    radius = std::max(radius, std::hypot(input.observed(0, i) - input.K.cx, input.observed(1, i) - input.K.cy));
+  }
+  return radius;
+}
+
 void CheckInput(const CameraCheckInput& input) {
   if (input.points.cols() != input.observed.cols()) {
     throw std::invalid_argument("check: points and observations differ in number (" +
@@ -338,11 +354,14 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   Freed freed = Freed::kBoth;
   Status changed = Status::kRezoomed;
   std::string kind = "its focal length and pose changed";
+  // A focal change too small to move any pixel by the tolerance is no re-zoom, however
+  // significant (two recordings differ by more than their noise in small ways).
+  const bool focal_visible = std::abs(both.s / reference.s - 1.0) * LargestRadius(input) > options.tolerance_px;
   if (pose_gain <= ChiSquareQuantile(6, options.significance_z)) {
     chosen = &focal;
     freed = Freed::kFocal;
     kind = "its focal length changed (re-zoomed)";
-  } else if (focal_gain <= ChiSquareQuantile(1, options.significance_z)) {
+  } else if (focal_gain <= ChiSquareQuantile(1, options.significance_z) || !focal_visible) {
     chosen = &pose;
     freed = Freed::kPose;
     changed = Status::kMoved;

@@ -15,7 +15,10 @@
 // A camera has changed when both say so. It is `rezoomed` when the focal length alone
 // explains the observations as well as the focal length and pose together (the
 // likelihood ratio of the six pose parameters is not significant), `moved` when the
-// pose alone does. Points are held fixed: they were placed by the unchanged cameras
+// pose alone does, or when the focal change it adds moves no pixel by the tolerance.
+// The change is measured against the same fit to the camera's own calibration
+// observations when they are given (the stored pose fits its points far better than
+// its sigma relative to the other cameras says), else against the stored sigmas. Points are held fixed: they were placed by the unchanged cameras
 // and the projector, so re-fitting against them is the repair, with every other
 // camera and the planes held.
 
