@@ -128,6 +128,8 @@ def check_cameras(calibration: Calibration, intrinsics: dict[str, Intrinsics], t
     the calibration was made from, give each camera's reference: the same fit to its
     own calibration's observations (without them, its stored pose and sigmas)."""
     options = options or CheckOptions()
+    if not calibration.registered or not len(calibration.points):
+        raise ValueError("the stored calibration has no registered camera or no point: nothing to check against")
     stored = dict(zip(calibration.point_ids.tolist(), calibration.points))
     if not any(int(i) in stored for i in tracks.point_ids):
         raise ValueError("the check projection shows none of the calibrated points: make it with "
@@ -207,8 +209,7 @@ def _majority(verdicts: dict[str, CameraVerdict]) -> tuple[bool, str]:
                        f"the floor, the projector or most cameras changed; run a full calibration (calibproj "
                        f"calibrate), nothing was repaired")
     changed = len(tested) - len(agree)
-    return True, (f"{len(agree)} of {len(tested)} cameras unchanged" +
-                  (f", {changed} changed" if changed else "") + "")
+    return True, f"{len(agree)} of {len(tested)} cameras unchanged" + (f", {changed} changed" if changed else "")
 
 
 def repaired(calibration: Calibration, intrinsics: dict[str, Intrinsics], stored_tracks: Tracks, tracks: Tracks,
