@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -342,3 +343,65 @@ def test_a_rendered_check_projection_finds_the_turned_camera(tmp_path) -> None:
         name: "moved" if name == turned else "unchanged" for name in scene.camera_names}, \
         {name: verdict.reason for name, verdict in result.cameras.items()}
     assert result.cameras[turned].rotation_change_deg == pytest.approx(0.3, abs=0.03)
+
+
+def test_a_camera_turned_and_rezoomed_is_rezoomed_with_both_refitted(stored) -> None:
+    R, t = turned(stored, [1.0, 0.2, 0.0], 0.4)
+    K = stored["K"].copy()
+    K[:2, :2] *= 0.97
+    verdict = check(stored, K, R, t)
+    assert verdict.status == "rezoomed" and "focal length and pose" in verdict.reason
+    assert verdict.focal_scale == pytest.approx(0.97, abs=0.003)
+    assert np.degrees(np.arccos(np.clip((np.trace(verdict.R @ R.T) - 1) / 2, -1, 1))) < 0.02
+
+
+def test_a_rezoomed_camera_keeps_its_stored_pose(stored) -> None:
+    K = stored["K"].copy()
+    K[:2, :2] *= 1.02
+    verdict = check(stored, K, stored["R"], stored["t"])
+    assert verdict.status == "rezoomed" and verdict.focal_scale == pytest.approx(1.02, abs=0.002)
+    np.testing.assert_allclose(verdict.R, stored["R"], atol=1e-12)
+    np.testing.assert_allclose(verdict.t, stored["t"], atol=1e-12)
+
+
+def test_cameras_that_cannot_be_tested_say_why_and_the_others_are(room, tmp_path) -> None:
+    import shutil
+
+    from test_pipeline import run_cli
+
+    from calibproj.check_and_repair import check
+
+    results = tmp_path / "results"
+    shutil.copytree(room["folder"] / "results", results)
+    # far1's intrinsics as an OpenCV YAML file without the image size; far4's broken.
+    far1 = json.loads((results / "intrinsics" / "far1.json").read_text())
+    (results / "intrinsics" / "far1.json").unlink()
+    storage = cv2.FileStorage(str(results / "intrinsics" / "far1.yaml"), cv2.FILE_STORAGE_WRITE)
+    storage.write("camera_matrix", np.array(far1["K"]))
+    storage.write("distortion_coefficients", np.array(far1["dist"], float).reshape(1, -1))
+    storage.release()
+    result = check(results, room["again"].tracks)
+    assert result.cameras["far1"].status == "unknown" and "image size" in result.cameras["far1"].reason
+    assert result.cameras["far2"].status == "moved" and result.trusted  # 3 of the 5 tested unchanged
+    (results / "intrinsics" / "far1.yaml").unlink()
+    (results / "intrinsics" / "far1.json").write_text(json.dumps(far1))
+    (results / "intrinsics" / "far4.json").write_text("{")
+    result = check(results, room["again"].tracks)
+    assert result.cameras["far4"].status == "unknown" and "far4.json" in result.cameras["far4"].reason
+    assert result.cameras["far2"].status == "moved" and result.trusted
+    # An existing --out is refused before the work, and left as it was.
+    (tmp_path / "taken").mkdir()
+    (tmp_path / "taken" / "camera_poses.json").write_text("{}")
+    taken = run_cli("check", str(results), "--tracks", str(room["folder"] / "again" / "tracks.json"),
+                    "--out", str(tmp_path / "taken"))
+    assert taken.returncode == 2 and "--force" in taken.stderr
+    assert (tmp_path / "taken" / "camera_poses.json").read_text() == "{}"
+    # Only one camera seen: nothing can be said against the calibration (exit 3, not 4).
+    kept = room["kept"].tracks
+    alone = kept.camera_index == kept.camera_names.index("far4")
+    from calibproj.tracks import Tracks
+
+    Tracks.from_observations(kept.camera_names, kept.camera_index[alone], kept.point_ids[kept.point_index[alone]],
+                             kept.xy[alone], kept.markers_per_array).write(tmp_path / "alone.json")
+    lone = run_cli("check", str(results), "--tracks", str(tmp_path / "alone.json"))
+    assert lone.returncode == 3 and "too few to tell" in lone.stdout

@@ -4,14 +4,15 @@ A check projection (``calibproj generate --check RESULTS``) shows some of the ar
 calibration was made from again, so its points keep their ids and the stored
 calibration knows where they are. Each camera's new observations of those points test
 its stored pose and intrinsics (``_core.check.check_camera``: the pose, the focal length
-and both fitted with the points held, judged by a chi-square with the stored sigmas and
-by how far the change moves the working volume in its image). A camera is then
+and both fitted with the points held; the change against the same fit to the camera's
+own calibration observations, judged by a chi-square with both fits' covariance and by
+how far it moves the working volume in its image). A camera is then
 
 - ``unchanged``: no change both significant and larger than the tolerance;
 - ``moved``: its pose changed (the new pose is the fit against the held points);
 - ``rezoomed``: its focal length changed (a PTZ camera's zoom), perhaps its pose too;
 - ``not seen``: no observation of a calibrated point (covered, off, or pointed away);
-  it keeps its stored pose;
+  it keeps its stored pose (logged as a warning);
 - ``unknown``: too few observations to test, said with how many.
 
 The stored points stand for the floor and the cameras that placed them. If the cameras
@@ -104,6 +105,11 @@ class CheckResult:
     unit: str = "arbitrary"
 
     @property
+    def tested(self) -> list[str]:
+        """The cameras that could be tested (unchanged, moved or re-zoomed)."""
+        return [name for name, verdict in self.cameras.items() if verdict.status in TESTED]
+
+    @property
     def changed(self) -> list[str]:
         return [name for name, verdict in self.cameras.items() if verdict.status in CHANGED]
 
@@ -122,11 +128,13 @@ class UntrustedReference(ValueError):
 
 
 def check_cameras(calibration: Calibration, intrinsics: dict[str, Intrinsics], tracks: Tracks,
-                  options: CheckOptions | None = None, stored_tracks: Tracks | None = None) -> CheckResult:
+                  options: CheckOptions | None = None, stored_tracks: Tracks | None = None,
+                  unusable: dict[str, str] | None = None) -> CheckResult:
     """Test every camera of ``calibration`` on ``tracks`` (new undistorted observations
     of its points, undistorted with ``intrinsics``). ``stored_tracks``, the observations
     the calibration was made from, give each camera's reference: the same fit to its
-    own calibration's observations (without them, its stored pose and sigmas)."""
+    own calibration's observations (without them, its stored pose and sigmas).
+    ``unusable``: why some cameras have no intrinsics (they are then unknown)."""
     options = options or CheckOptions()
     if not calibration.registered or not len(calibration.points):
         raise ValueError("the stored calibration has no registered camera or no point: nothing to check against")
@@ -137,13 +145,20 @@ def check_cameras(calibration: Calibration, intrinsics: dict[str, Intrinsics], t
     volume = working_volume(calibration)
     verdicts = {}
     for name in calibration.registered:
+        if name not in intrinsics:
+            reason = (unusable or {}).get(name, "no intrinsics in the stored results")
+            verdicts[name] = CameraVerdict("unknown", f"no usable intrinsics: {reason}")
+            continue
         verdicts[name] = _check_camera(name, calibration, intrinsics.get(name), tracks, stored, volume, options,
                                        stored_tracks)
     for name, reason in calibration.failed.items():
         verdicts[name] = CameraVerdict("unknown", f"not in the stored calibration ({reason})")
     trusted, message = _majority(verdicts)
     for name, verdict in verdicts.items():
-        log.debug("%s %s: %s", name, verdict.status, verdict.reason)
+        if verdict.status in ("not seen", "unknown"):
+            log.warning("camera %s %s: %s", name, verdict.status, verdict.reason)
+        else:
+            log.debug("camera %s %s: %s", name, verdict.status, verdict.reason)
     return CheckResult(verdicts, trusted, message, calibration.unit)
 
 
@@ -177,19 +192,27 @@ def _check_camera(name: str, calibration: Calibration, intrinsics: Intrinsics | 
                   stored_tracks: Tracks | None) -> CameraVerdict:
     if intrinsics is None:
         return CameraVerdict("unknown", "no intrinsics in the stored results")
+    if intrinsics.resolution is None:
+        return CameraVerdict("unknown", "its intrinsics give no image size: where the working volume lies in its "
+                                        "view is not known")
+    metrics = calibration.metrics.get(name)
+    if metrics is None:
+        return CameraVerdict("unknown", "no metrics of it in the stored results")
     ids, _ = tracks.observations(name) if name in tracks.camera_names else (np.zeros(0, np.int64), None)
     points, observed = _held(tracks, name, stored)
     if not len(points):
         seen = f"{len(ids)} observations, none of a calibrated point" if len(ids) else "no marker"
         return CameraVerdict("not seen", f"{seen}: it keeps its stored pose")
-    metrics = calibration.metrics[name]
     R, t = calibration.poses[name]
-    width, height = intrinsics.resolution or (0, 0)
+    width, height = intrinsics.resolution
     reference_points, reference_observed = _held(stored_tracks, name, stored)
-    result = _core.check.check_camera(
-        intrinsics.K, R, t, np.radians(metrics.rotation_sigma_deg or 0.0), metrics.centre_sigma or 0.0,
-        points, observed, volume, float(width), float(height), reference_points, reference_observed,
-        **asdict(options))
+    try:
+        result = _core.check.check_camera(
+            intrinsics.K, R, t, np.radians(metrics.rotation_sigma_deg or 0.0), metrics.centre_sigma or 0.0,
+            points, observed, volume, float(width), float(height), reference_points, reference_observed,
+            **asdict(options))
+    except ValueError as error:  # this camera's stored figures: the others are tested
+        return CameraVerdict("unknown", f"not testable: {error}")
     figures = {key: getattr(result, key) for key in (
         "points", "inliers", "noise_px", "rms_before_px", "rms_after_px", "rotation_change_deg", "rotation_sigma_deg",
         "centre_change", "centre_sigma", "focal_change", "focal_sigma", "volume_shift_px", "focal_scale")}
@@ -202,8 +225,8 @@ def _majority(verdicts: dict[str, CameraVerdict]) -> tuple[bool, str]:
     tested = [name for name, verdict in verdicts.items() if verdict.status in TESTED]
     agree = [name for name in tested if verdicts[name].status == "unchanged"]
     if len(tested) < 2:
-        return False, (f"only {len(tested)} camera could be tested: too few to tell whether the stored "
-                       f"calibration holds; run a full calibration")
+        return False, (f"{len(tested)} camera(s) tested: too few to tell whether the stored calibration holds "
+                       f"(see why the others were not)")
     if 2 * len(agree) <= len(tested):
         return False, (f"only {len(agree)} of the {len(tested)} cameras tested agree with the stored calibration: "
                        f"the floor, the projector or most cameras changed; run a full calibration (calibproj "
@@ -227,12 +250,16 @@ def repaired(calibration: Calibration, intrinsics: dict[str, Intrinsics], stored
             K = intrinsics[name].K.copy()
             K[:2, :2] *= verdict.focal_scale
             intrinsics[name] = replace(intrinsics[name], K=K)
-        sigma = verdict.rotation_sigma_deg
+        # Fitted to points the other cameras placed, it is known relative to them at
+        # best as well as before: the stored sigma, or the fit's when larger.
+        before = metrics[name]
+        sigma = max(filter(None, (before.rotation_sigma_deg, verdict.rotation_sigma_deg)), default=None)
+        centre = max(filter(None, (before.centre_sigma, verdict.centre_sigma)), default=None)
         metrics[name] = CameraMetrics(
             mean_px=verdict.rms_after_px, std_px=verdict.noise_px, observations=verdict.points,
-            inliers=verdict.inliers, track2_observations=verdict.inliers, view_score=metrics[name].view_score,
-            rotation_sigma_deg=sigma, centre_sigma=verdict.centre_sigma,
-            weak=sigma is not None and sigma > weak_rotation_sigma_deg)
+            inliers=verdict.inliers, track2_observations=verdict.inliers, view_score=before.view_score,
+            rotation_sigma_deg=sigma, centre_sigma=centre,
+            weak=before.weak or (sigma is not None and sigma > weak_rotation_sigma_deg))
     return (replace(calibration, poses=poses, metrics=metrics), intrinsics,
             _with_observations_of(stored_tracks, tracks, result.changed))
 
@@ -296,36 +323,41 @@ def check(
     from calibproj.pipeline import video_files, write_results
     from calibproj.provenance import provenance, write_provenance
     from calibproj.registration import RegistrationOptions
-    from calibproj.results import CALIBRATION_FILES, INTRINSICS_DIR, TRACKS_FILE, load_results, resolve_intrinsics
+    from calibproj.io.intrinsics import intrinsics_of_cameras
+    from calibproj.results import CALIBRATION_FILES, INTRINSICS_DIR, TRACKS_FILE, load_results
+
+    from calibproj.export import parse_formats
 
     folder_in = Path(results)
     calibration = load_results(folder_in)
-    intrinsics = dict(resolve_intrinsics(folder_in, None))
-    ingest_result = None
-    if isinstance(source, Tracks) or Path(source).is_file():
-        tracks = source if isinstance(source, Tracks) else Tracks.read(source)
-    else:
-        if sequence is None:
-            raise ValueError(f"{source}: checking from videos needs the check projection's sequence.json")
-        ingest_result = ingest(source, sequence, folder_in / INTRINSICS_DIR, workers=workers, progress=progress)
-        tracks = ingest_result.tracks
+    # A bad intrinsics file leaves its own camera untested (said why), not the check.
+    intrinsics, unusable = intrinsics_of_cameras(folder_in / INTRINSICS_DIR, calibration.registered)
     stored_tracks = Tracks.read(folder_in / TRACKS_FILE)
-    result = check_cameras(calibration, intrinsics, tracks, options, stored_tracks)
-    if ingest_result is not None:
-        for name, error in ingest_result.failed.items():
-            if name in result.cameras and result.cameras[name].status == "not seen":
-                result.cameras[name] = CameraVerdict("not seen", f"{error}: it keeps its stored pose")
-    if out is None:
-        return result
-    if not result.trusted:
-        raise UntrustedReference(result, f"{result.message} ({Path(out)} not written)")
-    fixed, fixed_intrinsics, fixed_tracks = repaired(calibration, intrinsics, stored_tracks, tracks, result,
-                                                     RegistrationOptions().weak_rotation_sigma_deg)
-    from calibproj.export import parse_formats
-
     formats = parse_formats(",".join(exports)) if exports else []
-    folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open()
+    from_videos = not (isinstance(source, Tracks) or Path(source).is_file())
+    if from_videos and sequence is None:
+        raise ValueError(f"{source}: checking from videos needs the check projection's sequence.json")
+    # The output is claimed before the long ingest: a folder that cannot be written (or
+    # exists, without force) is found at once.
+    folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
+        ingest_result = None
+        if from_videos:
+            ingest_result = ingest(source, sequence, folder_in / INTRINSICS_DIR, workers=workers, progress=progress)
+            tracks = ingest_result.tracks
+        else:
+            tracks = source if isinstance(source, Tracks) else Tracks.read(source)
+        result = check_cameras(calibration, intrinsics, tracks, options, stored_tracks, unusable)
+        if ingest_result is not None:
+            for name, error in ingest_result.failed.items():
+                if name in result.cameras and result.cameras[name].status == "not seen":
+                    result.cameras[name] = CameraVerdict("not seen", f"{error}: it keeps its stored pose")
+        if folder is None:
+            return result
+        if not result.trusted:
+            raise UntrustedReference(result, f"{result.message} ({Path(out)} not written)")
+        fixed, fixed_intrinsics, fixed_tracks = repaired(calibration, intrinsics, stored_tracks, tracks, result,
+                                                         RegistrationOptions().weak_rotation_sigma_deg)
         record = provenance(folder.path, command=command, source=source, sequence=sequence,
                             intrinsics=folder_in / INTRINSICS_DIR, model=calibration.model, checked=folder_in,
                             videos=video_files(ingest_result))
@@ -336,6 +368,7 @@ def check(
                           ingest_result)
         folder.commit()
         log.info("repaired results written to %s", folder.path)
+        return result
     finally:
-        folder.abort()
-    return result
+        if folder is not None:
+            folder.abort()  # nothing left to do after a commit

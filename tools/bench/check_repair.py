@@ -16,8 +16,9 @@ more than the tolerance in its image. The last line:
 ``check: false_moved=.. missed_moved=.. missed_below_tolerance=.. repaired_rot_ratio=..
 check_time_ratio=..``: unchanged cameras flagged, cameras over the tolerance not flagged
 with the right status, changes under the tolerance not flagged (expected), the worst
-ratio of the repaired calibration's rotation RMSE to the full calibration's (and the
-same for centres in the row), and the check's wall time over the full calibration's.
+ratio of the repaired calibration's rotation RMSE to the full calibration's (both RMSEs,
+rotation and centre, are in each trial's row), and the check's wall time over the full
+calibration's.
 
     python tools/bench/check_repair.py --scenes demo,or-full --seeds 3 --trials 5 --full
     python tools/bench/check_repair.py --scenes demo --seeds 1 --trials 2 --arrays 12

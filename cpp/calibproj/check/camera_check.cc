@@ -148,18 +148,18 @@ double SumSquares(const Observations& input, const Fit& fit, const std::vector<i
 Fit RobustFit(const Observations& input, const Fit& start, const CheckOptions& options, std::vector<int>* used) {
   used->resize(input.size());
   for (int i = 0; i < input.size(); ++i) (*used)[i] = i;
-  Fit both = start;
   for (int round = 0; round < kInlierRounds; ++round) {
-    both = Solve(input, *used, Freed::kBoth, start, options);
+    const Fit both = Solve(input, *used, Freed::kBoth, start, options);
     std::vector<int> kept;
     for (int i = 0; i < input.size(); ++i) {
       if (Residual(input, both, i).norm() <= options.outlier_px) kept.push_back(i);
     }
-    if (kept == *used) break;
+    if (kept == *used) return both;
     *used = kept;
-    if (static_cast<int>(used->size()) < options.min_points) break;
+    if (static_cast<int>(used->size()) < options.min_points) return both;  // too few: the caller says so
   }
-  return both;
+  // The fit always describes the observations kept.
+  return Solve(input, *used, Freed::kBoth, start, options);
 }
 
 double NoiseOf(const Fit& fit, int observations) {
@@ -303,9 +303,13 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   std::vector<int> used;
   const Fit both = RobustFit(now, stored, options, &used);
   out.inliers = static_cast<int>(used.size());
-  if (out.inliers < options.min_points || !both.converged) {
+  if (out.inliers < options.min_points) {
     out.reason = "only " + std::to_string(out.inliers) + " of its " + std::to_string(out.points) +
                  " observations agree with one camera (need " + std::to_string(options.min_points) + ")";
+    return out;
+  }
+  if (!both.converged) {
+    out.reason = "its fit to the " + std::to_string(out.inliers) + " observations did not converge";
     return out;
   }
   const Fit pose = Solve(now, used, Freed::kPose, stored, options);
@@ -394,8 +398,8 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   const std::string figures =
       Figures("rotation %.3g deg, centre %.3g (calibration units), focal %+.2g %%; the working volume moves up to %.2f px in its image",
               out.rotation_change_deg, out.centre_change, 100.0 * out.focal_change, out.volume_shift_px) +
-      Figures(" (tolerance %.2g px), chi-square %.1f (%.1f is noise at 99.9 %%)", options.tolerance_px, out.chi2,
-              out.chi2_threshold);
+      Figures(" (tolerance %.2g px), chi-square %.1f (%.1f is noise at %.4g %%)", options.tolerance_px, out.chi2,
+              out.chi2_threshold, 100.0 * (1.0 - 0.5 * std::erfc(options.significance_z / std::sqrt(2.0))));
   if (significant && visible) {
     out.status = changed;
     out.R = now_camera.R;

@@ -1,26 +1,27 @@
 #pragma once
 // Does a stored calibration still hold for one camera? A short check projection gives
-// the camera new observations of points whose 3D positions the stored calibration
-// knows (the check sequence shows some of the calibrated arrays again, so its points
-// keep their ids). Against those fixed points the camera is fitted three ways: its
-// pose alone, its focal length alone (a PTZ camera re-zoomed about its principal
-// point), and both. Each fit is compared with the stored camera:
+// the camera new observations of points whose 3D positions the calibration knows (the
+// check sequence shows some of the calibrated arrays again, so its points keep their
+// ids). Against those fixed points the camera is fitted three ways: its pose alone,
+// its focal length alone (a PTZ camera re-zoomed about its principal point), and both.
+// The fit of both is compared with a reference: the same fit to the camera's own
+// calibration observations when they are given (the stored camera fits its points far
+// better than its sigma relative to the other cameras says, and it is against those
+// points that the new observations are tested), else the stored pose with its sigmas.
 //
-// - statistically: the change, with the covariance of the fit plus the stored pose's,
-//   as a chi-square (Mahalanobis distance) against its 99.9 % quantile, so that a
-//   camera whose stored pose was uncertain is not called moved for that uncertainty;
+// - statistically: the change, with the covariance of both fits (or of the fit and the
+//   stored sigmas), as a chi-square (Mahalanobis distance) against its quantile at
+//   significance_z;
 // - practically: how far the change moves the points of the working volume (given by
 //   the caller) in the camera's image, against a tolerance in pixels.
 //
 // A camera has changed when both say so. It is `rezoomed` when the focal length alone
 // explains the observations as well as the focal length and pose together (the
-// likelihood ratio of the six pose parameters is not significant), `moved` when the
-// pose alone does, or when the focal change it adds moves no pixel by the tolerance.
-// The change is measured against the same fit to the camera's own calibration
-// observations when they are given (the stored pose fits its points far better than
-// its sigma relative to the other cameras says), else against the stored sigmas. Points are held fixed: they were placed by the unchanged cameras
-// and the projector, so re-fitting against them is the repair, with every other
-// camera and the planes held.
+// likelihood ratio of the six pose parameters is not significant), and also when both
+// changed (its pose is then re-fitted too); `moved` when the pose alone explains them,
+// or when the focal change it adds moves no pixel by the tolerance. Points are held
+// fixed: they were placed by the unchanged cameras and the projector, so re-fitting
+// against them is the repair, with every other camera and the planes held.
 
 #include <Eigen/Core>
 

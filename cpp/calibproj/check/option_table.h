@@ -10,8 +10,9 @@ namespace calibproj::check {
 template <typename Options, typename Visitor>
 void VisitCheckOptions(Options& o, Visitor&& visit) {
   visit("tolerance_px", o.tolerance_px,
-        "a camera has changed only when the change moves a point of the working volume (floor to "
-        "2 m over the projection) by more than this many pixels in its image");
+        "a camera has changed only when the change moves a point of the working volume (over the "
+        "calibrated points, from the floor to 2 m in a metric calibration) by more than this many "
+        "pixels in its image");
   visit("significance_z", o.significance_z,
         "standard normal quantile of the statistical tests (3.09: 99.9 %, one false alarm in a "
         "thousand unchanged cameras)");

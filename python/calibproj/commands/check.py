@@ -5,9 +5,11 @@
 
 Each camera of RESULTS is tested on its new observations of the calibrated points
 (the check projection shows some of the calibrated arrays again): its pose, its focal
-length and both are fitted with the points held, and the change is judged twice, by a
-chi-square with the stored sigmas (99.9 %) and by how far it moves the working volume
-(floor to 2 m) in the camera's image (--tolerance-px, default 0.5 px). Statuses:
+length and both are fitted with the points held, and the change from the same fit to
+its calibration's observations is judged twice, by a chi-square with both fits'
+covariance (99.9 %) and by how far it moves the working volume (over the calibrated
+points, floor to 2 m in a metric calibration) in the camera's image (--tolerance-px,
+default 0.5 px). Statuses:
 
     unchanged   no change both significant and above the tolerance
     moved       its pose changed (the new pose is given)
@@ -22,8 +24,9 @@ lengths) and a complete results folder is written, as calibrate writes one, with
 check.json (each camera's status, change with its sigma, residuals before and after).
 
 Exit status: 0 every camera confirmed (or repaired, with --out); 3 some camera changed
-(without --out), or was not seen or could not be tested; 4 the stored calibration
-cannot be trusted as a reference (run a full calibration); 1 and 2 as for every command.
+(without --out), or was not seen or could not be tested (fewer than two tested: nothing
+repaired); 4 the cameras that agree with RESULTS are not a clear majority (run a full
+calibration); 1 and 2 as for every command.
 """
 
 from __future__ import annotations
@@ -79,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
         if args.out and not untrusted:
             print(f"repaired results in {args.out}")
     if not result.trusted:
-        return EXIT_UNTRUSTED
+        # Too few cameras tested says nothing against the calibration: not confirmed.
+        return EXIT_UNTRUSTED if len(result.tested) >= 2 else EXIT_NOT_CONFIRMED
     open_cameras = [n for n, v in result.cameras.items() if v.status in ("not seen", "unknown")]
     if open_cameras or (result.changed and not args.out):
         return EXIT_NOT_CONFIRMED

@@ -240,19 +240,25 @@ def _run_check(args: argparse.Namespace) -> int:
     return 0
 
 
-def _calibrated_sequences(results) -> list:
+def _calibrated_sequences(results, seen: set | None = None) -> list:
     """The sequences a results folder was calibrated from: its own and, when it merged an
-    earlier calibration, that one's (recursively)."""
+    earlier calibration or repaired a checked one, that one's (recursively). A folder
+    `calibproj check --out` wrote is planned from the calibration it repaired."""
     from pathlib import Path
 
     from calibproj.provenance import read_provenance
 
-    paths = [_calibrated_sequence(results)]
-    merged = (((read_provenance(results) or {}).get("inputs") or {}).get("merged") or {}).get("path")
-    if isinstance(merged, str):
-        earlier = Path(merged) if Path(merged).is_absolute() else Path(results) / merged
-        if earlier.is_dir():
-            paths += _calibrated_sequences(earlier)
+    seen = set() if seen is None else seen
+    seen.add(Path(results).resolve())
+    inputs = (read_provenance(results) or {}).get("inputs") or {}
+    earlier = [entry.get("path") for entry in (inputs.get("merged"), inputs.get("checked")) if isinstance(entry, dict)]
+    earlier = [Path(p) if Path(p).is_absolute() else Path(results) / p for p in earlier if isinstance(p, str)]
+    paths = [] if inputs.get("checked") else [_calibrated_sequence(results)]
+    for folder in earlier:
+        if folder.is_dir() and folder.resolve() not in seen:
+            paths += _calibrated_sequences(folder, seen)
+    if not paths:
+        raise CommandError(f"{results}: its provenance names no sequence to plan from; give it with --sequence")
     return paths
 
 

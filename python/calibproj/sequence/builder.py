@@ -161,16 +161,23 @@ def overhead_frames(code_degree: int, code_frames_per_bit: int, reference_frames
     return 6 * reference_frames + 2 * (2 ** code_degree - 1) * code_frames_per_bit
 
 
-def overhead_seconds(sequence: Sequence) -> float:
-    """Seconds of ``sequence`` besides its patterns (reference frames and light codes)."""
+def overhead_seconds(sequence: Sequence, code_degree: int | None = None,
+                     reference_frames: int | None = None) -> float:
+    """Seconds of a sequence with ``sequence``'s timing besides its patterns (reference
+    frames and light codes), with its codes and reference blocks unless others are given."""
     start = sequence.start_code
-    return overhead_frames(_code_degree(start), start.frames_per_bit, sequence.segments[0].frame_count) / sequence.fps
+    degree = _code_degree(start) if code_degree is None else code_degree
+    blocks = sequence.segments[0].frame_count if reference_frames is None else reference_frames
+    return overhead_frames(degree, start.frames_per_bit, blocks) / sequence.fps
 
 
-def pattern_budget(sequence: Sequence, max_seconds: float) -> int:
-    """Patterns a sequence with ``sequence``'s timing, light codes and reference frames
-    can show within ``max_seconds`` (0 when the rest alone takes longer)."""
-    frames = math.floor(max_seconds * sequence.fps + 1e-9) - round(overhead_seconds(sequence) * sequence.fps)
+def pattern_budget(sequence: Sequence, max_seconds: float, code_degree: int | None = None,
+                   reference_frames: int | None = None) -> int:
+    """Patterns a sequence with ``sequence``'s timing (and its codes and reference blocks,
+    unless others are given) can show within ``max_seconds`` (0 when the rest alone
+    takes longer)."""
+    overhead = overhead_seconds(sequence, code_degree, reference_frames)
+    frames = math.floor(max_seconds * sequence.fps + 1e-9) - round(overhead * sequence.fps)
     return max(0, frames // sequence.frames_per_pattern)
 
 
@@ -187,11 +194,6 @@ def reassembled(sequence: Sequence, layout: MsmLayout, centres: np.ndarray, show
                              reference_frames=sequence.segments[0].frame_count if reference_frames is None
                              else reference_frames,
                              min_gap_modules=sequence.min_gap_modules)
-
-
-def overhead_seconds_with(sequence: Sequence, code_degree: int, reference_frames: int) -> float:
-    """Seconds besides the patterns of a sequence with ``sequence``'s timing and these codes."""
-    return overhead_frames(code_degree, sequence.start_code.frames_per_bit, reference_frames) / sequence.fps
 
 
 def _code_degree(code: LightCode) -> int:

@@ -20,10 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.sequence.builder import ShownPattern, overhead_seconds_with, reassembled
+from calibproj.sequence.builder import ShownPattern, overhead_seconds, pattern_budget, reassembled
+from calibproj.sequence.codes import MAX_DEGREE, MIN_DEGREE
 from calibproj.sequence.sequence import Sequence
 
 log = logging.getLogger(__name__)
+
+# Observations a camera needs to be tested (calibproj.check_and_repair.CheckOptions's
+# default min_points: a pose has six parameters).
+MIN_TESTED_POINTS = 6
 
 
 @dataclass(frozen=True)
@@ -53,6 +58,8 @@ class CheckSequenceOptions:
             raise ValueError(f"max_seconds must be in (0, 600], got {self.max_seconds}")
         if not 6 <= self.points_per_camera <= 100_000:
             raise ValueError(f"points_per_camera must be in [6, 100000], got {self.points_per_camera}")
+        if not MIN_DEGREE <= self.code_degree <= MAX_DEGREE:
+            raise ValueError(f"code_degree must be in [{MIN_DEGREE}, {MAX_DEGREE}], got {self.code_degree}")
         if not 1 <= self.reference_frames <= 300:
             raise ValueError(f"reference_frames must be in [1, 300], got {self.reference_frames}")
 
@@ -73,9 +80,9 @@ def plan_check(results: str | os.PathLike, sequences: list[Sequence],
     base = _common_base(sequences)
     candidates = _patterns_by_array(sequences, base)
     counts = _calibrated_points_per_array(calibration, tracks, base)
-    overhead = overhead_seconds_with(base, options.code_degree, options.reference_frames)
-    budget = int((options.max_seconds - overhead) * base.fps + 1e-9) // base.frames_per_pattern
+    budget = pattern_budget(base, options.max_seconds, options.code_degree, options.reference_frames)
     if budget < 1:
+        overhead = overhead_seconds(base, options.code_degree, options.reference_frames)
         raise ValueError(f"{options.max_seconds:g} s leave no time for patterns: the light codes and reference "
                          f"frames alone take {overhead:.1f} s")
     chosen = _choose_arrays(counts, candidates, budget, options.points_per_camera)
@@ -87,7 +94,7 @@ def plan_check(results: str | os.PathLike, sequences: list[Sequence],
                            reference_frames=options.reference_frames)
     seen = {name: int(sum(per_array.get(array, 0) for array in chosen)) for name, per_array in counts.items()}
     for name, points in seen.items():
-        if points < min(options.points_per_camera, 6):
+        if points < min(options.points_per_camera, MIN_TESTED_POINTS):
             log.warning("camera %s sees only %d calibrated points in the check projection: it will be unknown",
                         name, points)
     return sequence, seen
