@@ -58,7 +58,8 @@ check::CameraCheck CheckCameraPy(const RowMatrix& K, const RowMatrix& R, const E
   input.rotation_sigma = rotation_sigma;
   input.centre_sigma = centre_sigma;
   input.points = Columns3(points, "points");
-  input.observed = RowsOf<Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>>(observed, 2, "observed").transpose();
+  input.observed =
+      RowsOf<Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>>(observed, 2, "observed").transpose();
   input.volume = Columns3(volume, "volume");
   input.reference_points = Columns3(reference_points, "reference_points");
   input.reference_observed =

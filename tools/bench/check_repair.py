@@ -197,7 +197,8 @@ def format_trial(label: str, row: dict) -> str:
     if "repaired_rot" in row:
         line += f" | repaired {row['repaired_rot']:.4f} deg {row['repaired_mm']:.2f} mm"
     if "full_rot" in row:
-        line += f" | full {row['full_rot']:.4f} deg {row['full_mm']:.2f} mm | time {row['check_s']:.0f}/{row['full_s']:.0f} s"
+        line += (f" | full {row['full_rot']:.4f} deg {row['full_mm']:.2f} mm"
+                 f" | time {row['check_s']:.0f}/{row['full_s']:.0f} s")
     return line + ("" if row["trusted"] else " | untrusted")
 
 

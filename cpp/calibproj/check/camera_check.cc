@@ -396,7 +396,8 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   out.focal_sigma = std::sqrt(std::max(0.0, covariance(6, 6)));
 
   const std::string figures =
-      Figures("rotation %.3g deg, centre %.3g (calibration units), focal %+.2g %%; the working volume moves up to %.2f px in its image",
+      Figures("rotation %.3g deg, centre %.3g (calibration units), focal %+.2g %%; "
+              "the working volume moves up to %.2f px in its image",
               out.rotation_change_deg, out.centre_change, 100.0 * out.focal_change, out.volume_shift_px) +
       Figures(" (tolerance %.2g px), chi-square %.1f (%.1f is noise at %.4g %%)", options.tolerance_px, out.chi2,
               out.chi2_threshold, 100.0 * (1.0 - 0.5 * std::erfc(options.significance_z / std::sqrt(2.0))));

@@ -21,12 +21,13 @@ they are, then: calibproj calibrate DENSE_VIDEOS --sequence SEQ_DIR/sequence.jso
 sequence's; the layout options above do not apply.
 
 Check (--check RESULTS): the projection `calibproj check` tests a calibration with, at
-most --check-seconds (8 s) long, with shorter light codes (15 bits) and reference blocks: some of the arrays RESULTS were calibrated from,
-chosen so that every camera, the zoomed one included, sees --check-points of its
-calibrated points again. The sequences default to the one RESULTS' provenance names
-and, for a merged calibration, the one the merged results were calibrated from;
---sequence (repeatable) gives them. Then: calibproj check RESULTS CHECK_VIDEOS
---sequence SEQ_DIR/sequence.json [--out NEW_RESULTS].
+most --check-seconds (8 s) long, with shorter light codes (15 bits) and reference
+blocks: some of the arrays RESULTS were calibrated from, chosen so that every camera,
+the zoomed one included, sees --check-points of its calibrated points again. The
+sequences default to the one RESULTS' provenance names and, for a merged calibration
+(or one `calibproj check --out` repaired), the ones behind it; --sequence (repeatable)
+gives them. Then: calibproj check RESULTS CHECK_VIDEOS --sequence
+SEQ_DIR/sequence.json [--out NEW_RESULTS].
 """
 
 from __future__ import annotations
@@ -89,7 +90,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     densify.add_argument("--densify-min-points", type=int, default=DensifyOptions.min_points,
                          help="inliers below which a camera is densified for (default: %(default)s)")
     check = parser.add_argument_group("check projection (see above)")
-    check.add_argument("--check", metavar="RESULTS", help="plan the short projection `calibproj check` tests RESULTS with")
+    check.add_argument("--check", metavar="RESULTS",
+                       help="plan the short projection `calibproj check` tests RESULTS with")
     check.add_argument("--check-seconds", type=float, default=CheckSequenceOptions.max_seconds,
                        help="longest check projection, codes included (default: %(default)s)")
     check.add_argument("--check-points", type=int, default=CheckSequenceOptions.points_per_camera,

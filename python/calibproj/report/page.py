@@ -452,7 +452,8 @@ def check_table(document: dict, unit: str) -> str:
         def change(value: str, sigma: str, factor: float = 1.0, digits: int = 3) -> str:
             if camera.get(value) is None:
                 return "-"
-            return f"{_number(camera[value] * factor, digits)} &plusmn; {_number((camera.get(sigma) or 0) * factor, digits)}"
+            spread = _number((camera.get(sigma) or 0) * factor, digits)
+            return f"{_number(camera[value] * factor, digits)} &plusmn; {spread}"
 
         rows.append(
             f'<tr><td class="name">{html.escape(str(name))}</td><td class="name {css}">{html.escape(status)}</td>'
