@@ -49,8 +49,8 @@ MODULES = {"_core": _core, "_bench": _bench}
 # Where every keyword option meets every absurd value (the others sample them).
 EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "_core.sync.synchronise",
                 "_core.ingest.ingest_camera"}
-# No constructor by design; the tiny video holds no light code.
-BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.ingest.ingest_camera"}
+# No constructor by design (results of a call); the tiny video holds no light code.
+BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.ingest.ingest_camera", "_core.check.CameraCheck"}
 
 # Keyword options of registration.Reconstruction (cpp/bindings/registration.cc).
 REGISTRATION_OPTIONS = {
@@ -485,6 +485,11 @@ class Baselines:
             "_core.sync.option_table": Spec([]),
             "_core.ingest.valid_known_exposure": Spec([("seconds", 0.01)]),
             "_core.registration.option_table": Spec([]),
+            "_core.check.option_table": Spec([]),
+            "_core.check.CameraCheck": Spec([]),
+            "_core.check.check_options": Spec([], {"tolerance_px": 0.5, "min_points": 6}),
+            "_core.check.check_camera": Spec(self.camera_check_args(), options={
+                entry["name"]: entry["default"] for entry in _core.check.option_table()}),
             "_core.registration.check_options": Spec([], dict(REGISTRATION_OPTIONS)),
             "_core.ingest.option_table": Spec([]),
             "_core.sync.synchronise": Spec([("signal", self.signal), ("levels", self.levels),
@@ -568,6 +573,20 @@ class Baselines:
                                          ("intrinsics", intrinsics), ("tracks", tracks)]),
         }
 
+    def camera_check_args(self) -> list[tuple[str, Any]]:
+        """A camera of the plane scene checked against its own observations."""
+        s = self.scene
+        w, t = s["poses"][1][:3], s["poses"][1][3:]
+        theta = np.linalg.norm(w)
+        k = w / theta
+        Kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        R = np.eye(3) + np.sin(theta) * Kx + (1 - np.cos(theta)) * Kx @ Kx
+        observed = s["observed"][s["camera_index"] == 1]
+        volume = np.concatenate([s["points"], s["points"] + [0.0, 0.0, 1.0]])
+        return [("K", s["K"][1]), ("R", R), ("t", t), ("rotation_sigma", 1e-3), ("centre_sigma", 1e-2),
+                ("points", s["points"]), ("observed", observed), ("volume", volume), ("width", 640.0),
+                ("height", 480.0), ("reference_points", s["points"]), ("reference_observed", observed)]
+
     def receivers(self) -> dict[str, dict[str, Callable[[], Any]]]:
         """Objects whose methods and properties are called, by class, in several states."""
         s = self.scene
@@ -583,6 +602,8 @@ class Baselines:
                 "apriltag": lambda: _core.detect.MarkerDetector(self.apriltag_spec)},
             "_core.detect.ArucoOptions": {"default": _core.detect.ArucoOptions},
             "_core.ingest.Sequence": {"read": lambda: self.core_sequence},
+            "_core.check.CameraCheck": {"checked": lambda: _core.check.check_camera(
+                *(value for _, value in self.camera_check_args()))},
             "_core.detect.AprilTagOptions": {"default": _core.detect.AprilTagOptions},
             "_core.detect.CornerRefinementOptions": {"default": _core.detect.CornerRefinementOptions},
             "_core.detect.CornerRefinement": {"edges": lambda: _core.detect.CornerRefinement.edges},
