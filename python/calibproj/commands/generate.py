@@ -165,15 +165,10 @@ def _scales(text: str) -> tuple[float, ...]:
 def _run_densify(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from calibproj.io.output_folder import OutputFolder
     from calibproj.sequence import Sequence
-    from calibproj.sequence.builder import SEQUENCE_FILE, write_sequence
     from calibproj.sequence.densify import densify
-    from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET
 
-    results = Path(args.densify)
-    if not results.is_dir():
-        raise CommandError(f"{results}: no such results folder")
+    results = _results_folder(args.densify)
     cameras = tuple(n.strip() for n in args.densify_cameras.split(",") if n.strip()) if args.densify_cameras else None
     options = DensifyOptions(max_seconds=args.densify_seconds, cameras=cameras, min_points=args.densify_min_points,
                              min_gap_modules=args.densify_gap_modules)
@@ -183,11 +178,7 @@ def _run_densify(args: argparse.Namespace) -> int:
     dense, plans = densify(results, Sequence.load(sequence_path), options)
     summary = {"sequence": None, "video": None, "extra_seconds": 0.0, "cameras": {}}
     if dense is not None:
-        with OutputFolder(args.out, force=args.force, signature=[SEQUENCE_FILE]) as folder, \
-                folder.writing() as staging:
-            write_sequence(staging, dense, video=args.video, png=args.png,
-                           crf=DEFAULT_CRF if args.crf is None else args.crf, preset=args.preset or DEFAULT_PRESET,
-                           progress=args.progress and not args.json)
+        _write_planned(args, dense)
         summary.update(sequence=f"{args.out}/sequence.json", video=f"{args.out}/projection.mp4" if args.video else None,
                        extra_seconds=round(dense.duration_s, 3))
         for plan in plans:
@@ -214,22 +205,14 @@ def _run_densify(args: argparse.Namespace) -> int:
 def _run_check(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from calibproj.io.output_folder import OutputFolder
     from calibproj.sequence import Sequence
-    from calibproj.sequence.builder import SEQUENCE_FILE, write_sequence
     from calibproj.sequence.check_sequence import plan_check
-    from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET
 
-    results = Path(args.check)
-    if not results.is_dir():
-        raise CommandError(f"{results}: no such results folder")
+    results = _results_folder(args.check)
     paths = [Path(p) for p in args.sequence] if args.sequence else _calibrated_sequences(results)
     options = CheckSequenceOptions(max_seconds=args.check_seconds, points_per_camera=args.check_points)
     sequence, seen = plan_check(results, [Sequence.load(path) for path in paths], options)
-    with OutputFolder(args.out, force=args.force, signature=[SEQUENCE_FILE]) as folder, folder.writing() as staging:
-        write_sequence(staging, sequence, video=args.video, png=args.png,
-                       crf=DEFAULT_CRF if args.crf is None else args.crf, preset=args.preset or DEFAULT_PRESET,
-                       progress=args.progress and not args.json)
+    _write_planned(args, sequence)
     summary = {"sequence": f"{args.out}/sequence.json", "video": f"{args.out}/projection.mp4" if args.video else None,
                "seconds": round(sequence.duration_s, 3), "points": seen}
     if args.json:
@@ -240,6 +223,27 @@ def _run_check(args: argparse.Namespace) -> int:
         print(f"{summary['sequence']}: check projection of {sequence.duration_s:.1f} s; record it with every camera, "
               f"then: calibproj check {results} VIDEOS --sequence {summary['sequence']}")
     return 0
+
+
+def _results_folder(text: str) -> "Path":
+    from pathlib import Path
+
+    results = Path(text)
+    if not results.is_dir():
+        raise CommandError(f"{results}: no such results folder")
+    return results
+
+
+def _write_planned(args: argparse.Namespace, sequence) -> None:
+    """A planned (densified or check) sequence written to --out as generate writes one."""
+    from calibproj.io.output_folder import OutputFolder
+    from calibproj.sequence.builder import SEQUENCE_FILE, write_sequence
+    from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET
+
+    with OutputFolder(args.out, force=args.force, signature=[SEQUENCE_FILE]) as folder, folder.writing() as staging:
+        write_sequence(staging, sequence, video=args.video, png=args.png,
+                       crf=DEFAULT_CRF if args.crf is None else args.crf, preset=args.preset or DEFAULT_PRESET,
+                       progress=args.progress and not args.json)
 
 
 def _calibrated_sequences(results, seen: set | None = None) -> list:
