@@ -7,8 +7,10 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -19,7 +21,9 @@ from calibproj.ingest import ingest
 from calibproj.ingest_options import IngestOptions
 from calibproj.io.intrinsics import Intrinsics, read_intrinsics, write_intrinsics
 from calibproj.markers import MarkerDetector, marker_centres, render_marker
+from calibproj.sequence.video import GreyVideoWriter
 from calibproj.simulate.render import simulate_videos
+from calibproj.simulate.scene import load_scene
 from calibproj.tracks import Tracks
 
 # Centres of markers at least this wide (detected side, pixels) must be within
@@ -417,3 +421,53 @@ def test_an_interrupted_ingest_stops_every_camera_early(aruco, monkeypatch):
     for name, calls in seen.items():
         decoded, total = calls[-1]
         assert total > 0 and decoded < total / 2, (name, calls)
+
+
+def with_static_markers(video: Path, out: Path, ids: tuple[int, ...], markers: str, side_px: float) -> None:
+    """The video again, with markers of the family pasted in every frame along its
+    bottom edge: a floor marking that decodes, as the projection's markers look."""
+    capture = cv2.VideoCapture(str(video))
+    frames = []
+    while True:
+        ok, frame = capture.read()
+        if not ok:
+            break
+        frames.append(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+    height, width = frames[0].shape
+    stamps = []
+    for k, marker_id in enumerate(ids):
+        stamp = render_marker(markers, marker_id, module_px=side_px / 6.0, inverted=True)
+        x = 10 + k * (stamp.shape[1] + 10)
+        stamps.append((stamp, slice(height - 10 - stamp.shape[0], height - 10), slice(x, x + stamp.shape[1])))
+    with GreyVideoWriter(out, (width, height), _core.video.probe(str(video))["fps"], crf=0,
+                         preset="ultrafast", timestamps_s=_core.video.frame_timestamps(str(video))) as writer:
+        for frame in frames:
+            for stamp, rows, columns in stamps:
+                frame[rows, columns] = stamp
+            writer.write(frame)
+
+
+def test_a_marking_that_decodes_does_not_shrink_the_search_below_the_real_markers(tmp_path):
+    """Before the homography, whole frames are shrunk as far as the markers found so far
+    allow. Two large static markings that decode as the projection's markers (90 px,
+    where the first pattern's real markers are too small to see) once taught it a
+    magnification 7x too large, and every later frame was shrunk until no real marker
+    survived (0 MSMs). They now cost the camera no more than markings with ids the
+    projection does not show, which only hide what they cover."""
+    sequence = build_sequence(markers="aruco:4X4_50", arrays=3, scales=(0.25, 2.0, 3.0), marker_px=48.0,
+                              code_degree=4, reference_frames=8)
+    small = load_scene("small", seed=7)
+    room = tmp_path / "room"
+    simulate_videos(replace(small, cameras=small.cameras[:1]), sequence, room, seed=7)
+    name = small.cameras[0].name
+    kept = {}
+    for ids in ((40, 41), (0, 1)):  # the arrays show ids 0-31
+        folder = tmp_path / f"marked-{ids[0]}"
+        folder.mkdir()
+        with_static_markers(room / "videos" / f"{name}.mp4", folder / f"{name}.mp4", ids=ids,
+                            markers="aruco:4X4_50", side_px=90.0)
+        result = ingest(folder, sequence, room / "intrinsics", options=IngestOptions(explore_interval=0),
+                        progress=False)
+        assert not result.failed
+        kept[ids] = result.cameras[name].summary()["msms_kept"]
+    assert kept[40, 41] >= 40 and kept[0, 1] >= 0.9 * kept[40, 41], kept

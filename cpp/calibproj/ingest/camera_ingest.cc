@@ -9,6 +9,7 @@
 #include <map>
 #include <memory>
 #include <stdexcept>
+#include <unordered_map>
 #include <unordered_set>
 #include <utility>
 
@@ -30,6 +31,14 @@ constexpr int kProgressInterval = 25;
 // Decoded frames kept for the start code search, and patterns waiting for detection,
 // at most: each holds whole frames.
 constexpr int kMaxHeldFrames = 1024;
+// The adaptive bootstrap trusts a magnification only from an MSM seen at two of its
+// scales: concentric within this share of the smaller side, with sides in the ratio
+// of the scales within this tolerance. A single decoded quad may be a floor marking
+// that happens to decode; one 3x too large once shrank every later frame until no real
+// marker survived (measured: a 60 fps camera under room light and floor texture lost
+// all its 1,500 markers).
+constexpr double kConcentricShare = 0.25;
+constexpr double kScaleRatioTolerance = 0.25;
 
 void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument("ingest options: " + message);
@@ -540,6 +549,7 @@ class CameraIngest {
       for (const int id : output.detections.ids) {
         found_msms_.insert(static_cast<long long>(pattern.array) * sequence_.markers_per_array + id);
       }
+      LearnMagnification(output);
       for (std::size_t k = 0; k < output.detections.size(); ++k) {
         const detect::Quad& quad = output.detections.corners[k];
         const cv::Point2d centre = detect::DiagonalIntersection(output.undistorted[k]);
@@ -552,7 +562,6 @@ class CameraIngest {
         record.corners = quad;
         record.centre = centre;
         record.side_px = MeanSide(quad);
-        min_magnification_ = std::min(min_magnification_, record.side_px / pattern.marker_side_px);
         record.first_frame = output.first_frame;
         record.frame_count = output.frame_count;
         record.in_region = !output.whole_frame;
@@ -561,6 +570,29 @@ class CameraIngest {
         const cv::Point2d& projector = sequence_.centres[pattern.array * sequence_.markers_per_array + record.marker];
         if (!homography_.CrossesSurfaces(projector, pattern.marker_side_px)) homography_.Add(projector, centre);
       }
+    }
+  }
+
+  // The adaptive bootstrap's smallest magnification, from MSMs seen at two scales. A
+  // shrunk frame that finds nothing says nothing against it: a zoomed camera's view
+  // holds no whole marker of the largest scales.
+  void LearnMagnification(const DetectionOutput& output) {
+    const PatternSpec& pattern = sequence_.patterns[output.pattern];
+    for (std::size_t k = 0; k < output.detections.size(); ++k) {
+      const detect::Quad& quad = output.detections.corners[k];
+      const Sighting seen{detect::DiagonalIntersection(quad), MeanSide(quad), pattern.marker_side_px};
+      if (!std::isfinite(seen.centre.x) || !std::isfinite(seen.centre.y)) continue;
+      const long long key = static_cast<long long>(pattern.array) * sequence_.markers_per_array +
+                            output.detections.ids[k];
+      const auto [first, inserted] = first_sightings_.try_emplace(key, seen);
+      if (inserted || first->second.marker_side_px == seen.marker_side_px) continue;
+      const Sighting& earlier = first->second;
+      const double ratio = (seen.side_px / earlier.side_px) / (seen.marker_side_px / earlier.marker_side_px);
+      const bool concentric =
+          cv::norm(seen.centre - earlier.centre) < kConcentricShare * std::min(seen.side_px, earlier.side_px);
+      if (!concentric || std::abs(ratio - 1.0) > kScaleRatioTolerance) continue;
+      min_magnification_ = std::min({min_magnification_, seen.side_px / seen.marker_side_px,
+                                     earlier.side_px / earlier.marker_side_px});
     }
   }
 
@@ -674,8 +706,14 @@ class CameraIngest {
   detect::ProjectorHomography homography_;
   detect::ResolutionLimit resolution_;
   std::unordered_set<long long> found_msms_;  // array * markers_per_array + marker, at any scale
-  // Smallest image side over projector side of the markers found so far.
+  // Smallest image side over projector side of the MSMs found at two scales so far.
   double min_magnification_ = std::numeric_limits<double>::infinity();
+  struct Sighting {
+    cv::Point2d centre;   // distorted pixels
+    double side_px;
+    double marker_side_px;  // the pattern's, in projector pixels
+  };
+  std::unordered_map<long long, Sighting> first_sightings_;  // array * markers_per_array + marker
   DetectionPipeline pipeline_;
 
   bool started_ = false;

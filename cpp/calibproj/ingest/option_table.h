@@ -98,9 +98,9 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "take over.");
   visit("adaptive_bootstrap", o.adaptive_bootstrap,
         "with use_roi, those whole frames are shrunk further as far as the markers found so far allow "
-        "(the next pattern's module, predicted at half the smallest magnification seen, near "
-        "target_module_px): a zoomed camera that needs many patterns before its homography does not pay "
-        "full frames for them.");
+        "(the next pattern's module, predicted at half the smallest magnification of an MSM seen at two "
+        "of its scales, near target_module_px; a marking that decodes cannot teach it): a zoomed camera "
+        "that needs many patterns before its homography does not pay full frames for them.");
   visit("refine_undistorted", o.refine_undistorted,
         "corners from straight edge lines fitted in undistorted pixels, starting from the detector's "
         "unrefined corners (false: the detector's own refinement, then the four corners undistorted); "
