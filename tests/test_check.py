@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
 
 import cv2
 import numpy as np
@@ -268,6 +269,40 @@ def test_the_command_prints_the_verdicts_and_exits_by_them(room, tmp_path) -> No
     assert lenient.returncode == 0 and "moved" not in lenient.stdout
     kept = run_cli("check", str(results), "--tracks", str(room["folder"] / "kept" / "tracks.json"))
     assert kept.returncode == 0 and "6 of 6 cameras unchanged" in kept.stdout
+
+
+def test_the_native_check_prints_writes_and_exits_as_the_python_command(room, tmp_path) -> None:
+    """calibproj-native check runs the same core (verdicts, repair, check.json, table,
+    exit status): the same output and the same repaired files, byte for byte."""
+    from test_native import find_native
+    from test_pipeline import run_cli
+
+    native = find_native()
+    results, again = room["folder"] / "results", room["folder"] / "again" / "tracks.json"
+    for extra in ([], ["--tolerance-px", "1000"]):
+        python = run_cli("check", str(results), "--tracks", str(again), *extra)
+        alone = subprocess.run([str(native), "check", str(results), "--tracks", str(again), *extra],
+                               capture_output=True, text=True)
+        assert (alone.returncode, alone.stdout) == (python.returncode, python.stdout), alone.stderr
+    run_cli("check", str(results), "--tracks", str(again), "--out", str(tmp_path / "python"), "--no-report")
+    alone = subprocess.run([str(native), "check", str(results), "--tracks", str(again), "--out",
+                            str(tmp_path / "native"), "--json"], capture_output=True, text=True)
+    assert alone.returncode == 0, alone.stderr
+    assert json.loads(alone.stdout)["cameras"]["far2"]["status"] == "moved"
+    for name in ("check.json", "camera_poses.json", "metrics.json", "points.ply", "tracks.json",
+                 "intrinsics/ceiling.json", "intrinsics/far2.json"):
+        assert (tmp_path / "native" / name).read_bytes() == (tmp_path / "python" / name).read_bytes(), name
+    # Tracks of other points than the calibrated ones: one line naming the file, status 2.
+    from calibproj.tracks import Tracks
+
+    tracks = Tracks.read(again)
+    Tracks.from_observations(tracks.camera_names, np.asarray(tracks.camera_names)[tracks.camera_index],
+                             tracks.point_ids[tracks.point_index] + 10 ** 6, tracks.xy,
+                             tracks.markers_per_array).write(tmp_path / "stranger.json")
+    stranger = subprocess.run([str(native), "check", str(results), "--tracks", str(tmp_path / "stranger.json")],
+                              capture_output=True, text=True)
+    assert stranger.returncode == 2 and stranger.stderr.count("\n") == 1, stranger.stderr
+    assert "stranger.json" in stranger.stderr and "none of the calibrated points" in stranger.stderr
 
 
 def test_the_check_projection_is_short_and_tests_every_camera(room, tmp_path) -> None:

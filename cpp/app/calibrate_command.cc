@@ -9,6 +9,7 @@
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/intrinsics_file.h"
 #include "output_folder.h"
+#include "results_folder.h"
 #include "table_flags.h"
 #include "calibproj/formats/calibration.h"
 #include "calibproj/formats/export.h"
@@ -59,29 +60,6 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
 }
 
 namespace {
-
-// The results, the inputs they came from (tracks.json and intrinsics/, as the Python
-// command keeps them) and the exports, written into the staging folder, then moved
-// into place.
-void SaveResults(OutputFolder& folder, const formats::Calibration& calibration,
-                 const std::map<std::string, CameraIntrinsics>& intrinsics, const Tracks& given,
-                 const Tracks& tracks, const std::vector<std::string>& exports) {
-  folder.Write([&](const fs::path& staging) {
-    for (const auto& name : given.cameras) {
-      if (intrinsics.count(name)) formats::WriteIntrinsics(staging / "intrinsics" / (name + ".json"), intrinsics.at(name));
-    }
-    formats::WriteTracks(staging / "tracks.json", given);
-    formats::WriteCalibration(staging, calibration);
-    std::vector<std::string> warnings;
-    if (calibration.poses.empty() && !exports.empty()) {
-      warnings.push_back("no camera registered: nothing exported");  // the failures in metrics.json say why
-    } else {
-      for (const auto& format : exports) formats::Export(calibration, format, staging, intrinsics, &tracks, &warnings);
-    }
-    for (const auto& warning : warnings) std::cerr << warning << "\n";
-  });
-  folder.Commit();
-}
 
 // The MSM geometry of sequence.json, checked against the tracks it should belong to.
 formats::ProjectedMarkers MarkersOf(const std::string& sequence, std::optional<int> markers_per_array) {

@@ -11,6 +11,7 @@
 #include <iostream>
 
 #include "calibrate_command.h"
+#include "check_command.h"
 #include "detect_command.h"
 #include "calibproj/formats/files.h"
 #include "interrupts.h"
@@ -34,18 +35,23 @@ int main(int argc, char** argv) {
   const auto calibrate_args = calibproj::app::AddCalibrateCommand(app, &calibrate);
   CLI::App* detect = nullptr;
   const auto detect_args = calibproj::app::AddDetectCommand(app, &detect);
+  CLI::App* check = nullptr;
+  const auto check_args = calibproj::app::AddCheckCommand(app, &check);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {
     // CLI11 has an exit status per kind of error; the project has one for them all.
     return app.exit(error) == 0 ? 0 : kExitUsage;
   }
-  const std::string command = calibrate->parsed() ? "calibrate" : detect->parsed() ? "detect" : "";
+  const std::string command = calibrate->parsed() ? "calibrate" : detect->parsed() ? "detect"
+                              : check->parsed()   ? "check"
+                                                  : "";
   const std::string prefix = "calibproj-native " + command;
   calibproj::app::Interrupts interrupts(prefix);
   try {
     if (calibrate->parsed()) return calibproj::app::RunCalibrate(*calibrate_args, interrupts);
     if (detect->parsed()) return calibproj::app::RunDetect(*detect_args, interrupts);
+    if (check->parsed()) return calibproj::app::RunCheck(*check_args, interrupts);
   } catch (const calibproj::app::OutputBusyError& error) {
     std::cerr << prefix << ": error: " << error.what() << "\n";
     return kExitFailure;

@@ -8,12 +8,17 @@
 #include <stdexcept>
 #include <string>
 
+#include <pybind11/stl/filesystem.h>
+
+#include "calibproj/check/calibration_check.h"
 #include "calibproj/check/camera_check.h"
 #include "calibproj/check/option_table.h"
+#include "calibproj/formats/files.h"
 #include "checks.h"
 #include "convert.h"
 #include "ingest_options.h"
 #include "knob_setter.h"
+#include "python_objects.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -71,9 +76,95 @@ check::CameraCheck CheckCameraPy(const RowMatrix& K, const RowMatrix& R, const E
   return check::CheckCamera(input, options);
 }
 
+check::CalibrationCheck CheckCalibrationPy(const py::object& calibration, const py::dict& intrinsics,
+                                            const py::object& tracks, const py::object& stored_tracks,
+                                            const std::map<std::string, std::string>& unusable,
+                                            const std::map<std::string, std::string>& not_seen,
+                                            const py::kwargs& kwargs) {
+  const check::CheckOptions options = CheckOptionsFromKwargs(kwargs);
+  const formats::Calibration stored = CalibrationFromPython(calibration);
+  const auto cameras = IntrinsicsFromPython(intrinsics);
+  const std::optional<formats::Tracks> now = TracksFromPython(tracks);
+  if (!now) throw py::type_error("tracks: expected Tracks, got None");
+  const std::optional<formats::Tracks> before = TracksFromPython(stored_tracks);
+  check::CheckInputs inputs{&stored, &cameras, unusable, &*now, before ? &*before : nullptr, not_seen};
+  py::gil_scoped_release release;
+  return check::CheckCalibration(inputs, options);
+}
+
+// A figure of a tested camera's check; None for the others.
+template <typename T>
+auto Figure(T check::CameraCheck::*field) {
+  return [field](const check::CameraVerdict& v) -> std::optional<T> {
+    return v.figures ? std::optional<T>((*v.figures).*field) : std::nullopt;
+  };
+}
+
+void RegisterVerdicts(py::module_& m) {
+  using check::CameraVerdict;
+  py::class_<CameraVerdict>(m, "CameraVerdict",
+                            "One camera's check: its status, why, and the figures behind it (pixels are undistorted "
+                            "pixels; centre in the calibration's unit). Figures are None for a camera not tested.")
+      .def_readonly("status", &CameraVerdict::status, "unchanged, moved, rezoomed, not seen or unknown")
+      .def_readonly("reason", &CameraVerdict::reason, "why this status, with its figures")
+      .def_readonly("points", &CameraVerdict::points, "observations of calibrated points")
+      .def_readonly("inliers", &CameraVerdict::inliers, "observations within outlier_px of the best fit")
+      .def_property_readonly("noise_px", Figure(&check::CameraCheck::noise_px))
+      .def_property_readonly("rms_before_px", Figure(&check::CameraCheck::rms_before_px))
+      .def_property_readonly("rms_after_px", Figure(&check::CameraCheck::rms_after_px))
+      .def_property_readonly("rotation_change_deg", Figure(&check::CameraCheck::rotation_change_deg))
+      .def_property_readonly("rotation_sigma_deg", Figure(&check::CameraCheck::rotation_sigma_deg))
+      .def_property_readonly("centre_change", Figure(&check::CameraCheck::centre_change))
+      .def_property_readonly("centre_sigma", Figure(&check::CameraCheck::centre_sigma))
+      .def_property_readonly("focal_change", Figure(&check::CameraCheck::focal_change))
+      .def_property_readonly("focal_sigma", Figure(&check::CameraCheck::focal_sigma))
+      .def_property_readonly("volume_shift_px", Figure(&check::CameraCheck::volume_shift_px))
+      .def_property_readonly("R", Figure(&check::CameraCheck::R), "cam_from_world rotation as the camera is now")
+      .def_property_readonly("t", Figure(&check::CameraCheck::t), "cam_from_world translation as the camera is now")
+      .def_property_readonly(
+          "focal_scale", [](const CameraVerdict& v) { return v.figures ? v.figures->focal_scale : 1.0; },
+          "its focal length over the stored one");
+  using check::CalibrationCheck;
+  py::class_<CalibrationCheck>(m, "CalibrationCheck",
+                               "Every camera's verdict, and whether the stored calibration can be trusted as the "
+                               "reference of a repair.")
+      .def_property_readonly(
+          "cameras",
+          [](const CalibrationCheck& c) {
+            py::dict cameras;
+            for (const auto& [name, verdict] : c.cameras) cameras[py::str(name)] = py::cast(verdict);
+            return cameras;
+          },
+          "{camera: CameraVerdict}, the registered cameras then the failed ones")
+      .def_readonly("trusted", &CalibrationCheck::trusted,
+                    "the unchanged cameras are a clear majority of those tested")
+      .def_readonly("message", &CalibrationCheck::message)
+      .def_readonly("unit", &CalibrationCheck::unit)
+      .def_property_readonly("tested", &CalibrationCheck::Tested, "the cameras unchanged, moved or re-zoomed")
+      .def_property_readonly("changed", &CalibrationCheck::Changed, "the cameras moved or re-zoomed")
+      .def("json", &check::CheckJson, "check.json's text")
+      .def("table", &check::CheckTable, "one line per camera under a header, as both commands print it")
+      .def("exit_status", &check::CheckExitStatus, py::arg("repaired"),
+           "the commands' exit status: 0 confirmed or repaired, 3 not confirmed, 4 untrusted");
+}
+
 }  // namespace
 
 void register_check(py::module_& m) {
+  RegisterVerdicts(m);
+  m.def("check_calibration", &CheckCalibrationPy, py::arg("calibration"), py::arg("intrinsics"), py::arg("tracks"),
+        py::arg("stored_tracks") = py::none(), py::arg("unusable") = std::map<std::string, std::string>{},
+        py::arg("not_seen") = std::map<std::string, std::string>{},
+        "Tests every camera of a Calibration ({camera: Intrinsics}) on a check projection's Tracks; the\n"
+        "calibration's own Tracks give each camera's reference. unusable: why some cameras have no intrinsics;\n"
+        "not_seen: why some gave no observation. Keyword options as option_table() lists them. ValueError when\n"
+        "there is nothing to check against.");
+  m.def(
+      "write_check",
+      [](const std::filesystem::path& path, const check::CalibrationCheck& check) {
+        formats::AtomicWrite(path, check::CheckJson(check));
+      },
+      py::arg("path"), py::arg("check"), "Writes check.json atomically.");
   using check::CameraCheck;
   py::class_<CameraCheck>(m, "CameraCheck", "One camera of a stored calibration tested against new observations.")
       .def_property_readonly("status", [](const CameraCheck& c) { return std::string(check::StatusName(c.status)); },

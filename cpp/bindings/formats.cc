@@ -18,6 +18,7 @@
 #include "calibproj/formats/scale.h"
 #include "calibproj/formats/sequence_file.h"
 #include "convert.h"
+#include "python_objects.h"
 #include "json_convert.h"
 #include "registry.h"
 
@@ -217,6 +218,18 @@ py::dict TracksDict(const formats::Tracks& tracks) {
 }
 
 }  // namespace
+
+formats::Calibration CalibrationFromPython(const py::object& calibration) {
+  return Converted("calibration", [&] { return CalibrationFrom(calibration); });
+}
+
+std::map<std::string, formats::CameraIntrinsics> IntrinsicsFromPython(const py::dict& cameras) {
+  return Converted("intrinsics", [&] { return IntrinsicsFrom(cameras); });
+}
+
+std::optional<formats::Tracks> TracksFromPython(const py::object& tracks) {
+  return Converted("tracks", [&] { return TracksFrom(tracks); });
+}
 
 void register_formats(py::module_& m) {
   // A bad input file: the message names the file and the problem.

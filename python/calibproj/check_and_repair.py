@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import logging
 import os
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,24 +36,11 @@ import numpy as np
 from calibproj import _core
 from calibproj.calibration import Calibration, CameraMetrics
 from calibproj.io.intrinsics import Intrinsics
-from calibproj.io.jsonio import write_json
 from calibproj.option_tables import options_class
 from calibproj.results import CHECK_FILE
 from calibproj.tracks import Tracks
 
 log = logging.getLogger(__name__)
-
-CHECK_KIND = "check"
-CHECK_MAJOR = 1
-CHANGED = ("moved", "rezoomed")
-TESTED = ("unchanged",) + CHANGED
-# The working volume of the practical test: the floor under the calibrated points, up
-# to this height (metres; in a calibration without a metric unit, this share of the
-# highest camera's height).
-VOLUME_HEIGHT_M = 2.0
-VOLUME_HEIGHT_SHARE = 0.7
-VOLUME_SAMPLES = 9  # per side of the floor, and 5 heights
-
 
 def _check_options(self) -> None:
     _core.check.check_options(**asdict(self))
@@ -65,57 +52,10 @@ CheckOptions = options_class(
     methods={"__post_init__": _check_options})
 
 
-@dataclass
-class CameraVerdict:
-    """One camera's check: its status, why, and the figures behind it (pixels are
-    undistorted pixels; centre in the calibration's unit)."""
-
-    status: str
-    reason: str
-    points: int = 0
-    inliers: int = 0
-    noise_px: float | None = None
-    rms_before_px: float | None = None
-    rms_after_px: float | None = None
-    rotation_change_deg: float | None = None
-    rotation_sigma_deg: float | None = None
-    centre_change: float | None = None
-    centre_sigma: float | None = None
-    focal_change: float | None = None
-    focal_sigma: float | None = None
-    volume_shift_px: float | None = None
-    R: np.ndarray | None = field(default=None, repr=False)  # as the camera is now
-    t: np.ndarray | None = field(default=None, repr=False)
-    focal_scale: float = 1.0
-
-    def summary(self) -> dict[str, Any]:
-        """The camera's entry of ``check.json``."""
-        entry = {key: value for key, value in asdict(self).items() if key not in ("R", "t")}
-        return {key: (round(value, 6) if isinstance(value, float) else value) for key, value in entry.items()}
-
-
-@dataclass
-class CheckResult:
-    """Every camera's verdict, and whether the stored calibration can be trusted as the
-    reference of a repair."""
-
-    cameras: dict[str, CameraVerdict]
-    trusted: bool
-    message: str
-    unit: str = "arbitrary"
-
-    @property
-    def tested(self) -> list[str]:
-        """The cameras that could be tested (unchanged, moved or re-zoomed)."""
-        return [name for name, verdict in self.cameras.items() if verdict.status in TESTED]
-
-    @property
-    def changed(self) -> list[str]:
-        return [name for name, verdict in self.cameras.items() if verdict.status in CHANGED]
-
-    def summary(self) -> dict[str, Any]:
-        return {"unit": self.unit, "trusted": self.trusted, "message": self.message,
-                "cameras": {name: verdict.summary() for name, verdict in self.cameras.items()}}
+# The check of every camera and its figures: the core's classes (one implementation with
+# calibproj-native check).
+CameraVerdict = _core.check.CameraVerdict
+CheckResult = _core.check.CalibrationCheck
 
 
 class UntrustedReference(ValueError):
@@ -129,110 +69,22 @@ class UntrustedReference(ValueError):
 
 def check_cameras(calibration: Calibration, intrinsics: dict[str, Intrinsics], tracks: Tracks,
                   options: CheckOptions | None = None, stored_tracks: Tracks | None = None,
-                  unusable: dict[str, str] | None = None) -> CheckResult:
+                  unusable: dict[str, str] | None = None, not_seen: dict[str, str] | None = None) -> CheckResult:
     """Test every camera of ``calibration`` on ``tracks`` (new undistorted observations
     of its points, undistorted with ``intrinsics``). ``stored_tracks``, the observations
     the calibration was made from, give each camera's reference: the same fit to its
     own calibration's observations (without them, its stored pose and sigmas).
-    ``unusable``: why some cameras have no intrinsics (they are then unknown)."""
+    ``unusable``: why some cameras have no intrinsics (they are then unknown);
+    ``not_seen``: why some gave no observation (their ingest's failure)."""
     options = options or CheckOptions()
-    if not calibration.registered or not len(calibration.points):
-        raise ValueError("the stored calibration has no registered camera or no point: nothing to check against")
-    stored = dict(zip(calibration.point_ids.tolist(), calibration.points))
-    if not any(int(i) in stored for i in tracks.point_ids):
-        raise ValueError("the check projection shows none of the calibrated points: make it with "
-                         "`calibproj generate --check RESULTS` from the sequence RESULTS were calibrated from")
-    volume = working_volume(calibration)
-    verdicts = {}
-    for name in calibration.registered:
-        if name not in intrinsics:
-            reason = (unusable or {}).get(name, "no intrinsics in the stored results")
-            verdicts[name] = CameraVerdict("unknown", f"no usable intrinsics: {reason}")
-            continue
-        verdicts[name] = _check_camera(name, calibration, intrinsics.get(name), tracks, stored, volume, options,
-                                       stored_tracks)
-    for name, reason in calibration.failed.items():
-        verdicts[name] = CameraVerdict("unknown", f"not in the stored calibration ({reason})")
-    trusted, message = _majority(verdicts)
-    for name, verdict in verdicts.items():
+    result = _core.check.check_calibration(calibration, intrinsics, tracks, stored_tracks, unusable or {},
+                                           not_seen or {}, **asdict(options))
+    for name, verdict in result.cameras.items():
         if verdict.status in ("not seen", "unknown"):
             log.warning("camera %s %s: %s", name, verdict.status, verdict.reason)
         else:
             log.debug("camera %s %s: %s", name, verdict.status, verdict.reason)
-    return CheckResult(verdicts, trusted, message, calibration.unit)
-
-
-def working_volume(calibration: Calibration) -> np.ndarray:
-    """Points of the working volume: a grid over the floor under the calibrated points,
-    from the floor up to 2 m (or a share of the highest camera's height)."""
-    points = calibration.points
-    low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
-    if calibration.unit == "m":
-        top = VOLUME_HEIGHT_M
-    else:
-        top = VOLUME_HEIGHT_SHARE * max(float(calibration.center(name)[2]) for name in calibration.registered)
-    xs, ys, zs = (np.linspace(low[0], high[0], VOLUME_SAMPLES), np.linspace(low[1], high[1], VOLUME_SAMPLES),
-                  np.linspace(0.0, top, 5))
-    grid = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), axis=-1).reshape(-1, 3)
-    return grid
-
-
-def _held(tracks: Tracks | None, name: str, stored: dict[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """The camera's observations of stored points in ``tracks``: the points (N, 3) and
-    their pixels (N, 2)."""
-    if tracks is None or name not in tracks.camera_names:
-        return np.zeros((0, 3)), np.zeros((0, 2))
-    ids, xy = tracks.observations(name)
-    known = np.array([int(i) in stored for i in ids], dtype=bool)
-    return np.array([stored[int(i)] for i in ids[known]]).reshape(-1, 3), xy[known].reshape(-1, 2)
-
-
-def _check_camera(name: str, calibration: Calibration, intrinsics: Intrinsics | None, tracks: Tracks,
-                  stored: dict[int, np.ndarray], volume: np.ndarray, options: CheckOptions,
-                  stored_tracks: Tracks | None) -> CameraVerdict:
-    if intrinsics is None:
-        return CameraVerdict("unknown", "no intrinsics in the stored results")
-    if intrinsics.resolution is None:
-        return CameraVerdict("unknown", "its intrinsics give no image size: where the working volume lies in its "
-                                        "view is not known")
-    metrics = calibration.metrics.get(name)
-    if metrics is None:
-        return CameraVerdict("unknown", "no metrics of it in the stored results")
-    ids, _ = tracks.observations(name) if name in tracks.camera_names else (np.zeros(0, np.int64), None)
-    points, observed = _held(tracks, name, stored)
-    if not len(points):
-        seen = f"{len(ids)} observations, none of a calibrated point" if len(ids) else "no marker"
-        return CameraVerdict("not seen", f"{seen}: it keeps its stored pose")
-    R, t = calibration.poses[name]
-    width, height = intrinsics.resolution
-    reference_points, reference_observed = _held(stored_tracks, name, stored)
-    try:
-        result = _core.check.check_camera(
-            intrinsics.K, R, t, np.radians(metrics.rotation_sigma_deg or 0.0), metrics.centre_sigma or 0.0,
-            points, observed, volume, float(width), float(height), reference_points, reference_observed,
-            **asdict(options))
-    except ValueError as error:  # this camera's stored figures: the others are tested
-        return CameraVerdict("unknown", f"not testable: {error}")
-    figures = {key: getattr(result, key) for key in (
-        "points", "inliers", "noise_px", "rms_before_px", "rms_after_px", "rotation_change_deg", "rotation_sigma_deg",
-        "centre_change", "centre_sigma", "focal_change", "focal_sigma", "volume_shift_px", "focal_scale")}
-    if result.status == "unknown":
-        return CameraVerdict("unknown", result.reason, points=result.points, inliers=result.inliers)
-    return CameraVerdict(result.status, result.reason, R=np.array(result.R), t=np.array(result.t), **figures)
-
-
-def _majority(verdicts: dict[str, CameraVerdict]) -> tuple[bool, str]:
-    tested = [name for name, verdict in verdicts.items() if verdict.status in TESTED]
-    agree = [name for name in tested if verdicts[name].status == "unchanged"]
-    if len(tested) < 2:
-        return False, (f"{len(tested)} camera(s) tested: too few to tell whether the stored calibration holds "
-                       f"(see why the others were not)")
-    if 2 * len(agree) <= len(tested):
-        return False, (f"only {len(agree)} of the {len(tested)} cameras tested agree with the stored calibration: "
-                       f"the floor, the projector or most cameras changed; run a full calibration (calibproj "
-                       f"calibrate), nothing was repaired")
-    changed = len(tested) - len(agree)
-    return True, f"{len(agree)} of {len(tested)} cameras unchanged" + (f", {changed} changed" if changed else "")
+    return result
 
 
 def repaired(calibration: Calibration, intrinsics: dict[str, Intrinsics], stored_tracks: Tracks, tracks: Tracks,
@@ -282,7 +134,7 @@ def _with_observations_of(stored: Tracks, new: Tracks, cameras: list[str]) -> Tr
 
 
 def write_check(path: str | os.PathLike, result: CheckResult) -> None:
-    write_json(Path(path), CHECK_KIND, CHECK_MAJOR, result.summary())
+    _core.check.write_check(Path(path), result)
 
 
 def check(
@@ -347,11 +199,8 @@ def check(
             tracks = ingest_result.tracks
         else:
             tracks = source if isinstance(source, Tracks) else Tracks.read(source)
-        result = check_cameras(calibration, intrinsics, tracks, options, stored_tracks, unusable)
-        if ingest_result is not None:
-            for name, error in ingest_result.failed.items():
-                if name in result.cameras and result.cameras[name].status == "not seen":
-                    result.cameras[name] = CameraVerdict("not seen", f"{error}: it keeps its stored pose")
+        result = check_cameras(calibration, intrinsics, tracks, options, stored_tracks, unusable,
+                               ingest_result.failed if ingest_result is not None else None)
         if folder is None:
             return result
         if not result.trusted:

@@ -56,8 +56,7 @@ from calibproj.simulate.render import RenderOptions, simulate_videos  # noqa: E4
 from calibproj.simulate.scene import CameraChange, Scene, load_scene  # noqa: E402
 
 # The effects, and frame-time jitter with a few dropped frames: real cameras are
-# not phase-locked to the projector (a phase-locked 60 fps camera with a 15 ms readout,
-# room light and a floor texture loses its markers: a known problem, see the notes).
+# not phase-locked to the projector.
 EFFECTS = ("rolling-15ms", "room-light", "floor", "drops-2")
 VOLUME_HEIGHT_M = 2.0
 

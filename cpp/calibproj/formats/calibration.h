@@ -88,6 +88,10 @@ std::string PointsPly(const Calibration& calibration);
 // Files that a calibration writes; an existing one is only replaced with force.
 extern const std::vector<std::string> kCalibrationFiles;
 
+// The calibration a results folder holds (its three files); InputError naming the file
+// and the problem, with the checks of the Python package's readers.
+Calibration ReadCalibration(const std::filesystem::path& directory);
+
 // Writes the three files into `directory` (created), each atomically.
 void WriteCalibration(const std::filesystem::path& directory, const Calibration& calibration);
 

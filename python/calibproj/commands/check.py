@@ -35,10 +35,6 @@ import argparse
 
 from calibproj.commands.options import add_dataclass_arguments, dataclass_from_args
 
-EXIT_NOT_CONFIRMED = 3
-EXIT_UNTRUSTED = 4
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from calibproj.check_and_repair import CheckOptions
 
@@ -57,8 +53,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
     from calibproj.check_and_repair import CheckOptions, UntrustedReference, check
 
     if (args.videos is None) == (args.tracks is None):
@@ -75,36 +69,10 @@ def run(args: argparse.Namespace) -> int:
     except UntrustedReference as error:
         result, untrusted = error.result, error
     if args.json:
-        print(json.dumps(result.summary(), indent=1))
+        print(result.json(), end="")
     else:
-        print(format_verdicts(result))
+        print(result.table())
         print(str(untrusted) if untrusted else result.message)
         if args.out and not untrusted:
             print(f"repaired results in {args.out}")
-    if not result.trusted:
-        # Too few cameras tested says nothing against the calibration: not confirmed.
-        return EXIT_UNTRUSTED if len(result.tested) >= 2 else EXIT_NOT_CONFIRMED
-    open_cameras = [n for n, v in result.cameras.items() if v.status in ("not seen", "unknown")]
-    if open_cameras or (result.changed and not args.out):
-        return EXIT_NOT_CONFIRMED
-    return 0
-
-
-def format_verdicts(result) -> str:
-    """One line per camera: status, change with its sigma, shift of the working volume."""
-    unit = "mm" if result.unit == "m" else result.unit
-    scale = 1000.0 if result.unit == "m" else 1.0
-    header = (f"{'camera':<12}{'status':<11}{'rotation deg':>16}{'centre ' + unit:>18}{'focal %':>9}"
-              f"{'volume px':>11}{'rms px before/after':>22}")
-    lines = [header, "-" * len(header)]
-    for name, verdict in result.cameras.items():
-        if verdict.rotation_change_deg is None:
-            lines.append(f"{name:<12}{verdict.status:<11}{verdict.reason}")
-            continue
-        lines.append(
-            f"{name:<12}{verdict.status:<11}"
-            f"{verdict.rotation_change_deg:8.3f} +-{verdict.rotation_sigma_deg:6.3f}"
-            f"{verdict.centre_change * scale:9.2f} +-{verdict.centre_sigma * scale:6.2f}"
-            f"{100 * verdict.focal_change:9.2f}{verdict.volume_shift_px:11.2f}"
-            f"{verdict.rms_before_px:13.3f} / {verdict.rms_after_px:.3f}")
-    return "\n".join(lines)
+    return result.exit_status(repaired=bool(args.out) and untrusted is None)

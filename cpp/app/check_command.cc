@@ -1,0 +1,118 @@
+#include "check_command.h"
+
+#include <filesystem>
+#include <iostream>
+#include <map>
+
+#include "calibproj/check/calibration_check.h"
+#include "calibproj/check/option_table.h"
+#include "calibproj/formats/calibration.h"
+#include "calibproj/formats/export.h"
+#include "calibproj/formats/files.h"
+#include "calibproj/formats/intrinsics_file.h"
+#include "calibproj/formats/tracks_file.h"
+#include "calibproj/registration/reconstruction.h"
+#include "output_folder.h"
+#include "results_folder.h"
+#include "table_flags.h"
+
+namespace calibproj::app {
+
+namespace fs = std::filesystem;
+using formats::InputError;
+
+std::shared_ptr<CheckArguments> AddCheckCommand(CLI::App& app, CLI::App** command) {
+  auto args = std::make_shared<CheckArguments>();
+  CLI::App* cmd = app.add_subcommand(
+      "check",
+      "Check a calibration with a short projection (`calibproj generate --check RESULTS`): every camera of RESULTS "
+      "tested against the check projection's tracks (`calibproj-native detect` of its videos, undistorted with "
+      "RESULTS/intrinsics): unchanged, moved, rezoomed, not seen or unknown. With --out, the moved and re-zoomed "
+      "cameras are re-fitted against the unchanged ones and a complete results folder is written there, with "
+      "check.json.");
+  cmd->add_option("results", args->results, "results folder of `calibrate`")->required();
+  cmd->add_option("--tracks", args->tracks, "tracks.json of the check projection")->required();
+  cmd->add_option("--out", args->out, "write the repaired results folder here");
+  cmd->add_flag("--force", args->force, "replace an existing --out");
+  cmd->add_option("--export", args->exports,
+                  "also write the repaired calibration as yaml, colmap and/or anipose (comma-separated)");
+  cmd->add_flag("--json", args->json, "print every camera's verdict as check.json has it");
+  check::VisitCheckOptions(args->options, TableFlags(cmd, "check options"));
+  *command = cmd;
+  return args;
+}
+
+namespace {
+
+// The intrinsics of the named cameras in `folder`, and why the others have none (a bad,
+// missing or doubled file fails its own camera only).
+std::map<std::string, formats::CameraIntrinsics> IntrinsicsOf(const fs::path& folder,
+                                                              const std::vector<formats::CameraPose>& cameras,
+                                                              std::map<std::string, std::string>* unusable) {
+  formats::IntrinsicsFilesIn(folder);  // the folder exists and holds intrinsics files
+  std::map<std::string, formats::CameraIntrinsics> intrinsics;
+  for (const auto& camera : cameras) {
+    try {
+      intrinsics[camera.name] = formats::ReadIntrinsics(formats::IntrinsicsFileOf(folder, camera.name), camera.name);
+    } catch (const InputError& error) {
+      (*unusable)[camera.name] = error.what();
+    }
+  }
+  return intrinsics;
+}
+
+}  // namespace
+
+int RunCheck(const CheckArguments& arguments, Interrupts& interrupts) {
+  const std::vector<std::string> exports =
+      arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
+  try {
+    arguments.options.Check();
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
+  }
+  // Claimed before the inputs are read, as the Python command does.
+  std::optional<OutputFolder> out;
+  if (!arguments.out.empty()) {
+    out.emplace(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
+    out->Open();
+  }
+  const fs::path results = arguments.results;
+  const formats::Calibration calibration = formats::ReadCalibration(results);
+  std::map<std::string, std::string> unusable;
+  const auto intrinsics = IntrinsicsOf(results / "intrinsics", calibration.poses, &unusable);
+  const formats::Tracks stored = formats::ReadTracks(results / "tracks.json");
+  const formats::Tracks tracks = formats::ReadTracks(arguments.tracks);
+  const check::CheckInputs inputs{&calibration, &intrinsics, unusable, &tracks, &stored, {}};
+  check::CalibrationCheck result;
+  try {
+    result = check::CheckCalibration(inputs, arguments.options);
+  } catch (const std::invalid_argument& error) {
+    throw InputError(arguments.tracks + ": " + error.what());
+  }
+  for (const auto& [name, verdict] : result.cameras) {
+    if (verdict.status == "not seen" || verdict.status == "unknown") {
+      std::cerr << "camera " << name << " " << verdict.status << ": " << verdict.reason << "\n";
+    }
+  }
+  const bool repair = out && result.trusted;
+  if (repair) {
+    const check::Repair repaired =
+        check::Repaired(inputs, result, registration::Options{}.weak_rotation_sigma_deg);
+    SaveResults(*out, repaired.calibration, repaired.intrinsics, repaired.tracks, repaired.tracks, exports,
+                [&](const fs::path& staging) { formats::AtomicWrite(staging / "check.json", check::CheckJson(result)); });
+  } else if (out) {
+    out->Abort();
+  }
+  if (arguments.json) {
+    std::cout << check::CheckJson(result);
+  } else {
+    std::cout << check::CheckTable(result) << "\n" << result.message;
+    if (out && !repair) std::cout << " (" << arguments.out << " not written)";
+    std::cout << "\n";
+    if (repair) std::cout << "repaired results in " << arguments.out << "\n";
+  }
+  return check::CheckExitStatus(result, repair);
+}
+
+}  // namespace calibproj::app
