@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import dataclasses
+import json
 import subprocess
 import time
 from pathlib import Path
@@ -25,7 +26,7 @@ import numpy as np
 import pytest
 
 # The tests folder is on sys.path under pytest.
-from fuzz_inputs import Mutation, Run, all_mutations, dumps, make_inputs, prepare
+from fuzz_inputs import Mutation, Run, all_mutations, dumps, fill, make_inputs, prepare
 from test_native import find_native
 
 SEED = 20250612
@@ -149,3 +150,108 @@ def test_the_valid_inputs_are_accepted(native: Path, tmp_path: Path) -> None:
         # detect: every camera fails to synchronise (the videos hold no light code), status 1.
         assert result.returncode == (0 if fmt == "tracks" else 1), result.stderr
         assert ": error: " not in result.stderr
+
+
+# ---------------------------------------------------------------------------------------
+# The results folder `check` reads: camera_poses.json, metrics.json and points.ply.
+
+RESULTS_BUDGET = {"camera_poses.json": 70, "metrics.json": 70}
+CHECK_STATUSES = (0, 1, 2, 3, 4)  # 3 and 4: not confirmed, untrusted (README, "Exit status")
+
+
+def ply_mutations(text: str, rng: np.random.Generator) -> list[Mutation]:
+    """Line-level damage to points.ply: header, counts, vertices, ids."""
+    lines = text.splitlines()
+    end = lines.index("end_header")
+    first = lines[end + 1].split()
+
+    def with_row(words: list[str]) -> bytes:
+        return "\n".join([*lines[:end + 1], " ".join(words), *lines[end + 2:]]).encode() + b"\n"
+
+    out = [Mutation("empty file", b"", True), Mutation("binary garbage", rng.integers(0, 256, 500, np.uint8).tobytes(), True),
+           Mutation("no schema comment", text.replace("comment schema calibproj.points/1\n", "").encode(), True),
+           Mutation("no end_header", text.replace("end_header\n", "").encode(), True),
+           Mutation("one vertex missing", "\n".join(lines[:-1]).encode(), True),
+           Mutation("one vertex too many", (text + lines[-1] + "\n").encode(), True),
+           Mutation("vertex count not a number", text.replace("element vertex", "element vertex x", 1).encode(), True),
+           Mutation("negative vertex count", text.replace(f"element vertex {len(lines) - end - 1}",
+                                                          "element vertex -3").encode(), True),
+           Mutation("not UTF-8", text.replace("property double x", "property double \xff").encode("latin-1"), True),
+           Mutation("CRLF line ends", text.replace("\n", "\r\n").encode(), False),
+           Mutation("a duplicate id", with_row([*first[:3], lines[end + 2].split()[3]]), True),
+           Mutation("a fractional id", with_row([*first[:3], "1.5"]), True),
+           Mutation("a negative id", with_row([*first[:3], "-4"]), True),
+           Mutation("an id of 2**53", with_row([*first[:3], str(2 ** 53)]), True),
+           Mutation("a column missing", with_row(first[:3]), True),
+           Mutation("a column too many", with_row([*first, "7"]), True)]
+    for word in ("nan", "inf", "-inf", "1e400", "abc", "0x10", "--1", "1e", ".", "+2.5", "1E-3"):
+        position = int(rng.integers(3))
+        words = list(first)
+        words[position] = word
+        out.append(Mutation(f"coordinate {position} = {word}", with_row(words),
+                            word not in ("+2.5", "1E-3")))
+    return out
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory) -> tuple[Path, Path]:
+    """A results folder of the small room (geometric simulation) and a check's tracks."""
+    from calibproj.pipeline import calibrate
+    from calibproj.simulate import simulate_tracks
+
+    folder = tmp_path_factory.mktemp("calibrated")
+    first = simulate_tracks("small", folder / "first", noise_px=0.1, seed=3)
+    calibrate(first.tracks, first.intrinsics, out=folder / "results", report=False)
+    again = simulate_tracks("small", folder / "again", noise_px=0.1, seed=4)
+    return folder / "results", folder / "again" / "tracks.json"
+
+
+def test_mutated_results_folders_fail_cleanly(native: Path, calibrated: tuple[Path, Path], tmp_path: Path) -> None:
+    """`calibproj-native check` on a results folder with one damaged file: an exit status
+    of the command, never a crash or a hang; a refusal is one line naming the file, and
+    it refuses exactly the folders the Python package refuses to load."""
+    import shutil
+
+    from calibproj.calibration import Calibration
+    from calibproj.io.jsonio import FormatError
+
+    results, tracks = calibrated
+    rng = np.random.default_rng(SEED)
+    mutations = {name: fill([], json.loads((results / name).read_text()), rng, budget)
+                 for name, budget in RESULTS_BUDGET.items()}
+    mutations["points.ply"] = ply_mutations((results / "points.ply").read_text(), rng)
+    failures, refused = [], 0
+    for name, items in mutations.items():
+        for index, mutation in enumerate(items):
+            folder = tmp_path / f"{name}-{index:03d}"
+            shutil.copytree(results, folder)
+            (folder / name).write_bytes(mutation.data)
+            damaged = folder / name
+            try:
+                result = subprocess.run([str(native), "check", str(folder), "--tracks", str(tracks)],
+                                        capture_output=True, timeout=RUN_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                failures.append(f"{name} {mutation.label}: hang")
+                continue
+            label = f"{name} {mutation.label}"
+            errors = [line for line in result.stderr.decode(errors="replace").splitlines() if ": error: " in line]
+            native_refuses = result.returncode == 2 and len(errors) == 1 and str(damaged) in errors[0]
+            if result.returncode not in CHECK_STATUSES:
+                failures.append(f"{label}: exit status {result.returncode}: {result.stderr[-300:]!r}")
+            elif result.returncode == 2 and not native_refuses:
+                failures.append(f"{label}: status 2 without one error line naming the file: {errors}")
+            try:
+                Calibration.load(folder)
+                python_refuses = None
+            except FormatError as error:
+                python_refuses = str(error)
+            if (python_refuses is not None) != native_refuses:
+                failures.append(f"{label}: Python {'refuses' if python_refuses else 'reads'} it "
+                                f"({python_refuses}), native {'does not' if python_refuses else 'refuses'}")
+            if mutation.must_fail and not native_refuses:
+                failures.append(f"{label}: accepted (exit status {result.returncode})")
+            refused += native_refuses
+    total = sum(map(len, mutations.values()))
+    print(f"\nran calibproj-native check on {total} damaged results folders; both tools refuse {refused}")
+    assert 0 < refused < total
+    assert not failures, f"{len(failures)} of {total} runs misbehaved:\n" + "\n".join(failures)

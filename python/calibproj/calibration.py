@@ -23,6 +23,8 @@ from calibproj.io.jsonio import FormatError, read_json
 from calibproj.io.poses import read_poses
 
 METRICS_KIND = "metrics"
+# Counts beyond a double's exact integers are no count (the C++ reader's int64 holds them).
+MAX_COUNT = 2 ** 53
 MODELS = ("free", "coplanar")  # of the registration (calibproj.registration)
 SCHEMA_MAJOR = 1
 PLY_SCHEMA = "calibproj.points/1"
@@ -178,7 +180,7 @@ def _plane_entry(where: str, entry: Any) -> dict[str, Any]:
     if len(normal) != 3:
         raise ValueError(f"{where}.normal: expected 3 numbers")
     return {"normal": normal, "offset": number(entry["offset"], f"{where}.offset"),
-            "points": integer(entry["points"], f"{where}.points", minimum=0)}
+            "points": integer(entry["points"], f"{where}.points", minimum=0, maximum=MAX_COUNT)}
 
 
 def _camera_metrics(where: str, entry: Any) -> CameraMetrics:
@@ -196,7 +198,7 @@ def _camera_metrics(where: str, entry: Any) -> CameraMetrics:
 def _metric_value(name: str, value: Any, where: str) -> Any:
     """One checked field of ``CameraMetrics``."""
     if name in ("observations", "inliers", "track2_observations", "view_score"):
-        return integer(value, where, minimum=0)
+        return integer(value, where, minimum=0, maximum=MAX_COUNT)
     if name == "weak":
         return boolean(value, where)
     if value is None:

@@ -3,7 +3,10 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <algorithm>
+#include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -178,53 +181,106 @@ void ReadMetrics(const fs::path& path, Calibration* calibration) {
   }
 }
 
+// The lines of a text as Python's str.splitlines() cuts them (\n, \r\n, \r, \v, \f,
+// \x1c-\x1e, U+0085, U+2028, U+2029).
+std::vector<std::string> SplitLines(const std::string& text) {
+  std::vector<std::string> lines;
+  std::string line;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    std::size_t skip = 0;
+    if (c == '\r' && i + 1 < text.size() && text[i + 1] == '\n') {
+      skip = 1;
+    } else if (c == '\n' || c == '\r' || c == '\v' || c == '\f' || c == '\x1c' || c == '\x1d' || c == '\x1e') {
+      skip = 0;
+    } else if (text.compare(i, 2, "\xc2\x85") == 0) {
+      skip = 1;
+    } else if (text.compare(i, 3, "\xe2\x80\xa8") == 0 || text.compare(i, 3, "\xe2\x80\xa9") == 0) {
+      skip = 2;
+    } else {
+      line += c;
+      continue;
+    }
+    lines.push_back(line);
+    line.clear();
+    i += skip;
+  }
+  if (!line.empty()) lines.push_back(line);
+  return lines;
+}
+
+// The white-space separated words of a line (spaces and tabs).
+std::vector<std::string> Words(const std::string& line) {
+  std::istringstream in(line);
+  std::vector<std::string> words;
+  for (std::string word; in >> word;) words.push_back(word);
+  return words;
+}
+
+// A number as Python's float() reads one (no hexadecimal); false otherwise.
+bool ParseFloat(const std::string& word, double* value) {
+  if (word.find_first_of("xX(") != std::string::npos) return false;
+  char* end = nullptr;
+  *value = std::strtod(word.c_str(), &end);
+  return !word.empty() && end == word.c_str() + word.size();
+}
+
 void ReadPoints(const fs::path& path, Calibration* calibration) {
+  const std::string schema = "calibproj.points/1";
   std::ifstream in(path, std::ios::binary);
   if (!fs::is_regular_file(path) || !in) throw InputError(path.string() + ": no such file");
-  const std::string schema = "calibproj.points/1";
-  std::vector<std::string> lines;
-  for (std::string line; std::getline(in, line);) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    lines.push_back(line);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (InvalidUtf8At(text) != std::string::npos) {
+    throw InputError(path.string() + ": not a calibproj points file (" + schema + "): not UTF-8 text");
   }
+  const std::vector<std::string> lines = SplitLines(text);
   bool tagged = false;
   for (std::size_t k = 0; k < std::min<std::size_t>(4, lines.size()); ++k) tagged |= lines[k] == "comment schema " + schema;
   if (lines.empty() || lines[0] != "ply" || !tagged) {
     throw InputError(path.string() + ": not a calibproj points file (" + schema + ")");
   }
   const auto end = std::find(lines.begin(), lines.end(), "end_header");
+  const auto declaration = std::find_if(lines.begin(), end, [](const std::string& line) {
+    return line.rfind("element vertex", 0) == 0;
+  });
   long long count = -1;
-  for (auto line = lines.begin(); line != end && count < 0; ++line) {
-    std::istringstream words(*line);
-    std::string element, vertex;
-    if (line->rfind("element vertex", 0) == 0 && (words >> element >> vertex >> count)) break;
-    count = -1;
+  if (end != lines.end() && declaration != end) {
+    const std::vector<std::string> words = Words(*declaration);
+    char* stop = nullptr;
+    if (words.size() >= 3) count = std::strtoll(words[2].c_str(), &stop, 10);
+    if (words.size() < 3 || stop != words[2].c_str() + words[2].size() || words[2].empty()) count = -2;
   }
-  if (end == lines.end() || count < 0) {
+  if (count == -1 || count == -2) {
     throw InputError(path.string() + ": malformed PLY header (no 'element vertex N' before 'end_header')");
   }
   const auto rows = static_cast<long long>(lines.end() - end - 1);
-  if (rows != count) {
+  if (count < 0 || rows != count) {
     throw InputError(path.string() + ": " + std::to_string(count) + " vertices declared, " + std::to_string(rows) +
                      " found");
   }
   calibration->points.resize(count, 3);
-  std::set<std::int64_t> seen;
+  std::vector<double> ids(count);
   for (long long p = 0; p < count; ++p) {
-    std::istringstream words(*(end + 1 + p));
-    double x, y, z, id;
-    std::string extra;
-    if (!(words >> x >> y >> z >> id) || (words >> extra)) {
-      throw InputError(path.string() + ": malformed vertex (expected 4 numbers: x y z id)");
-    }
-    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z) || !std::isfinite(id)) {
-      throw InputError(path.string() + ": a vertex is not finite");
-    }
+    const std::vector<std::string> words = Words(*(end + 1 + p));
+    double values[4];
+    bool numbers = words.size() == 4;
+    for (std::size_t k = 0; numbers && k < 4; ++k) numbers = ParseFloat(words[k], &values[k]);
+    if (!numbers) throw InputError(path.string() + ": malformed vertex (expected 4 numbers: x y z id)");
+    calibration->points.row(p) << values[0], values[1], values[2];
+    ids[p] = values[3];
+  }
+  if (!calibration->points.allFinite() ||
+      !std::all_of(ids.begin(), ids.end(), [](double id) { return std::isfinite(id); })) {
+    throw InputError(path.string() + ": a vertex is not finite");
+  }
+  std::set<std::int64_t> seen;
+  for (const double id : ids) {
     if (id != std::floor(id) || id < 0.0 || id >= 9007199254740992.0) {
       throw InputError(path.string() + ": point ids must be non-negative integers");
     }
+  }
+  for (const double id : ids) {
     if (!seen.insert(static_cast<std::int64_t>(id)).second) throw InputError(path.string() + ": a point id appears twice");
-    calibration->points.row(p) << x, y, z;
     calibration->point_ids.push_back(static_cast<std::int64_t>(id));
   }
 }

@@ -87,9 +87,6 @@ std::string PythonRepr(const std::string& text) {
 
 namespace fs = std::filesystem;
 
-namespace {
-
-// Where the bytes stop being UTF-8, or npos.
 size_t InvalidUtf8At(const std::string& text) {
   size_t i = 0;
   while (i < text.size()) {
@@ -103,6 +100,9 @@ size_t InvalidUtf8At(const std::string& text) {
   }
   return std::string::npos;
 }
+
+namespace {
+
 
 // The first NaN, Infinity or -Infinity outside strings (Python's json writes them, but
 // they are not JSON), with its offset; empty when there is none.

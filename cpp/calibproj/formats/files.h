@@ -44,6 +44,9 @@ std::string PythonFloat(double value);
 // them, non-ASCII characters escaped. std::invalid_argument for a non-finite float.
 std::string PythonJson(const nlohmann::ordered_json& value);
 
+// Where the bytes stop being UTF-8, or npos.
+size_t InvalidUtf8At(const std::string& text);
+
 // The text without leading and trailing white space.
 std::string Trimmed(const std::string& text);
 
