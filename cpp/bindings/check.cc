@@ -92,6 +92,23 @@ check::CalibrationCheck CheckCalibrationPy(const py::object& calibration, const 
   return check::CheckCalibration(inputs, options);
 }
 
+// The calibration as the cameras are now: (Calibration, {camera: Intrinsics fields},
+// Tracks fields).
+py::tuple RepairedPy(const py::object& calibration, const py::dict& intrinsics, const py::object& tracks,
+                     const py::object& stored_tracks, const check::CalibrationCheck& result,
+                     double weak_rotation_sigma_deg) {
+  const formats::Calibration stored = CalibrationFromPython(calibration);
+  const auto cameras = IntrinsicsFromPython(intrinsics);
+  const std::optional<formats::Tracks> now = TracksFromPython(tracks);
+  const std::optional<formats::Tracks> before = TracksFromPython(stored_tracks);
+  if (!now || !before) throw py::type_error("tracks and stored_tracks: expected Tracks");
+  const check::CheckInputs inputs{&stored, &cameras, {}, &*now, &*before, {}};
+  const check::Repair repair = check::Repaired(inputs, result, weak_rotation_sigma_deg);
+  py::dict repaired_intrinsics;
+  for (const auto& [name, camera] : repair.intrinsics) repaired_intrinsics[py::str(name)] = IntrinsicsFields(camera);
+  return py::make_tuple(repair.calibration, repaired_intrinsics, TracksFields(repair.tracks));
+}
+
 // A figure of a tested camera's check; None for the others.
 template <typename T>
 auto Figure(T check::CameraCheck::*field) {
@@ -159,6 +176,12 @@ void register_check(py::module_& m) {
         "calibration's own Tracks give each camera's reference. unusable: why some cameras have no intrinsics;\n"
         "not_seen: why some gave no observation. Keyword options as option_table() lists them. ValueError when\n"
         "there is nothing to check against.");
+  m.def("repaired", &RepairedPy, py::arg("calibration"), py::arg("intrinsics"), py::arg("tracks"),
+        py::arg("stored_tracks"), py::arg("check"), py::arg("weak_rotation_sigma_deg"),
+        "The calibration as the cameras are now: the changed cameras' poses, focal lengths, metrics and\n"
+        "observations (those of tracks) replace the stored ones. Returns (_core.formats.Calibration,\n"
+        "{camera: Intrinsics fields}, Tracks fields); ValueError with the check's message when it is not\n"
+        "trusted.");
   m.def(
       "write_check",
       [](const std::filesystem::path& path, const check::CalibrationCheck& check) {

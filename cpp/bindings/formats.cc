@@ -231,6 +231,48 @@ std::optional<formats::Tracks> TracksFromPython(const py::object& tracks) {
   return Converted("tracks", [&] { return TracksFrom(tracks); });
 }
 
+py::dict IntrinsicsFields(const formats::CameraIntrinsics& intrinsics) { return IntrinsicsDict(intrinsics); }
+
+py::dict TracksFields(const formats::Tracks& tracks) { return TracksDict(tracks); }
+
+// The core's calibration types as bound classes (read-only).
+static void RegisterCalibrationTypes(py::module_& m) {
+  using formats::CameraMetrics;
+  using formats::CameraPose;
+  using formats::Plane;
+  py::class_<CameraPose>(m, "CameraPose", "A registered camera's pose in the floor frame: x_cam = R X + t.")
+      .def_readonly("name", &CameraPose::name)
+      .def_readonly("R", &CameraPose::R)
+      .def_readonly("t", &CameraPose::t);
+  py::class_<CameraMetrics>(m, "CameraMetrics", "A camera's figures in metrics.json (undistorted pixels).")
+      .def_readonly("mean_px", &CameraMetrics::mean_px)
+      .def_readonly("std_px", &CameraMetrics::std_px)
+      .def_readonly("observations", &CameraMetrics::observations)
+      .def_readonly("inliers", &CameraMetrics::inliers)
+      .def_readonly("track2_observations", &CameraMetrics::track2_observations)
+      .def_readonly("view_score", &CameraMetrics::view_score)
+      .def_readonly("failure", &CameraMetrics::failure)
+      .def_readonly("rotation_sigma_deg", &CameraMetrics::rotation_sigma_deg)
+      .def_readonly("centre_sigma", &CameraMetrics::centre_sigma)
+      .def_readonly("weak", &CameraMetrics::weak);
+  py::class_<Plane>(m, "Plane", "A plane besides the floor: normal . X = offset in the floor frame.")
+      .def_readonly("normal", &Plane::normal)
+      .def_readonly("offset", &Plane::offset)
+      .def_readonly("points", &Plane::points);
+  py::class_<Calibration>(m, "Calibration",
+                          "A calibration as the core holds it (calibproj.calibration.Calibration.from_core reads it)")
+      .def_readonly("poses", &Calibration::poses, "the registered cameras' CameraPose, in order")
+      .def_readonly("failed", &Calibration::failed, "(camera, reason) of the cameras not calibrated")
+      .def_readonly("metrics", &Calibration::metrics, "(camera, CameraMetrics) of every camera")
+      .def_readonly("points", &Calibration::points, "(P, 3) in the floor frame")
+      .def_readonly("point_ids", &Calibration::point_ids)
+      .def_readonly("unit", &Calibration::unit)
+      .def_readonly("model", &Calibration::model)
+      .def_readonly("registration_order", &Calibration::registration_order)
+      .def_readonly("floor_rms", &Calibration::floor_rms)
+      .def_readonly("planes", &Calibration::planes);
+}
+
 void register_formats(py::module_& m) {
   // A bad input file: the message names the file and the problem.
   py::register_exception<formats::InputError>(m, "InputError", PyExc_ValueError);
@@ -242,6 +284,10 @@ void register_formats(py::module_& m) {
       PyErr_SetObject(PyExc_OSError, os_error(e.code().value(), e.code().message(), e.path1().string()).ptr());
     }
   });
+  RegisterCalibrationTypes(m);
+  m.def("read_calibration", &formats::ReadCalibration, py::arg("directory"),
+        "The Calibration of a results folder (camera_poses.json, metrics.json, points.ply); InputError naming "
+        "the file and the problem");
   m.attr("calibration_files") = formats::kCalibrationFiles;
   m.attr("export_formats") = formats::kExportFormats;
   m.attr("default_marker_radius_sides") = formats::kDefaultMarkerRadiusSides;

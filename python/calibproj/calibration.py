@@ -12,22 +12,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from calibproj.io.json_values import boolean, describe, integer, number, text
-from calibproj.io.jsonio import FormatError, read_json
-from calibproj.io.poses import read_poses
-
-METRICS_KIND = "metrics"
-# Counts beyond a double's exact integers are no count (the C++ reader's int64 holds them).
-MAX_COUNT = 2 ** 53
-MODELS = ("free", "coplanar")  # of the registration (calibproj.registration)
-SCHEMA_MAJOR = 1
-PLY_SCHEMA = "calibproj.points/1"
+from calibproj.io.jsonio import FormatError
 
 
 @dataclass
@@ -136,76 +127,31 @@ class Calibration:
 
     @classmethod
     def load(cls, directory: str | os.PathLike) -> Calibration:
-        directory = Path(directory)
-        poses = read_poses(directory / "camera_poses.json")
-        path = directory / "metrics.json"
-        document = read_json(path, METRICS_KIND, SCHEMA_MAJOR)
+        """The calibration of a results folder, read by the C++ core (the one reader of
+        ``calibproj-native`` too); FormatError naming the file and the problem."""
+        from calibproj import _core
+
+        if not Path(directory).is_dir():
+            raise FormatError(f"{directory}: no such results folder")
         try:
-            metrics, summary = _metrics_of(document)
-        except ValueError as error:
-            raise FormatError(f"{path}: {error}") from None
-        points, point_ids = read_ply(directory / "points.ply")
-        return cls(poses=poses.poses, failed=poses.failed, metrics=metrics, points=points, point_ids=point_ids,
-                   unit=poses.unit, **summary)
+            return cls.from_core(_core.formats.read_calibration(Path(directory)))
+        except _core.formats.InputError as error:
+            raise FormatError(str(error)) from None
 
-
-def _metrics_of(document: dict[str, Any]) -> tuple[dict[str, CameraMetrics], dict[str, Any]]:
-    """The per-camera metrics of a ``metrics.json`` and its model, registration order
-    and floor RMS; ValueError naming the entry."""
-    cameras = document.get("cameras")
-    if not isinstance(cameras, dict):
-        raise ValueError("cameras: expected an object {name: metrics}")
-    metrics = {name: _camera_metrics(f"cameras.{name}", entry) for name, entry in cameras.items()}
-    model = document.get("model", "coplanar")
-    if type(model) is not str or model not in MODELS:
-        raise ValueError(f"model must be one of {list(MODELS)}, got {describe(model)}")
-    order = document.get("registration_order", [])
-    if not isinstance(order, list) or not all(type(name) is str for name in order):
-        raise ValueError("registration_order: expected a list of camera names")
-    floor_rms = number(document.get("floor_rms", 0.0), "floor_rms", minimum=0.0)
-    planes = [_plane_entry(f"planes[{k}]", entry) for k, entry in enumerate(_list(document.get("planes", []), "planes"))]
-    return metrics, {"model": model, "registration_order": order, "floor_rms": floor_rms, "planes": planes}
-
-
-def _list(value: Any, where: str) -> list:
-    if not isinstance(value, list):
-        raise ValueError(f"{where}: expected a list")
-    return value
-
-
-def _plane_entry(where: str, entry: Any) -> dict[str, Any]:
-    if not isinstance(entry, dict) or set(entry) != {"normal", "offset", "points"}:
-        raise ValueError(f"{where}: expected an object with normal, offset and points")
-    normal = [number(v, f"{where}.normal") for v in _list(entry["normal"], f"{where}.normal")]
-    if len(normal) != 3:
-        raise ValueError(f"{where}.normal: expected 3 numbers")
-    return {"normal": normal, "offset": number(entry["offset"], f"{where}.offset"),
-            "points": integer(entry["points"], f"{where}.points", minimum=0, maximum=MAX_COUNT)}
-
-
-def _camera_metrics(where: str, entry: Any) -> CameraMetrics:
-    if not isinstance(entry, dict):
-        raise ValueError(f"{where}: expected an object of metrics")
-    known = {f.name: f for f in fields(CameraMetrics)}
-    unknown = sorted(set(entry) - set(known))
-    missing = [name for name, f in known.items() if name not in entry and f.default is MISSING]
-    if unknown or missing:
-        raise ValueError(f"{where}: " + "; ".join(filter(None, [unknown and f"unknown field(s) {unknown}",
-                                                                 missing and f"missing field(s) {missing}"])))
-    return CameraMetrics(**{name: _metric_value(name, value, f"{where}.{name}") for name, value in entry.items()})
-
-
-def _metric_value(name: str, value: Any, where: str) -> Any:
-    """One checked field of ``CameraMetrics``."""
-    if name in ("observations", "inliers", "track2_observations", "view_score"):
-        return integer(value, where, minimum=0, maximum=MAX_COUNT)
-    if name == "weak":
-        return boolean(value, where)
-    if value is None:
-        return None
-    if name == "failure":
-        return text(value, where)
-    return number(value, where, minimum=0.0)  # pixels and sigmas
+    @classmethod
+    def from_core(cls, core: Any) -> Calibration:
+        """This class from the core's ``_core.formats.Calibration``."""
+        metrics = {name: CameraMetrics(
+            mean_px=m.mean_px, std_px=m.std_px, observations=m.observations, inliers=m.inliers,
+            track2_observations=m.track2_observations, view_score=m.view_score, failure=m.failure,
+            rotation_sigma_deg=m.rotation_sigma_deg, centre_sigma=m.centre_sigma, weak=m.weak)
+            for name, m in core.metrics}
+        return cls(poses={pose.name: (np.array(pose.R), np.array(pose.t)) for pose in core.poses},
+                   failed=dict(core.failed), metrics=metrics, points=np.array(core.points).reshape(-1, 3),
+                   point_ids=np.array(core.point_ids, dtype=np.int64), unit=core.unit, model=core.model,
+                   registration_order=list(core.registration_order), floor_rms=core.floor_rms,
+                   planes=[{"normal": [float(v) for v in plane.normal], "offset": plane.offset,
+                            "points": plane.points} for plane in core.planes])
 
 
 def _planes(summary: dict[str, Any]) -> list[dict[str, Any]]:
@@ -221,40 +167,6 @@ def _planes(summary: dict[str, Any]) -> list[dict[str, Any]]:
 def _finite_or_none(value: float) -> float | None:
     value = float(value)
     return value if np.isfinite(value) else None
-
-
-def read_ply(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """The points (P, 3) and their ids (P,) of a ``points.ply`` as ``Calibration.save``
-    writes it; FormatError naming the file and the problem."""
-    path = Path(path)
-    if not path.is_file():
-        raise FormatError(f"{path}: no such file")
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except UnicodeDecodeError:
-        raise FormatError(f"{path}: not a calibproj points file ({PLY_SCHEMA}): not UTF-8 text") from None
-    if not lines or lines[0] != "ply" or f"comment schema {PLY_SCHEMA}" not in lines[:4]:
-        raise FormatError(f"{path}: not a calibproj points file ({PLY_SCHEMA})")
-    try:
-        end = lines.index("end_header")
-        count = int(next(line.split()[2] for line in lines[:end] if line.startswith("element vertex")))
-    except (ValueError, IndexError, StopIteration):
-        raise FormatError(f"{path}: malformed PLY header (no 'element vertex N' before 'end_header')") from None
-    rows = lines[end + 1:]
-    if count < 0 or len(rows) != count:
-        raise FormatError(f"{path}: {count} vertices declared, {len(rows)} found")
-    try:
-        data = np.array([[float(value) for value in row.split()] for row in rows], dtype=float).reshape(count, 4)
-    except ValueError:
-        raise FormatError(f"{path}: malformed vertex (expected 4 numbers: x y z id)") from None
-    if not np.isfinite(data).all():
-        raise FormatError(f"{path}: a vertex is not finite")
-    ids = data[:, 3]
-    if not (np.all(ids == np.round(ids)) and np.all(ids >= 0) and np.all(ids < 2 ** 53)):
-        raise FormatError(f"{path}: point ids must be non-negative integers")
-    if len(np.unique(ids)) != len(ids):
-        raise FormatError(f"{path}: a point id appears twice")
-    return data[:, :3], ids.astype(np.int64)
 
 
 def calibration_summary(calibration: Calibration) -> list[dict[str, Any]]:

@@ -27,15 +27,13 @@ from __future__ import annotations
 
 import logging
 import os
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from calibproj import _core
-from calibproj.calibration import Calibration, CameraMetrics
-from calibproj.io.intrinsics import Intrinsics
+from calibproj.calibration import Calibration
+from calibproj.io.intrinsics import Intrinsics, intrinsics_from_fields
 from calibproj.option_tables import options_class
 from calibproj.results import CHECK_FILE
 from calibproj.tracks import Tracks
@@ -91,46 +89,14 @@ def repaired(calibration: Calibration, intrinsics: dict[str, Intrinsics], stored
              result: CheckResult,
              weak_rotation_sigma_deg: float) -> tuple[Calibration, dict[str, Intrinsics], Tracks]:
     """The calibration with the changed cameras as they are now: their poses, focal
-    lengths and observations (the check's) replaced, their metrics from the check."""
+    lengths and observations (the check's) replaced, their metrics from the check (by
+    the core, as calibproj-native repairs)."""
     if not result.trusted:
         raise ValueError(result.message)
-    poses, metrics, intrinsics = dict(calibration.poses), dict(calibration.metrics), dict(intrinsics)
-    for name in result.changed:
-        verdict = result.cameras[name]
-        poses[name] = (verdict.R, verdict.t)
-        if verdict.focal_scale != 1.0:
-            K = intrinsics[name].K.copy()
-            K[:2, :2] *= verdict.focal_scale
-            intrinsics[name] = replace(intrinsics[name], K=K)
-        # Fitted to points the other cameras placed, it is known relative to them at
-        # best as well as before: the stored sigma, or the fit's when larger.
-        before = metrics[name]
-        sigma = max(filter(None, (before.rotation_sigma_deg, verdict.rotation_sigma_deg)), default=None)
-        centre = max(filter(None, (before.centre_sigma, verdict.centre_sigma)), default=None)
-        metrics[name] = CameraMetrics(
-            mean_px=verdict.rms_after_px, std_px=verdict.noise_px, observations=verdict.points,
-            inliers=verdict.inliers, track2_observations=verdict.inliers, view_score=before.view_score,
-            rotation_sigma_deg=sigma, centre_sigma=centre,
-            weak=before.weak or (sigma is not None and sigma > weak_rotation_sigma_deg))
-    return (replace(calibration, poses=poses, metrics=metrics), intrinsics,
-            _with_observations_of(stored_tracks, tracks, result.changed))
-
-
-def _with_observations_of(stored: Tracks, new: Tracks, cameras: list[str]) -> Tracks:
-    """``stored`` with the observations of ``cameras`` replaced by their ones in ``new``."""
-    names = list(stored.camera_names)
-    rows_cameras, rows_ids, rows_xy = [], [], []
-    for name in names:
-        source = new if name in cameras else stored
-        if name not in source.camera_names:
-            continue
-        ids, xy = source.observations(name)
-        rows_cameras += [name] * len(ids)
-        rows_ids.append(ids)
-        rows_xy.append(xy)
-    ids = np.concatenate(rows_ids) if rows_ids else np.zeros(0, np.int64)
-    xy = np.concatenate(rows_xy) if rows_xy else np.zeros((0, 2))
-    return Tracks.from_observations(names, rows_cameras, ids, xy, stored.markers_per_array)
+    core, cameras, observations = _core.check.repaired(calibration, intrinsics, tracks, stored_tracks, result,
+                                                       weak_rotation_sigma_deg)
+    return (Calibration.from_core(core), {name: intrinsics_from_fields(fields) for name, fields in cameras.items()},
+            Tracks(**observations))
 
 
 def write_check(path: str | os.PathLike, result: CheckResult) -> None:

@@ -224,7 +224,7 @@ def read_intrinsics(path: str | os.PathLike, name: str | None = None) -> Intrins
         fields = _core.formats.read_intrinsics(Path(path), name or "")
     except _core.formats.InputError as error:
         raise FormatError(str(error)) from None
-    return _from_fields(fields)
+    return intrinsics_from_fields(fields)
 
 
 def write_intrinsics(path: str | os.PathLike, intrinsics: Intrinsics) -> None:
@@ -320,8 +320,9 @@ def intrinsics_from_json(document: Any, name: str, where: str | os.PathLike) -> 
         fields = _core.formats.intrinsics_from_json(json.dumps(document), name)
     except (TypeError, ValueError) as error:
         raise FormatError(f"{where}: {error}") from None
-    return _from_fields(fields)
+    return intrinsics_from_fields(fields)
 
 
-def _from_fields(fields: dict[str, Any]) -> Intrinsics:
+def intrinsics_from_fields(fields: dict[str, Any]) -> Intrinsics:
+    """An Intrinsics from the fields the core gives (name, resolution, K, dist)."""
     return Intrinsics(fields["name"], fields["resolution"], np.asarray(fields["K"]), np.asarray(fields["dist"]))
