@@ -50,7 +50,10 @@ MODULES = {"_core": _core, "_bench": _bench}
 EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "_core.sync.synchronise",
                 "_core.ingest.ingest_camera"}
 # No constructor by design (results of a call); the tiny video holds no light code.
-BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.ingest.ingest_camera", "_core.check.CameraCheck"}
+BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.ingest.ingest_camera", "_core.check.CameraCheck",
+                        "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.Calibration",
+                        "_core.formats.CameraPose", "_core.formats.CameraMetrics", "_core.formats.Plane",
+                        "_core.formats.CameraIntrinsics", "_core.formats.Tracks"}
 
 # Keyword options of registration.Reconstruction (cpp/bindings/registration.cc).
 REGISTRATION_OPTIONS = {
@@ -541,7 +544,28 @@ class Baselines:
         tracks.write(folder / "valid_tracks.json")
         write_intrinsics(folder / "a.json", intrinsics["a"])
         (folder / "sequence.json").write_text(json.dumps({"schema": "calibproj.sequence/1", **self.sequence}))
+        # A stored calibration and a check of it (read by the receivers below).
+        calibration.save(folder / "results")
+        self.results_folder = folder / "results"
+        check_args = [("calibration", calibration), ("intrinsics", intrinsics), ("tracks", tracks),
+                      ("stored_tracks", tracks), ("unusable", {}), ("not_seen", {})]
+        self.check_call = lambda: _core.check.check_calibration(*(value for _, value in check_args))
+        checked = self.check_call()
         return {
+            "_core.formats.read_calibration": Spec([("directory", folder / "results")]),
+            "_core.formats.Calibration": Spec([]),
+            "_core.formats.CameraPose": Spec([]),
+            "_core.formats.CameraMetrics": Spec([]),
+            "_core.formats.Plane": Spec([]),
+            "_core.formats.CameraIntrinsics": Spec([]),
+            "_core.formats.Tracks": Spec([]),
+            "_core.check.CalibrationCheck": Spec([]),
+            "_core.check.CameraVerdict": Spec([]),
+            "_core.check.check_calibration": Spec(check_args, options={
+                entry["name"]: entry["default"] for entry in _core.check.option_table()}),
+            "_core.check.repaired": Spec([*check_args[:4], ("check", checked), ("weak_rotation_sigma_deg", 0.05)]),
+            "_core.check.write_check": Spec([("path", folder / "check.json"), ("check", checked)]),
+            "_core.check.CalibrationCheck.exit_status": Spec([("repaired", True)]),
             "_core.formats.write_calibration": Spec([("directory", folder), ("calibration", calibration)]),
             "_core.formats.write_intrinsics": Spec([("out", folder / "written.json"), ("intrinsics", intrinsics["a"])]),
             "_core.formats.read_intrinsics": Spec([("path", str(folder / "a.json")), ("name", "a")]),
@@ -604,6 +628,18 @@ class Baselines:
             "_core.ingest.Sequence": {"read": lambda: self.core_sequence},
             "_core.check.CameraCheck": {"checked": lambda: _core.check.check_camera(
                 *(value for _, value in self.camera_check_args()))},
+            "_core.check.CalibrationCheck": {"checked": lambda: self.check_call()},
+            "_core.check.CameraVerdict": {
+                state: (lambda state=state: self.check_call().cameras[state]) for state in ("a", "b")},
+            "_core.formats.Calibration": {"read": lambda: _core.formats.read_calibration(self.results_folder)},
+            "_core.formats.CameraPose": {"read": lambda: _core.formats.read_calibration(self.results_folder).poses[0]},
+            "_core.formats.CameraMetrics": {
+                "read": lambda: _core.formats.read_calibration(self.results_folder).metrics[0][1]},
+            "_core.formats.Plane": {"read": lambda: _core.formats.read_calibration(self.results_folder).planes[0]},
+            "_core.formats.CameraIntrinsics": {
+                "read": lambda: _core.formats.read_intrinsics(self.results_folder / "a.json", "a")},
+            "_core.formats.Tracks": {
+                "read": lambda: _core.formats.read_tracks(self.results_folder.parent / "valid_tracks.json")},
             "_core.detect.AprilTagOptions": {"default": _core.detect.AprilTagOptions},
             "_core.detect.CornerRefinementOptions": {"default": _core.detect.CornerRefinementOptions},
             "_core.detect.CornerRefinement": {"edges": lambda: _core.detect.CornerRefinement.edges},

@@ -92,8 +92,8 @@ check::CalibrationCheck CheckCalibrationPy(const py::object& calibration, const 
   return check::CheckCalibration(inputs, options);
 }
 
-// The calibration as the cameras are now: (Calibration, {camera: Intrinsics fields},
-// Tracks fields).
+// The calibration as the cameras are now: (Calibration, {camera: CameraIntrinsics},
+// Tracks), the core's bound types.
 py::tuple RepairedPy(const py::object& calibration, const py::dict& intrinsics, const py::object& tracks,
                      const py::object& stored_tracks, const check::CalibrationCheck& result,
                      double weak_rotation_sigma_deg) {
@@ -104,9 +104,7 @@ py::tuple RepairedPy(const py::object& calibration, const py::dict& intrinsics, 
   if (!now || !before) throw py::type_error("tracks and stored_tracks: expected Tracks");
   const check::CheckInputs inputs{&stored, &cameras, {}, &*now, &*before, {}};
   const check::Repair repair = check::Repaired(inputs, result, weak_rotation_sigma_deg);
-  py::dict repaired_intrinsics;
-  for (const auto& [name, camera] : repair.intrinsics) repaired_intrinsics[py::str(name)] = IntrinsicsFields(camera);
-  return py::make_tuple(repair.calibration, repaired_intrinsics, TracksFields(repair.tracks));
+  return py::make_tuple(repair.calibration, repair.intrinsics, repair.tracks);
 }
 
 // A figure of a tested camera's check; None for the others.
@@ -180,7 +178,7 @@ void register_check(py::module_& m) {
         py::arg("stored_tracks"), py::arg("check"), py::arg("weak_rotation_sigma_deg"),
         "The calibration as the cameras are now: the changed cameras' poses, focal lengths, metrics and\n"
         "observations (those of tracks) replace the stored ones. Returns (_core.formats.Calibration,\n"
-        "{camera: Intrinsics fields}, Tracks fields); ValueError with the check's message when it is not\n"
+        "{camera: _core.formats.CameraIntrinsics}, _core.formats.Tracks); ValueError with the check's message when it is not\n"
         "trusted.");
   m.def(
       "write_check",

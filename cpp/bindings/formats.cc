@@ -195,28 +195,6 @@ std::optional<formats::Tracks> TracksFrom(const py::object& t) {
   return tracks;
 }
 
-py::dict IntrinsicsDict(const formats::CameraIntrinsics& in) {
-  py::dict out;
-  out["name"] = in.name;
-  out["resolution"] = in.has_resolution ? py::cast(std::make_pair(static_cast<std::int64_t>(in.width),
-                                                                  static_cast<std::int64_t>(in.height)))
-                                        : py::none();
-  out["K"] = in.K;
-  out["dist"] = in.dist;
-  return out;
-}
-
-py::dict TracksDict(const formats::Tracks& tracks) {
-  py::dict out;
-  out["camera_names"] = py::tuple(py::cast(tracks.cameras));
-  out["point_ids"] = py::array_t<std::int64_t>(tracks.point_ids.size(), tracks.point_ids.data());
-  out["camera_index"] = py::array_t<std::int32_t>(tracks.camera_index.size(), tracks.camera_index.data());
-  out["point_index"] = py::array_t<std::int32_t>(tracks.point_index.size(), tracks.point_index.data());
-  out["xy"] = Eigen::MatrixXd(tracks.xy);
-  out["markers_per_array"] = tracks.markers_per_array ? py::cast(*tracks.markers_per_array) : py::none();
-  return out;
-}
-
 }  // namespace
 
 formats::Calibration CalibrationFromPython(const py::object& calibration) {
@@ -231,12 +209,36 @@ std::optional<formats::Tracks> TracksFromPython(const py::object& tracks) {
   return Converted("tracks", [&] { return TracksFrom(tracks); });
 }
 
-py::dict IntrinsicsFields(const formats::CameraIntrinsics& intrinsics) { return IntrinsicsDict(intrinsics); }
-
-py::dict TracksFields(const formats::Tracks& tracks) { return TracksDict(tracks); }
-
 // The core's calibration types as bound classes (read-only).
 static void RegisterCalibrationTypes(py::module_& m) {
+  using formats::CameraIntrinsics;
+  py::class_<CameraIntrinsics>(m, "CameraIntrinsics",
+                               "A camera's intrinsics as the core holds them (calibproj.io.intrinsics."
+                               "intrinsics_from_core reads them)")
+      .def_readonly("name", &CameraIntrinsics::name)
+      .def_property_readonly(
+          "resolution",
+          [](const CameraIntrinsics& in) -> py::object {
+            if (!in.has_resolution) return py::none();
+            return py::make_tuple(static_cast<std::int64_t>(in.width), static_cast<std::int64_t>(in.height));
+          },
+          "(width, height), or None when the file gives none")
+      .def_readonly("K", &CameraIntrinsics::K)
+      .def_readonly("dist", &CameraIntrinsics::dist);
+  using formats::Tracks;
+  py::class_<Tracks>(m, "Tracks", "Observations as the core holds them (calibproj.tracks.Tracks.from_core reads them)")
+      .def_property_readonly("camera_names", [](const Tracks& t) { return py::tuple(py::cast(t.cameras)); })
+      .def_property_readonly(
+          "point_ids",
+          [](const Tracks& t) { return py::array_t<std::int64_t>(t.point_ids.size(), t.point_ids.data()); })
+      .def_property_readonly(
+          "camera_index",
+          [](const Tracks& t) { return py::array_t<std::int32_t>(t.camera_index.size(), t.camera_index.data()); })
+      .def_property_readonly(
+          "point_index",
+          [](const Tracks& t) { return py::array_t<std::int32_t>(t.point_index.size(), t.point_index.data()); })
+      .def_property_readonly("xy", [](const Tracks& t) { return Eigen::MatrixXd(t.xy); }, "(N, 2) pixels")
+      .def_readonly("markers_per_array", &Tracks::markers_per_array);
   using formats::CameraMetrics;
   using formats::CameraPose;
   using formats::Plane;
@@ -302,10 +304,10 @@ void register_formats(py::module_& m) {
   m.def(
       "read_intrinsics",
       [](const std::filesystem::path& path, const std::string& name) {
-        return IntrinsicsDict(formats::ReadIntrinsics(path, name));
+        return formats::ReadIntrinsics(path, name);
       },
       py::arg("path"), py::arg("name") = "",
-      "The fields of an Intrinsics from a file in any supported format (name: the file stem when empty); "
+      "The CameraIntrinsics of a file in any supported format (name: the file stem when empty); "
       "InputError naming the file and the problem");
   m.def(
       "write_intrinsics",
@@ -318,10 +320,10 @@ void register_formats(py::module_& m) {
       [](const std::string& text, const std::string& name) {
         const nlohmann::json document = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
         if (document.is_discarded()) throw py::value_error("not valid JSON");
-        return IntrinsicsDict(formats::IntrinsicsFromDocument(document, name));
+        return formats::IntrinsicsFromDocument(document, name);
       },
       py::arg("text"), py::arg("name"),
-      "The fields of an Intrinsics from the JSON text of our format's body; ValueError with the problem");
+      "The CameraIntrinsics of the JSON text of our format's body; ValueError with the problem");
   m.def("intrinsics_files", &formats::IntrinsicsFilesIn, py::arg("directory"),
         "Camera name -> its intrinsics files in the folder (.json, .yaml, .yml, .xml; sorted); InputError when "
         "the folder does not exist or holds none");
@@ -337,8 +339,8 @@ void register_formats(py::module_& m) {
       "The document of a sequence.json that the core accepts (the one reader of the format); InputError "
       "naming the file and the problem");
   m.def(
-      "read_tracks", [](const std::filesystem::path& path) { return TracksDict(formats::ReadTracks(path)); },
-      py::arg("path"), "The fields of a Tracks from tracks.json; InputError naming the file and the problem");
+      "read_tracks", [](const std::filesystem::path& path) { return formats::ReadTracks(path); },
+      py::arg("path"), "The Tracks of a tracks.json; InputError naming the file and the problem");
   m.def(
       "write_tracks",
       [](const std::filesystem::path& out, const py::object& tracks) {
@@ -354,10 +356,10 @@ void register_formats(py::module_& m) {
         if (!given) throw py::type_error("tracks: expected a Tracks, got None");
         given->Check();
         const auto cameras = Converted("intrinsics", [&] { return IntrinsicsFrom(intrinsics); });
-        return TracksDict(formats::WithEarlierObservations(earlier, *given, cameras));
+        return formats::WithEarlierObservations(earlier, *given, cameras);
       },
       py::arg("earlier"), py::arg("tracks"), py::arg("intrinsics"),
-      "The fields of a Tracks: `tracks` with the observations of an earlier results folder (or tracks.json) "
+      "The Tracks `tracks` with the observations of an earlier results folder (or tracks.json) "
       "added; InputError naming the file (other intrinsics, shared point ids)");
   m.def(
       "scaled_lengths",

@@ -21,8 +21,4 @@ std::map<std::string, formats::CameraIntrinsics> IntrinsicsFromPython(const pybi
 // None gives nothing.
 std::optional<formats::Tracks> TracksFromPython(const pybind11::object& tracks);
 
-// The keyword arguments of an Intrinsics and of a Tracks.
-pybind11::dict IntrinsicsFields(const formats::CameraIntrinsics& intrinsics);
-pybind11::dict TracksFields(const formats::Tracks& tracks);
-
 }  // namespace calibproj::bindings

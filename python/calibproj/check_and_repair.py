@@ -33,7 +33,7 @@ from typing import Any
 
 from calibproj import _core
 from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics, intrinsics_from_fields
+from calibproj.io.intrinsics import Intrinsics, intrinsics_from_core
 from calibproj.option_tables import options_class
 from calibproj.results import CHECK_FILE
 from calibproj.tracks import Tracks
@@ -95,8 +95,8 @@ def repaired(calibration: Calibration, intrinsics: dict[str, Intrinsics], stored
         raise ValueError(result.message)
     core, cameras, observations = _core.check.repaired(calibration, intrinsics, tracks, stored_tracks, result,
                                                        weak_rotation_sigma_deg)
-    return (Calibration.from_core(core), {name: intrinsics_from_fields(fields) for name, fields in cameras.items()},
-            Tracks(**observations))
+    return (Calibration.from_core(core), {name: intrinsics_from_core(camera) for name, camera in cameras.items()},
+            Tracks.from_core(observations))
 
 
 def write_check(path: str | os.PathLike, result: CheckResult) -> None:

@@ -297,7 +297,7 @@ def _with_earlier(merge: str | os.PathLike, tracks: Tracks, intrinsics: Mapping[
     from calibproj import _core
 
     try:
-        merged = Tracks(**_core.formats.with_earlier_observations(Path(merge), tracks, dict(intrinsics)))
+        merged = Tracks.from_core(_core.formats.with_earlier_observations(Path(merge), tracks, dict(intrinsics)))
     except _core.formats.InputError as error:
         raise FormatError(str(error)) from None
     counts = merged.counts_per_camera()

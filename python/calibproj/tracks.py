@@ -216,13 +216,19 @@ class Tracks:
         _core.formats.write_tracks(Path(path), self)
 
     @classmethod
+    def from_core(cls, core: Any) -> Tracks:
+        """From the core's ``_core.formats.Tracks``."""
+        return cls(camera_names=core.camera_names, point_ids=core.point_ids, camera_index=core.camera_index,
+                   point_index=core.point_index, xy=core.xy, markers_per_array=core.markers_per_array)
+
+    @classmethod
     def read(cls, path: str | os.PathLike) -> Tracks:
         """Read ``tracks.json`` (by the C++ core, as ``calibproj-native`` reads it); errors
         name the file and the problem."""
         from calibproj import _core
 
         try:
-            return cls(**_core.formats.read_tracks(Path(path)))
+            return cls.from_core(_core.formats.read_tracks(Path(path)))
         except _core.formats.InputError as error:
             raise FormatError(str(error)) from None
 

@@ -225,7 +225,15 @@ Eigen::Matrix3Xd WorkingVolume(const formats::Calibration& calibration) {
   return volume;
 }
 
+// std::invalid_argument naming the first inconsistent input.
+static void CheckInputsAgree(const CheckInputs& inputs) {
+  inputs.calibration->Check();
+  inputs.tracks->Check();
+  if (inputs.stored_tracks != nullptr) inputs.stored_tracks->Check();
+}
+
 CalibrationCheck CheckCalibration(const CheckInputs& inputs, const CheckOptions& options) {
+  CheckInputsAgree(inputs);
   const formats::Calibration& calibration = *inputs.calibration;
   if (calibration.poses.empty() || calibration.points.rows() == 0) {
     throw std::invalid_argument("the stored calibration has no registered camera or no point: nothing to check against");
@@ -255,10 +263,16 @@ CalibrationCheck CheckCalibration(const CheckInputs& inputs, const CheckOptions&
 
 Repair Repaired(const CheckInputs& inputs, const CalibrationCheck& check, double weak_rotation_sigma_deg) {
   if (!check.trusted) throw std::invalid_argument(check.message);
+  CheckInputsAgree(inputs);
+  if (inputs.stored_tracks == nullptr) throw std::invalid_argument("the repair needs the stored tracks");
   Repair repair{*inputs.calibration, *inputs.intrinsics, {}};
   const std::vector<std::string> changed = check.Changed();
   for (const std::string& name : changed) {
-    const CameraCheck& figures = *check.Find(name)->figures;
+    const CameraVerdict* verdict = check.Find(name);
+    if (!verdict->figures || !repair.intrinsics.count(name) || !repair.calibration.PoseOf(name)) {
+      throw std::invalid_argument("camera " + name + " of the check is not in this calibration");
+    }
+    const CameraCheck& figures = *verdict->figures;
     for (auto& pose : repair.calibration.poses) {
       if (pose.name == name) pose.R = figures.R, pose.t = figures.t;
     }

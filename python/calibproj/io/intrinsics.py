@@ -221,10 +221,10 @@ def read_intrinsics(path: str | os.PathLike, name: str | None = None) -> Intrins
     from calibproj import _core
 
     try:
-        fields = _core.formats.read_intrinsics(Path(path), name or "")
+        core = _core.formats.read_intrinsics(Path(path), name or "")
     except _core.formats.InputError as error:
         raise FormatError(str(error)) from None
-    return intrinsics_from_fields(fields)
+    return intrinsics_from_core(core)
 
 
 def write_intrinsics(path: str | os.PathLike, intrinsics: Intrinsics) -> None:
@@ -317,12 +317,12 @@ def intrinsics_from_json(document: Any, name: str, where: str | os.PathLike) -> 
     from calibproj import _core
 
     try:
-        fields = _core.formats.intrinsics_from_json(json.dumps(document), name)
+        core = _core.formats.intrinsics_from_json(json.dumps(document), name)
     except (TypeError, ValueError) as error:
         raise FormatError(f"{where}: {error}") from None
-    return intrinsics_from_fields(fields)
+    return intrinsics_from_core(core)
 
 
-def intrinsics_from_fields(fields: dict[str, Any]) -> Intrinsics:
-    """An Intrinsics from the fields the core gives (name, resolution, K, dist)."""
-    return Intrinsics(fields["name"], fields["resolution"], np.asarray(fields["K"]), np.asarray(fields["dist"]))
+def intrinsics_from_core(core: Any) -> Intrinsics:
+    """An Intrinsics from the core's ``_core.formats.CameraIntrinsics``."""
+    return Intrinsics(core.name, core.resolution, np.array(core.K), np.array(core.dist, dtype=float))
