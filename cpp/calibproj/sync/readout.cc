@@ -235,7 +235,7 @@ ReadoutEstimate EstimateReadout(const std::vector<std::vector<double>>& band_sig
 
 bool Applicable(const ReadoutEstimate& readout, double sigmas, double max_sigma) {
   return readout.valid && readout.readout > sigmas * readout.readout_sigma && readout.readout > 0.02 &&
-         readout.readout_sigma <= max_sigma;
+         readout.readout <= kMaxReadoutFrames && readout.readout_sigma <= max_sigma;
 }
 
 FrameMap CoverRows(const FrameMap& window_map, const ReadoutEstimate& readout, double sigmas) {
