@@ -399,6 +399,80 @@ def test_a_rezoomed_camera_keeps_its_stored_pose(stored) -> None:
     np.testing.assert_allclose(verdict.t, stored["t"], atol=1e-12)
 
 
+WIDE_LENS = np.array([-0.2574, 0.0891, 0.000297, -0.000198, -0.01188])  # the demo's far cameras
+
+
+def as_ingested(pixels: np.ndarray, K_true: np.ndarray, K_stored: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Undistorted pixels of the true camera as the ingest makes them with the stored
+    intrinsics: distorted through the true lens, undistorted with the stored one."""
+    rays = np.column_stack([(pixels - K_true[:2, 2]) / np.diag(K_true)[:2], np.ones(len(pixels))])
+    raw, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), K_true, dist)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)
+    return cv2.undistortPointsIter(raw, K_stored, dist, None, K_stored, criteria).reshape(-1, 2)
+
+
+def test_a_rezoomed_wide_angle_camera_keeps_its_pose() -> None:
+    """Zoomed 4 % out behind a strong barrel distortion, a wide camera's pixels undistorted
+    with its stored focal length are no pinhole image of the new one (px off towards the
+    corners): the focal length alone explains them only through the lens, and then the
+    pose stays as it was (fitted in undistorted pixels: pose and focal length both
+    changed, the centre moved 4 cm, 0.8 px left)."""
+    K_stored = np.array([[610.0, 0, 640], [0, 610.0, 360], [0, 0, 1]])
+    centre = np.array([0.0, -2.5, 2.8])
+    R = look_at(centre, np.array([0.0, 0.0, 0.0]))
+    t = -R @ centre
+    xs, ys = np.meshgrid(np.linspace(-2.4, 2.4, 11), np.linspace(-1.5, 1.4, 9))
+    floor = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+    volume = np.concatenate([floor + [0, 0, h] for h in (0.0, 0.9, 1.7)])
+    K = K_stored.copy()
+    K[:2, :2] *= 0.96
+    observed = as_ingested(project(K, R, t, floor), K, K_stored, WIDE_LENS)
+    observed += np.random.default_rng(3).normal(0.0, 0.1, observed.shape)
+    verdict = _core.check.check_camera(K_stored, R, t, 1e-4, 1e-3, floor, observed, volume, WIDTH, HEIGHT,
+                                       dist=WIDE_LENS.tolist())
+    assert verdict.status == "rezoomed" and "re-zoomed" in verdict.reason, verdict.reason
+    assert verdict.focal_scale == pytest.approx(0.96, abs=0.0005)
+    np.testing.assert_allclose(verdict.t, t, atol=1e-12)
+    assert verdict.rms_after_px < 0.2
+
+
+def test_a_repaired_rezoomed_camera_gets_its_pixels_undistorted_with_its_new_focal_length(room) -> None:
+    """The repaired results folder holds the re-zoomed camera's new focal length and its
+    observations undistorted with it, as a calibration of the new room would."""
+    from calibproj.calibration import Calibration
+    from calibproj.check_and_repair import check_cameras, repaired
+    from calibproj.io.intrinsics import load_intrinsics_dir
+    from calibproj.sequence import Sequence
+    from calibproj.simulate import simulate_tracks
+    from calibproj.simulate.scene import CameraChange
+    from calibproj.tracks import Tracks
+
+    results = room["folder"] / "results"
+    stored_intrinsics = load_intrinsics_dir(results / "intrinsics")
+    zoomed = room["scene"].changed({"far4": CameraChange(zoom=0.96)})
+    sequence = Sequence.load(room["folder"] / "sequence.json")
+    new = simulate_tracks(zoomed, room["folder"] / "zoomed", noise_px=0.1, seed=9, layout=sequence).tracks
+    K_true = zoomed.camera("far4").K
+    K_stored, dist = stored_intrinsics["far4"].K, stored_intrinsics["far4"].dist.ravel()
+    names = np.asarray(new.camera_names)[new.camera_index]
+    xy = new.xy.copy()
+    xy[names == "far4"] = as_ingested(xy[names == "far4"], K_true, K_stored, dist)
+    ingested = Tracks.from_observations(new.camera_names, names, new.point_ids[new.point_index], xy,
+                                        new.markers_per_array)
+    calibration = Calibration.load(results)
+    stored_tracks = Tracks.read(results / "tracks.json")
+    result = check_cameras(calibration, stored_intrinsics, ingested, stored_tracks=stored_tracks)
+    assert result.cameras["far4"].status == "rezoomed", result.cameras["far4"].reason
+    fixed, intrinsics, tracks = repaired(calibration, stored_intrinsics, stored_tracks, ingested, result, 0.05)
+    assert intrinsics["far4"].K[0, 0] == pytest.approx(K_true[0, 0], rel=0.001)
+    np.testing.assert_allclose(fixed.poses["far4"][1], calibration.poses["far4"][1], atol=1e-12)
+    ids, pixels = tracks.observations("far4")
+    expected_ids, expected = new.observations("far4")
+    np.testing.assert_array_equal(ids, expected_ids)
+    # Undistorted again with the estimated focal length (0.1 % from the true one).
+    assert np.abs(pixels - expected).max() < 0.05
+
+
 def test_cameras_that_cannot_be_tested_say_why_and_the_others_are(room, tmp_path) -> None:
     import shutil
 

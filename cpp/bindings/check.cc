@@ -51,13 +51,14 @@ check::CameraCheck CheckCameraPy(const RowMatrix& K, const RowMatrix& R, const E
                                  double rotation_sigma, double centre_sigma, const RowMatrix& points,
                                  const RowMatrix& observed, const RowMatrix& volume, double width, double height,
                                  const RowMatrix& reference_points, const RowMatrix& reference_observed,
-                                 const py::kwargs& kwargs) {
+                                 const std::vector<double>& dist, const py::kwargs& kwargs) {
   const check::CheckOptions options = CheckOptionsFromKwargs(kwargs);
   if (K.rows() != 3 || K.cols() != 3) throw std::invalid_argument("K: expected shape (3, 3)");
   if (R.rows() != 3 || R.cols() != 3) throw std::invalid_argument("R: expected shape (3, 3)");
   if (t.size() != 3) throw std::invalid_argument("t: expected 3 values");
   check::CameraCheckInput input;
   input.K = {K(0, 0), K(1, 1), K(0, 2), K(1, 2), K(0, 1)};
+  input.dist = dist;
   input.R = R;
   input.t = t;
   input.rotation_sigma = rotation_sigma;
@@ -213,11 +214,12 @@ void register_check(py::module_& m) {
   m.def("check_camera", &CheckCameraPy, py::arg("K"), py::arg("R"), py::arg("t"), py::arg("rotation_sigma"),
         py::arg("centre_sigma"), py::arg("points"), py::arg("observed"), py::arg("volume"), py::arg("width"),
         py::arg("height"), py::arg("reference_points") = RowMatrix(0, 3),
-        py::arg("reference_observed") = RowMatrix(0, 2),
+        py::arg("reference_observed") = RowMatrix(0, 2), py::arg("dist") = std::vector<double>{},
         "Tests one stored camera (K, R, t; pose sigmas in rad and world units) against its new undistorted\n"
         "observations (N, 2) of stored points (N, 3), the working volume (M, 3) and image size giving the\n"
         "practical test; the camera's observations (M, 2) of stored points (M, 3) that the calibration was made\n"
-        "from are the reference of the change (without them, the stored sigmas); keyword options as\n"
+        "from are the reference of the change (without them, the stored sigmas); dist: the stored OpenCV\n"
+        "distortion (the observations are undistorted pixels of K; empty: none); keyword options as\n"
         "option_table() lists them.");
   m.def(
       "check_options", [](const py::kwargs& kwargs) { CheckOptionsFromKwargs(kwargs); },

@@ -5,9 +5,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <nlohmann/json.hpp>
+#include <opencv2/core/eigen.hpp>
 #include <set>
 #include <stdexcept>
 
+#include "calibproj/detect/lens.h"
 #include "calibproj/formats/files.h"
 
 namespace calibproj::check {
@@ -94,6 +96,7 @@ CameraVerdict CheckOne(const std::string& name, const formats::CameraPose& pose,
   const Eigen::Matrix3d& K = intrinsics->second.K;
   CameraCheckInput input;
   input.K = {K(0, 0), K(1, 1), K(0, 2), K(1, 2), K(0, 1)};
+  input.dist = intrinsics->second.dist;
   input.R = pose.R;
   input.t = pose.t;
   input.rotation_sigma = metrics->rotation_sigma_deg.value_or(0.0) * kPi / 180.0;
@@ -162,6 +165,31 @@ formats::Tracks WithObservationsOf(const formats::Tracks& stored, const formats:
     }
   }
   return formats::MakeTracks(stored.cameras, camera, ids, xy, stored.markers_per_array);
+}
+
+// `tracks` with the camera's pixels (undistorted with K `before`) undistorted with K
+// `after` instead: a re-zoomed camera's observations as its new intrinsics give them.
+formats::Tracks Reundistorted(formats::Tracks tracks, const std::string& name, const Eigen::Matrix3d& before,
+                              const Eigen::Matrix3d& after, const std::vector<double>& dist) {
+  const auto camera = std::find(tracks.cameras.begin(), tracks.cameras.end(), name);
+  if (camera == tracks.cameras.end()) return tracks;
+  const int index = static_cast<int>(camera - tracks.cameras.begin());
+  std::vector<Eigen::Index> rows;
+  std::vector<cv::Point2d> pixels;
+  for (Eigen::Index k = 0; k < tracks.camera_index.size(); ++k) {
+    if (tracks.camera_index[k] != index) continue;
+    rows.push_back(k);
+    pixels.emplace_back(tracks.xy(k, 0), tracks.xy(k, 1));
+  }
+  const auto lens = [&](const Eigen::Matrix3d& K) {
+    detect::LensModel model;
+    cv::eigen2cv(K, model.K);
+    model.dist = dist;
+    return model;
+  };
+  const std::vector<cv::Point2d> moved = detect::UndistortPixels(lens(after), detect::DistortPixels(lens(before), pixels));
+  for (std::size_t j = 0; j < rows.size(); ++j) tracks.xy.row(rows[j]) << moved[j].x, moved[j].y;
+  return tracks;
 }
 
 // Python's round(value, 6): correctly rounded to six decimals.
@@ -291,7 +319,16 @@ Repair Repaired(const CheckInputs& inputs, const CalibrationCheck& check, double
                      (metrics.rotation_sigma_deg && *metrics.rotation_sigma_deg > weak_rotation_sigma_deg);
     }
   }
-  repair.tracks = WithObservationsOf(*inputs.stored_tracks, *inputs.tracks, changed);
+  // A re-zoomed camera's pixels, undistorted with its stored focal length, are made
+  // again with its new one (the intrinsics written beside them).
+  formats::Tracks now = *inputs.tracks;
+  for (const std::string& name : changed) {
+    const formats::CameraIntrinsics& stored = inputs.intrinsics->at(name);
+    if (check.Find(name)->figures->focal_scale != 1.0) {
+      now = Reundistorted(std::move(now), name, stored.K, repair.intrinsics.at(name).K, stored.dist);
+    }
+  }
+  repair.tracks = WithObservationsOf(*inputs.stored_tracks, now, changed);
   return repair;
 }
 

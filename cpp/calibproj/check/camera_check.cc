@@ -15,6 +15,7 @@
 
 #include "calibproj/common/limits.h"
 #include "calibproj/common/quantile.h"
+#include "calibproj/detect/lens.h"
 
 namespace calibproj::check {
 
@@ -27,15 +28,64 @@ constexpr double kMinNoisePx = 0.01;
 // Inlier selection rounds (fit, keep the observations near it, fit again).
 constexpr int kInlierRounds = 3;
 
+// The stored lens distortion, in a fixed layout (k1, k2, p1, p2, k3, k4, k5, k6,
+// s1, s2, s3, s4).
+struct Lens {
+  bool distorted = false;
+  double coefficients[12] = {};
+};
+
+Lens LensOf(const std::vector<double>& dist) {
+  if (dist.size() > 12) {
+    throw std::invalid_argument("check: a distortion of " + std::to_string(dist.size()) +
+                                " coefficients (a tilted sensor) is not supported");
+  }
+  Lens lens;
+  for (std::size_t k = 0; k < dist.size(); ++k) {
+    if (!std::isfinite(dist[k])) throw std::invalid_argument("check: the distortion is not finite");
+    lens.coefficients[k] = dist[k];
+    lens.distorted |= dist[k] != 0.0;
+  }
+  return lens;
+}
+
+// Undistorted pixels (of K) back to the distorted pixels they were made from.
+Eigen::Matrix2Xd Distorted(const ba::Intrinsics& K, const std::vector<double>& dist, const Eigen::Matrix2Xd& pixels) {
+  if (pixels.cols() == 0) return pixels;
+  detect::LensModel model;
+  model.K = cv::Matx33d(K.fx, K.skew, K.cx, 0.0, K.fy, K.cy, 0.0, 0.0, 1.0);
+  model.dist = dist;
+  std::vector<cv::Point2d> points(pixels.cols());
+  for (int i = 0; i < pixels.cols(); ++i) points[i] = {pixels(0, i), pixels(1, i)};
+  const std::vector<cv::Point2d> distorted = detect::DistortPixels(model, points);
+  Eigen::Matrix2Xd out(2, pixels.cols());
+  for (int i = 0; i < pixels.cols(); ++i) out.col(i) << distorted[i].x, distorted[i].y;
+  return out;
+}
+
 // Which of the camera's parameters a fit frees.
 enum class Freed { kPose, kFocal, kBoth };
 
-// One observation of a held point: x_cam = exp(w) R_stored (X - c), pixel with the
-// focal lengths (and skew) scaled by s about the principal point.
+// OpenCV's distortion of normalized coordinates (k1, k2, p1, p2, k3, k4, k5, k6, s1..s4;
+// missing ones 0): what cv::projectPoints applies, for the focal fits.
+template <typename T>
+void Distort(const Lens& lens, const T& x, const T& y, T* xd, T* yd) {
+  const double* d = lens.coefficients;
+  const T r2 = x * x + y * y, r4 = r2 * r2, r6 = r4 * r2;
+  const T radial = (T(1.0) + T(d[0]) * r2 + T(d[1]) * r4 + T(d[4]) * r6) /
+                   (T(1.0) + T(d[5]) * r2 + T(d[6]) * r4 + T(d[7]) * r6);
+  *xd = x * radial + T(2.0 * d[2]) * x * y + T(d[3]) * (r2 + T(2.0) * x * x) + T(d[8]) * r2 + T(d[9]) * r4;
+  *yd = y * radial + T(d[2]) * (r2 + T(2.0) * y * y) + T(2.0 * d[3]) * x * y + T(d[10]) * r2 + T(d[11]) * r4;
+}
+
+// One observation of a held point: x_cam = exp(w) R_stored (X - c), pixel through the
+// lens with the focal lengths (and skew) scaled by s about the principal point. The
+// observation is in distorted pixels when the lens has distortion: a re-zoomed camera's
+// pixels undistorted with its stored focal length are no pinhole image of its new one.
 struct HeldPointResidual {
-  HeldPointResidual(const ba::Intrinsics& K, const Eigen::Matrix3d& R_stored, const Eigen::Vector3d& X,
-                    const Eigen::Vector2d& observed)
-      : K_(K), observed_(observed) {
+  HeldPointResidual(const ba::Intrinsics& K, const Lens& lens, const Eigen::Matrix3d& R_stored,
+                    const Eigen::Vector3d& X, const Eigen::Vector2d& observed)
+      : K_(K), lens_(lens), observed_(observed) {
     // The stored rotation applied once: only the update is a parameter.
     Eigen::Map<Eigen::Vector3d>(rotated_, 3) = R_stored * X;
     Eigen::Map<Eigen::Matrix3d>(R_, 3, 3) = R_stored;
@@ -50,14 +100,19 @@ struct HeldPointResidual {
     T p[3];
     ceres::AngleAxisRotatePoint(w, relative, p);
     if (!(p[2] > T(ba::kMinDepth))) return false;
-    const T xn = p[0] / p[2];
-    const T yn = p[1] / p[2];
+    T xn = p[0] / p[2];
+    T yn = p[1] / p[2];
+    if (lens_.distorted) {
+      const T x = xn, y = yn;
+      Distort(lens_, x, y, &xn, &yn);
+    }
     residual[0] = s[0] * (T(K_.fx) * xn + T(K_.skew) * yn) + T(K_.cx) - T(observed_.x());
     residual[1] = s[0] * T(K_.fy) * yn + T(K_.cy) - T(observed_.y());
     return true;
   }
 
   ba::Intrinsics K_;
+  Lens lens_;
   Eigen::Vector2d observed_;
   double rotated_[3];
   double R_[9];  // column-major
@@ -78,9 +133,10 @@ Eigen::Vector3d Centre(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) { ret
 // stored calibration was made from), with the stored camera they are fitted from.
 struct Observations {
   const ba::Intrinsics& K;
+  const Lens& lens;
   const Eigen::Matrix3d& R;  // stored rotation: the fits are updates of it
   const Eigen::Matrix3Xd& points;
-  const Eigen::Matrix2Xd& observed;
+  const Eigen::Matrix2Xd& observed;  // distorted pixels when the lens has distortion
   int size() const { return static_cast<int>(points.cols()); }
 };
 
@@ -90,7 +146,7 @@ Fit Solve(const Observations& input, const std::vector<int>& used, Freed freed, 
   ceres::Problem problem;
   for (int i : used) {
     auto* cost = new ceres::AutoDiffCostFunction<HeldPointResidual, 2, 3, 3, 1>(
-        new HeldPointResidual(input.K, input.R, input.points.col(i), input.observed.col(i)));
+        new HeldPointResidual(input.K, input.lens, input.R, input.points.col(i), input.observed.col(i)));
     problem.AddResidualBlock(cost, nullptr, fit.w, fit.c, &fit.s);
   }
   if (freed == Freed::kFocal) {
@@ -130,7 +186,7 @@ Eigen::MatrixXd Inverse(const Eigen::MatrixXd& information) {
 }
 
 Eigen::Vector2d Residual(const Observations& input, const Fit& fit, int i) {
-  const HeldPointResidual cost(input.K, input.R, input.points.col(i), input.observed.col(i));
+  const HeldPointResidual cost(input.K, input.lens, input.R, input.points.col(i), input.observed.col(i));
   double r[2] = {1e9, 1e9};
   if (!cost(fit.w, fit.c, &fit.s, r)) return {1e9, 1e9};
   return {r[0], r[1]};
@@ -299,7 +355,12 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   const Eigen::Vector3d stored_centre = Centre(input.R, input.t);
   std::copy(stored_centre.data(), stored_centre.data() + 3, stored.c);
 
-  const Observations now{input.K, input.R, input.points, input.observed};
+  // With a distortion, the fits compare distorted pixels (see HeldPointResidual).
+  const Lens lens = LensOf(input.dist);
+  const Eigen::Matrix2Xd observed = lens.distorted ? Distorted(input.K, input.dist, input.observed) : input.observed;
+  const Eigen::Matrix2Xd reference_observed =
+      lens.distorted ? Distorted(input.K, input.dist, input.reference_observed) : input.reference_observed;
+  const Observations now{input.K, lens, input.R, input.points, observed};
   std::vector<int> used;
   const Fit both = RobustFit(now, stored, options, &used);
   out.inliers = static_cast<int>(used.size());
@@ -326,7 +387,7 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   // tested. Otherwise the stored camera, with its sigmas.
   Fit reference = stored;
   Eigen::Matrix<double, 7, 7> reference_covariance = Eigen::Matrix<double, 7, 7>::Zero();
-  const Observations then{input.K, input.R, input.reference_points, input.reference_observed};
+  const Observations then{input.K, lens, input.R, input.reference_points, reference_observed};
   std::vector<int> reference_used;
   bool measured_reference = false;
   const Fit earlier = then.size() >= options.min_points ? RobustFit(then, stored, options, &reference_used) : stored;

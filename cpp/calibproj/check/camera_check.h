@@ -26,6 +26,7 @@
 #include <Eigen/Core>
 
 #include <string>
+#include <vector>
 
 #include "calibproj/ba/camera.h"
 
@@ -57,6 +58,10 @@ const char* StatusName(Status status);
 // One camera as stored and its new observations of stored points.
 struct CameraCheckInput {
   ba::Intrinsics K;                    // undistorted pinhole of the stored intrinsics
+  // Their distortion (OpenCV order, at most 12 coefficients; empty: none). The
+  // observations are undistorted pixels of K; with a distortion the fits compare them
+  // distorted again, so that a focal change moves them as the lens does.
+  std::vector<double> dist;
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // stored cam_from_world
   Eigen::Vector3d t = Eigen::Vector3d::Zero();
   // The stored pose's uncertainty: rotation (rad, per axis) and centre (world units).
