@@ -168,7 +168,8 @@ def ply_mutations(text: str, rng: np.random.Generator) -> list[Mutation]:
     def with_row(words: list[str]) -> bytes:
         return "\n".join([*lines[:end + 1], " ".join(words), *lines[end + 2:]]).encode() + b"\n"
 
-    out = [Mutation("empty file", b"", True), Mutation("binary garbage", rng.integers(0, 256, 500, np.uint8).tobytes(), True),
+    out = [Mutation("empty file", b"", True),
+           Mutation("binary garbage", rng.integers(0, 256, 500, np.uint8).tobytes(), True),
            Mutation("no schema comment", text.replace("comment schema calibproj.points/1\n", "").encode(), True),
            Mutation("no end_header", text.replace("end_header\n", "").encode(), True),
            Mutation("one vertex missing", "\n".join(lines[:-1]).encode(), True),

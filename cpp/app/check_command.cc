@@ -100,7 +100,9 @@ int RunCheck(const CheckArguments& arguments, Interrupts& interrupts) {
     const check::Repair repaired =
         check::Repaired(inputs, result, registration::Options{}.weak_rotation_sigma_deg);
     SaveResults(*out, repaired.calibration, repaired.intrinsics, repaired.tracks, repaired.tracks, exports,
-                [&](const fs::path& staging) { formats::AtomicWrite(staging / "check.json", check::CheckJson(result)); });
+                [&](const fs::path& staging) {
+                  formats::AtomicWrite(staging / "check.json", check::CheckJson(result));
+                });
   } else if (out) {
     out->Abort();
   }

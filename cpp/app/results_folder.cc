@@ -17,7 +17,9 @@ void SaveResults(OutputFolder& folder, const formats::Calibration& calibration,
   folder.Write([&](const fs::path& staging) {
     if (extra) extra(staging);
     for (const auto& name : given.cameras) {
-      if (intrinsics.count(name)) formats::WriteIntrinsics(staging / "intrinsics" / (name + ".json"), intrinsics.at(name));
+      if (intrinsics.count(name)) {
+        formats::WriteIntrinsics(staging / "intrinsics" / (name + ".json"), intrinsics.at(name));
+      }
     }
     formats::WriteTracks(staging / "tracks.json", given);
     formats::WriteCalibration(staging, calibration);

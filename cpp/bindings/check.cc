@@ -179,8 +179,8 @@ void register_check(py::module_& m) {
         py::arg("stored_tracks"), py::arg("check"), py::arg("weak_rotation_sigma_deg"),
         "The calibration as the cameras are now: the changed cameras' poses, focal lengths, metrics and\n"
         "observations (those of tracks) replace the stored ones. Returns (_core.formats.Calibration,\n"
-        "{camera: _core.formats.CameraIntrinsics}, _core.formats.Tracks); ValueError with the check's message when it is not\n"
-        "trusted.");
+        "{camera: _core.formats.CameraIntrinsics}, _core.formats.Tracks); ValueError with the check's message\n"
+        "when it is not trusted.");
   m.def(
       "write_check",
       [](const std::filesystem::path& path, const check::CalibrationCheck& check) {

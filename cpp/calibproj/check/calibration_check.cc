@@ -187,7 +187,8 @@ formats::Tracks Reundistorted(formats::Tracks tracks, const std::string& name, c
     model.dist = dist;
     return model;
   };
-  const std::vector<cv::Point2d> moved = detect::UndistortPixels(lens(after), detect::DistortPixels(lens(before), pixels));
+  const std::vector<cv::Point2d> moved =
+      detect::UndistortPixels(lens(after), detect::DistortPixels(lens(before), pixels));
   for (std::size_t j = 0; j < rows.size(); ++j) tracks.xy.row(rows[j]) << moved[j].x, moved[j].y;
   return tracks;
 }
@@ -264,7 +265,8 @@ CalibrationCheck CheckCalibration(const CheckInputs& inputs, const CheckOptions&
   CheckInputsAgree(inputs);
   const formats::Calibration& calibration = *inputs.calibration;
   if (calibration.poses.empty() || calibration.points.rows() == 0) {
-    throw std::invalid_argument("the stored calibration has no registered camera or no point: nothing to check against");
+    throw std::invalid_argument(
+        "the stored calibration has no registered camera or no point: nothing to check against");
   }
   std::map<std::int64_t, Eigen::Index> stored;
   for (Eigen::Index p = 0; p < static_cast<Eigen::Index>(calibration.point_ids.size()); ++p) {

@@ -125,7 +125,9 @@ CameraMetrics MetricsOf(const std::string& where, const json& entry) {
   }
   if (!unknown.empty() || !missing.empty()) {
     std::string problem = unknown.empty() ? "" : "unknown field(s) " + PythonList(unknown);
-    if (!missing.empty()) problem += (problem.empty() ? "" : "; ") + std::string("missing field(s) ") + PythonList(missing);
+    if (!missing.empty()) {
+      problem += (problem.empty() ? "" : "; ") + std::string("missing field(s) ") + PythonList(missing);
+    }
     throw std::invalid_argument(where + ": " + problem);
   }
   constexpr long long kMaxCount = 1LL << 53;
@@ -235,7 +237,9 @@ void ReadPoints(const fs::path& path, Calibration* calibration) {
   }
   const std::vector<std::string> lines = SplitLines(text);
   bool tagged = false;
-  for (std::size_t k = 0; k < std::min<std::size_t>(4, lines.size()); ++k) tagged |= lines[k] == "comment schema " + schema;
+  for (std::size_t k = 0; k < std::min<std::size_t>(4, lines.size()); ++k) {
+    tagged |= lines[k] == "comment schema " + schema;
+  }
   if (lines.empty() || lines[0] != "ply" || !tagged) {
     throw InputError(path.string() + ": not a calibproj points file (" + schema + ")");
   }
@@ -280,7 +284,9 @@ void ReadPoints(const fs::path& path, Calibration* calibration) {
     }
   }
   for (const double id : ids) {
-    if (!seen.insert(static_cast<std::int64_t>(id)).second) throw InputError(path.string() + ": a point id appears twice");
+    if (!seen.insert(static_cast<std::int64_t>(id)).second) {
+      throw InputError(path.string() + ": a point id appears twice");
+    }
     calibration->point_ids.push_back(static_cast<std::int64_t>(id));
   }
 }
