@@ -38,19 +38,24 @@ def project(K, R, t, points):
     return pixels[:, :2] / pixels[:, 2:]
 
 
-@pytest.fixture
-def stored():
-    """A camera 2.8 m up, looking at the floor 2.5 m away, and the floor points it sees."""
-    K = np.array([[1100.0, 0, 640], [0, 1100.0, 360], [0, 0, 1]])
+def floor_camera(focal: float, floor_x: np.ndarray, floor_y: np.ndarray) -> dict:
+    """A camera 2.8 m up, looking at the floor 2.5 m away, the floor points (a grid over
+    floor_x x floor_y) it sees, and a working volume above them."""
+    K = np.array([[focal, 0, 640], [0, focal, 360], [0, 0, 1]])
     centre = np.array([0.0, -2.5, 2.8])
     R = look_at(centre, np.array([0.0, 0.0, 0.0]))
     t = -R @ centre
-    xs, ys = np.meshgrid(np.linspace(-1.0, 1.0, 9), np.linspace(-0.7, 0.7, 7))
+    xs, ys = np.meshgrid(floor_x, floor_y)
     floor = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
     inside = project(K, R, t, floor)
     assert np.all((inside >= 0) & (inside <= [WIDTH, HEIGHT]))
     volume = np.concatenate([floor + [0, 0, h] for h in (0.0, 0.9, 1.7)])
     return {"K": K, "R": R, "t": t, "points": floor, "volume": volume}
+
+
+@pytest.fixture
+def stored():
+    return floor_camera(1100.0, np.linspace(-1.0, 1.0, 9), np.linspace(-0.7, 0.7, 7))
 
 
 def turned(stored, axis, degrees: float) -> tuple[np.ndarray, np.ndarray]:
@@ -417,13 +422,8 @@ def test_a_rezoomed_wide_angle_camera_keeps_its_pose() -> None:
     corners): the focal length alone explains them only through the lens, and then the
     pose stays as it was (fitted in undistorted pixels: pose and focal length both
     changed, the centre moved 4 cm, 0.8 px left)."""
-    K_stored = np.array([[610.0, 0, 640], [0, 610.0, 360], [0, 0, 1]])
-    centre = np.array([0.0, -2.5, 2.8])
-    R = look_at(centre, np.array([0.0, 0.0, 0.0]))
-    t = -R @ centre
-    xs, ys = np.meshgrid(np.linspace(-2.4, 2.4, 11), np.linspace(-1.5, 1.4, 9))
-    floor = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
-    volume = np.concatenate([floor + [0, 0, h] for h in (0.0, 0.9, 1.7)])
+    wide = floor_camera(610.0, np.linspace(-2.4, 2.4, 11), np.linspace(-1.5, 1.4, 9))
+    K_stored, R, t, floor, volume = (wide[key] for key in ("K", "R", "t", "points", "volume"))
     K = K_stored.copy()
     K[:2, :2] *= 0.96
     observed = as_ingested(project(K, R, t, floor), K, K_stored, WIDE_LENS)
