@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -347,6 +348,17 @@ def test_native_detect_takes_every_ingest_option() -> None:
     help_text = run_native("detect", "--help").stdout
     for field in dataclasses.fields(IngestOptions):
         assert "--" + field.name.replace("_", "-") in help_text, field.name
+
+
+def test_both_check_commands_take_the_same_options() -> None:
+    """calibproj check and calibproj-native check take the same options, but those of
+    the Python command's own ingest of videos, progress bars and report (README)."""
+    def options(help_text: str) -> set[str]:
+        return set(re.findall(r"--[a-z][a-z0-9-]*", help_text))
+
+    python, native = options(run_python("check", "--help").stdout), options(run_native("check", "--help").stdout)
+    assert python - native == {"--sequence", "--workers", "--no-progress", "--no-report"}
+    assert native - python == set()
 
 
 def test_detect_runs_into_one_folder_keep_a_report_each(tmp_path: Path) -> None:
