@@ -210,7 +210,8 @@ def calibrated(tmp_path_factory) -> tuple[Path, Path]:
 def test_mutated_results_folders_fail_cleanly(native: Path, calibrated: tuple[Path, Path], tmp_path: Path) -> None:
     """`calibproj-native check` on a results folder with one damaged file: an exit status
     of the command, never a crash or a hang; a refusal is one line naming the file, and
-    it refuses exactly the folders the Python package refuses to load."""
+    it refuses exactly the folders the Python package refuses to load (both read them
+    through the core's one reader: this holds the Python side to it)."""
     import shutil
 
     from calibproj.calibration import Calibration
