@@ -127,6 +127,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # while the command line is read, before its command runs
         print("calibproj: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except ImportError as error:
+        # An extension module whose start was interrupted reports "initialization failed".
+        if not _caused_by_interrupt(error):
+            raise
+        print("calibproj: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 def _run(argv: list[str] | None) -> int:
