@@ -78,6 +78,39 @@ def test_an_unchanged_camera_is_unchanged_over_many_noise_draws(stored) -> None:
     assert np.mean([v.noise_px for v in verdicts]) == pytest.approx(0.1, rel=0.15)
 
 
+def test_what_a_check_can_resolve_is_predicted_from_the_points_it_will_see(stored) -> None:
+    """The predicted uncertainty of the working volume's shift in the image against
+    Monte Carlo fits of pose and focal length (OpenCV's calibration of one planar view,
+    aspect and principal point fixed, as the check fits them); the check reports the
+    same; points spread over the view resolve far better than a patch of as many."""
+    K, R, t, points, volume = (stored[key] for key in ("K", "R", "t", "points", "volume"))
+    predicted = _core.check.predicted_shift_sigma(K, R, t, points, volume, WIDTH, HEIGHT, 0.1)
+    rng = np.random.default_rng(5)
+    flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_FIX_ASPECT_RATIO
+             | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3)
+    seen = project(K, R, t, volume)
+    inside = np.all((seen >= 0) & (seen <= [WIDTH, HEIGHT]), axis=1)
+    shifts = []
+    for _ in range(300):
+        observed = project(K, R, t, points) + rng.normal(0.0, 0.1, (len(points), 2))
+        _, K_fit, _, rvecs, tvecs = cv2.calibrateCamera([points.astype(np.float32)], [observed.astype(np.float32)],
+                                                        (WIDTH, HEIGHT), K.copy(), np.zeros(5), flags=flags)
+        R_fit = cv2.Rodrigues(rvecs[0])[0]
+        shifts.append(project(K_fit, R_fit, tvecs[0].ravel(), volume[inside]) - seen[inside])
+    shifts = np.array(shifts)  # (draws, points, 2)
+    measured = max(np.sqrt(np.linalg.eigvalsh(np.cov(shifts[:, k].T)).max()) for k in range(shifts.shape[1]))
+    assert predicted == pytest.approx(measured, rel=0.15)
+    verdict = check(stored, K, R, t, noise_px=0.1, rotation_sigma=1e-9, centre_sigma=1e-9, model_error_px=0.0)
+    assert verdict.status == "unchanged"
+    assert verdict.volume_shift_sigma_px == pytest.approx(predicted, rel=0.2)
+    # As many points in one corner of the view leave the camera free to turn.
+    corner = points[(points[:, 0] < -0.2) & (points[:, 1] < 0.0)]
+    spread = points[np.linspace(0, len(points) - 1, len(corner)).round().astype(int)]
+    assert _core.check.predicted_shift_sigma(K, R, t, corner, volume, WIDTH, HEIGHT, 0.1) > 2.0 * \
+        _core.check.predicted_shift_sigma(K, R, t, spread, volume, WIDTH, HEIGHT, 0.1)
+    assert math.isinf(_core.check.predicted_shift_sigma(K, R, t, points[:5], volume, WIDTH, HEIGHT, 0.1))
+
+
 def test_a_moved_camera_is_moved_with_its_new_pose(stored) -> None:
     R = rotation([0.3, 1.0, 0.2], 0.3) @ stored["R"]
     centre = -stored["R"].T @ stored["t"] + [0.01, -0.02, 0.005]
@@ -324,8 +357,19 @@ def test_the_check_projection_is_short_and_tests_every_camera(room, tmp_path) ->
     assert summary["seconds"] <= 8.0
     assert min(summary["points"][name] for name in ("far1", "far2", "far4", "far5", "near1")) >= 30
     assert summary["points"]["ceiling"] >= 6  # of the few its first projection gave it
-    sequence = Sequence.load(tmp_path / "check" / "sequence.json")
     first = Sequence.load(room["folder"] / "sequence.json")
+    # The time the points leave is spent where it sharpens the tests most: the cameras'
+    # points spread over their views, so that a smaller move of the working volume shows.
+    from calibproj.sequence.check_sequence import CheckSequenceOptions, plan_check
+
+    def resolution(**options):
+        return plan_check(room["folder"] / "results", [first], CheckSequenceOptions(max_seconds=12.0, **options))[2]
+
+    spread, points_only = resolution(), resolution(target_shift_px=1000.0)
+    assert all(spread[name] < 0.8 * points_only[name] for name in ("far1", "far2", "far4", "far5", "near1"))
+    assert max(spread[name] for name in ("far1", "far2", "far4", "far5")) < 0.2
+    assert summary["resolution_px"]["far1"] == pytest.approx(points_only["far1"], abs=1e-4)  # 8 s: points only
+    sequence = Sequence.load(tmp_path / "check" / "sequence.json")
     assert len(sequence.patterns) < len(first.patterns)
     # Recorded in the changed room, it finds the changes as the full projection does.
     tracks = simulate_tracks(room["changed"], tmp_path / "recorded", noise_px=0.1, seed=9, layout=sequence).tracks
@@ -370,7 +414,7 @@ def test_a_rendered_check_projection_finds_the_turned_camera(tmp_path) -> None:
     simulate_videos("small", sequence, tmp_path / "room", seed=1)
     calibrate(tmp_path / "room" / "videos", tmp_path / "room" / "intrinsics", sequence=tmp_path / "sequence" /
               "sequence.json", out=tmp_path / "results", progress=False, report=False)
-    planned, seen = plan_check(tmp_path / "results", [sequence])
+    planned, seen, _ = plan_check(tmp_path / "results", [sequence])
     planned.save(tmp_path / "check.json")
     assert planned.duration_s <= 8.0 and min(seen.values()) >= 30
     scene = load_scene("small")

@@ -563,6 +563,10 @@ class Baselines:
             "_core.check.CameraVerdict": Spec([]),
             "_core.check.check_calibration": Spec(check_args, options={
                 entry["name"]: entry["default"] for entry in _core.check.option_table()}),
+            "_core.check.working_volume": Spec([("calibration", calibration)]),
+            "_core.check.predicted_shift_sigma": Spec([
+                *[arg for arg in self.camera_check_args() if arg[0] in ("K", "R", "t", "points", "volume", "width",
+                                                                         "height")], ("noise_px", 0.1)]),
             "_core.check.repaired": Spec([*check_args[:4], ("check", checked), ("weak_rotation_sigma_deg", 0.05)]),
             "_core.check.write_check": Spec([("path", folder / "check.json"), ("check", checked)]),
             "_core.check.CalibrationCheck.exit_status": Spec([("repaired", True)]),

@@ -77,6 +77,24 @@ check::CameraCheck CheckCameraPy(const RowMatrix& K, const RowMatrix& R, const E
   return check::CheckCamera(input, options);
 }
 
+double PredictedShiftSigmaPy(const RowMatrix& K, const RowMatrix& R, const Eigen::VectorXd& t, const RowMatrix& points,
+                             const RowMatrix& volume, double width, double height, double noise_px) {
+  if (K.rows() != 3 || K.cols() != 3) throw std::invalid_argument("K: expected shape (3, 3)");
+  if (R.rows() != 3 || R.cols() != 3) throw std::invalid_argument("R: expected shape (3, 3)");
+  if (t.size() != 3) throw std::invalid_argument("t: expected 3 values");
+  check::CameraCheckInput input;
+  input.K = {K(0, 0), K(1, 1), K(0, 2), K(1, 2), K(0, 1)};
+  input.R = R;
+  input.t = t;
+  input.points = Columns3(points, "points");
+  input.observed = Eigen::Matrix2Xd::Zero(2, input.points.cols());
+  input.volume = Columns3(volume, "volume");
+  input.width = width;
+  input.height = height;
+  py::gil_scoped_release release;
+  return check::PredictedShiftSigma(input, noise_px);
+}
+
 check::CalibrationCheck CheckCalibrationPy(const py::object& calibration, const py::dict& intrinsics,
                                             const py::object& tracks, const py::object& stored_tracks,
                                             const std::map<std::string, std::string>& unusable,
@@ -135,6 +153,7 @@ void RegisterVerdicts(py::module_& m) {
       .def_property_readonly("focal_change", Figure(&check::CameraCheck::focal_change))
       .def_property_readonly("focal_sigma", Figure(&check::CameraCheck::focal_sigma))
       .def_property_readonly("volume_shift_px", Figure(&check::CameraCheck::volume_shift_px))
+      .def_property_readonly("volume_shift_sigma_px", Figure(&check::CameraCheck::volume_shift_sigma_px))
       .def_property_readonly("R", Figure(&check::CameraCheck::R), "cam_from_world rotation as the camera is now")
       .def_property_readonly("t", Figure(&check::CameraCheck::t), "cam_from_world translation as the camera is now")
       .def_property_readonly(
@@ -208,6 +227,7 @@ void register_check(py::module_& m) {
       .def_readonly("chi2_threshold", &CameraCheck::chi2_threshold)
       .def_readonly("volume_shift_px", &CameraCheck::volume_shift_px,
                     "largest move of a working-volume point in the image (px)")
+      .def_readonly("volume_shift_sigma_px", &CameraCheck::volume_shift_sigma_px, "its uncertainty (1 sigma, px)")
       .def_readonly("R", &CameraCheck::R, "cam_from_world rotation as the camera is now")
       .def_readonly("t", &CameraCheck::t, "cam_from_world translation as the camera is now")
       .def_readonly("focal_scale", &CameraCheck::focal_scale, "its focal length over the stored one");
@@ -221,6 +241,17 @@ void register_check(py::module_& m) {
         "from are the reference of the change (without them, the stored sigmas); dist: the stored OpenCV\n"
         "distortion (the observations are undistorted pixels of K; empty: none); keyword options as\n"
         "option_table() lists them.");
+  m.def("predicted_shift_sigma", &PredictedShiftSigmaPy, py::arg("K"), py::arg("R"), py::arg("t"),
+        py::arg("points"), py::arg("volume"), py::arg("width"), py::arg("height"), py::arg("noise_px"),
+        "What a check of the camera (K, R, t) on these stored points (N, 3) could resolve: the uncertainty\n"
+        "(1 sigma, px) of how far the working volume (M, 3) seems to move in its image (width x height) when\n"
+        "its pose is fitted to them with noise_px of detection noise; inf when they fix no pose.");
+  m.def(
+      "working_volume",
+      [](const py::object& calibration) -> Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> {
+        return check::WorkingVolume(CalibrationFromPython(calibration)).transpose();
+      },
+      py::arg("calibration"), "The check's working volume (M, 3) of a calibration: its practical test's points.");
   m.def(
       "check_options", [](const py::kwargs& kwargs) { CheckOptionsFromKwargs(kwargs); },
       "Raises ValueError naming the first check option (keyword) that is unknown or out of range.");

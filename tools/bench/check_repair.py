@@ -119,12 +119,19 @@ def accuracy(folder: Path, scene: Scene) -> tuple[float, float]:
 
 
 def calibrated_room(scene: Scene, sequence, sequence_path: Path, folder: Path, seed: int,
-                    densify_for_weak: bool) -> tuple[Path, list, float]:
+                    densify_for_weak: bool, reuse: bool = False) -> tuple[Path, list, float]:
     """The room rendered with the full projection and calibrated (metric), and with
     ``densify_for_weak`` the extra projection `generate --densify` plans rendered and
     merged, as a user with a weak zoomed camera does: the results folder, the sequences
     it was calibrated from, and the seconds spent calibrating (ingest included, the
-    rendering not)."""
+    rendering not). With ``reuse``, a room calibrated by an earlier run is taken as it
+    is (its seconds then unknown: nan)."""
+    if reuse and (folder / "results").is_dir():
+        sequences = [Sequence.load(sequence_path)]
+        if densify_for_weak and (folder / "results_dense").is_dir():
+            return folder / "results_dense", sequences + [Sequence.load(folder / "dense_sequence.json")], math.nan
+        if not densify_for_weak:
+            return folder / "results", sequences, math.nan
     simulate_videos(scene, sequence, folder, seed=seed, options=RenderOptions())
     scale = f"marker-size:{marker_side_on_floor(folder / 'scene.json', sequence):.9f}"
     results = folder / "results"
@@ -234,6 +241,9 @@ def main() -> int:
     parser.add_argument("--densify", action="store_true",
                         help="calibrate every room as a user with a weak zoomed camera does: with the extra "
                              "projection `generate --densify` plans, merged (the full calibrations too)")
+    parser.add_argument("--reuse", action="store_true",
+                        help="take the rooms a run with the same --work calibrated as they are (the check "
+                             "projection and the trials are planned and rendered again)")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     with tempfile.TemporaryDirectory(prefix="check-") as temporary:
@@ -246,8 +256,9 @@ def main() -> int:
             for seed in range(args.seeds):
                 scene = realistic(load_scene(scene_name, seed=seed))
                 room = work / f"{scene_name}-{seed}"
-                results, sequences, _ = calibrated_room(scene, sequence, sequence_path, room, seed, args.densify)
-                check_sequence, _ = plan_check(results, sequences)
+                results, sequences, _ = calibrated_room(scene, sequence, sequence_path, room, seed, args.densify,
+                                                        reuse=args.reuse)
+                check_sequence, _, _ = plan_check(results, sequences)
                 check_path = room / "check_sequence.json"
                 check_sequence.save(check_path)
                 print(f"{scene_name} seed {seed}: check projection {check_sequence.duration_s:.1f} s "

@@ -352,6 +352,7 @@ std::string CheckJson(const CalibrationCheck& check) {
                      {"focal_change", Figure(f, &CameraCheck::focal_change)},
                      {"focal_sigma", Figure(f, &CameraCheck::focal_sigma)},
                      {"volume_shift_px", Figure(f, &CameraCheck::volume_shift_px)},
+                     {"volume_shift_sigma_px", Figure(f, &CameraCheck::volume_shift_sigma_px)},
                      {"focal_scale", f ? Rounded6(f->focal_scale) : 1.0}};
   }
   const ordered_json body = {

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <stdexcept>
 #include <vector>
 
@@ -185,6 +186,19 @@ Eigen::MatrixXd Inverse(const Eigen::MatrixXd& information) {
   return scale.asDiagonal() * inverse * scale.asDiagonal();
 }
 
+// The covariance of the parameters a fit frees, the others held (zero rows and columns),
+// from the information of all seven at the solution.
+Eigen::Matrix<double, 7, 7> CovarianceOf(const Eigen::MatrixXd& information, Freed freed) {
+  Eigen::Matrix<double, 7, 7> covariance = Eigen::Matrix<double, 7, 7>::Zero();
+  if (freed == Freed::kBoth) return Inverse(information);
+  if (freed == Freed::kPose) {
+    covariance.topLeftCorner<6, 6>() = Inverse(information.topLeftCorner(6, 6));
+  } else {
+    covariance(6, 6) = information(6, 6) > 0.0 ? 1.0 / information(6, 6) : std::numeric_limits<double>::infinity();
+  }
+  return covariance;
+}
+
 Eigen::Vector2d Residual(const Observations& input, const Fit& fit, int i) {
   const HeldPointResidual cost(input.K, input.lens, input.R, input.points.col(i), input.observed.col(i));
   double r[2] = {1e9, 1e9};
@@ -273,6 +287,43 @@ double VolumeShift(const CameraCheckInput& input, const Pinhole& before, const P
   return shift >= 0.0 ? shift : std::max(0.0, largest(input.points, false));
 }
 
+// The volume points the stored camera sees in its image (all of them without its size).
+std::vector<int> VolumeInView(const CameraCheckInput& input) {
+  const bool sized = input.width > 0 && input.height > 0;
+  std::vector<int> inside;
+  for (int i = 0; i < input.volume.cols(); ++i) {
+    Eigen::Vector2d seen;
+    if (!Project(input.K, input.R, input.t, 1.0, input.volume.col(i), &seen)) continue;
+    if (sized && !(seen.x() >= 0 && seen.y() >= 0 && seen.x() <= input.width && seen.y() <= input.height)) continue;
+    inside.push_back(i);
+  }
+  return inside;
+}
+
+// d pixel / d (w, c, s) of X at the stored camera (central differences: the pixel is
+// smooth and the steps far above rounding).
+Eigen::Matrix<double, 2, 7> PixelJacobian(const CameraCheckInput& input, const Eigen::Vector3d& X) {
+  const Eigen::Vector3d centre = Centre(input.R, input.t);
+  const double steps[7] = {1e-6, 1e-6, 1e-6, 1e-6 * (1.0 + centre.norm()), 1e-6 * (1.0 + centre.norm()),
+                           1e-6 * (1.0 + centre.norm()), 1e-6};
+  Eigen::Matrix<double, 2, 7> J = Eigen::Matrix<double, 2, 7>::Zero();
+  for (int k = 0; k < 7; ++k) {
+    Eigen::Vector2d ends[2];
+    for (int side = 0; side < 2; ++side) {
+      Fit fit;
+      std::copy(centre.data(), centre.data() + 3, fit.c);
+      const double step = side == 0 ? steps[k] : -steps[k];
+      if (k < 3) fit.w[k] = step;
+      if (k >= 3 && k < 6) fit.c[k - 3] += step;
+      if (k == 6) fit.s += step;
+      const Pinhole camera = PinholeOf(fit, input.R);
+      if (!Project(input.K, camera.R, camera.t, camera.s, X, &ends[side])) return J;
+    }
+    J.col(k) = (ends[0] - ends[1]) / (2.0 * steps[k]);
+  }
+  return J;
+}
+
 // The farthest a pixel of the image (or, without its size, an observation) lies from
 // the principal point: how far a focal change of 1 moves a pixel at most.
 double LargestRadius(const CameraCheckInput& input) {
@@ -313,9 +364,10 @@ void CheckInput(const CameraCheckInput& input) {
   limits::RequireInRange(input.height, 0.0, limits::kMaxImageSide, "check: height");
 }
 
-std::string Figures(const char* format, double a, double b = 0.0, double c = 0.0, double d = 0.0) {
+std::string Figures(const char* format, double a, double b = 0.0, double c = 0.0, double d = 0.0,
+                    double e = 0.0) {
   char text[240];
-  std::snprintf(text, sizeof text, format, a, b, c, d);
+  std::snprintf(text, sizeof text, format, a, b, c, d, e);
   return text;
 }
 
@@ -326,6 +378,7 @@ void CheckOptions::Check() const {
   limits::RequireInRange(significance_z, 0.0, 40.0, "check: significance_z");
   limits::RequireInRange(min_points, 6, limits::kMaxPoints, "check: min_points");
   limits::RequireInRange(outlier_px, 1e-3, 1e6, "check: outlier_px");
+  limits::RequireInRange(model_error_px, 0.0, 1e3, "check: model_error_px");
   limits::RequireInRange(max_iterations, 1, limits::kMaxIterations, "check: max_iterations");
 }
 
@@ -337,6 +390,35 @@ const char* StatusName(Status status) {
     case Status::kUnknown: return "unknown";
   }
   return "unknown";
+}
+
+double VolumeShiftSigma(const CameraCheckInput& input, const Eigen::Matrix<double, 7, 7>& covariance) {
+  double sigma = 0.0;
+  for (const int i : VolumeInView(input)) {
+    const Eigen::Matrix<double, 2, 7> J = PixelJacobian(input, input.volume.col(i));
+    const Eigen::Matrix2d image = J * covariance * J.transpose();
+    sigma = std::max(sigma, std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(image)
+                                                         .eigenvalues()
+                                                         .maxCoeff())));
+  }
+  return sigma;
+}
+
+double PredictedShiftSigma(const CameraCheckInput& input, double noise_px) {
+  limits::RequireInRange(noise_px, 1e-6, 1e3, "check: noise_px");
+  CheckInput(input);
+  if (input.points.cols() < 6) return std::numeric_limits<double>::infinity();
+  Eigen::MatrixXd information = Eigen::MatrixXd::Zero(7, 7);
+  for (int i = 0; i < input.points.cols(); ++i) {
+    const Eigen::Matrix<double, 2, 7> J = PixelJacobian(input, input.points.col(i));
+    information += J.transpose() * J;
+  }
+  // A camera the points do not fix (collinear, all behind it) resolves nothing.
+  const Eigen::Matrix<double, 7, 7> covariance = CovarianceOf(information, Freed::kBoth) * (noise_px * noise_px);
+  if (!covariance.allFinite() || Eigen::FullPivLU<Eigen::MatrixXd>(information).rank() < 7) {
+    return std::numeric_limits<double>::infinity();
+  }
+  return VolumeShiftSigma(input, covariance);
 }
 
 CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& options) {
@@ -377,7 +459,9 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   const Fit focal = Solve(now, used, Freed::kFocal, stored, options);
   const int n = out.inliers;
   out.noise_px = NoiseOf(both, n);
-  const double variance = out.noise_px * out.noise_px;
+  // What two recordings of an unchanged camera differ by beyond the noise of one.
+  const double model_variance = options.model_error_px * options.model_error_px;
+  const double variance = out.noise_px * out.noise_px + model_variance;
   out.rms_before_px = std::sqrt(SumSquares(now, stored, used) / n);
 
   // The change (w, centre, focal scale) against its covariance. Its reference is the
@@ -390,12 +474,14 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   const Observations then{input.K, lens, input.R, input.reference_points, reference_observed};
   std::vector<int> reference_used;
   bool measured_reference = false;
+  double reference_variance = 0.0;  // of one coordinate, with measured_reference
   const Fit earlier = then.size() >= options.min_points ? RobustFit(then, stored, options, &reference_used) : stored;
   if (then.size() >= options.min_points && earlier.converged &&
       static_cast<int>(reference_used.size()) >= options.min_points) {
     reference = earlier;
     const double noise = NoiseOf(earlier, static_cast<int>(reference_used.size()));
-    reference_covariance = Inverse(earlier.information) * noise * noise;
+    reference_variance = noise * noise + model_variance;
+    reference_covariance = Inverse(earlier.information) * reference_variance;
     measured_reference = true;
     out.reference = "its calibration's observations";
   } else {
@@ -409,6 +495,11 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
   change << both.w[0] - reference.w[0], both.w[1] - reference.w[1], both.w[2] - reference.w[2],
       both.c[0] - reference.c[0], both.c[1] - reference.c[1], both.c[2] - reference.c[2], both.s - reference.s;
   const Eigen::Matrix<double, 7, 7> covariance = Inverse(both.information) * variance + reference_covariance;
+  // The reference's variance of the parameters a fit frees (the stored sigmas' as they are).
+  const auto reference_covariance_of = [&](Freed freed) -> Eigen::Matrix<double, 7, 7> {
+    if (!measured_reference) return reference_covariance;
+    return CovarianceOf(earlier.information, freed) * reference_variance;
+  };
   out.chi2 = change.dot(covariance.completeOrthogonalDecomposition().solve(change));
   out.chi2_threshold = ChiSquareQuantile(7, options.significance_z);
 
@@ -438,12 +529,16 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
       measured_reference ? Solve(then, reference_used, freed, stored, options) : stored;
   const Pinhole now_camera = PinholeOf(*chosen, input.R);
   out.volume_shift_px = VolumeShift(input, PinholeOf(chosen_reference, input.R), now_camera);
+
   const bool significant = out.chi2 > out.chi2_threshold;
   const bool visible = out.volume_shift_px > options.tolerance_px;
   // A change is described by the fit that explains it against its reference; no change
   // by the fit of both, whose figures bound what may have changed unseen.
   const Fit& described = significant && visible ? *chosen : both;
   const Fit& from = significant && visible ? chosen_reference : reference;
+  const Freed described_freed = significant && visible ? freed : Freed::kBoth;
+  out.volume_shift_sigma_px = VolumeShiftSigma(
+      input, CovarianceOf(described.information, described_freed) * variance + reference_covariance_of(described_freed));
   const Eigen::Matrix3d turn = RotationOf(described.w, input.R) * RotationOf(from.w, input.R).transpose();
   out.rotation_change_deg = Eigen::AngleAxisd(turn).angle() * kRadToDeg;
   out.centre_change = (Eigen::Vector3d(described.c[0], described.c[1], described.c[2]) -
@@ -458,8 +553,9 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
 
   const std::string figures =
       Figures("rotation %.3g deg, centre %.3g (calibration units), focal %+.2g %%; "
-              "the working volume moves up to %.2f px in its image",
-              out.rotation_change_deg, out.centre_change, 100.0 * out.focal_change, out.volume_shift_px) +
+              "the working volume moves up to %.2f +- %.2f px in its image",
+              out.rotation_change_deg, out.centre_change, 100.0 * out.focal_change, out.volume_shift_px,
+              out.volume_shift_sigma_px) +
       Figures(" (tolerance %.2g px), chi-square %.1f (%.1f is noise at %.4g %%)", options.tolerance_px, out.chi2,
               out.chi2_threshold, 100.0 * (1.0 - 0.5 * std::erfc(options.significance_z / std::sqrt(2.0))));
   if (significant && visible) {

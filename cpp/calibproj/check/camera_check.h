@@ -44,6 +44,13 @@ struct CheckOptions {
   // Observations farther than this from the best fit are left out (a marker decoded
   // with a wrong id, a person's shadow).
   double outlier_px = 3.0;
+  // What two recordings of an unchanged camera differ by beyond the detection noise of
+  // one (px per coordinate, added to it in quadrature): a pattern shown again lands on
+  // other sensor rows, floor texture and light, which move its centres by a few
+  // hundredths of a pixel in ways that are alike over a region of the image. Without it
+  // unchanged cameras of rendered rooms scored a chi-square of 14.8 on average where
+  // 7 is noise.
+  double model_error_px = 0.08;
   // Ceres iterations per fit.
   int max_iterations = 50;
 
@@ -95,11 +102,22 @@ struct CameraCheck {
   double chi2 = 0.0;                 // Mahalanobis distance of the change, squared
   double chi2_threshold = 0.0;
   double volume_shift_px = 0.0;      // largest move of a working-volume point in the image
+  double volume_shift_sigma_px = 0.0;  // its uncertainty (1 sigma) from the change's covariance
   // The camera as it is now (the stored one when unchanged).
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
   Eigen::Vector3d t = Eigen::Vector3d::Zero();
   double focal_scale = 1.0;
 };
+
+// The uncertainty (1 sigma, px) of the largest move of a working-volume point the camera
+// sees, for a change (w, centre, focal scale) with this covariance.
+double VolumeShiftSigma(const CameraCheckInput& input, const Eigen::Matrix<double, 7, 7>& covariance);
+
+// What a check could resolve: VolumeShiftSigma of the camera's pose and focal length
+// fitted to input.points (their pixels from the stored camera, each coordinate with
+// noise_px of noise), as an unchanged camera's test fits them. Infinite when they do
+// not fix them (fewer than six points, or degenerate).
+double PredictedShiftSigma(const CameraCheckInput& input, double noise_px);
 
 // Throws std::invalid_argument for inconsistent input (sizes, non-finite values).
 CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& options);

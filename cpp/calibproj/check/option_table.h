@@ -20,6 +20,9 @@ void VisitCheckOptions(Options& o, Visitor&& visit) {
         "observations of calibrated points a camera needs to be tested (fewer: unknown)");
   visit("outlier_px", o.outlier_px,
         "observations farther than this from the camera's best fit are left out of its test");
+  visit("model_error_px", o.model_error_px,
+        "what two recordings of an unchanged camera differ by beyond the detection noise of one "
+        "(px, added to it in quadrature in the statistical test)");
   visit("max_iterations", o.max_iterations, "solver iterations per fit");
 }
 

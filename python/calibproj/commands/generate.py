@@ -211,15 +211,18 @@ def _run_check(args: argparse.Namespace) -> int:
     results = _results_folder(args.check)
     paths = [Path(p) for p in args.sequence] if args.sequence else _calibrated_sequences(results)
     options = CheckSequenceOptions(max_seconds=args.check_seconds, points_per_camera=args.check_points)
-    sequence, seen = plan_check(results, [Sequence.load(path) for path in paths], options)
+    sequence, seen, resolution = plan_check(results, [Sequence.load(path) for path in paths], options)
     _write_planned(args, sequence)
     summary = {"sequence": f"{args.out}/sequence.json", "video": f"{args.out}/projection.mp4" if args.video else None,
-               "seconds": round(sequence.duration_s, 3), "points": seen}
+               "seconds": round(sequence.duration_s, 3), "points": seen,
+               "resolution_px": {name: None if sigma is None else round(sigma, 4) for name, sigma in resolution.items()}}
     if args.json:
         print(json.dumps(summary))
     else:
         for name, points in seen.items():
-            print(f"{name}: {points} calibrated points shown again")
+            sigma = resolution[name]
+            resolves = "" if sigma is None else f"; a move of the working volume resolved to {sigma:.2f} px (1 sigma)"
+            print(f"{name}: {points} calibrated points shown again{resolves}")
         print(f"{summary['sequence']}: check projection of {sequence.duration_s:.1f} s; record it with every camera, "
               f"then: calibproj check {results} VIDEOS --sequence {summary['sequence']}")
     return 0

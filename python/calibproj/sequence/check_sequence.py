@@ -5,7 +5,10 @@ points whose 3D positions the calibration knows, so the check projection shows a
 the calibration was made from, at their own centres and scales: its point ids are the
 calibration's. ``plan_check`` picks them from a first calibration's observations: the
 arrays that give every registered camera, the zoomed one included, the most of its
-calibrated points, until each has ``points_per_camera`` of them or the time is spent.
+calibrated points, until each has ``points_per_camera`` of them; then, with the time
+left, the arrays that most sharpen what each camera's test can resolve (how far the
+working volume may seem to move in its image for the detection noise: points spread
+over a camera's view fix its pose, one patch of them leaves it free to turn).
 A calibration merged with a densified projection is checked from both sequences (the
 densified one holds every centre; its own arrays are where the zoomed camera looks).
 """
@@ -20,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calibproj import _core
 from calibproj.sequence.builder import ShownPattern, overhead_seconds, pattern_budget, reassembled
 from calibproj.sequence.codes import MAX_DEGREE, MIN_DEGREE
 from calibproj.sequence.sequence import Sequence
@@ -46,12 +50,19 @@ class CheckSequenceOptions:
         reference_frames: frames of each white and black block around the codes (8 where
             a calibration's sequence has 15): with the codes, 4.6 s of the check's time
             instead of 9.2 s.
+        target_shift_px: once every camera has its points, arrays are added while they
+            bring a camera's resolvable volume shift (1 sigma) down towards this, in
+            pixels; a quarter of the check's default tolerance.
+        noise_px: the detection noise (px per coordinate) that resolution is planned for:
+            the noise of a rendered room's centres with the check's model error.
     """
 
     max_seconds: float = 8.0
     points_per_camera: int = 30
     code_degree: int = 4
     reference_frames: int = 8
+    target_shift_px: float = 0.125
+    noise_px: float = 0.1
 
     def __post_init__(self) -> None:
         if not 0.0 < self.max_seconds <= 600.0:
@@ -62,13 +73,20 @@ class CheckSequenceOptions:
             raise ValueError(f"code_degree must be in [{MIN_DEGREE}, {MAX_DEGREE}], got {self.code_degree}")
         if not 1 <= self.reference_frames <= 300:
             raise ValueError(f"reference_frames must be in [1, 300], got {self.reference_frames}")
+        if not 1e-3 <= self.target_shift_px <= 1e3:
+            raise ValueError(f"target_shift_px must be in [0.001, 1000], got {self.target_shift_px}")
+        if not 1e-3 <= self.noise_px <= 100.0:
+            raise ValueError(f"noise_px must be in [0.001, 100], got {self.noise_px}")
 
 
 def plan_check(results: str | os.PathLike, sequences: list[Sequence],
-               options: CheckSequenceOptions | None = None) -> tuple[Sequence, dict[str, int]]:
+               options: CheckSequenceOptions | None = None
+               ) -> tuple[Sequence, dict[str, int], dict[str, float | None]]:
     """The check sequence for the calibration in the folder ``results``, made from
-    ``sequences`` (the one it was calibrated from and, when merged, the first one), and
-    per registered camera the calibrated points it will see."""
+    ``sequences`` (the one it was calibrated from and, when merged, the first one); per
+    registered camera the calibrated points it will see; and per camera what its test
+    will resolve: how far the working volume may seem to move in its image (1 sigma, px,
+    at ``options.noise_px``), None where the camera's intrinsics or points do not say."""
     from calibproj.calibration import Calibration
     from calibproj.results import TRACKS_FILE
     from calibproj.tracks import Tracks
@@ -89,15 +107,20 @@ def plan_check(results: str | os.PathLike, sequences: list[Sequence],
     if not chosen:
         raise ValueError(f"{folder}: no array of these sequences holds a calibrated point; give the sequence "
                          f"the results were calibrated from")
+    views = _camera_views(calibration, tracks, base, folder)
+    chosen = _spread_arrays(views, chosen, candidates, budget, options)
     shown = [pattern for array in sorted(chosen) for pattern in candidates[array]]
     sequence = reassembled(base, base.layout, base.centres, shown, code_degree=options.code_degree,
                            reference_frames=options.reference_frames)
     seen = {name: int(sum(per_array.get(array, 0) for array in chosen)) for name, per_array in counts.items()}
+    resolution: dict[str, float | None] = {}
     for name, points in seen.items():
+        sigma = views[name].shift_sigma(chosen, options.noise_px) if name in views else math.inf
+        resolution[name] = sigma if math.isfinite(sigma) else None
         if points < min(options.points_per_camera, MIN_TESTED_POINTS):
             log.warning("camera %s sees only %d calibrated points in the check projection: it will be unknown",
                         name, points)
-    return sequence, seen
+    return sequence, seen, resolution
 
 
 def _common_base(sequences: list[Sequence]) -> Sequence:
@@ -166,3 +189,79 @@ def _choose_arrays(counts: dict[str, dict[int, int]], candidates: dict[int, list
         used += len(candidates[best])
         for name, per_array in counts.items():
             have[name] += per_array.get(best, 0)
+
+
+@dataclass
+class _CameraView:
+    """One registered camera as the planner sees it: its stored pinhole, its image size,
+    the working volume, and per array the stored points it observed."""
+
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    size: tuple[float, float]
+    volume: np.ndarray
+    points_by_array: dict[int, np.ndarray]
+
+    def shift_sigma(self, arrays: set[int], noise_px: float) -> float:
+        """How far (1 sigma, px) a check on these arrays' points could tell the working
+        volume moved in this camera's image."""
+        points = [self.points_by_array[a] for a in arrays if a in self.points_by_array]
+        if not points:
+            return math.inf
+        return float(_core.check.predicted_shift_sigma(self.K, self.R, self.t, np.concatenate(points), self.volume,
+                                                       *self.size, noise_px))
+
+
+def _camera_views(calibration, tracks, base: Sequence, folder: Path) -> dict[str, _CameraView]:
+    from calibproj.io.intrinsics import intrinsics_of_cameras
+    from calibproj.results import INTRINSICS_DIR
+
+    if not (folder / INTRINSICS_DIR).is_dir():
+        return {}  # planned by the points alone
+    cameras, _ = intrinsics_of_cameras(folder / INTRINSICS_DIR, list(calibration.registered))
+    volume = np.asarray(_core.check.working_volume(calibration))
+    stored = {int(i): k for k, i in enumerate(calibration.point_ids.tolist())}
+    views: dict[str, _CameraView] = {}
+    for name in calibration.registered:
+        camera = cameras.get(name)
+        if camera is None or camera.resolution is None or name not in tracks.camera_names:
+            continue  # planned by its points alone
+        ids, _ = tracks.observations(name)
+        rows = np.array([stored[int(i)] for i in ids if int(i) in stored], dtype=np.int64)
+        arrays = calibration.point_ids[rows] // base.layout.markers_per_array
+        R, t = calibration.poses[name]
+        views[name] = _CameraView(np.asarray(camera.K, float), R, t, tuple(map(float, camera.resolution)), volume,
+                                  {int(a): calibration.points[rows[arrays == a]] for a in np.unique(arrays)})
+    return views
+
+
+def _spread_arrays(views: dict[str, _CameraView], chosen: set[int], candidates: dict[int, list[ShownPattern]],
+                   budget: int, options: CheckSequenceOptions) -> set[int]:
+    """Greedy, with the patterns ``chosen`` leaves: the array that brings the cameras'
+    resolvable volume shifts down the most (in log, each down to the target) per
+    pattern shown, while one does."""
+    chosen = set(chosen)
+    used = sum(len(candidates[array]) for array in chosen)
+
+    def cost(name: str, arrays: set[int]) -> float:
+        return math.log(max(views[name].shift_sigma(arrays, options.noise_px), options.target_shift_px))
+
+    costs = {name: cost(name, chosen) for name in views}
+    while True:
+        best, best_gain, best_costs = None, 0.0, {}
+        for array, patterns in candidates.items():
+            if array in chosen or used + len(patterns) > budget:
+                continue
+            # Only the cameras that see the array and still short of the target change.
+            changed = {name: cost(name, chosen | {array}) for name, view in views.items()
+                       if array in view.points_by_array and costs[name] > math.log(options.target_shift_px)}
+            gain = sum(0.0 if math.isinf(value) else min(costs[name] - value, 1e3)
+                       for name, value in changed.items()) / len(patterns)
+            if gain > best_gain:
+                best, best_gain, best_costs = array, gain, changed
+        if best is None:
+            return chosen
+        chosen.add(best)
+        used += len(candidates[best])
+        costs.update(best_costs)
