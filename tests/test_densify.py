@@ -150,13 +150,13 @@ def test_a_texture_that_moves_large_markers_more_leaves_the_small_ones_their_wei
 
     from calibproj.comparison import rotation_errors_to_reference
     from calibproj.registration import RegistrationDriver, RegistrationOptions
-    from calibproj.scale import ProjectedMarkers
+    from calibproj.scale import ProjectedMarkers, projected_markers
 
     scene, sequence, dense, intrinsics = room["scene"], room["sequence"], room["dense"], room["first"].intrinsics
     rng = np.random.default_rng(0)
 
     def displaced(seq):
-        sides = np.nan_to_num(ProjectedMarkers.from_sequence(seq).largest_side_px)
+        sides = np.nan_to_num(projected_markers(seq).largest_side_px)
         return dataclasses.replace(seq, centres=seq.centres + rng.normal(size=seq.centres.shape) * 0.002 * sides[..., None])
 
     first = simulate_tracks(scene, None, noise_px=0.05, seed=31, layout=displaced(sequence)).tracks
@@ -166,13 +166,13 @@ def test_a_texture_that_moves_large_markers_more_leaves_the_small_ones_their_wei
                                                                   for c in extra.camera_index]]),
         np.concatenate([first.point_ids[first.point_index], extra.point_ids[extra.point_index]]),
         np.concatenate([first.xy, extra.xy]), first.markers_per_array)
-    by_size = ProjectedMarkers.from_sequence(dense)
+    by_size = projected_markers(dense)
     # The densified sequence draws only the new arrays: the first ones' sides are not known.
     sides = np.unique(by_size.largest_side_px[~np.isnan(by_size.largest_side_px)])
     assert len(sides) == 1 and np.all(np.isnan(by_size.largest_side_px[:sequence.layout.arrays]))
     options = RegistrationOptions(error_correlation=0.0)  # independent simulated errors
     sigma = {}
-    for name, markers in (("one noise", dataclasses.replace(by_size, largest_side_px=None)), ("by size", by_size)):
+    for name, markers in (("one noise", ProjectedMarkers(by_size.centres_px, by_size.marker_side_px, by_size.projector)), ("by size", by_size)):
         driver = RegistrationDriver(tracks, intrinsics, options, projector=markers)
         calibration = driver.run()
         sigma[name] = calibration.metrics["ceiling"].rotation_sigma_deg

@@ -591,10 +591,11 @@ class Baselines:
                                                ("measurement", parse_scale("marker-size:1/4=0.1")),
                                                ("markers", markers), ("radius_sides", 30.0)]),
             "_core.formats.parse_export_formats": Spec([("text", "yaml,colmap")]),
-            "_core.formats.projector_pixels": Spec([("markers", markers),
-                                                   ("point_ids", np.array([0, 3, 10**9], dtype=np.int64))]),
-            "_core.formats.projector_marker_sides": Spec([("markers", markers),
-                                                         ("point_ids", np.array([0, 3, 10**9], dtype=np.int64))]),
+            "_core.formats.ProjectedMarkers": Spec([("centres_px", centres), ("marker_side_px", 4.0),
+                                                   ("projector", (60, 30)), ("largest_side_px", np.full((2, 9), 8.0))]),
+            "_core.formats.ProjectedMarkers.pixels": Spec([("point_ids", np.array([0, 3, 10**9], dtype=np.int64))]),
+            "_core.formats.ProjectedMarkers.largest_sides": Spec([
+                ("point_ids", np.array([0, 3, 10**9], dtype=np.int64))]),
             "_core.formats.colmap_camera": Spec([("intrinsics", intrinsics["a"])]),
             "_core.formats.quaternion_wxyz": Spec([("R", np.eye(3))]),
             "_core.formats.export": Spec([("calibration", calibration), ("format", "colmap"), ("directory", folder),
@@ -636,6 +637,9 @@ class Baselines:
             "_core.check.CameraVerdict": {
                 state: (lambda state=state: self.check_call().cameras[state]) for state in ("a", "b")},
             "_core.formats.Calibration": {"read": lambda: _core.formats.read_calibration(self.results_folder)},
+            "_core.formats.ProjectedMarkers": {
+                "sized": lambda: _core.formats.ProjectedMarkers(np.zeros((2, 3, 2)), 4.0, (60, 30), np.ones((2, 3))),
+                "unsized": lambda: _core.formats.ProjectedMarkers(np.zeros((1, 2, 2)), 1.0, (8, 8))},
             "_core.formats.CameraPose": {"read": lambda: _core.formats.read_calibration(self.results_folder).poses[0]},
             "_core.formats.CameraMetrics": {
                 "read": lambda: _core.formats.read_calibration(self.results_folder).metrics[0][1]},

@@ -312,7 +312,7 @@ def demo_with_projector(noise_px: float = 0.1, seed: int = 0, projector_dist: tu
                         relief: FloorRelief | None = None):
     from dataclasses import replace
 
-    from calibproj.scale import ProjectedMarkers
+    from calibproj.scale import layout_markers
     from calibproj.sequence.layout import MsmLayout
     from calibproj.simulate.scene import load_scene
 
@@ -321,7 +321,7 @@ def demo_with_projector(noise_px: float = 0.1, seed: int = 0, projector_dist: tu
     scene = replace(scene, projector=replace(scene.projector, dist=projector_dist),
                     floor=replace(scene.floor, relief=relief))
     sim = simulate_tracks(scene, None, noise_px=noise_px, seed=seed, layout=layout)
-    return sim, ProjectedMarkers.from_layout(layout)
+    return sim, layout_markers(layout)
 
 
 # Simulated tracks have independent errors: the covariance then needs no share of

@@ -13,6 +13,7 @@ from calibproj.scale import (
     ProjectedMarkers,
     apply_scale,
     check_measurement,
+    layout_markers,
     parse_scale,
     scale_factor,
     scaled,
@@ -106,7 +107,7 @@ def test_distance_gives_metric_poses(paper) -> None:
 
 def test_marker_size_at_the_image_centre_gives_metric_poses(paper) -> None:
     sim, calibration = paper
-    markers = ProjectedMarkers.from_layout(sim.layout)
+    markers = layout_markers(sim.layout)
     side = true_marker_side(sim.scene, markers, markers.image_centre())
     metric = apply_scale(calibration, f"marker-size:{side}", markers)
     assert rigid_centre_errors(metric, sim.scene).max() < MAX_CENTRE_ERROR_M
@@ -122,7 +123,7 @@ def test_marker_size_is_local_under_a_tilted_projector() -> None:
     tilted = Projector(position=(0.9, -0.4, 3.0), look_at=(0.0, 0.0, 0.0), resolution=(1920, 1080), fx=1400.0)
     sim = simulate_tracks(dataclasses.replace(scene, projector=tilted), None, noise_px=0.5, seed=5)
     calibration = calibrate(sim.tracks, sim.intrinsics)
-    markers = ProjectedMarkers.from_layout(sim.layout)
+    markers = layout_markers(sim.layout)
     pixels = markers.pixels(calibration.point_ids)
     chosen = calibration.point_ids[np.argmin(np.linalg.norm(pixels - [600.0, 350.0], axis=1))]
     array, marker = divmod(int(chosen), markers.markers_per_array)
@@ -153,7 +154,7 @@ def test_scaled_multiplies_lengths_only(paper) -> None:
 
 def test_measurements_that_cannot_apply_name_the_problem(paper) -> None:
     sim, calibration = paper
-    markers = ProjectedMarkers.from_layout(sim.layout)
+    markers = layout_markers(sim.layout)
     with pytest.raises(ValueError, match="no camera 'far9'"):
         check_measurement(parse_scale("camera-height:far9=2"), sim.tracks.camera_names)
     with pytest.raises(ValueError, match="needs the projection sequence"):
@@ -218,6 +219,6 @@ def test_projector_pixels_follow_the_point_ids() -> None:
 
     centres = np.arange(2 * 3 * 2, dtype=float).reshape(2, 3, 2) + 0.5  # 2 arrays of 3 markers
     markers = ProjectedMarkers(centres, 24.0, (1920, 1080))
-    pixels = _core.formats.projector_pixels(markers, np.array([4, 0, 6, -1], dtype=np.int64))
+    pixels = markers.pixels(np.array([4, 0, 6, -1], dtype=np.int64))
     np.testing.assert_array_equal(pixels[:2], [centres[1, 1], centres[0, 0]])  # id = array * 3 + marker
     assert np.isnan(pixels[2:]).all()  # beyond the sequence's MSMs

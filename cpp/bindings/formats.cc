@@ -139,30 +139,109 @@ py::dict MeasurementDict(const formats::ScaleMeasurement& measurement) {
   return out;
 }
 
-// From a calibproj.scale.ProjectedMarkers (None: no sequence given).
+// A bound ProjectedMarkers, or nothing for None (no sequence given).
 std::optional<formats::ProjectedMarkers> MarkersFrom(const py::object& m) {
   if (m.is_none()) return std::nullopt;
-  formats::ProjectedMarkers markers;
-  const py::tuple shape = m.attr("centres_px").attr("shape");
-  markers.arrays = shape[0].cast<int>();
-  markers.markers_per_array = shape[1].cast<int>();
-  const auto flat = m.attr("centres_px").attr("reshape")(-1).cast<std::vector<double>>();
-  for (size_t k = 0; k + 1 < flat.size(); k += 2) markers.centres.emplace_back(flat[k], flat[k + 1]);
-  markers.marker_side_px = m.attr("marker_side_px").cast<double>();
-  const auto projector = m.attr("projector").cast<std::pair<int, int>>();
-  markers.projector_width = projector.first;
-  markers.projector_height = projector.second;
-  const py::object largest = py::getattr(m, "largest_side_px", py::none());
-  if (!largest.is_none()) markers.largest_side_px = largest.attr("reshape")(-1).cast<std::vector<double>>();
-  markers.Check();
-  return markers;
+  if (!py::isinstance<formats::ProjectedMarkers>(m)) {
+    throw py::type_error("markers: expected a ProjectedMarkers, got " + std::string(py::str(py::type::handle_of(m).attr("__name__"))));
+  }
+  return m.cast<formats::ProjectedMarkers>();
 }
 
 // A ProjectedMarkers that must be given (TypeError for None).
 formats::ProjectedMarkers RequiredMarkers(const py::object& markers) {
-  auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
+  auto projected = MarkersFrom(markers);
   if (!projected) throw py::type_error("markers: expected a ProjectedMarkers, got None");
   return *std::move(projected);
+}
+
+// The shape of an array as numpy prints it: (3, 2), (4,).
+std::string ShapeText(const py::array& array) {
+  std::string text = "(";
+  for (py::ssize_t k = 0; k < array.ndim(); ++k) {
+    text += (k ? ", " : "") + std::to_string(array.shape(k));
+  }
+  return text + (array.ndim() == 1 ? ",)" : ")");
+}
+
+using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+formats::ProjectedMarkers NewMarkers(const DoubleArray& centres, double marker_side_px, std::pair<int, int> projector,
+                                     const std::optional<DoubleArray>& largest) {
+  if (centres.ndim() != 3 || centres.shape(2) != 2 || centres.size() == 0) {
+    throw std::invalid_argument("MSM centres must have shape (arrays, markers, 2), got " + ShapeText(centres));
+  }
+  formats::ProjectedMarkers markers;
+  markers.arrays = static_cast<int>(centres.shape(0));
+  markers.markers_per_array = static_cast<int>(centres.shape(1));
+  const double* values = centres.data();
+  for (py::ssize_t k = 0; k + 1 < centres.size(); k += 2) markers.centres.emplace_back(values[k], values[k + 1]);
+  markers.marker_side_px = marker_side_px;
+  markers.projector_width = projector.first;
+  markers.projector_height = projector.second;
+  if (largest) {
+    if (largest->ndim() != 2 || largest->shape(0) != centres.shape(0) || largest->shape(1) != centres.shape(1)) {
+      throw std::invalid_argument("largest marker sides must have shape (" + std::to_string(centres.shape(0)) + ", " +
+                                  std::to_string(centres.shape(1)) + "), got " + ShapeText(*largest));
+    }
+    markers.largest_side_px.assign(largest->data(), largest->data() + largest->size());
+  }
+  markers.Check();
+  return markers;
+}
+
+void RegisterProjectedMarkers(py::module_& m) {
+  using formats::ProjectedMarkers;
+  py::class_<ProjectedMarkers>(
+      m, "ProjectedMarkers",
+      "Where the projector draws the MSMs: what the projector model and the marker-size scale need from the\n"
+      "sequence. The MSM (array, marker) has point id array * markers_per_array + marker.")
+      .def(py::init(&NewMarkers), py::arg("centres_px"), py::arg("marker_side_px"), py::arg("projector"),
+           py::arg("largest_side_px") = py::none(),
+           "centres_px: projector pixels of every MSM centre (arrays, markers_per_array, 2); marker_side_px: side\n"
+           "of a marker at scale 1, border included; projector: (width, height); largest_side_px: per MSM\n"
+           "(arrays, markers_per_array) the side of the largest marker drawn at it, NaN where none, or None\n"
+           "when not known. ValueError for shapes or sizes that make no sense.")
+      .def_property_readonly(
+          "centres_px",
+          [](const ProjectedMarkers& p) {
+            py::array_t<double> out({static_cast<py::ssize_t>(p.arrays), static_cast<py::ssize_t>(p.markers_per_array),
+                                     static_cast<py::ssize_t>(2)});
+            double* values = out.mutable_data();
+            for (const cv::Point2d& centre : p.centres) {
+              *values++ = centre.x;
+              *values++ = centre.y;
+            }
+            return out;
+          },
+          "(arrays, markers_per_array, 2) projector pixels")
+      .def_readonly("marker_side_px", &ProjectedMarkers::marker_side_px)
+      .def_property_readonly("projector",
+                             [](const ProjectedMarkers& p) { return py::make_tuple(p.projector_width, p.projector_height); },
+                             "(width, height)")
+      .def_property_readonly(
+          "largest_side_px",
+          [](const ProjectedMarkers& p) -> py::object {
+            if (p.largest_side_px.empty()) return py::none();
+            py::array_t<double> out({static_cast<py::ssize_t>(p.arrays), static_cast<py::ssize_t>(p.markers_per_array)});
+            std::copy(p.largest_side_px.begin(), p.largest_side_px.end(), out.mutable_data());
+            return out;
+          },
+          "(arrays, markers_per_array), NaN where no marker is drawn; None when not known")
+      .def_readonly("arrays", &ProjectedMarkers::arrays)
+      .def_readonly("markers_per_array", &ProjectedMarkers::markers_per_array)
+      .def_property_readonly("point_count", [](const ProjectedMarkers& p) { return p.centres.size(); })
+      .def("pixels", &ProjectedMarkers::PixelsOf, py::arg("point_ids"),
+           "Per point id its projector pixel (N, 2), NaN for an id beyond the sequence's MSMs")
+      .def("largest_sides", &ProjectedMarkers::LargestSidesOf, py::arg("point_ids"),
+           "Per point id the side of the largest marker drawn at it (projector px), NaN where not known")
+      .def(
+          "image_centre",
+          [](const ProjectedMarkers& p) {
+            // Pixel centres on integers.
+            return Eigen::Vector2d((p.projector_width - 1) / 2.0, (p.projector_height - 1) / 2.0);
+          },
+          "The projector image's centre (pixels)");
 }
 
 // From a calibproj.io.intrinsics.Intrinsics.
@@ -287,6 +366,7 @@ void register_formats(py::module_& m) {
     }
   });
   RegisterCalibrationTypes(m);
+  RegisterProjectedMarkers(m);
   m.def("read_calibration", &formats::ReadCalibration, py::arg("directory"),
         "The Calibration of a results folder (camera_poses.json, metrics.json, points.ply); InputError naming "
         "the file and the problem");
@@ -374,7 +454,7 @@ void register_formats(py::module_& m) {
   m.def(
       "check_measurement",
       [](const py::object& measurement, const std::vector<std::string>& names, const py::object& markers) {
-        const auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
+        const auto projected = MarkersFrom(markers);
         formats::CheckMeasurement(Converted("measurement", [&] { return MeasurementFrom(measurement); }), names,
                                   projected ? &*projected : nullptr);
       },
@@ -383,7 +463,7 @@ void register_formats(py::module_& m) {
       "scale_factor",
       [](const py::object& calibration, const py::object& measurement, const py::object& markers,
          double radius_sides) {
-        const auto projected = Converted("markers", [&] { return MarkersFrom(markers); });
+        const auto projected = MarkersFrom(markers);
         const formats::ScaleFit fit = formats::ScaleFactor(
             Converted("calibration", [&] { return CalibrationFrom(calibration); }),
             Converted("measurement", [&] { return MeasurementFrom(measurement); }), projected ? &*projected : nullptr,
@@ -396,20 +476,6 @@ void register_formats(py::module_& m) {
         return out;
       },
       py::arg("calibration"), py::arg("measurement"), py::arg("markers"), py::arg("radius_sides"));
-  m.def(
-      "projector_pixels",
-      [](const py::object& markers, const std::vector<std::int64_t>& point_ids) {
-        return RequiredMarkers(markers).PixelsOf(point_ids);
-      },
-      py::arg("markers"), py::arg("point_ids"),
-      "Per point id its projector pixel (N, 2), NaN for an id beyond the sequence's MSMs");
-  m.def(
-      "projector_marker_sides",
-      [](const py::object& markers, const std::vector<std::int64_t>& point_ids) {
-        return RequiredMarkers(markers).LargestSidesOf(point_ids);
-      },
-      py::arg("markers"), py::arg("point_ids"),
-      "Per point id the side of the largest marker drawn at it (projector px), NaN where not known");
   m.def("parse_export_formats", &formats::ParseExportFormats, py::arg("text"));
   m.def(
       "colmap_camera",

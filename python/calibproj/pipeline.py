@@ -327,11 +327,11 @@ def _left_out(ingest_failed: dict[str, str], unusable_intrinsics: dict[str, str]
 
 
 def _projected_markers(sequence: Any, markers_per_array: int | None) -> Any:
-    from calibproj.scale import ProjectedMarkers, read_projected_markers
+    from calibproj.scale import projected_markers, read_projected_markers
 
     if isinstance(sequence, (str, os.PathLike)):
         return read_projected_markers(sequence, markers_per_array)
-    return ProjectedMarkers.from_sequence(sequence)
+    return projected_markers(sequence)
 
 
 def write_results(out: Path, final: Path, calibration: Calibration, tracks: Tracks,

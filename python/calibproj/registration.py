@@ -108,8 +108,7 @@ class RegistrationDriver:
         )
         if projector is not None:
             ids = np.asarray(self.tracks.point_ids, dtype=np.int64)
-            self.reconstruction.set_projector(_core.formats.projector_pixels(projector, ids), *projector.projector,
-                                              _core.formats.projector_marker_sides(projector, ids))
+            self.reconstruction.set_projector(projector.pixels(ids), *projector.projector, projector.largest_sides(ids))
 
     def name(self, camera: int) -> str:
         return self.tracks.camera_names[camera]

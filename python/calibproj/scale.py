@@ -90,68 +90,26 @@ class ScaleMeasurement:
         return self.text or f"{self.kind}={self.metres:g} m"
 
 
-@dataclass(frozen=True, eq=False)  # numpy field
-class ProjectedMarkers:
-    """Where the projector draws the MSMs: what ``marker-size`` needs from the sequence.
+# Where the projector draws the MSMs (the core's class): projector pixels of every MSM
+# centre, the marker side at scale 1, the projector's size and per MSM the largest
+# marker drawn at it; ``help(ProjectedMarkers)`` documents it.
+ProjectedMarkers = _core.formats.ProjectedMarkers
 
-    Attributes:
-        centres_px: projector pixels of every MSM centre, ``(arrays, markers_per_array, 2)``;
-            the MSM ``(array, marker)`` has point id ``array * markers_per_array + marker``.
-        marker_side_px: side of a marker at scale 1 in projector pixels, border included.
-        projector: projector resolution ``(width, height)``.
-        largest_side_px: per MSM ``(arrays, markers_per_array)`` the side of the largest
-            marker the sequence draws at its centre (projector pixels), NaN where it draws
-            none; None when not known. The registration groups the projector's noise by it.
-    """
 
-    centres_px: np.ndarray
-    marker_side_px: float
-    projector: tuple[int, int]
-    largest_side_px: np.ndarray | None = None
+def projected_markers(sequence) -> ProjectedMarkers:
+    """The MSMs a ``calibproj.sequence.Sequence`` (what ``sequence.json`` holds) draws,
+    with per MSM the side of the largest marker drawn at it (NaN where none)."""
+    largest = np.full(sequence.centres.shape[:2], np.nan)
+    for index, pattern in enumerate(sequence.patterns):
+        row = largest[pattern.array]
+        shown = sequence.markers_shown(index)
+        row[shown] = np.fmax(row[shown], pattern.marker_side_px)
+    return ProjectedMarkers(sequence.centres, sequence.layout.marker_side(1.0), tuple(sequence.projector), largest)
 
-    def __post_init__(self) -> None:
-        centres = np.asarray(self.centres_px, dtype=float)
-        if centres.ndim != 3 or centres.shape[2] != 2 or centres.size == 0:
-            raise ValueError(f"MSM centres must have shape (arrays, markers, 2), got {centres.shape}")
-        if not self.marker_side_px > 0:
-            raise ValueError(f"marker side must be positive, got {self.marker_side_px} px")
-        object.__setattr__(self, "centres_px", centres)
-        if self.largest_side_px is not None:
-            sides = np.asarray(self.largest_side_px, dtype=float)
-            if sides.shape != centres.shape[:2]:
-                raise ValueError(f"largest marker sides must have shape {centres.shape[:2]}, got {sides.shape}")
-            object.__setattr__(self, "largest_side_px", sides)
 
-    @classmethod
-    def from_sequence(cls, sequence) -> ProjectedMarkers:
-        """From a ``calibproj.sequence.Sequence`` (what ``sequence.json`` holds)."""
-        largest = np.full(sequence.centres.shape[:2], np.nan)
-        for index, pattern in enumerate(sequence.patterns):
-            row = largest[pattern.array]
-            shown = sequence.markers_shown(index)
-            row[shown] = np.fmax(row[shown], pattern.marker_side_px)
-        return cls(sequence.centres, sequence.layout.marker_side(1.0), tuple(sequence.projector), largest)
-
-    @classmethod
-    def from_layout(cls, layout) -> ProjectedMarkers:
-        """From a ``calibproj.sequence.MsmLayout``."""
-        return cls(layout.centres(), layout.marker_side(1.0), tuple(layout.projector))
-
-    @property
-    def markers_per_array(self) -> int:
-        return self.centres_px.shape[1]
-
-    @property
-    def point_count(self) -> int:
-        return self.centres_px.shape[0] * self.centres_px.shape[1]
-
-    def pixels(self, point_ids: np.ndarray) -> np.ndarray:
-        """Projector pixels of MSM point ids, ``(N, 2)``."""
-        return self.centres_px.reshape(-1, 2)[np.asarray(point_ids, dtype=np.int64)]
-
-    def image_centre(self) -> np.ndarray:
-        width, height = self.projector
-        return np.array([(width - 1) / 2.0, (height - 1) / 2.0])  # pixel centres on integers
+def layout_markers(layout) -> ProjectedMarkers:
+    """The MSMs of a ``calibproj.sequence.MsmLayout`` (their largest sides not known)."""
+    return ProjectedMarkers(layout.centres(), layout.marker_side(1.0), tuple(layout.projector))
 
 
 def read_projected_markers(path: str | os.PathLike, markers_per_array: int | None = None) -> ProjectedMarkers:
@@ -159,7 +117,7 @@ def read_projected_markers(path: str | os.PathLike, markers_per_array: int | Non
     checks that the sequence is the one the tracks were made from."""
     from calibproj.sequence.sequence import Sequence
 
-    markers = ProjectedMarkers.from_sequence(Sequence.load(path))
+    markers = projected_markers(Sequence.load(path))
     if markers_per_array is not None and markers_per_array != markers.markers_per_array:
         raise ValueError(f"{path}: {markers.markers_per_array} markers per array, but the tracks have "
                          f"{markers_per_array}; is it the sequence of these tracks?")

@@ -220,14 +220,14 @@ def densify(results: str | os.PathLike, sequence: Sequence,
     needs it. A camera that cannot be planned for is logged and left out."""
     from calibproj.calibration import Calibration
     from calibproj.results import TRACKS_FILE, resolve_intrinsics
-    from calibproj.scale import ProjectedMarkers
+    from calibproj.scale import projected_markers
     from calibproj.tracks import Tracks
 
     options = options or DensifyOptions()
     folder = Path(results)
     calibration = Calibration.load(folder)
     tracks = Tracks.read(folder / TRACKS_FILE)
-    markers = ProjectedMarkers.from_sequence(sequence)
+    markers = projected_markers(sequence)
     if tracks.markers_per_array not in (None, markers.markers_per_array) or \
             (len(tracks.point_ids) and tracks.point_ids.max() >= markers.point_count):
         raise ValueError(f"{folder}: its tracks do not come from this sequence (point ids or markers per array "
