@@ -53,7 +53,7 @@ EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "
 BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.ingest.ingest_camera", "_core.check.CameraCheck",
                         "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.Calibration",
                         "_core.formats.CameraPose", "_core.formats.CameraMetrics", "_core.formats.Plane",
-                        "_core.formats.CameraIntrinsics", "_core.formats.Tracks"}
+                        "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit"}
 
 # Keyword options of registration.Reconstruction (cpp/bindings/registration.cc).
 REGISTRATION_OPTIONS = {
@@ -550,6 +550,8 @@ class Baselines:
         check_args = [("calibration", calibration), ("intrinsics", intrinsics), ("tracks", tracks),
                       ("stored_tracks", tracks), ("unusable", {}), ("not_seen", {})]
         self.check_call = lambda: _core.check.check_calibration(*(value for _, value in check_args))
+        self.scale_fit = lambda: _core.formats.scale_factor(calibration, parse_scale("marker-size:1/4=0.1"), markers,
+                                                             30.0)
         checked = self.check_call()
         return {
             "_core.formats.read_calibration": Spec([("directory", folder / "results")]),
@@ -585,6 +587,9 @@ class Baselines:
                                                             ("tracks", later), ("intrinsics", intrinsics)]),
             "_core.formats.scaled_lengths": Spec([("calibration", calibration), ("factor", 2.0)]),
             "_core.formats.parse_scale": Spec([("text", "distance:a,b=2.0")]),
+            "_core.formats.ScaleMeasurement": Spec([("kind", "distance"), ("metres", 2.0), ("cameras", ["a", "b"]),
+                                                   ("marker", None), ("text", "")]),
+            "_core.formats.ScaleFit": Spec([]),
             "_core.formats.check_measurement": Spec([("measurement", parse_scale("marker-size:1/4=0.1")),
                                                     ("camera_names", ["a", "b"]), ("markers", markers)]),
             "_core.formats.scale_factor": Spec([("calibration", calibration),
@@ -637,6 +642,10 @@ class Baselines:
             "_core.check.CameraVerdict": {
                 state: (lambda state=state: self.check_call().cameras[state]) for state in ("a", "b")},
             "_core.formats.Calibration": {"read": lambda: _core.formats.read_calibration(self.results_folder)},
+            "_core.formats.ScaleFit": {"fitted": lambda: self.scale_fit()},
+            "_core.formats.ScaleMeasurement": {
+                "parsed": lambda: _core.formats.parse_scale("marker-size:1/4=0.1"),
+                "built": lambda: _core.formats.ScaleMeasurement("camera-height", 2.5, ["a"])},
             "_core.formats.ProjectedMarkers": {
                 "sized": lambda: _core.formats.ProjectedMarkers(np.zeros((2, 3, 2)), 4.0, (60, 30), np.ones((2, 3))),
                 "unsized": lambda: _core.formats.ProjectedMarkers(np.zeros((1, 2, 2)), 1.0, (8, 8))},

@@ -119,24 +119,44 @@ py::dict LengthsOf(const Calibration& calibration) {
   return out;
 }
 
-formats::ScaleMeasurement MeasurementFrom(const py::object& m) {
-  formats::ScaleMeasurement measurement;
-  measurement.kind = m.attr("kind").cast<std::string>();
-  measurement.metres = m.attr("metres").cast<double>();
-  measurement.cameras = m.attr("cameras").cast<std::vector<std::string>>();
-  measurement.marker = OptionalOf<std::pair<long long, long long>>(m.attr("marker"));
-  measurement.text = m.attr("text").cast<std::string>();
-  return measurement;
+// A bound ScaleMeasurement (TypeError for anything else).
+const formats::ScaleMeasurement& MeasurementFrom(const py::object& m) {
+  if (!py::isinstance<formats::ScaleMeasurement>(m)) {
+    throw py::type_error("measurement: expected a ScaleMeasurement, got " +
+                         std::string(py::str(py::type::handle_of(m).attr("__name__"))));
+  }
+  return m.cast<const formats::ScaleMeasurement&>();
 }
 
-py::dict MeasurementDict(const formats::ScaleMeasurement& measurement) {
-  py::dict out;
-  out["kind"] = measurement.kind;
-  out["metres"] = measurement.metres;
-  out["cameras"] = py::tuple(py::cast(measurement.cameras));
-  out["marker"] = measurement.marker ? py::cast(*measurement.marker) : py::none();
-  out["text"] = measurement.text;
-  return out;
+void RegisterScaleTypes(py::module_& m) {
+  using formats::ScaleMeasurement;
+  py::class_<ScaleMeasurement>(m, "ScaleMeasurement", "One length measured in the room (a --scale value).")
+      .def(py::init([](std::string kind, double metres, std::vector<std::string> cameras,
+                       std::optional<std::pair<long long, long long>> marker, std::string text) {
+             ScaleMeasurement measurement{std::move(kind), metres, std::move(cameras), marker, std::move(text)};
+             measurement.Check();
+             return measurement;
+           }),
+           py::arg("kind"), py::arg("metres"), py::arg("cameras") = std::vector<std::string>{},
+           py::arg("marker") = py::none(), py::arg("text") = "",
+           "ValueError unless kind, length, cameras and marker fit together")
+      .def_readonly("kind", &ScaleMeasurement::kind, "camera-height, marker-size or distance")
+      .def_readonly("metres", &ScaleMeasurement::metres, "the measured length")
+      .def_property_readonly("cameras", [](const ScaleMeasurement& s) { return py::tuple(py::cast(s.cameras)); },
+                             "the camera (camera-height) or the two cameras (distance)")
+      .def_readonly("marker", &ScaleMeasurement::marker,
+                    "(array, marker) of the marker measured (marker-size); None: the one nearest the centre of the "
+                    "projected image")
+      .def_readonly("text", &ScaleMeasurement::text, "the measurement as written, for messages")
+      .def("__str__", &ScaleMeasurement::Label)
+      .def("__repr__", [](const ScaleMeasurement& s) { return "ScaleMeasurement(" + s.Label() + ")"; });
+  using formats::ScaleFit;
+  py::class_<ScaleFit>(m, "ScaleFit", "What a scale measurement gives.")
+      .def_readonly("metres_per_unit", &ScaleFit::metres_per_unit)
+      .def_readonly("length", &ScaleFit::length, "the measured length in calibration units")
+      .def_readonly("fitted_centres", &ScaleFit::fitted_centres,
+                    "marker-size: MSM centres of the floor homography")
+      .def_readonly("fit_rms", &ScaleFit::fit_rms, "marker-size: their RMS distance to it, calibration units");
 }
 
 // A bound ProjectedMarkers, or nothing for None (no sequence given).
@@ -367,6 +387,7 @@ void register_formats(py::module_& m) {
   });
   RegisterCalibrationTypes(m);
   RegisterProjectedMarkers(m);
+  RegisterScaleTypes(m);
   m.def("read_calibration", &formats::ReadCalibration, py::arg("directory"),
         "The Calibration of a results folder (camera_poses.json, metrics.json, points.ply); InputError naming "
         "the file and the problem");
@@ -449,13 +470,13 @@ void register_formats(py::module_& m) {
       py::arg("calibration"), py::arg("factor"),
       "The Calibration's fields that scaling changes, every length multiplied by factor, unit 'm'");
   m.def(
-      "parse_scale", [](const std::string& text) { return MeasurementDict(formats::ParseScale(text)); },
-      py::arg("text"), "A --scale value as the fields of a ScaleMeasurement");
+      "parse_scale", &formats::ParseScale, py::arg("text"),
+      "A --scale value as a ScaleMeasurement; ValueError naming the bad part");
   m.def(
       "check_measurement",
       [](const py::object& measurement, const std::vector<std::string>& names, const py::object& markers) {
         const auto projected = MarkersFrom(markers);
-        formats::CheckMeasurement(Converted("measurement", [&] { return MeasurementFrom(measurement); }), names,
+        formats::CheckMeasurement(MeasurementFrom(measurement), names,
                                   projected ? &*projected : nullptr);
       },
       py::arg("measurement"), py::arg("camera_names"), py::arg("markers"));
@@ -464,16 +485,8 @@ void register_formats(py::module_& m) {
       [](const py::object& calibration, const py::object& measurement, const py::object& markers,
          double radius_sides) {
         const auto projected = MarkersFrom(markers);
-        const formats::ScaleFit fit = formats::ScaleFactor(
-            Converted("calibration", [&] { return CalibrationFrom(calibration); }),
-            Converted("measurement", [&] { return MeasurementFrom(measurement); }), projected ? &*projected : nullptr,
-            radius_sides);
-        py::dict out;
-        out["metres_per_unit"] = fit.metres_per_unit;
-        out["length"] = fit.length;
-        out["fitted_centres"] = fit.fitted_centres;
-        out["fit_rms"] = fit.fit_rms;
-        return out;
+        return formats::ScaleFactor(Converted("calibration", [&] { return CalibrationFrom(calibration); }),
+                                    MeasurementFrom(measurement), projected ? &*projected : nullptr, radius_sides);
       },
       py::arg("calibration"), py::arg("measurement"), py::arg("markers"), py::arg("radius_sides"));
   m.def("parse_export_formats", &formats::ParseExportFormats, py::arg("text"));

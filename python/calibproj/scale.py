@@ -43,7 +43,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -67,27 +66,9 @@ DEFAULT_MARKER_RADIUS_SIDES = _core.formats.default_marker_radius_sides
 MIN_MARKER_NEIGHBOURS = _core.formats.min_marker_neighbours
 
 
-@dataclass(frozen=True)
-class ScaleMeasurement:
-    """One length measured in the room.
-
-    Attributes:
-        kind: ``camera-height``, ``marker-size`` or ``distance``.
-        metres: the measured length.
-        cameras: the camera (camera-height) or the two cameras (distance).
-        marker: ``(array, marker)`` of the marker measured (marker-size); ``None``
-            means the marker nearest the centre of the projected image.
-        text: the measurement as written, for messages.
-    """
-
-    kind: str
-    metres: float
-    cameras: tuple[str, ...] = ()
-    marker: tuple[int, int] | None = None
-    text: str = ""
-
-    def __str__(self) -> str:
-        return self.text or f"{self.kind}={self.metres:g} m"
+# One length measured in the room (the core's class): kind, metres, cameras, marker and
+# the text as written; ``help(ScaleMeasurement)`` documents it.
+ScaleMeasurement = _core.formats.ScaleMeasurement
 
 
 # Where the projector draws the MSMs (the core's class): projector pixels of every MSM
@@ -129,7 +110,7 @@ def read_projected_markers(path: str | os.PathLike, markers_per_array: int | Non
 
 def parse_scale(text: str) -> ScaleMeasurement:
     """Parse a ``--scale`` value (see the module docstring); ValueError naming the bad part."""
-    return ScaleMeasurement(**_core.formats.parse_scale(str(text)))
+    return _core.formats.parse_scale(str(text))
 
 
 def check_measurement(
@@ -164,10 +145,9 @@ def scale_factor(
     fit = _core.formats.scale_factor(calibration, measurement, markers, float(radius_sides))
     if measurement.kind == "marker-size":
         logger.info("marker-size: floor homography fitted on %d MSM centres, RMS %.3g units",
-                    fit["fitted_centres"], fit["fit_rms"])
-    logger.info("scale from %s: %.6g m per unit (%.6g units measured)", measurement, fit["metres_per_unit"],
-                fit["length"])
-    return fit["metres_per_unit"]
+                    fit.fitted_centres, fit.fit_rms)
+    logger.info("scale from %s: %.6g m per unit (%.6g units measured)", measurement, fit.metres_per_unit, fit.length)
+    return fit.metres_per_unit
 
 
 def apply_scale(
