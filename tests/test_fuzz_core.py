@@ -585,7 +585,7 @@ class Baselines:
             "_core.formats.write_tracks": Spec([("out", folder / "tracks.json"), ("tracks", tracks)]),
             "_core.formats.with_earlier_observations": Spec([("earlier", folder / "valid_tracks.json"),
                                                             ("tracks", later), ("intrinsics", intrinsics)]),
-            "_core.formats.scaled_lengths": Spec([("calibration", calibration), ("factor", 2.0)]),
+            "_core.formats.scaled": Spec([("calibration", calibration), ("factor", 2.0)]),
             "_core.formats.parse_scale": Spec([("text", "distance:a,b=2.0")]),
             "_core.formats.ScaleMeasurement": Spec([("kind", "distance"), ("metres", 2.0), ("cameras", ["a", "b"]),
                                                    ("marker", None), ("text", "")]),

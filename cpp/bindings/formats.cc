@@ -94,31 +94,6 @@ Calibration CalibrationFrom(const py::object& c) {
   return calibration;
 }
 
-// The lengths of a calibration as Calibration's fields (what scaling changes).
-py::dict LengthsOf(const Calibration& calibration) {
-  py::dict poses, centre_sigma;
-  for (const auto& pose : calibration.poses) poses[py::str(pose.name)] = py::make_tuple(pose.R, pose.t);
-  for (const auto& [name, metrics] : calibration.metrics) {
-    centre_sigma[py::str(name)] = metrics.centre_sigma ? py::cast(*metrics.centre_sigma) : py::none();
-  }
-  py::list planes;
-  for (const auto& plane : calibration.planes) {
-    py::dict entry;
-    entry["normal"] = std::vector<double>{plane.normal.x(), plane.normal.y(), plane.normal.z()};
-    entry["offset"] = plane.offset;
-    entry["points"] = plane.points;
-    planes.append(entry);
-  }
-  py::dict out;
-  out["poses"] = poses;
-  out["centre_sigma"] = centre_sigma;
-  out["points"] = Eigen::MatrixXd(calibration.points);
-  out["unit"] = calibration.unit;
-  out["floor_rms"] = calibration.floor_rms;
-  out["planes"] = planes;
-  return out;
-}
-
 // A bound ScaleMeasurement (TypeError for anything else).
 const formats::ScaleMeasurement& MeasurementFrom(const py::object& m) {
   if (!py::isinstance<formats::ScaleMeasurement>(m)) {
@@ -463,12 +438,12 @@ void register_formats(py::module_& m) {
       "The Tracks `tracks` with the observations of an earlier results folder (or tracks.json) "
       "added; InputError naming the file (other intrinsics, shared point ids)");
   m.def(
-      "scaled_lengths",
+      "scaled",
       [](const py::object& calibration, double factor) {
-        return LengthsOf(formats::Scaled(Converted("calibration", [&] { return CalibrationFrom(calibration); }), factor));
+        return formats::Scaled(Converted("calibration", [&] { return CalibrationFrom(calibration); }), factor);
       },
       py::arg("calibration"), py::arg("factor"),
-      "The Calibration's fields that scaling changes, every length multiplied by factor, unit 'm'");
+      "The calibration (a core Calibration) with every length multiplied by factor, in metres");
   m.def(
       "parse_scale", &formats::ParseScale, py::arg("text"),
       "A --scale value as a ScaleMeasurement; ValueError naming the bad part");

@@ -40,7 +40,6 @@ scale.cc``), the same code as ``calibproj-native calibrate --scale``.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
 
@@ -164,11 +163,4 @@ def scaled(calibration: Calibration, factor: float) -> Calibration:
     """A copy of the calibration with every length multiplied by ``factor``, in metres."""
     if calibration.unit == "m":
         logger.warning("the calibration is already in metres; scaling it again by %.6g", factor)
-    lengths = _core.formats.scaled_lengths(calibration, float(factor))
-    sigma = lengths["centre_sigma"]
-    metrics = {name: dataclasses.replace(m, centre_sigma=sigma[name]) for name, m in calibration.metrics.items()}
-    return dataclasses.replace(
-        calibration, poses=lengths["poses"], metrics=metrics, points=np.asarray(lengths["points"]).reshape(-1, 3),
-        point_ids=calibration.point_ids.copy(), unit=lengths["unit"], floor_rms=lengths["floor_rms"],
-        planes=lengths["planes"],
-    )
+    return Calibration.from_core(_core.formats.scaled(calibration, float(factor)))
