@@ -50,7 +50,7 @@ MODULES = {"_core": _core, "_bench": _bench}
 EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "_core.sync.synchronise",
                 "_core.ingest.ingest_camera"}
 # No constructor by design (results of a call); the tiny video holds no light code.
-BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.ingest.ingest_camera", "_core.check.CameraCheck",
+BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "_core.detect.MarkerFamilyInfo", "_core.ingest.ingest_camera", "_core.check.CameraCheck",
                         "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.Calibration",
                         "_core.formats.CameraPose", "_core.formats.CameraMetrics", "_core.formats.Plane",
                         "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit"}
@@ -466,6 +466,7 @@ class Baselines:
                                                   ("height", 480.0), ("levels", 3)]),
             "_core.detect.family_specs": Spec([]),
             "_core.detect.family_info": Spec([("spec", "aruco:4X4_50")]),
+            "_core.detect.MarkerFamilyInfo": Spec([]),
             "_core.detect.marker_bits": Spec([("spec", "aruco:4X4_50"), ("id", 3)]),
             "_core.detect.marker_centres": Spec([("corners", corners)]),
             "_core.detect.check_floor_consistency": Spec([("projector", s["points"][:, :2] * 100),
@@ -481,6 +482,7 @@ class Baselines:
             "_core.detect.CornerRefinementOptions": Spec([]),
             "_core.detect.CornerRefinement": Spec([("value", 1)]),
             "_core.video.probe": Spec([("path", f["tiny.mkv"])]),
+            "_core.video.VideoInfo": Spec([]),
             "_core.video.frame_timestamps": Spec([("path", f["tiny.mkv"])]),
             "_core.video.frame_period": Spec([("times", [0.0, 0.04, 0.08, 0.16, 0.2])]),
             "_core.video.luma_signal": Spec([("path", f["tiny.mkv"]), ("gamma", 2.2), ("row_step", 2),
@@ -643,6 +645,10 @@ class Baselines:
                 state: (lambda state=state: self.check_call().cameras[state]) for state in ("a", "b")},
             "_core.formats.Calibration": {"read": lambda: _core.formats.read_calibration(self.results_folder)},
             "_core.formats.ScaleFit": {"fitted": lambda: self.scale_fit()},
+            "_core.video.VideoInfo": {"probed": lambda: _core.video.probe(self.files["tiny.mkv"])},
+            "_core.detect.MarkerFamilyInfo": {
+                family: (lambda family=family: _core.detect.family_info(family))
+                for family in ("aruco:4X4_50", "apriltag:tagStandard41h12")},
             "_core.formats.ScaleMeasurement": {
                 "parsed": lambda: _core.formats.parse_scale("marker-size:1/4=0.1"),
                 "built": lambda: _core.formats.ScaleMeasurement("camera-height", 2.5, ["a"])},

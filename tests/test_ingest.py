@@ -439,7 +439,7 @@ def with_static_markers(video: Path, out: Path, ids: tuple[int, ...], markers: s
         stamp = render_marker(markers, marker_id, module_px=side_px / 6.0, inverted=True)
         x = 10 + k * (stamp.shape[1] + 10)
         stamps.append((stamp, slice(height - 10 - stamp.shape[0], height - 10), slice(x, x + stamp.shape[1])))
-    with GreyVideoWriter(out, (width, height), _core.video.probe(str(video))["fps"], crf=0,
+    with GreyVideoWriter(out, (width, height), _core.video.probe(str(video)).fps, crf=0,
                          preset="ultrafast", timestamps_s=_core.video.frame_timestamps(str(video))) as writer:
         for frame in frames:
             for stamp, rows, columns in stamps:

@@ -58,7 +58,7 @@ def test_a_retimed_video_has_gaps_where_frames_were_dropped(tmp_path):
     decoded = _core.video.frame_timestamps(str(path))
     assert np.max(np.abs(decoded - times)) < 2e-5  # the 1/90000 s time base
     info = _core.video.probe(str(path))
-    assert info["timed"] and info["fps"] == pytest.approx(30.0)
+    assert info.timed and info.fps == pytest.approx(30.0)
     signal = _core.video.luma_signal(str(path), 1.0, 1)
     assert len(signal) == kept[-1] + 1
     np.testing.assert_array_equal(np.flatnonzero(~np.isnan(signal)), kept)

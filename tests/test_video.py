@@ -66,9 +66,9 @@ def test_luma_is_the_grey_level_of_the_encoded_frames(tmp_path: Path, name: str)
 def test_probe_reads_size_rate_and_frame_count(tmp_path: Path) -> None:
     path = encode(tmp_path, "x264_yuv420p", frames(), rate="30000/1001")
     info = _core.video.probe(str(path))
-    assert (info["width"], info["height"]) == SIZE
-    assert info["fps"] == pytest.approx(30000 / 1001, rel=1e-6)
-    assert info["frame_count"] == FRAMES
+    assert (info.width, info.height) == SIZE
+    assert info.fps == pytest.approx(30000 / 1001, rel=1e-6)
+    assert info.frame_count == FRAMES
 
 
 @pytest.mark.parametrize("content", [b"", b"not a video at all" * 100])

@@ -132,20 +132,22 @@ void RegisterOptions(py::module_& m) {
 
 void RegisterFamilies(py::module_& m) {
   m.def("family_specs", &detect::MarkerFamilySpecs, "Every marker family spec this build accepts.");
+  using detect::MarkerFamilyInfo;
+  py::class_<MarkerFamilyInfo>(m, "MarkerFamilyInfo", "What a marker family is made of.")
+      .def_readonly("spec", &MarkerFamilyInfo::spec, "canonical spec, e.g. aruco:4X4_50")
+      .def_readonly("system", &MarkerFamilyInfo::system, "aruco or apriltag")
+      .def_readonly("name", &MarkerFamilyInfo::name, "the family name without the system")
+      .def_readonly("id_count", &MarkerFamilyInfo::id_count, "number of ids (0 .. id_count - 1)")
+      .def_property_readonly(
+          "grid_cells", [](const MarkerFamilyInfo& f) { return f.geometry.grid_cells; },
+          "side of the drawn marker in modules (cells), border included")
+      .def_property_readonly(
+          "quad_cells", [](const MarkerFamilyInfo& f) { return f.geometry.quad_cells; },
+          "side in modules of the square whose corners the detector returns (smaller than grid_cells for "
+          "AprilTags with the border inside, such as tagStandard41h12); both squares share the marker's centre")
+      .def("__repr__", [](const MarkerFamilyInfo& f) { return "MarkerFamilyInfo(" + f.spec + ")"; });
   m.def(
-      "family_info",
-      [](const std::string& spec) {
-        const auto family = detect::ParseMarkerFamily(spec);
-        const auto geometry = detect::GetMarkerGeometry(family);
-        py::dict info;
-        info["spec"] = family.Spec();
-        info["system"] = family.SystemName();
-        info["name"] = family.name;
-        info["id_count"] = detect::MarkerIdCount(family);
-        info["grid_cells"] = geometry.grid_cells;
-        info["quad_cells"] = geometry.quad_cells;
-        return info;
-      },
+      "family_info", &detect::DescribeMarkerFamily,
       py::arg("spec"),
       "Canonical spec, system, name, number of ids, side of the drawn grid and of the "
       "detected square (cells) of a marker family. ValueError for an unknown family.");

@@ -17,6 +17,15 @@ namespace py = pybind11;
 namespace calibproj::bindings {
 
 void register_video(py::module_& m) {
+  py::class_<video::VideoInfo>(m, "VideoInfo", "What a video's container says of it.")
+      .def_readonly("path", &video::VideoInfo::path)
+      .def_readonly("width", &video::VideoInfo::width)
+      .def_readonly("height", &video::VideoInfo::height)
+      .def_readonly("fps", &video::VideoInfo::fps,
+                    "rate of the frame grid the first timestamps lie on (else the declared one)")
+      .def_readonly("declared_fps", &video::VideoInfo::declared_fps, "the container's average frame rate")
+      .def_readonly("timed", &video::VideoInfo::timed, "the container gives frame timestamps")
+      .def_readonly("frame_count", &video::VideoInfo::frame_count, "as the container declares it (may be approximate)");
   m.def(
       "probe",
       [](const std::string& path) {
@@ -25,15 +34,7 @@ void register_video(py::module_& m) {
           py::gil_scoped_release release;
           info = video::ProbeVideo(path);
         }
-        py::dict d;
-        d["path"] = info.path;
-        d["width"] = info.width;
-        d["height"] = info.height;
-        d["fps"] = info.fps;
-        d["declared_fps"] = info.declared_fps;
-        d["timed"] = info.timed;
-        d["frame_count"] = info.frame_count;
-        return d;
+        return info;
       },
       py::arg("path"),
       "Frame size, frame rate (of the frame grid the first timestamps lie on; declared_fps: the "

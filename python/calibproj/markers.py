@@ -38,7 +38,6 @@ AprilTag
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -56,37 +55,15 @@ def _core_detect() -> Any:
     return detect
 
 
-@dataclass(frozen=True)
-class MarkerFamilyInfo:
-    """What a marker family is made of.
-
-    Attributes:
-        spec: canonical spec string, e.g. ``"aruco:4X4_50"``.
-        system: ``"aruco"`` or ``"apriltag"``.
-        name: the family name without the system.
-        id_count: number of ids (0 .. id_count - 1).
-        grid_cells: side of the drawn marker in modules (cells), border included.
-        quad_cells: side in modules of the square whose corners the detector returns
-            (smaller than ``grid_cells`` for AprilTags with the border inside, such as
-            tagStandard41h12); both squares share the marker's centre.
-    """
-
-    spec: str
-    system: str
-    name: str
-    id_count: int
-    grid_cells: int
-    quad_cells: int
-
-
 def marker_families() -> list[str]:
     """Every marker family spec this build accepts."""
     return list(_core_detect().family_specs())
 
 
-def family_info(markers: str = DEFAULT_MARKERS) -> MarkerFamilyInfo:
-    """Describe a marker family; ``ValueError`` naming the choices for an unknown one."""
-    return MarkerFamilyInfo(**_core_detect().family_info(markers))
+def family_info(markers: str = DEFAULT_MARKERS) -> Any:
+    """Describe a marker family (the core's ``MarkerFamilyInfo``: spec, system, name,
+    id_count, grid_cells, quad_cells); ``ValueError`` naming the choices for an unknown one."""
+    return _core_detect().family_info(markers)
 
 
 def marker_bits(markers: str, marker_id: int) -> np.ndarray:

@@ -217,7 +217,7 @@ def _with_nominal(source: Any, videos: Path, fov_deg: float) -> tuple[dict[str, 
         except RuntimeError as error:
             unusable[name] = str(error)
             continue
-        found[name] = nominal_intrinsics(name, (int(info["width"]), int(info["height"])), fov_deg)
+        found[name] = nominal_intrinsics(name, (info.width, info.height), fov_deg)
         logger.info("camera %s: no intrinsics file; starting from a %g deg field of view", name, fov_deg)
     return found, unusable
 

@@ -184,4 +184,9 @@ cv::Ptr<cv::aruco::Dictionary> ArucoDictionary(const MarkerFamily& family) {
   return ArucoDictionaryNamed(family.name);
 }
 
+MarkerFamilyInfo DescribeMarkerFamily(const std::string& spec) {
+  const MarkerFamily family = ParseMarkerFamily(spec);
+  return {family.Spec(), family.SystemName(), family.name, MarkerIdCount(family), GetMarkerGeometry(family)};
+}
+
 }  // namespace calibproj::detect

@@ -49,6 +49,18 @@ struct MarkerGeometry {
 
 MarkerGeometry GetMarkerGeometry(const MarkerFamily& family);
 
+// What a family is made of, as one record.
+struct MarkerFamilyInfo {
+  std::string spec;    // canonical, e.g. "aruco:4X4_50"
+  std::string system;  // "aruco" or "apriltag"
+  std::string name;    // without the system
+  int id_count = 0;
+  MarkerGeometry geometry;
+};
+
+// Throws std::invalid_argument as ParseMarkerFamily does.
+MarkerFamilyInfo DescribeMarkerFamily(const std::string& spec);
+
 // Marker `id` as a grid_cells x grid_cells CV_8U matrix of 0 (black) and 1 (white)
 // cells, row 0 at the top, as printed black on white: exactly what the detectors
 // expect. Both detectors return corner 0 at the top-left corner of this grid (AprilTag
