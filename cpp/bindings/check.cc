@@ -47,20 +47,26 @@ Eigen::Matrix3Xd Columns3(const RowMatrix& rows, const char* what) {
   return RowsOf<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(rows, 3, what).transpose();
 }
 
+// A check input holding the stored camera (K, R, t), their shapes checked.
+check::CameraCheckInput StoredCamera(const RowMatrix& K, const RowMatrix& R, const Eigen::VectorXd& t) {
+  if (K.rows() != 3 || K.cols() != 3) throw std::invalid_argument("K: expected shape (3, 3)");
+  if (R.rows() != 3 || R.cols() != 3) throw std::invalid_argument("R: expected shape (3, 3)");
+  if (t.size() != 3) throw std::invalid_argument("t: expected 3 values");
+  check::CameraCheckInput input;
+  input.K = {K(0, 0), K(1, 1), K(0, 2), K(1, 2), K(0, 1)};
+  input.R = R;
+  input.t = t;
+  return input;
+}
+
 check::CameraCheck CheckCameraPy(const RowMatrix& K, const RowMatrix& R, const Eigen::VectorXd& t,
                                  double rotation_sigma, double centre_sigma, const RowMatrix& points,
                                  const RowMatrix& observed, const RowMatrix& volume, double width, double height,
                                  const RowMatrix& reference_points, const RowMatrix& reference_observed,
                                  const std::vector<double>& dist, const py::kwargs& kwargs) {
   const check::CheckOptions options = CheckOptionsFromKwargs(kwargs);
-  if (K.rows() != 3 || K.cols() != 3) throw std::invalid_argument("K: expected shape (3, 3)");
-  if (R.rows() != 3 || R.cols() != 3) throw std::invalid_argument("R: expected shape (3, 3)");
-  if (t.size() != 3) throw std::invalid_argument("t: expected 3 values");
-  check::CameraCheckInput input;
-  input.K = {K(0, 0), K(1, 1), K(0, 2), K(1, 2), K(0, 1)};
+  check::CameraCheckInput input = StoredCamera(K, R, t);
   input.dist = dist;
-  input.R = R;
-  input.t = t;
   input.rotation_sigma = rotation_sigma;
   input.centre_sigma = centre_sigma;
   input.points = Columns3(points, "points");
@@ -79,13 +85,7 @@ check::CameraCheck CheckCameraPy(const RowMatrix& K, const RowMatrix& R, const E
 
 double PredictedShiftSigmaPy(const RowMatrix& K, const RowMatrix& R, const Eigen::VectorXd& t, const RowMatrix& points,
                              const RowMatrix& volume, double width, double height, double noise_px) {
-  if (K.rows() != 3 || K.cols() != 3) throw std::invalid_argument("K: expected shape (3, 3)");
-  if (R.rows() != 3 || R.cols() != 3) throw std::invalid_argument("R: expected shape (3, 3)");
-  if (t.size() != 3) throw std::invalid_argument("t: expected 3 values");
-  check::CameraCheckInput input;
-  input.K = {K(0, 0), K(1, 1), K(0, 2), K(1, 2), K(0, 1)};
-  input.R = R;
-  input.t = t;
+  check::CameraCheckInput input = StoredCamera(K, R, t);
   input.points = Columns3(points, "points");
   input.observed = Eigen::Matrix2Xd::Zero(2, input.points.cols());
   input.volume = Columns3(volume, "volume");
