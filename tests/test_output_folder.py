@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import json
+import logging
 import os
 import time
 from pathlib import Path
@@ -341,3 +342,22 @@ def test_detect_checks_its_output_file_before_the_ingest(small: Path, tmp_path: 
     assert main([*base, str(tmp_path / "tracks.json")]) == 1
     assert "another calibproj run is writing it" in one_error_line(capsys)
     holder.close()
+
+
+def test_messages_made_while_writing_name_the_final_folders(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """The demo's folder holds the results' staging folder: a message naming a file in
+    either names it where it is once both are committed, and only while they are written."""
+    caplog.set_level(logging.INFO)
+    logger = logging.getLogger("calibproj.test_output_folder")
+    outer = OutputFolder(tmp_path / "demo").open()
+    with outer, outer.writing() as staging:
+        inner = OutputFolder(staging / "results").open()
+        with inner, inner.writing() as results:
+            logger.info("report written: %s", results / "report.html")
+            logger.info("videos in %s", staging / "room")
+        logger.info("results in %s", staging / "results")
+    logger.info("staging was %s", staging)
+    final = tmp_path / "demo"
+    assert caplog.messages == [f"report written: {final / 'results' / 'report.html'}", f"videos in {final / 'room'}",
+                               f"results in {final / 'results'}", f"staging was {staging}"]
+    assert (final / "results").is_dir()

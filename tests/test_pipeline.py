@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import shutil
 import subprocess
 import sys
@@ -12,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from calibproj.cli import EXIT_FAILURE, main
+from calibproj.cli import EXIT_FAILURE, EXIT_USAGE, main
 from calibproj.comparison import compare
 from calibproj.evaluation import evaluate
 from calibproj.sequence import generate
@@ -146,8 +147,8 @@ def test_bad_invocations_exit_non_zero_with_one_clear_line(room: Path, tmp_path:
     result = run_cli("calibrate", str(videos), "--sequence", str(sequence), "--intrinsics", str(partial),
                      "--out", str(tmp_path / "e"), "--no-report", "--no-progress")
     assert result.returncode == 1
-    line = one_error_line(result)
-    assert f"cam2: {partial / 'cam2.json'}: no intrinsics file for camera 'cam2'" in line
+    assert one_error_line(result).endswith("1 camera(s) failed: cam2 (why: in the table above)")
+    assert f"cam2          FAILED     {partial / 'cam2.json'}: no intrinsics file for camera 'cam2'" in result.stdout
     poses = json.loads((tmp_path / "e" / "camera_poses.json").read_text())
     assert sorted(poses["cameras"]) == ["cam1", "cam3"] and "cam2" in poses["failed"]
 
@@ -161,7 +162,8 @@ def test_bad_invocations_exit_non_zero_with_one_clear_line(room: Path, tmp_path:
                      "--out", str(tmp_path / "f"), "--no-report", "--no-progress")
     assert result.returncode == 1
     reason = f"{broken / 'cam3.json'}: K: expected numbers, got true"
-    assert one_error_line(result).endswith(f"failed: cam3: {reason}")
+    assert one_error_line(result).endswith("failed: cam3 (why: in the table above)")
+    assert f"cam3          FAILED     {reason}" in result.stdout
     poses = json.loads((tmp_path / "f" / "camera_poses.json").read_text())
     assert sorted(poses["cameras"]) == ["cam1", "cam2"] and poses["failed"] == {"cam3": reason}
 
@@ -170,7 +172,7 @@ def test_a_camera_whose_intrinsics_file_is_bad_or_missing_fails_alone(
         tmp_path: Path, capsys: pytest.CaptureFixture, caplog: pytest.LogCaptureFixture) -> None:
     """From tracks: one camera's intrinsics file holds true in K, another's is missing.
     Those two fail, with the file and the problem in the results, the log and the
-    error line; the seven others are calibrated as well as ever (exit status 1)."""
+    summary table, and the error line names them; the seven others are calibrated as well as ever (exit status 1)."""
     simulate_tracks("or-full", tmp_path / "sim", noise_px=0.3, seed=1, eval_points=0, eval_points_per_camera=0)
     intrinsics = tmp_path / "sim" / "intrinsics"
     document = json.loads((intrinsics / "far2.json").read_text())
@@ -178,15 +180,26 @@ def test_a_camera_whose_intrinsics_file_is_bad_or_missing_fails_alone(
     (intrinsics / "far2.json").write_text(json.dumps(document))
     (intrinsics / "near2.json").unlink()
     results = tmp_path / "results"
+    caplog.set_level(logging.INFO)
     status = main(["calibrate", "--tracks", str(tmp_path / "sim" / "tracks.json"), "--intrinsics", str(intrinsics),
-                   "--out", str(results), "--no-report", "--no-progress"])
+                   "--out", str(results), "--no-report", "--no-progress", "--export", "yaml",
+                   "--scale", "camera-height:far1=2.5"])
     assert status == EXIT_FAILURE
     reasons = {"far2": f"{intrinsics / 'far2.json'}: K: expected numbers, got true",
                "near2": f"{intrinsics / 'near2.json'}: no intrinsics file for camera 'near2' (also looked for "
                         "near2.yaml, near2.yml, near2.xml)"}
-    stderr = capsys.readouterr().err
-    assert ": error: " not in stderr
-    assert f"calibproj calibrate: 2 camera(s) failed: far2: {reasons['far2']}; near2: {reasons['near2']}" in stderr
+    printed = capsys.readouterr()
+    assert ": error: " not in printed.err
+    assert "calibproj calibrate: 2 camera(s) failed: far2, near2 (why: in the table above)" in printed.err
+    assert all(f"{name:<14}FAILED     {reason}" in printed.out for name, reason in reasons.items())
+    # The summary is printed last: each camera's status, sigmas in the report's units.
+    summary = printed.out.splitlines()
+    assert summary[-1] == f"results: {results} (in metres)"
+    assert summary[-2] == "sigmas: 1 sigma, relative to the reference camera; centre sigmas in mm"
+    statuses = {line.split()[0]: line.split()[1] for line in summary if line.split()[:1] in (["far3"], ["near1"])}
+    assert statuses == {"far3": "reference", "near1": "ok"}  # far3: the initial pair's first
+    # Messages name the files where they are once the run has ended.
+    assert f"exported yaml: {results / 'calibration_opencv.yaml'}" in caplog.text and ".tmp-" not in caplog.text
     assert all(f"camera {name} failed: {reason}" in caplog.text for name, reason in reasons.items())
     assert json.loads((results / "camera_poses.json").read_text())["failed"] == reasons
     metrics = json.loads((results / "metrics.json").read_text())["cameras"]
@@ -261,3 +274,75 @@ def test_nominal_field_of_view_needs_videos(room: Path, tmp_path: Path, capsys) 
     code = main(["calibrate", "--tracks", str(tmp_path / "tracks.json"), "--out", str(tmp_path / "out"),
                  "--nominal-fov", "90", "--refine-intrinsics", "focal"])
     assert code == 2 and "--nominal-fov needs videos" in capsys.readouterr().err
+
+
+def refused_before_the_ingest(capsys: pytest.CaptureFixture, out: Path, *args: str) -> str:
+    """Run ``calibrate ARGS --out OUT``: status 2, one line, no output folder started."""
+    status = main(["calibrate", *args, "--out", str(out), "--no-progress"])
+    printed = capsys.readouterr()
+    lines = printed.err.strip().splitlines()
+    assert status == EXIT_USAGE and len(lines) == 1, printed.err
+    assert "MSMs" not in printed.err and not out.exists() and not list(out.parent.glob(f".{out.name}.*"))
+    return lines[0]
+
+
+def linked(folder: Path, videos: dict[str, Path]) -> Path:
+    folder.mkdir()
+    for name, source in videos.items():
+        (folder / name).symlink_to(source)
+    return folder
+
+
+@pytest.mark.parametrize("room", ["aruco:4X4_50"], indirect=True)
+def test_mistakes_seen_before_the_ingest_stop_it_in_one_line_naming_both_sides(
+        room: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """Too few cameras, videos and intrinsics named apart, a video renamed by its camera,
+    the projector's own video among the cameras (whatever its name), a video given as
+    the sequence or as tracks: each is one line before any video is decoded, naming
+    what is on both sides and what was likely meant."""
+    from calibproj.sequence.builder import write_sequence
+    from calibproj.sequence.sequence import Sequence
+
+    videos, intrinsics = room / "room" / "videos", room / "room" / "intrinsics"
+    sequence = room / "sequence" / "sequence.json"
+    out = tmp_path / "results"
+    common = ["--sequence", str(sequence), "--intrinsics", str(intrinsics)]
+
+    one = linked(tmp_path / "one", {"cam1.mp4": videos / "cam1.mp4"})
+    line = refused_before_the_ingest(capsys, out, str(one), *common)
+    assert line.endswith(f"{one}: one camera video (cam1.mp4); a calibration needs two or more cameras that see "
+                         "the projection together")
+
+    named_apart = tmp_path / "named_apart"
+    named_apart.mkdir()
+    for k in (1, 2, 3):
+        shutil.copy(intrinsics / f"cam{k}.json", named_apart / f"c{k}.json")
+    line = refused_before_the_ingest(capsys, out, str(videos), "--sequence", str(sequence),
+                                     "--intrinsics", str(named_apart))
+    assert (f"cam1.mp4, cam2.mp4, cam3.mp4 in {videos} have no intrinsics in {named_apart}, whose c1.json, "
+            "c2.json, c3.json match no video" in line)
+    assert line.endswith("(rename c1.json to cam1.json, c2.json to cam2.json, c3.json to cam3.json?)")
+
+    renamed = linked(tmp_path / "renamed", {"GOPR0042.MP4": videos / "cam1.mp4", "cam2.mp4": videos / "cam2.mp4",
+                                            "cam3.mp4": videos / "cam3.mp4"})
+    line = refused_before_the_ingest(capsys, out, str(renamed), *common)
+    assert (f"GOPR0042.MP4 in {renamed} has no intrinsics in {intrinsics}, whose cam1.json matches no video"
+            in line and line.endswith("(rename GOPR0042.MP4 to cam1.MP4?)"))
+
+    write_sequence(tmp_path / "projection", Sequence.load(sequence), preset="ultrafast")
+    projector = linked(tmp_path / "with_projector", {
+        "cam1.mp4": videos / "cam1.mp4", "cam2.mp4": videos / "cam2.mp4", "cam3.mp4": videos / "cam3.mp4",
+        "cam4.mp4": tmp_path / "projection" / "projection.mp4"})
+    line = refused_before_the_ingest(capsys, out, str(projector), *common)
+    assert f"{projector / 'cam4.mp4'}: is the projector's video of the sequence, not a camera's recording" in line
+
+    line = refused_before_the_ingest(capsys, out, str(videos), "--sequence", str(videos / "cam1.mp4"),
+                                     "--intrinsics", str(intrinsics))
+    assert line.endswith(f"{videos / 'cam1.mp4'}: is a video (MP4/MOV), not a calibproj sequence file; give the "
+                         "sequence.json that calibproj generate wrote with it")
+    line = refused_before_the_ingest(capsys, out, str(videos), "--sequence",
+                                     str(tmp_path / "projection" / "projection.mp4"), "--intrinsics", str(intrinsics))
+    assert line.endswith(f"the sequence file beside it is {tmp_path / 'projection' / 'sequence.json'}")
+    line = refused_before_the_ingest(capsys, out, str(videos / "cam2.mp4"), *common)
+    assert line.endswith(f"{videos / 'cam2.mp4'}: is a video (MP4/MOV), not a calibproj tracks file; camera videos "
+                         f"are given as their folder ({videos})")

@@ -17,6 +17,7 @@
 #include "calibproj/formats/intrinsics_file.h"
 #include "calibproj/formats/scale.h"
 #include "calibproj/formats/sequence_file.h"
+#include "calibproj/formats/video_container.h"
 #include "convert.h"
 #include "python_objects.h"
 #include "json_convert.h"
@@ -403,6 +404,9 @@ void register_formats(py::module_& m) {
   m.def("intrinsics_files", &formats::IntrinsicsFilesIn, py::arg("directory"),
         "Camera name -> its intrinsics files in the folder (.json, .yaml, .yml, .xml; sorted); InputError when "
         "the folder does not exist or holds none");
+  m.def("video_container", &formats::VideoContainerOfFile, py::arg("path"),
+        "The video container the file's first bytes show ('MP4/MOV', 'Matroska/WebM', 'AVI', 'MPEG-TS', "
+        "'MPEG-PS'), or '' for anything else (or a file that cannot be read)");
   m.def("intrinsics_file", &formats::IntrinsicsFileOf, py::arg("directory"), py::arg("name"),
         "The one intrinsics file of camera `name` in the folder; InputError naming the missing or second file");
   m.def("detect_report_path", &formats::DetectReportPath, py::arg("tracks"),

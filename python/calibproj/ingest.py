@@ -216,10 +216,10 @@ def ingest(
     """
     sequence, sequence_source = _load_sequence(sequence)
     options = options or IngestOptions()
-    video_paths = _video_paths(videos)
+    paths = video_paths(videos)
     aruco, apriltag = _detector_options(sequence.markers.system, detector_options or {})
     core_sequence = sequence.core()  # read by the core once, for every camera
-    names = list(video_paths)
+    names = list(paths)
     bars = _Progress(names, enabled=progress)
     exposures = dict(exposures or {})
     check_exposures(exposures, names)
@@ -227,7 +227,7 @@ def ingest(
     def run(name: str) -> CameraIngest:
         camera_options = options.replace(exposure_s=exposures.get(name, options.exposure_s))
         job = _CameraJob(core_sequence, camera_options, aruco, apriltag, bars)
-        return job.run(name, video_paths[name], _intrinsics_for(intrinsics, name))
+        return job.run(name, paths[name], _intrinsics_for(intrinsics, name))
 
     try:
         with ThreadPoolExecutor(max_workers=max(1, workers), thread_name_prefix="ingest") as pool:
@@ -271,11 +271,13 @@ class _CameraJob:
         except (ValueError, RuntimeError, OSError) as error:
             if self.bars.cancelled.is_set():  # the C++ core reports the interruption as its error
                 raise KeyboardInterrupt(f"camera {name}: ingest interrupted") from None
+            self.bars.finish(name, complete=False)
             report.error = str(error)
-            logger.warning("camera %s: %s", name, error)
+            logger.error("camera %s failed: %s", name, error)
             if SYNC_FAILURE in report.error:
                 report.brightness, report.brightness_step = _brightness_trace(video, self.kwargs)
         else:
+            self.bars.finish(name, complete=True)
             logger.info("camera %s: %d MSMs", name, len(report.raw["centres"]["array"]))
         return report
 
@@ -317,8 +319,23 @@ class _Progress:
                 self.bars[name] = progress_bar(total or None, f"camera {name}", position=self.positions[name])
             return self.bars[name]
 
+    def finish(self, name: str, complete: bool) -> None:
+        """Close the camera's bar as soon as its ingest ends, so that its time and rate
+        are its own (not those of the slowest camera); a ``complete`` one shows all the
+        frames it decoded as done (the container's frame count is an estimate)."""
+        with self.lock:
+            bar = self.bars.get(name)
+        if bar is None:
+            return
+        if complete and bar.n and bar.total != bar.n:
+            bar.total = bar.n
+        bar.close()
+
     def close(self) -> None:
-        for bar in self.bars.values():
+        # In screen order: a bar closed out of order is drawn again on a terminal.
+        with self.lock:
+            bars = sorted(self.bars.items(), key=lambda item: self.positions[item[0]])
+        for _, bar in bars:
             bar.close()
 
 
@@ -379,7 +396,7 @@ def _load_sequence(sequence: Any) -> tuple[Any, str]:
     return Sequence.load(sequence), str(sequence)
 
 
-def _video_paths(videos: Any) -> dict[str, Path]:
+def video_paths(videos: Any) -> dict[str, Path]:
     """Camera name -> video path, in name order."""
     if isinstance(videos, Mapping):
         paths = {str(name): Path(path) for name, path in videos.items()}

@@ -126,6 +126,8 @@ def calibrate(
     _check_nominal_fov(nominal_fov_deg, request, videos, intrinsics)
     folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
+        if videos is not None:  # the output is known to be writable: now the inputs, before the ingest
+            _check_videos(videos, sequence, intrinsics if nominal_fov_deg is None else None, merge)
         intrinsics_source = intrinsics
         given = source if videos is not None or isinstance(source, Tracks) else Tracks.read(source)
         # Before the ingest: a bad or missing file fails its own camera only (the reason
@@ -257,6 +259,22 @@ def _videos_folder(source: Tracks | str | os.PathLike) -> Path | None:
     return None if path.is_file() or path.suffix.lower() == ".json" else path
 
 
+def _check_videos(videos: Path, sequence: Any, intrinsics: Any, merge: str | os.PathLike | None) -> None:
+    """The mistakes ``calibproj.ingest_inputs`` sees before the ingest (ValueError)."""
+    from calibproj.ingest import video_paths
+    from calibproj.ingest_inputs import check_camera_count, check_intrinsics_names, check_no_projector_video
+    from calibproj.sequence.sequence import Sequence
+
+    names = video_camera_names(videos)
+    if not names:
+        return  # the ingest says what is wrong with the folder
+    if sequence is not None:
+        check_no_projector_video(video_paths(videos), sequence if isinstance(sequence, Sequence)
+                                 else Sequence.load(sequence))
+    check_camera_count(videos, names, _earlier_cameras(merge) if merge is not None else ())
+    check_intrinsics_names(videos, names, intrinsics)
+
+
 def video_camera_names(folder: Path) -> list[str]:
     """The cameras of a videos folder as the ingest names them (video file stems)."""
     from calibproj.ingest import VIDEO_SUFFIXES
@@ -279,9 +297,7 @@ def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, e
 
     result = ingest(path, sequence, intrinsics, options=ingest_options, detector_options=detector_options,
                     workers=workers, progress=progress, exposures=exposures)
-    for name, error in result.failed.items():
-        logger.error("camera %s failed: %s", name, error)
-    return result.tracks, result.failed, result
+    return result.tracks, result.failed, result  # the ingest logged each failure as it happened
 
 
 def _earlier_cameras(merge: str | os.PathLike) -> list[str]:
@@ -319,7 +335,7 @@ def video_files(ingest_result: Any) -> dict[str, str]:
 
 def _left_out(ingest_failed: dict[str, str], unusable_intrinsics: dict[str, str]) -> dict[str, str]:
     """The cameras that cannot enter the registration, with the reason: those the ingest
-    failed (logged by ``_tracks_of``) and those without usable intrinsics."""
+    failed (logged by the ingest) and those without usable intrinsics."""
     for name, reason in unusable_intrinsics.items():
         if name not in ingest_failed:
             logger.error("camera %s failed: %s", name, reason)

@@ -31,7 +31,9 @@ def progress_bar(total: int | None, description: str, enabled: bool = True, posi
     if not enabled:
         return tqdm(total=total, disable=True)
     if _is_terminal(stream):
-        return tqdm(total=total, desc=description, unit=unit, position=position, leave=True, file=stream)
+        # smoothing=0: the rate shown is the task's own average, also once it is closed.
+        return tqdm(total=total, desc=description, unit=unit, position=position, leave=True, file=stream,
+                    smoothing=0)
     return PeriodicProgress(total, description, unit, interval_s)
 
 

@@ -162,11 +162,11 @@ class RegistrationDriver:
         summary = self.reconstruction.summarize()
         for c, name in enumerate(self.tracks.camera_names):
             if summary["registered"][c] and summary["weak"][c]:
-                logger.warning("camera %s is weakly determined: rotation known to %.3f deg (1 sigma, limit %g), "
-                               "centre to %.3g units; more points in its view help (calibproj generate --densify RESULTS "
+                # The centre's sigma waits for the final summary, in the results' unit.
+                logger.warning("camera %s is weakly determined: rotation known to %.3f deg (1 sigma, limit %g); "
+                               "more points in its view help (calibproj generate --densify RESULTS "
                                "plans a short extra projection for it)",
-                               name, summary["rotation_sigma_deg"][c], self.options.weak_rotation_sigma_deg,
-                               summary["centre_sigma"][c])
+                               name, summary["rotation_sigma_deg"][c], self.options.weak_rotation_sigma_deg)
 
     def run(self, callback: Callable[[Step], bool | None] | None = None) -> Calibration:
         """All steps; ``callback(step)`` returning False stops after that step."""

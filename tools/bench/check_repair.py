@@ -231,6 +231,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", default="demo,or-full", help="scene presets (default demo,or-full)")
     parser.add_argument("--seeds", type=int, default=3, help="seeds per scene (default 3)")
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="first seed; seeds first..first+N-1 are run (default 0)")
     parser.add_argument("--trials", type=int, default=5, help="trials per scene and seed (default 5)")
     parser.add_argument("--arrays", type=int, default=48, help="MSM arrays of the full projection (default 48)")
     parser.add_argument("--tolerance-px", type=float, default=CheckOptions.tolerance_px,
@@ -253,7 +255,7 @@ def main() -> int:
         totals = {"false_moved": 0, "missed_moved": 0, "missed_below_tolerance": 0}
         rot_ratios, time_ratios, rows = [], [], []
         for scene_name in args.scenes.split(","):
-            for seed in range(args.seeds):
+            for seed in range(args.first_seed, args.first_seed + args.seeds):
                 scene = realistic(load_scene(scene_name, seed=seed))
                 room = work / f"{scene_name}-{seed}"
                 results, sequences, _ = calibrated_room(scene, sequence, sequence_path, room, seed, args.densify,

@@ -339,6 +339,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--conditions", default=",".join(CONDITIONS),
                         help=f"comma-separated conditions (default all: {', '.join(CONDITIONS)})")
     parser.add_argument("--seeds", type=int, default=3, help="seeds per condition (default 3)")
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="first seed; seeds first..first+N-1 are run (default 0)")
     parser.add_argument("--arrays", type=int, default=48, help="MSM arrays projected (default 48, as the demo)")
     parser.add_argument("--markers", default="aruco:4X4_50", help="marker family (default aruco:4X4_50)")
     parser.add_argument("--model", default="coplanar", choices=("coplanar", "free"))
@@ -375,7 +377,7 @@ def main(argv: list[str] | None = None) -> int:
                             progress=False)
         rows = []
         for name in names:
-            for seed in range(args.seeds):
+            for seed in range(args.first_seed, args.first_seed + args.seeds):
                 started = time.perf_counter()
                 row = run(name, seed, sequence, work / "sequence" / "sequence.json", work, args)
                 row["seconds"] = time.perf_counter() - started

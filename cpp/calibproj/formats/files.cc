@@ -1,5 +1,7 @@
 #include "calibproj/formats/files.h"
 
+#include "calibproj/formats/video_container.h"
+
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -146,12 +148,28 @@ std::string JsonProblem(const std::string& text, const nlohmann::json::exception
   return std::regex_replace(what, std::regex("; last read: '.*?'(?=;|$)"), "");
 }
 
+// What was probably meant when a video was given as a calibproj file of `kind`.
+std::string VideoGivenHint(const fs::path& path, const std::string& kind) {
+  const fs::path folder = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  if (kind == "sequence") {
+    const fs::path beside = folder / "sequence.json";
+    std::error_code error;
+    if (fs::is_regular_file(beside, error)) return "; the sequence file beside it is " + beside.string();
+    return "; give the sequence.json that calibproj generate wrote with it";
+  }
+  if (kind == "tracks") return "; camera videos are given as their folder (" + folder.string() + ")";
+  return "";
+}
+
 }  // namespace
 
 nlohmann::json ReadJson(const fs::path& path) {
   if (!fs::is_regular_file(path)) throw InputError(path.string() + ": no such file");
   std::ifstream in(path, std::ios::binary);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (const std::string container = VideoContainerOf(text.substr(0, 1024)); !container.empty()) {
+    throw InputError(path.string() + ": is a video (" + container + "), not a JSON file");
+  }
   if (const size_t bad = InvalidUtf8At(text); bad != std::string::npos) {
     char byte[8];
     std::snprintf(byte, sizeof(byte), "0x%02x", static_cast<unsigned char>(text[bad]));
@@ -176,6 +194,10 @@ nlohmann::json ReadJson(const fs::path& path) {
 }
 
 nlohmann::json ReadSchemaJson(const fs::path& path, const std::string& kind, int major) {
+  if (const std::string container = VideoContainerOfFile(path); !container.empty()) {
+    throw InputError(path.string() + ": is a video (" + container + "), not a calibproj " + kind + " file" +
+                     VideoGivenHint(path, kind));
+  }
   const nlohmann::json document = ReadJson(path);
   if (!document.is_object()) throw InputError(path.string() + ": expected a JSON object at the top level");
   const std::string expected = "calibproj." + kind + "/" + std::to_string(major);

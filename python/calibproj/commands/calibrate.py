@@ -78,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from calibproj.calibration import calibration_summary
+    from calibproj.commands.summary import format_cameras, row_status, unit_words
     from calibproj.pipeline import calibrate
     from calibproj.registration import RegistrationOptions
     from calibproj.self_calibration import SelfCalibrationOptions
@@ -108,32 +109,22 @@ def run(args: argparse.Namespace) -> int:
         self_calibration_options=dataclass_from_args(SelfCalibrationOptions, args),
         merge=args.merge,
     )
-    rows = calibration_summary(calibration)
     if args.json:
+        rows = calibration_summary(calibration)
+        for row in rows:
+            row["status"] = row_status(calibration, row["camera"])
         print(json.dumps(rows, indent=1))
     else:
-        print(format_summary(rows))
         from calibproj.report.page import plane_text
 
+        print(format_cameras(calibration, args.out))
         for k, plane in enumerate(calibration.planes):
             print(f"plane {k + 1} besides the floor: {plane_text(plane, calibration.unit)}")
-        print(f"results in {args.out} (unit: {calibration.unit})")
+        print(f"results: {args.out} ({unit_words(calibration)})")
+        if not args.no_report and calibration.poses:
+            print(f"report: {Path(args.out) / 'report.html'}")
     if calibration.failed:
-        failures = "; ".join(f"{name}: {reason}" for name, reason in calibration.failed.items())
-        print(f"calibproj calibrate: {len(calibration.failed)} camera(s) failed: {failures}", file=sys.stderr)
+        print(f"calibproj calibrate: {len(calibration.failed)} camera(s) failed: {', '.join(calibration.failed)} "
+              f"(why: in the table above)", file=sys.stderr)
         return 1
     return 0
-
-
-def format_summary(rows: list[dict]) -> str:
-    header = f"{'camera':<14}{'status':<12}{'mean px':>9}{'std px':>9}{'inliers':>9}{'track>=2':>10}{'score':>9}"
-    lines = [header, "-" * len(header)]
-    for row in rows:
-        if row["registered"]:
-            lines.append(
-                f"{row['camera']:<14}{'registered':<12}{row['mean_px']:9.3f}{row['std_px']:9.3f}"
-                f"{row['inliers']:9d}{row['track2']:10d}{row['view_score']:9d}"
-            )
-        else:
-            lines.append(f"{row['camera']:<14}{'FAILED':<12}{row['failure']}")
-    return "\n".join(lines)

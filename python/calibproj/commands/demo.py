@@ -28,6 +28,7 @@ def run(args: argparse.Namespace) -> int:
 
     from calibproj.commands.compare import format_table
     from calibproj.commands.evaluate import format_table as format_evaluation
+    from calibproj.commands.summary import format_cameras, unit_words
     from calibproj.demo import DemoOptions, run_demo
 
     options = dataclass_from_args(DemoOptions, args)
@@ -41,5 +42,9 @@ def run(args: argparse.Namespace) -> int:
     print(format_evaluation(result.evaluation))
     times = ", ".join(f"{stage} {seconds:.0f} s" for stage, seconds in result.seconds.items())
     print(f"\ntime: {times}; total {total:.0f} s")
+    results = result.report.parent
+    print("\nThe calibration:")
+    print(format_cameras(result.calibration, results))
+    print(f"results: {results} ({unit_words(result.calibration)})")
     print(f"report: {result.report}")
     return 0 if not result.comparison.missing else 1

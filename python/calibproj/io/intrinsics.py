@@ -244,7 +244,7 @@ def write_intrinsics_dir(directory: str | os.PathLike, cameras: dict[str, Intrin
 def load_intrinsics_dir(directory: str | os.PathLike) -> dict[str, Intrinsics]:
     """All intrinsics files of a directory, keyed by camera name (the file stem); the
     first bad file is a FormatError."""
-    cameras, unusable = intrinsics_of_cameras(directory, _intrinsics_files(directory))
+    cameras, unusable = intrinsics_of_cameras(directory, intrinsics_files_in(directory))
     for reason in unusable.values():
         raise FormatError(reason)
     return cameras
@@ -267,7 +267,7 @@ def intrinsics_of_cameras(
         return found, {name: f"no intrinsics for camera {name!r} (cameras with intrinsics: {known})"
                        for name in names if name not in source}
     directory = Path(source)
-    _intrinsics_files(directory)  # the folder exists and holds intrinsics files
+    intrinsics_files_in(directory)  # the folder exists and holds intrinsics files
     cameras: dict[str, Intrinsics] = {}
     unusable: dict[str, str] = {}
     for name in names:
@@ -283,7 +283,7 @@ def has_intrinsics_file(source: Mapping[str, Intrinsics] | str | os.PathLike, na
     if isinstance(source, Mapping):
         return name in source
     try:
-        return name in _intrinsics_files(source)
+        return name in intrinsics_files_in(source)
     except FormatError:  # no folder, or none of its files is an intrinsics file
         return False
 
@@ -300,7 +300,7 @@ def intrinsics_file(directory: str | os.PathLike, name: str) -> Path:
         raise FormatError(str(error)) from None
 
 
-def _intrinsics_files(directory: str | os.PathLike) -> dict[str, list[Path]]:
+def intrinsics_files_in(directory: str | os.PathLike) -> dict[str, list[Path]]:
     """Camera name -> its intrinsics files in ``directory`` (one, normally)."""
     from calibproj import _core
 

@@ -78,9 +78,14 @@ def write_json(path: str | os.PathLike, kind: str, major: int, body: dict[str, A
 
 def read_json_value(path: str | os.PathLike) -> Any:
     """Read any JSON file strictly (see the module docstring); FormatError naming the file."""
+    from calibproj import _core
+
     path = Path(path)
     if not path.is_file():
         raise FormatError(f"{path}: no such file")
+    container = _core.formats.video_container(path)
+    if container:
+        raise FormatError(f"{path}: is a video ({container}), not a JSON file")
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as error:

@@ -17,7 +17,8 @@ through (``calibrate``, ``generate``, ``simulate``, ``demo``):
    folder aside, the new one in), then deletes the previous folder: ``force`` replaces
    the whole previous folder, never a part of it. Leaving the ``with`` block
    without an exception commits; an exception or an interruption deletes the staging
-   folder and leaves the previous folder as it was.
+   folder and leaves the previous folder as it was. Log messages made while the work
+   writes name the final folder, not the staging one (``messages_naming``).
 
 A run killed outright (power cut, ``kill -9``) leaves at most a hidden staging folder,
 which the next run on the same path deletes; a folder at ``path`` is always a
@@ -30,13 +31,14 @@ from __future__ import annotations
 import array
 import errno
 import fcntl
+import logging
 import os
 import shutil
 import signal
 import tempfile
 import threading
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from types import TracebackType
 
@@ -314,7 +316,8 @@ class OutputFolder:
             raise RuntimeError("OutputFolder.writing() before open()")
         staging = self.staging
         try:
-            yield staging
+            with messages_naming(staging, self.path):
+                yield staging
         except OSError as error:
             if not _is_write_failure(error, staging):
                 raise
@@ -373,6 +376,51 @@ class OutputFolder:
             self.commit()
         else:
             self.abort()
+
+
+@contextmanager
+def messages_naming(staging: Path, final: Path) -> Iterator[None]:
+    """Log messages made while the block runs name ``final`` where they would name
+    ``staging``: what a run reports writing (``report written: ...``) is named where
+    the user will find it, not in a staging folder that is gone when the run ends.
+
+    The logging module's record factory is wrapped for the block (from any thread);
+    nested blocks (the demo's folder holds the results' staging folder) rename the
+    innermost staging folder first."""
+    pairs = {str(staging): str(final)}
+    with suppress(OSError):
+        pairs[str(staging.resolve())] = str(final.resolve())
+    pairs = dict(sorted(pairs.items(), key=lambda pair: -len(pair[0])))  # longest first
+
+    def own(message: str) -> str:
+        for old, new in pairs.items():
+            message = message.replace(old, new)
+        return message
+
+    previous = logging.getLogRecordFactory()
+    outer = getattr(previous, "rename", None)
+    base = getattr(previous, "base", previous)
+    rename = own if outer is None else (lambda message: outer(own(message)))
+
+    def factory(*args: object, **kwargs: object) -> logging.LogRecord:
+        record = base(*args, **kwargs)
+        try:
+            message = record.getMessage()
+        except (TypeError, ValueError):  # a malformed call: logging reports it when it emits
+            return record
+        renamed = rename(message)
+        if renamed != message:
+            record.msg, record.args = renamed, None
+        return record
+
+    factory.rename = rename  # type: ignore[attr-defined]
+    factory.base = base  # type: ignore[attr-defined]
+    logging.setLogRecordFactory(factory)
+    try:
+        yield
+    finally:
+        if logging.getLogRecordFactory() is factory:
+            logging.setLogRecordFactory(previous)
 
 
 def _same_file(a: Path, b: Path) -> bool:
