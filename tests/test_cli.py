@@ -80,6 +80,76 @@ def test_a_mistyped_option_gets_a_suggestion(capsys: pytest.CaptureFixture) -> N
     assert "did you mean" not in usage_error(capsys, [*base, "--zzzzzz"])
 
 
+def test_an_option_of_another_command_is_named_as_such(capsys: pytest.CaptureFixture) -> None:
+    line = usage_error(capsys, ["check", "results", "--board", "chessboard:9x6"])
+    assert line.endswith("(--board is an option of calibproj intrinsics)")
+    line = usage_error(capsys, ["compare", "a", "b", "--pnp-threshold-px", "2"])
+    assert line.endswith("(--pnp-threshold-px is an option of calibproj calibrate)")
+
+
+def test_calibrate_takes_the_ingest_options_of_its_videos() -> None:
+    """calibrate ingests videos as detect does, so it takes detect's knobs (found by a
+    user: --min-correlation was answered with "did you mean --min-coverage?")."""
+    from calibproj.cli import build_parser, parse_arguments
+    from calibproj.commands.calibrate import INGEST_OPTIONS_NOT_HERE
+    from calibproj.commands.options import dataclass_changed_from_args
+    from calibproj.ingest_options import IngestOptions
+
+    parser = build_parser()
+    args = parse_arguments(parser, ["calibrate", "videos", "--out", "o", "--min-correlation", "0.7",
+                                    "--detector-option", "quad_decimate=2"])
+    options = dataclass_changed_from_args(IngestOptions, args, exclude=INGEST_OPTIONS_NOT_HERE)
+    assert options == IngestOptions(min_correlation=0.7) and args.detector_option == ["quad_decimate=2"]
+    plain = parse_arguments(parser, ["calibrate", "videos", "--out", "o"])
+    assert dataclass_changed_from_args(IngestOptions, plain, exclude=INGEST_OPTIONS_NOT_HERE) is None
+
+
+def every_command_parser() -> dict:
+    from calibproj.cli import build_parser
+
+    parser = build_parser()
+    commands = next(action.choices for action in parser._actions if isinstance(action.choices, dict))
+    return {"calibproj": parser, **commands}
+
+
+def test_every_option_has_help_and_every_usage_fits_a_line() -> None:
+    for name, parser in every_command_parser().items():
+        for action in parser._actions:
+            assert action.help and action.help.strip(), (name, action.option_strings or action.dest)
+        usage = parser.format_usage().strip()
+        assert "\n" not in usage and len(usage) <= 100, usage
+        if name != "calibproj":
+            assert usage.endswith("[options]"), usage
+
+
+def test_common_options_come_first_and_the_rest_in_groups(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit):
+        main(["calibrate", "--help"])
+    text = capsys.readouterr().out
+    groups = re.findall(r"^(\S[^\n]*):$", text.split("positional arguments:")[1], re.MULTILINE)
+    assert groups[:2] == ["options", "output and progress"]
+    assert {"registration options", "ingest options (with videos; as calibproj detect)"} <= set(groups)
+    common = text.split("\noptions:\n")[1].split("\n\n")[0]
+    assert all(flag in common for flag in ("--sequence", "--intrinsics", "--out", "--scale", "--export"))
+    assert "--pnp-threshold-px" not in common and "--min-correlation" not in common
+
+
+def test_verbose_is_taken_after_the_command_too(capsys: pytest.CaptureFixture) -> None:
+    from calibproj.cli import build_parser, parse_arguments
+
+    for line in (["-v", "compare", "a", "b"], ["compare", "a", "b", "-v"], ["compare", "-v", "a", "b"]):
+        args = parse_arguments(build_parser(), line)
+        assert args.verbose + args.command_verbose == 1, line
+    args = parse_arguments(build_parser(), ["-v", "demo", "-v"])
+    assert args.verbose + args.command_verbose == 2
+
+
+def test_every_command_that_replaces_a_folder_says_force_alike() -> None:
+    for name, parser in every_command_parser().items():
+        flags = {flag for action in parser._actions for flag in action.option_strings}
+        assert "--no-force" not in flags, name
+
+
 # -- the scale's cameras, before the ingest ------------------------------------------------------------
 
 

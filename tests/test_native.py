@@ -357,7 +357,7 @@ def test_both_check_commands_take_the_same_options() -> None:
         return set(re.findall(r"--[a-z][a-z0-9-]*", help_text))
 
     python, native = options(run_python("check", "--help").stdout), options(run_native("check", "--help").stdout)
-    assert python - native == {"--sequence", "--workers", "--no-progress", "--no-report"}
+    assert python - native == {"--sequence", "--workers", "--no-progress", "--no-report", "--verbose"}
     assert native - python == set()
 
 
@@ -372,13 +372,26 @@ PYTHON_ONLY_CALIBRATE = {
     "--max-sampled-points", "--closed-form-min-change"}
 
 
-@pytest.mark.parametrize("command, python_only", [("detect", set()), ("calibrate", PYTHON_ONLY_CALIBRATE)])
+
+
+def ingest_flags() -> set[str]:
+    """The ingest's options as flags, which the Python calibrate takes from detect for its
+    videos (calibproj-native calibrates tracks; its detect takes them)."""
+    from calibproj.commands.calibrate import INGEST_OPTIONS_NOT_HERE
+
+    return {"--detector-option"} | {"--" + field.name.replace("_", "-") for field in dataclasses.fields(IngestOptions)
+                                     if field.name not in INGEST_OPTIONS_NOT_HERE}
+
+
+@pytest.mark.parametrize("command, python_only", [("detect", set()),
+                                                  ("calibrate", PYTHON_ONLY_CALIBRATE | ingest_flags())])
 def test_both_tools_take_the_same_options_but_those_listed(command: str, python_only: set[str]) -> None:
     """The gap between the two command lines is the listed one, no wider: an option added
     to one tool only fails here until it is added to the other or listed (README)."""
     def options(help_text: str) -> set[str]:
         # The options' own lines, not the examples of the description.
-        return set(re.findall(r"^\s+(?:-\w, )?(--[a-z][a-z0-9-]*)", help_text, re.MULTILINE)) - {"--help"}
+        # --verbose: the program's own option, which the Python command takes after it too.
+        return set(re.findall(r"^\s+(?:-\w, )?(--[a-z][a-z0-9-]*)", help_text, re.MULTILINE)) - {"--help", "--verbose"}
 
     python, native = options(run_python(command, "--help").stdout), options(run_native(command, "--help").stdout)
     assert python - native == python_only

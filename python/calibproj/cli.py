@@ -61,7 +61,8 @@ def build_parser() -> SuggestingArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"calibproj {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
-    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
+                                       help="the stage to run; calibproj COMMAND --help lists its options")
     for name, module_name in COMMANDS.items():
         try:
             module = importlib.import_module(module_name)
@@ -75,8 +76,26 @@ def build_parser() -> SuggestingArgumentParser:
             name, help=summary, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter
         )
         module.add_arguments(sub)
+        # -v is taken after the command too, where a user adds it to the line he ran.
+        sub.add_argument("-v", "--verbose", action="count", default=0, dest="command_verbose",
+                         help="more log output (-vv for debug); before the command as well")
+        sub.usage = compact_usage(sub)
+        sub.siblings = subparsers.choices
         sub.set_defaults(run=module.run, command_parser=sub)
     return parser
+
+
+def compact_usage(parser: argparse.ArgumentParser) -> str:
+    """``calibproj calibrate [VIDEOS_DIR] --out DIR [options]``: the positional arguments
+    and required options; the options are listed, grouped, below it."""
+    parts = ["%(prog)s"]
+    formatter = parser._get_formatter()
+    for action in parser._actions:
+        if not action.option_strings:
+            parts.append(formatter._format_args(action, action.dest.upper()))
+        elif action.required:
+            parts.append(f"{action.option_strings[0]} {action.metavar or action.dest.upper()}")
+    return " ".join(parts + ["[options]"])
 
 
 def parse_arguments(parser: SuggestingArgumentParser, argv: list[str] | None) -> argparse.Namespace:
@@ -140,7 +159,7 @@ def _run(argv: list[str] | None) -> int:
     args = parse_arguments(parser, argv)
     # Recorded in the outputs that say how they were made (provenance.json).
     args.command_line = ["calibproj", *(sys.argv[1:] if argv is None else argv)]
-    level = logging.WARNING - 10 * min(args.verbose + 1, 2)
+    level = logging.WARNING - 10 * min(args.verbose + args.command_verbose + 1, 2)
     logging.basicConfig(level=level, format="%(message)s")
     prefix = f"calibproj {args.command}"
     try:

@@ -32,45 +32,63 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from calibproj.commands.options import (add_dataclass_arguments, add_exposure_argument, dataclass_from_args,
-                                        parse_exposures)
+from calibproj.commands.options import (add_dataclass_arguments, add_detector_option_argument,
+                                        add_exposure_argument, dataclass_changed_from_args, dataclass_from_args,
+                                        parse_detector_options, parse_exposures)
+
+
+# Ingest options that calibrate does not take: the registration has an option of that name.
+INGEST_OPTIONS_NOT_HERE = ("homography_threshold_px",)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from calibproj.ingest_options import IngestOptions
     from calibproj.registration import RegistrationOptions
     from calibproj.self_calibration import SelfCalibrationOptions
 
+    # What most runs need comes first; every other knob is in a group of its own.
     parser.add_argument("videos", nargs="?", metavar="VIDEOS_DIR", help="folder of camera videos (<camera>.mp4)")
-    parser.add_argument("--tracks", metavar="FILE", help="tracks.json to calibrate from, instead of videos")
+    parser.add_argument("--sequence", metavar="FILE",
+                        help="sequence.json of the projection (needed with videos and by --scale marker-size)")
     parser.add_argument("--intrinsics", metavar="DIR",
                         help="folder of per-camera intrinsics files (may be left out with --nominal-fov)")
     parser.add_argument("--out", required=True, metavar="DIR", help="results folder")
-    parser.add_argument("--force", action="store_true", help="replace an existing results folder (the whole folder)")
-    parser.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
     parser.add_argument("--scale", metavar="MEASUREMENT",
                         help="metric scale from one measurement (see above; default: arbitrary unit)")
-    parser.add_argument("--sequence", metavar="FILE",
-                        help="sequence.json of the projection (needed with videos and by --scale marker-size)")
     parser.add_argument("--export", metavar="FORMATS",
                         help="also write the calibration as yaml, colmap and/or anipose (comma-separated)")
-    parser.add_argument("--merge", metavar="RESULTS",
-                        help="add the observations of an earlier calibration (its results folder or tracks.json): "
-                             "the new videos record a projection planned by `calibproj generate --densify RESULTS`, "
-                             "and --sequence is that densified sequence.json; same intrinsics as RESULTS")
-    parser.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
-    parser.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
-    add_exposure_argument(parser, "with videos; default: estimated")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    parser.add_argument("--refine-intrinsics", action="append", metavar="[CAMERA=]ENTRIES",
-                        help="refine these lens entries from the projection itself, starting from the "
-                             "intrinsics given: focal, pp, k1, k2, k3, tangential, or none; for every camera "
-                             "(focal,k1,k2) or one (ceiling=none); repeatable. Entries the data do not "
-                             "determine keep their given values and are reported (see self_calibration.json)")
-    parser.add_argument("--nominal-fov", type=float, metavar="DEG",
-                        help="with videos and --refine-intrinsics: a camera without an intrinsics file starts "
-                             "from a pinhole with this horizontal field of view (centred, no distortion)")
+    parser.add_argument("--force", action="store_true", help="replace an existing results folder (the whole folder)")
+    parser.add_argument("--tracks", metavar="FILE", help="tracks.json to calibrate from, instead of videos")
+
+    output = parser.add_argument_group("output and progress")
+    output.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
+    output.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
+    output.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+    more = parser.add_argument_group("more observations and lenses")
+    more.add_argument("--merge", metavar="RESULTS",
+                      help="add the observations of an earlier calibration (its results folder or tracks.json): "
+                           "the new videos record a projection planned by `calibproj generate --densify RESULTS`, "
+                           "and --sequence is that densified sequence.json; same intrinsics as RESULTS")
+    more.add_argument("--refine-intrinsics", action="append", metavar="[CAMERA=]ENTRIES",
+                      help="refine these lens entries from the projection itself, starting from the "
+                           "intrinsics given: focal, pp, k1, k2, k3, tangential, or none; for every camera "
+                           "(focal,k1,k2) or one (ceiling=none); repeatable. Entries the data do not "
+                           "determine keep their given values and are reported (see self_calibration.json)")
+    more.add_argument("--nominal-fov", type=float, metavar="DEG",
+                      help="with videos and --refine-intrinsics: a camera without an intrinsics file starts "
+                           "from a pinhole with this horizontal field of view (centred, no distortion)")
+
+    videos = parser.add_argument_group("ingest of the videos (as calibproj detect)")
+    videos.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
+    add_exposure_argument(videos, "with videos; default: estimated")
+    add_detector_option_argument(videos)
     add_dataclass_arguments(parser, RegistrationOptions, "registration options")
     add_dataclass_arguments(parser, SelfCalibrationOptions, "self-calibration options (with --refine-intrinsics)")
+    # --homography-threshold-px is the registration's here; the ingest keeps its default
+    # (calibproj detect sets it, then calibrate --tracks).
+    add_dataclass_arguments(parser, IngestOptions, "ingest options (with videos; as calibproj detect)",
+                            exclude=INGEST_OPTIONS_NOT_HERE)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -79,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
 
     from calibproj.calibration import calibration_summary
     from calibproj.commands.summary import format_cameras, row_status, unit_words
+    from calibproj.ingest_options import IngestOptions
     from calibproj.pipeline import calibrate
     from calibproj.registration import RegistrationOptions
     from calibproj.self_calibration import SelfCalibrationOptions
@@ -90,6 +109,10 @@ def run(args: argparse.Namespace) -> int:
     exposures = parse_exposures(args.exposure)
     if exposures and args.videos is None:
         raise ValueError("--exposure applies to videos, not to --tracks")
+    ingest_options = dataclass_changed_from_args(IngestOptions, args, exclude=INGEST_OPTIONS_NOT_HERE)
+    detector_options = parse_detector_options(args.detector_option)
+    if (ingest_options is not None or detector_options) and args.videos is None:
+        raise ValueError("ingest and detector options apply to videos, not to --tracks")
     calibration = calibrate(
         args.tracks or args.videos,
         args.intrinsics,
@@ -101,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
         report=not args.no_report,
         force=args.force,
         exposures=exposures,
+        ingest_options=ingest_options,
+        detector_options=detector_options or None,
         workers=args.workers,
         progress=not args.no_progress,
         command=getattr(args, "command_line", None),

@@ -19,8 +19,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--out", default="calibproj-demo", metavar="DIR",
                         help="folder for the sequence, the videos and the results (default: calibproj-demo)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace the folder of an earlier demo (the whole folder)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    add_dataclass_arguments(parser, DemoOptions, "demo options")
+    add_dataclass_arguments(parser, DemoOptions, "demo options", exclude=("force",))
 
 
 def run(args: argparse.Namespace) -> int:

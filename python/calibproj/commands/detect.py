@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import argparse
 
-from calibproj.commands.options import (add_dataclass_arguments, add_exposure_argument, dataclass_from_args,
+from calibproj.commands.options import (add_dataclass_arguments, add_detector_option_argument,
+                                        add_exposure_argument, dataclass_from_args, parse_detector_options,
                                         parse_exposures)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,9 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="replace an existing --out")
     parser.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                         help=f"cameras processed at once (default {DEFAULT_WORKERS})")
-    parser.add_argument("--detector-option", action="append", default=[], metavar="NAME=VALUE",
-                        help="marker detector option as calibproj.detect_markers takes it, e.g. quad_decimate=2 "
-                             "(repeatable; default: the detector's defaults)")
+    add_detector_option_argument(parser)
     add_exposure_argument(parser, "default: --exposure-s for all")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.add_argument("--json", action="store_true", help="print the report as JSON instead of a table")
@@ -51,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     from calibproj.io.output_folder import OutputFile
 
     options = dataclass_from_args(IngestOptions, args)
-    detector_options, exposures = _detector_options(args.detector_option), parse_exposures(args.exposure)
+    detector_options, exposures = parse_detector_options(args.detector_option), parse_exposures(args.exposure)
     with OutputFile(args.out, force=args.force, inputs=[args.sequence]) as output:
         result = ingest.ingest(args.videos, args.sequence, args.intrinsics, options=options,
                                detector_options=detector_options, workers=args.workers,
@@ -62,21 +61,6 @@ def run(args: argparse.Namespace) -> int:
     report = result.report()
     print(json.dumps(report, indent=1) if args.json else format_report(report))
     return 0 if len(result.failed) < len(result.cameras) else 1
-
-
-def _detector_options(items: list[str]) -> dict:
-    import ast
-
-    options = {}
-    for item in items:
-        name, separator, text = item.partition("=")
-        if not separator or not name:
-            raise ValueError(f"--detector-option expects NAME=VALUE, got {item!r}")
-        try:
-            options[name.strip()] = ast.literal_eval(text.strip())
-        except (ValueError, SyntaxError):
-            options[name.strip()] = text.strip()
-    return options
 
 
 def format_report(report: dict) -> str:

@@ -25,13 +25,17 @@ def attribute_docs(cls: type) -> dict[str, str]:
     return docs
 
 
-def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, title: str) -> None:
-    """One ``--field-name`` flag per field of the dataclass ``cls``; its help is the
-    field's ``metadata["help"]`` or else its entry in the class docstring, and a field
-    with ``metadata["choices"]`` takes only those."""
+def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, title: str,
+                            exclude: tuple[str, ...] = ()) -> None:
+    """One ``--field-name`` flag per field of the dataclass ``cls`` (but the fields
+    ``exclude`` names, which the command adds as it adds its common options); its help
+    is the field's ``metadata["help"]`` or else its entry in the class docstring, and a
+    field with ``metadata["choices"]`` takes only those."""
     group = parser.add_argument_group(title)
     docs = attribute_docs(cls)
     for f in dataclasses.fields(cls):
+        if f.name in exclude:
+            continue
         default = f.default
         flag = "--" + f.name.replace("_", "-")
         help_text = f"{f.metadata.get('help') or docs.get(f.name, '')} (default: {default})".replace("%", "%%")
@@ -46,8 +50,17 @@ def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, title: s
             group.add_argument(flag, type=type(default), default=default, help=help_text)
 
 
-def dataclass_from_args(cls: type, args: argparse.Namespace) -> Any:
-    return cls(**{f.name: getattr(args, f.name) for f in dataclasses.fields(cls)})
+def dataclass_from_args(cls: type, args: argparse.Namespace, exclude: tuple[str, ...] = ()) -> Any:
+    """``cls`` from the flags ``add_dataclass_arguments`` added (the fields ``exclude``
+    names keep their defaults)."""
+    return cls(**{f.name: getattr(args, f.name) for f in dataclasses.fields(cls) if f.name not in exclude})
+
+
+def dataclass_changed_from_args(cls: type, args: argparse.Namespace, exclude: tuple[str, ...] = ()) -> Any:
+    """``dataclass_from_args``, or None when every field has its default (so that the
+    API's own choice of defaults for the call applies)."""
+    options = dataclass_from_args(cls, args, exclude)
+    return None if options == cls() else options
 
 
 def _comma_list(item_type: type):
@@ -60,7 +73,29 @@ def _comma_list(item_type: type):
     return parse
 
 
-def add_exposure_argument(parser: argparse.ArgumentParser, default: str) -> None:
+def add_detector_option_argument(parser: Any) -> None:
+    parser.add_argument("--detector-option", action="append", default=[], metavar="NAME=VALUE",
+                        help="marker detector option as calibproj.detect_markers takes it, e.g. quad_decimate=2 "
+                             "(repeatable; default: the detector's defaults)")
+
+
+def parse_detector_options(items: list[str]) -> dict[str, Any]:
+    """--detector-option NAME=VALUE values: name -> value (a Python literal, else the text)."""
+    import ast
+
+    options = {}
+    for item in items:
+        name, separator, text = item.partition("=")
+        if not separator or not name:
+            raise ValueError(f"--detector-option expects NAME=VALUE, got {item!r}")
+        try:
+            options[name.strip()] = ast.literal_eval(text.strip())
+        except (ValueError, SyntaxError):
+            options[name.strip()] = text.strip()
+    return options
+
+
+def add_exposure_argument(parser: Any, default: str) -> None:
     parser.add_argument("--exposure", action="append", default=[], metavar="CAMERA=SECONDS",
                         help="known exposure time of one camera: with it a rolling shutter's readout is measured "
                              f"where the light codes alone leave it open (repeatable; {default})")

@@ -33,6 +33,9 @@ class SuggestingArgumentParser(argparse.ArgumentParser):
     """``argparse.ArgumentParser`` whose errors suggest the subcommand or option meant."""
 
     arguments: Sequence[str] = ()  # the arguments of the last parse
+    # A subcommand's parser: every subcommand by name (set by the program that makes them),
+    # so that an option of another subcommand is named as such.
+    siblings: Mapping[str, argparse.ArgumentParser] | None = None
 
     def parse_known_args(self, args=None, namespace=None):
         self.arguments = list(sys.argv[1:] if args is None else args)
@@ -51,11 +54,23 @@ class SuggestingArgumentParser(argparse.ArgumentParser):
         candidates = self._option_candidates()
         hints = []
         for option in self._unknown_options():
+            elsewhere = self._commands_with(option)
             suggestion = closest(option, candidates)
-            if suggestion:
+            if elsewhere:  # an exact name of another command beats a look-alike of this one
+                hints.append(f"{option} is an option of calibproj {' and '.join(elsewhere)}")
+            elif suggestion:
                 hints.append(f"did you mean {suggestion}?" if option in message
                              else f"{option}: did you mean {suggestion}?")
         return f" ({'; '.join(hints)})" if hints else ""
+
+    def _commands_with(self, option: str) -> list[str]:
+        """The subcommands (this parser's, or its siblings) that take ``option``."""
+        commands = dict(self.siblings or {})
+        for action in self._actions:
+            if isinstance(action.choices, Mapping):
+                commands.update(action.choices)
+        return [name for name, sub in commands.items() if sub is not self
+                and any(option in a.option_strings for a in sub._actions)]
 
     def _choices_of(self, name: str) -> list[str]:
         """The choices of the argument argparse names ``name`` in its message."""
