@@ -4,6 +4,8 @@ board, rendered here through a known camera (pinhole with distortion)."""
 from __future__ import annotations
 
 import json
+import re
+import shutil
 from pathlib import Path
 
 import cv2
@@ -144,6 +146,7 @@ def test_a_blurred_view_is_left_out(chessboard_images: Path, tmp_path: Path) -> 
     result = calibrate_with_board(folder, CHESSBOARD)
     labels = [v.label for v in result.views]
     assert "left03.png" not in labels and len(labels) == 13
+    assert list(result.left_out) == ["left03.png"] and result.left_out["left03.png"].startswith("blurred (sharpness")
 
 
 def test_views_are_chosen_for_coverage(chessboard_images: Path) -> None:
@@ -181,9 +184,42 @@ def test_the_command_writes_intrinsics_and_a_plot(chessboard_images: Path, tmp_p
     np.testing.assert_allclose(written.K, summary["K"])
     assert (tmp_path / "coverage.png").read_bytes().startswith(b"\x89PNG")
     assert summary["images"] == {"seen": 14, "board_found": 14, "used": 14} and len(summary["views"]) == 14
+    # The file carries what README promises: how they were measured, beside them.
+    measured = json.loads(out.read_text())["board_calibration"]
+    assert set(measured["sigmas"]) >= {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"}
+    assert all(0 < measured["sigmas"][name] < 2.0 for name in ("fx", "fy", "cx", "cy"))
+    assert [view["label"] for view in measured["views"]] == [view["label"] for view in summary["views"]]
+    assert all(0 < view["rms_px"] < 1.0 for view in measured["views"]) and measured["left_out"] == []
     # Without --force an existing file stays.
     assert main(["intrinsics", str(chessboard_images), "--board", "chessboard:9x6:0.03", "--out", str(out)]) == 2
     assert "exists" in capsys.readouterr().err
+
+
+def test_views_left_out_are_named_with_why(chessboard_images: Path, tmp_path: Path, capsys) -> None:
+    folder = tmp_path / "images"
+    folder.mkdir()
+    for path in sorted(chessboard_images.iterdir())[:8]:
+        shutil.copy(path, folder / path.name)
+    cv2.imwrite(str(folder / "wall.png"), np.full(SIZE[::-1], 128, np.uint8))
+    out = tmp_path / "near1.json"
+    assert main(["intrinsics", str(folder), "--board", "chessboard:9x6:0.03", "--out", str(out),
+                 "--max-views", "5"]) == 0
+    printed = capsys.readouterr().out
+    assert "left out, board not found: wall.png" in printed
+    assert re.search(r"left out, not needed: left\d\d.png, left\d\d.png, left\d\d.png\n", printed)
+    left_out = {entry["label"]: entry["reason"] for entry in json.loads(out.read_text())["board_calibration"]["left_out"]}
+    assert left_out["wall.png"] == "board not found" and len(left_out) == 4
+
+
+def test_a_chessboard_given_by_its_squares_is_explained(chessboard_images: Path, tmp_path: Path, capsys) -> None:
+    """chessboard:10x7 for a board of 10x7 squares (9x6 inner corners): found nowhere,
+    and the message says what COLSxROWS counts and what is found."""
+    assert main(["intrinsics", str(chessboard_images), "--board", "chessboard:10x7:0.03",
+                 "--out", str(tmp_path / "far1.json")]) == 2
+    line = capsys.readouterr().err.strip()
+    assert "the board chessboard:10x7:0.03 was found in 0 of 14 images" in line
+    assert line.endswith("(chessboard COLSxROWS counts inner corners, squares minus one: chessboard:9x6:0.03 is "
+                         "found in 6 of the first 6 images)")
 
 
 @pytest.mark.parametrize("board, message", [

@@ -168,6 +168,17 @@ def test_detections_come_from_clean_frames_only(aruco, aruco_results):
         assert raw["frames_detected"] <= len(sequence.patterns)
 
 
+def test_the_thumbnail_shows_the_pattern_where_most_markers_were_found(aruco_results):
+    """The report draws a camera's detections on it: the first pattern may show one
+    marker to a zoomed camera where another shows tens."""
+    for result in aruco_results.values():
+        for name, camera in result.cameras.items():
+            found = np.bincount(camera.raw["records"]["pattern"])
+            chosen = camera.raw["thumbnail_pattern"]
+            assert found[chosen] == found.max(), name
+            assert chosen == int(np.argmax(found)), name  # ties: the earlier pattern
+
+
 def test_merged_centre_is_the_mean_of_the_kept_scales(aruco_results):
     result = aruco_results[True]
     options = IngestOptions()

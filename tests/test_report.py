@@ -133,6 +133,9 @@ def test_the_page_fits_a_phone() -> None:
     from calibproj.report.page import STYLE, _scroll
 
     assert "max-width: 100%" in STYLE and "overflow-x: auto" in STYLE and "auto-fit" in STYLE
+    # Printed, a wide table is not clipped by its scrolling box.
+    printed = STYLE.split("@media print {")[1].split("\n}\n")[0]
+    assert ".scroll { overflow: visible; }" in printed and "width: 100%" in printed
     assert _scroll("<table></table>") == '<div class="scroll"><table></table></div>'
 
 
@@ -200,7 +203,16 @@ def test_numbers_table_gives_centre_height_tilt_and_heading() -> None:
     cells = [re.findall(r"<td[^>]*>([^<]*)</td>", row) for row in rows[1:3]]
     assert cells[0][:7] == ["down", "1.0000", "-2.0000", "2.5000", "1.20", "0.00", "0.0"]
     assert cells[1][3] == "3.0000" and cells[1][5] == "30.00" and cells[1][6] == "0.0"
-    assert cells[1][7:12] == ["900.0", "905.0", "640.0", "360.0", "-0.1"]
+    # One precision per column (k1 as the self-calibration table gives it), never "-0.0".
+    assert cells[1][7:13] == ["900.0", "905.0", "640.0", "360.0", "-0.1000", "0.0200"]
+    assert not any(re.fullmatch(r"-0\.0*", cell) for row in cells for cell in row)
+
+
+def test_numbers_are_never_minus_zero() -> None:
+    from calibproj.report.page import _number
+
+    assert [_number(v, 3) for v in (-0.0, -1e-9, -0.0004, -0.0006, 2.5, None, True)] == [
+        "0.000", "0.000", "0.000", "-0.001", "2.500", "-", "-"]
 
 
 def test_a_bad_intrinsics_file_leaves_its_camera_without_intrinsics(report_with_a_failed_camera, tmp_path,

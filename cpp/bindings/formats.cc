@@ -388,10 +388,18 @@ void register_formats(py::module_& m) {
       "InputError naming the file and the problem");
   m.def(
       "write_intrinsics",
-      [](const std::filesystem::path& out, const py::object& intrinsics) {
-        formats::WriteIntrinsics(out, Converted("intrinsics", [&] { return CameraIntrinsicsFrom(intrinsics); }));
+      [](const std::filesystem::path& out, const py::object& intrinsics, const std::string& extra_json) {
+        nlohmann::ordered_json extra = nlohmann::ordered_json::object();
+        if (!extra_json.empty()) {
+          extra = nlohmann::ordered_json::parse(extra_json, nullptr, /*allow_exceptions=*/false);
+          if (!extra.is_object()) throw py::value_error("extra: not the JSON text of an object");
+        }
+        formats::WriteIntrinsics(out, Converted("intrinsics", [&] { return CameraIntrinsicsFrom(intrinsics); }),
+                                 extra);
       },
-      py::arg("out"), py::arg("intrinsics"), "Our intrinsics file of an Intrinsics, written atomically");
+      py::arg("out"), py::arg("intrinsics"), py::arg("extra_json") = "",
+      "Our intrinsics file of an Intrinsics, written atomically; extra_json: the JSON text of an object whose "
+      "entries follow the format's own (how they were measured)");
   m.def(
       "intrinsics_from_json",
       [](const std::string& text, const std::string& name) {

@@ -87,7 +87,7 @@ class CameraIngest:
         return entry
 
     def thumbnail(self) -> np.ndarray | None:
-        """The grey copy of the first frame sent to detection (``IngestOptions.thumbnail_width``), or None."""
+        """The grey copy of the frame where most markers were found (``IngestOptions.thumbnail_width``), or None."""
         image = self.raw.get("thumbnail") if self.ok else None
         return image if image is not None and image.size else None
 

@@ -190,16 +190,19 @@ CameraIntrinsics ReadIntrinsics(const fs::path& path, const std::string& name) {
   }
 }
 
-void WriteIntrinsics(const fs::path& path, const CameraIntrinsics& intrinsics) {
+void WriteIntrinsics(const fs::path& path, const CameraIntrinsics& intrinsics, const nlohmann::ordered_json& extra) {
   nlohmann::ordered_json K = nlohmann::ordered_json::array();
   for (int r = 0; r < 3; ++r) K.push_back({intrinsics.K(r, 0), intrinsics.K(r, 1), intrinsics.K(r, 2)});
-  const nlohmann::ordered_json body = {
+  nlohmann::ordered_json body = {
       {"camera", intrinsics.name},
       {"resolution", intrinsics.has_resolution ? nlohmann::ordered_json{static_cast<std::int64_t>(intrinsics.width),
                                                                         static_cast<std::int64_t>(intrinsics.height)}
                                                : nlohmann::ordered_json(nullptr)},
       {"K", K},
       {"dist", intrinsics.dist}};
+  for (const auto& [key, value] : extra.items()) {
+    if (!body.contains(key)) body[key] = value;
+  }
   AtomicWrite(path, DumpSchemaJson("intrinsics", 1, body));
 }
 

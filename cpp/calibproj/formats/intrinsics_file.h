@@ -28,8 +28,11 @@ struct CameraIntrinsics {
 CameraIntrinsics ReadIntrinsics(const std::filesystem::path& path, const std::string& name = "");
 
 // Writes our format (calibproj.intrinsics/1) atomically, as the Python package writes
-// it; an image size not known (the reference code's JSON) is written as null.
-void WriteIntrinsics(const std::filesystem::path& path, const CameraIntrinsics& intrinsics);
+// it; an image size not known (the reference code's JSON) is written as null. The
+// entries of `extra` (an object: how the intrinsics were measured, their uncertainty)
+// follow the format's own; readers pass over them.
+void WriteIntrinsics(const std::filesystem::path& path, const CameraIntrinsics& intrinsics,
+                     const nlohmann::ordered_json& extra = nlohmann::ordered_json::object());
 
 // The body of our format ({resolution, K, dist}, resolution null when not known);
 // std::invalid_argument with the problem.

@@ -469,7 +469,7 @@ class CameraIngest {
   void AddFrame(int frame, const cv::Mat& gray_frame) {
     const bool first = pending_.frames.empty();
     const bool averaging = wanted_[pending_.pattern] > 1;
-    if (first && result_.thumbnail.empty()) KeepThumbnail(gray_frame, pending_.pattern);
+    if (first) KeepThumbnail(gray_frame, pending_.pattern);
     if (first) {
       pending_.job.regions.resize(pending_.rects.size());
       pending_.sums.resize(pending_.rects.size());
@@ -488,18 +488,34 @@ class CameraIngest {
     pending_.frames.push_back(frame);
   }
 
+  // A small copy of each pattern's first frame until its detections arrive: the report
+  // shows the one where most markers were found (a zoomed camera may find one marker in
+  // the first array and tens in another).
   void KeepThumbnail(const cv::Mat& gray_frame, int pattern) {
     if (options_.thumbnail_width <= 0 || gray_frame.empty()) return;
     const double factor = std::min(1.0, static_cast<double>(options_.thumbnail_width) / gray_frame.cols);
     const cv::Size size(std::max(1, cvRound(gray_frame.cols * factor)),
                         std::max(1, cvRound(gray_frame.rows * factor)));
-    cv::resize(gray_frame, result_.thumbnail, size, 0.0, 0.0, cv::INTER_AREA);
-    result_.thumbnail_pattern = pattern;
+    cv::resize(gray_frame, thumbnails_[pattern], size, 0.0, 0.0, cv::INTER_AREA);
+  }
+
+  void ChooseThumbnail(int pattern, int found) {
+    const auto it = thumbnails_.find(pattern);
+    if (it == thumbnails_.end()) return;
+    if (found > thumbnail_found_) {  // ties keep the earlier pattern
+      result_.thumbnail = std::move(it->second);
+      result_.thumbnail_pattern = pattern;
+      thumbnail_found_ = found;
+    }
+    thumbnails_.erase(it);
   }
 
   void SubmitPending() {
     PendingPattern pending = std::exchange(pending_, PendingPattern{});
-    if (pending.pattern < 0 || pending.skip || pending.frames.empty()) return;
+    if (pending.pattern < 0 || pending.skip || pending.frames.empty()) {
+      thumbnails_.erase(pending.pattern);
+      return;
+    }
     const int count = static_cast<int>(pending.frames.size());
     if (count > 1) {
       for (std::size_t i = 0; i < pending.sums.size(); ++i) {
@@ -550,6 +566,7 @@ class CameraIngest {
         found_msms_.insert(static_cast<long long>(pattern.array) * sequence_.markers_per_array + id);
       }
       LearnMagnification(output);
+      ChooseThumbnail(output.pattern, static_cast<int>(output.detections.size()));
       for (std::size_t k = 0; k < output.detections.size(); ++k) {
         const detect::Quad& quad = output.detections.corners[k];
         const cv::Point2d centre = detect::DiagonalIntersection(output.undistorted[k]);
@@ -728,6 +745,8 @@ class CameraIngest {
   int last_needed_frame_ = -1;  // the last camera frame the sync or a pick uses
   PendingPattern pending_;
   std::map<int, DetectionOutput> arrived_;  // finished, not yet absorbed, by pattern
+  std::map<int, cv::Mat> thumbnails_;       // submitted patterns' first frames, small
+  int thumbnail_found_ = -1;                // markers found in the pattern of result_.thumbnail
   std::vector<PatternStatus> status_;
   std::vector<std::vector<int>> used_frames_;
   CameraIngestResult result_;

@@ -117,7 +117,7 @@ struct IngestOptions {
   // detections of the patterns at least this many before it, whatever the threads'
   // timing: results do not depend on how fast detection keeps up.
   int planning_lag = 4;
-  // A grey copy of the first frame sent to detection, this many pixels wide, for the
+  // A grey copy of the frame where most markers were found, this many pixels wide, for the
   // report to draw detections on (0: none).
   int thumbnail_width = 640;
 

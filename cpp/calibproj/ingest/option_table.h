@@ -253,8 +253,8 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "a pattern's regions are planned from the detections of the patterns at least this many before "
         "it, whatever the threads' timing, so that results do not depend on how fast detection keeps up.");
   visit("thumbnail_width", o.thumbnail_width,
-        "width in pixels of the grey copy of the first frame sent to detection, which the report draws "
-        "the camera's detections on (0: none).");
+        "width in pixels of the grey copy of a frame, which the report draws the camera's detections on: "
+        "the first frame of the pattern where most markers were found (0: none).");
 }
 
 }  // namespace calibproj::ingest

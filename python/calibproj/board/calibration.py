@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import logging
 import os
-from dataclasses import dataclass, field
+import re
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from calibproj.board.spec import MIN_CORNERS, BoardDetector, BoardSpec
+from calibproj.board.spec import MIN_CHESSBOARD_SIDE, MIN_CORNERS, BoardDetector, BoardSpec
 from calibproj.board.views import View, grey_images, select_views, sharpness
 from calibproj.io.intrinsics import Intrinsics
 
@@ -67,6 +68,7 @@ class BoardCalibration:
         sigmas: 1-sigma of each intrinsic (``fx``, ``fy``, ``cx``, ``cy``, ``k1``, ...).
         views: the views used; ``view_rms_px`` their RMS errors in the same order.
         seen: images looked at; ``found``: those where the board was found.
+        left_out: every image looked at but not used, by label, with why.
     """
 
     intrinsics: Intrinsics
@@ -78,19 +80,26 @@ class BoardCalibration:
     found: int
     board: BoardSpec
     options: BoardOptions = field(default_factory=BoardOptions)
+    left_out: dict[str, str] = field(default_factory=dict)
 
     def summary(self) -> dict:
         """A JSON-ready summary (what ``calibproj intrinsics --json`` prints)."""
         K, dist = self.intrinsics.K, np.asarray(self.intrinsics.dist).ravel()
+        return {"resolution": list(self.intrinsics.resolution), "K": K.tolist(), "dist": dist.tolist(),
+                **self.measurement()}
+
+    def measurement(self) -> dict:
+        """How the intrinsics were measured, as the intrinsics file records it beside them
+        (``board_calibration``): the board, each parameter's 1-sigma, every view's RMS
+        error, and every image left out with why."""
         return {
             "board": str(self.board),
-            "resolution": list(self.intrinsics.resolution),
-            "K": K.tolist(), "dist": dist.tolist(),
             "rms_px": self.rms_px,
             "sigmas": self.sigmas,
             "images": {"seen": self.seen, "board_found": self.found, "used": len(self.views)},
             "views": [{"label": v.label, "corners": len(v.image_points), "rms_px": float(e),
                        "sharpness": v.sharpness} for v, e in zip(self.views, self.view_rms_px)],
+            "left_out": [{"label": label, "reason": reason} for label, reason in self.left_out.items()],
         }
 
 
@@ -106,7 +115,7 @@ def calibrate_with_board(source: str | os.PathLike, board: BoardSpec | str, name
     options = options or BoardOptions()
     options.check()
     detector = BoardDetector(board, classic=options.classic_detector)
-    found, seen, size = [], 0, None
+    found, left_out, seen, size = [], {}, 0, None
     for label, gray in grey_images(source, options.step):
         seen += 1
         if size is None:
@@ -116,14 +125,48 @@ def calibrate_with_board(source: str | os.PathLike, board: BoardSpec | str, name
                              f"the first image {size[0]}x{size[1]}")
         corners = detector.detect(gray)
         if corners is None or len(corners[1]) < MIN_CORNERS:
+            left_out[label] = ("board not found" if corners is None else
+                               f"{len(corners[1])} corners found ({MIN_CORNERS} needed)")
             continue
         found.append(View(label, corners[0], corners[1], sharpness(gray, corners[1])))
-    views = select_views(found, size or (1, 1), options.max_views, options.min_sharpness_share)
+    views, not_used = select_views(found, size or (1, 1), options.max_views, options.min_sharpness_share)
+    left_out.update(not_used)
     logger.info("%s: board %s found in %d of %d images; %d views used", source, board, len(found), seen, len(views))
     if len(views) < MIN_VIEWS:
         raise ValueError(f"{source}: the board {board} was found in {len(found)} of {seen} images "
-                         f"({len(views)} usable); at least {MIN_VIEWS} views are needed")
-    return _calibrate(views, size, board, name, options, seen, len(found))
+                         f"({len(views)} usable); at least {MIN_VIEWS} views are needed"
+                         f"{_board_hint(source, board, options) if not found else ''}")
+    result = _calibrate(views, size, board, name, options, seen, len(found))
+    result.left_out = {label: left_out[label] for label in sorted(left_out, key=_natural_order)}
+    return result
+
+
+# Images tried with another reading of a board that was found nowhere.
+HINT_IMAGES = 6
+
+
+def _board_hint(source: str | os.PathLike, board: BoardSpec, options: BoardOptions) -> str:
+    """When a chessboard is found nowhere but its squares-minus-one reading is: COLSxROWS
+    counts inner corners, and the count of squares is the usual mistake."""
+    if board.kind != "chessboard" or min(board.columns, board.rows) - 1 < MIN_CHESSBOARD_SIDE:
+        return ""
+    inner = replace(board, columns=board.columns - 1, rows=board.rows - 1)
+    detector = BoardDetector(inner, classic=options.classic_detector)
+    tried = found = 0
+    for _, gray in grey_images(source, options.step):
+        tried += 1
+        found += detector.detect(gray) is not None
+        if tried == HINT_IMAGES:
+            break
+    if not found:
+        return ""
+    return (f" (chessboard COLSxROWS counts inner corners, squares minus one: {inner} is found in {found} of "
+            f"the first {tried} images)")
+
+
+def _natural_order(label: str) -> tuple:
+    """``frame 20`` before ``frame 100``."""
+    return tuple(int(part) if part.isdigit() else part for part in re.split(r"(\d+)", label))
 
 
 def _calibrate(views: list[View], size: tuple[int, int], board: BoardSpec, name: str, options: BoardOptions,

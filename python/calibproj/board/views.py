@@ -110,16 +110,19 @@ def sharpness(gray: np.ndarray, points: np.ndarray) -> float:
 
 
 def select_views(views: list[View], image_size: tuple[int, int], max_views: int, min_sharpness_share: float,
-                 cells: int = 8) -> list[View]:
-    """At most ``max_views`` views: the blurred ones left out (sharpness below
-    ``min_sharpness_share`` of the median), then greedily the view that adds the most
-    image cells not yet covered by corners (``cells`` along the longer side), ties going
-    to the sharper view; once every reachable cell is covered, the sharpest of the rest.
-    Coverage matters because distortion is only measured where corners were seen."""
+                 cells: int = 8) -> tuple[list[View], dict[str, str]]:
+    """At most ``max_views`` views, and why each other one is left out: the blurred ones
+    first (sharpness below ``min_sharpness_share`` of the median), then greedily the view
+    that adds the most image cells not yet covered by corners (``cells`` along the longer
+    side), ties going to the sharper view; once every reachable cell is covered, the
+    sharpest of the rest. Coverage matters because distortion is only measured where
+    corners were seen."""
     if not views:
-        return []
+        return [], {}
     median = float(np.median([v.sharpness for v in views]))
-    sharp = [v for v in views if v.sharpness >= min_sharpness_share * median]
+    left_out = {v.label: f"blurred (sharpness {v.sharpness:.3g}, below {min_sharpness_share:g} x the median "
+                         f"{median:.3g})" for v in views if v.sharpness < min_sharpness_share * median}
+    sharp = [v for v in views if v.label not in left_out]
     width, height = image_size
     step = max(width, height) / cells
     cell_sets = [set(map(tuple, np.floor(v.image_points / step).astype(int))) for v in sharp]
@@ -131,4 +134,6 @@ def select_views(views: list[View], image_size: tuple[int, int], max_views: int,
         covered |= cell_sets[best]
         chosen.append(best)
         remaining.remove(best)
-    return [sharp[i] for i in sorted(chosen)]
+    for i in remaining:
+        left_out[sharp[i].label] = f"not needed (the {max_views} views kept, --max-views, cover the image better)"
+    return [sharp[i] for i in sorted(chosen)], left_out

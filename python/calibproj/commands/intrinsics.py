@@ -5,8 +5,9 @@ image. --board is `chessboard:COLSxROWS:SQUARE_M` (inner corners) or
 `charuco:COLSxROWS:SQUARE_M:MARKER_M:DICT` (squares; e.g. charuco:5x7:0.04:0.03:4X4_50).
 Blurred views are left out and the views covering the image best are kept
 (--max-views); the camera matrix and distortion are written as calibproj's intrinsics
-JSON (the camera is named after OUT's file stem), with each parameter's 1-sigma, the
-RMS error of every view, and with --plot a PNG of where the corners lie in the image.
+JSON (the camera is named after OUT's file stem), with how they were measured
+(`board_calibration`: each parameter's 1-sigma, the RMS error of every view, and every
+image left out with why), and with --plot a PNG of where the corners lie in the image.
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
             with plot_file.writing():
                 atomic_write_bytes(plot, picture)
         with out_file.writing():
-            write_intrinsics(out, result.intrinsics)
+            write_intrinsics(out, result.intrinsics, {"board_calibration": result.measurement()})
     if args.json:
         print(json.dumps(result.summary(), indent=1))
     else:
@@ -78,4 +79,22 @@ def format_result(result) -> str:
         f"cx {K[0, 2]:.2f} +- {sigma['cx']:.2f}  cy {K[1, 2]:.2f} +- {sigma['cy']:.2f} px",
         f"distortion: {dist}",
         f"RMS reprojection error {result.rms_px:.3f} px (worst view {worst[1]}: {worst[0]:.3f} px)",
+        *left_out_lines(result.left_out),
     ])
+
+
+# Labels named per reason at most; the intrinsics file lists them all.
+LISTED_LABELS = 8
+
+
+def left_out_lines(left_out: dict[str, str]) -> list[str]:
+    """The images not used, grouped by why (the reason's words before its details)."""
+    groups: dict[str, list[str]] = {}
+    for label, reason in left_out.items():
+        groups.setdefault(reason.split(" (")[0], []).append(label)
+    lines = []
+    for reason, labels in groups.items():
+        named = ", ".join(labels[:LISTED_LABELS])
+        more = f" and {len(labels) - LISTED_LABELS} more" if len(labels) > LISTED_LABELS else ""
+        lines.append(f"left out, {reason}: {named}{more}")
+    return lines

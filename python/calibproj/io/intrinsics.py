@@ -227,12 +227,13 @@ def read_intrinsics(path: str | os.PathLike, name: str | None = None) -> Intrins
     return intrinsics_from_core(core)
 
 
-def write_intrinsics(path: str | os.PathLike, intrinsics: Intrinsics) -> None:
+def write_intrinsics(path: str | os.PathLike, intrinsics: Intrinsics, extra: Mapping[str, Any] | None = None) -> None:
     """Write our intrinsics format atomically (by the C++ core, as ``calibproj-native``
-    writes it)."""
+    writes it); the entries of ``extra`` (how the intrinsics were measured, their
+    uncertainty) follow the format's own."""
     from calibproj import _core
 
-    _core.formats.write_intrinsics(Path(path), intrinsics)
+    _core.formats.write_intrinsics(Path(path), intrinsics, json.dumps(dict(extra)) if extra else "")
 
 
 def write_intrinsics_dir(directory: str | os.PathLike, cameras: dict[str, Intrinsics]) -> None:

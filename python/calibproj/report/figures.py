@@ -303,8 +303,9 @@ def camera_coverage(view: CameraView, dpi: int = DEFAULT_DPI) -> bytes:
 def camera_detections(view: CameraView, thumbnail: np.ndarray, scale: float, array: int | None,
                       dpi: int = DEFAULT_DPI) -> bytes:
     """A frame of the camera's video with what was found in it: the detected MSM
-    centres of the array it shows, where the calibration reprojects their points, and
-    every observation the outlier filter left out (of any array)."""
+    centres of the array it shows, where the calibration reprojects their points, the
+    centres detected in the other arrays (a zoomed camera may see one marker per array
+    and tens over the projection), and every observation the outlier filter left out."""
     figure = Figure(figsize=PANEL_SIZE)
     axes = figure.subplots()
     height, width = thumbnail.shape[:2]
@@ -312,9 +313,11 @@ def camera_detections(view: CameraView, thumbnail: np.ndarray, scale: float, arr
     axes.imshow(thumbnail, cmap="gray", vmin=0, vmax=255, extent=(-0.5, size[0] - 0.5, size[1] - 0.5, -0.5),
                 interpolation="antialiased")
     shown = view.observed_arrays == array if array is not None else np.zeros(len(view.observed_px), dtype=bool)
-    detected = view.observed_px[shown]
+    detected, elsewhere = view.observed_px[shown], view.observed_px[~shown]
+    axes.scatter(elsewhere[:, 0], elsewhere[:, 1], s=8, c="#f1c40f", linewidths=0,
+                 label=f"detected in the other arrays ({len(elsewhere)})")
     axes.scatter(detected[:, 0], detected[:, 1], s=30, facecolors="none", edgecolors="#2ecc71", linewidths=0.9,
-                 label=f"detected ({len(detected)})")
+                 label=f"detected in this array ({len(detected)})")
     reprojected = view.projected_px[view.residual_arrays == array] if array is not None else np.zeros((0, 2))
     axes.scatter(reprojected[:, 0], reprojected[:, 1], s=30, marker="+", c="#ff33cc", linewidths=0.9,
                  label=f"reprojected ({len(reprojected)})")

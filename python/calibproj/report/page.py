@@ -54,6 +54,14 @@ figure { margin: 0.5em 0; }
 p.failed, p.warning { color: #c0392b; font-weight: bold; }
 div.warnings { border-left: 4px solid #c0392b; background: #fdf2f0; padding: 0.3em 1em; }
 section.camera { border-top: 1px solid #ddd; margin-top: 1.5em; }
+@media print {
+  body { max-width: none; margin: 0; font-size: 10pt; }
+  .scroll { overflow: visible; }
+  table { font-size: 8pt; width: 100%; }
+  th, td { padding: 0.15em 0.3em; word-break: break-word; }
+  img { page-break-inside: avoid; }
+  section.camera, figure { page-break-inside: avoid; }
+}
 @media (max-width: 600px) {
   body { margin: 0.5em auto; padding: 0 0.5em; font-size: 15px; }
   th, td { padding: 0.25em 0.4em; }
@@ -247,7 +255,8 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         _scroll(numbers_table(calibration, views)),
         *(["<h2>Intrinsics refined from the projection</h2>", self_calibration_table(inputs.self_calibration)]
           if inputs.self_calibration else []),
-        *(["<h2>Sync and detection</h2>", _scroll(sync_table(inputs.detect_report)), *map(_figure, sync or [])]
+        *(["<h2>Sync and detection</h2>", _scroll(sync_table(inputs.detect_report)), SYNC_NOTE,
+           *map(_figure, sync or [])]
           if inputs.detect_report else []),
         "<h2>Scene</h2>",
         *(_figure(plot) for plot in scene),
@@ -335,7 +344,7 @@ def plane_text(plane: dict, unit: str) -> str:
     normal = np.asarray(plane.get("normal", [0.0, 0.0, 1.0]), dtype=float)
     tilt = float(np.degrees(np.arccos(np.clip(abs(normal[2]) / max(np.linalg.norm(normal), 1e-12), -1.0, 1.0))))
     suffix = " m" if unit == "m" else " units"
-    where = (f"{plane.get('offset', 0.0):.4f}{suffix} above the floor" if tilt < 5.0
+    where = (f"{_number(plane.get('offset', 0.0), 4)}{suffix} above the floor" if tilt < 5.0
              else f"tilted {tilt:.1f} deg from the floor")
     return f"{where}, {plane.get('points', 0)} points (e.g. a table left in the projection)"
 
@@ -396,7 +405,7 @@ def numbers_table(calibration: Calibration, views: list[CameraView]) -> str:
         sigma = view.metrics.centre_sigma if view.metrics is not None else None
         cells = [_number(c, 4) for c in centre] + [
             _number(None if sigma is None else sigma * (1e3 if metric else 1.0), 2 if metric else 5),
-            f"{tilt:.2f}", f"{heading:.1f}", *_intrinsics_cells(view)]
+            _number(tilt, 2), _number(heading, 1), *_intrinsics_cells(view)]
         rows.append(f'<tr><td class="name">{html.escape(view.name)}</td>'
                     + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     return "<table>" + "".join(rows) + "</table>"
@@ -409,8 +418,8 @@ def _intrinsics_cells(view: CameraView) -> list[str]:
     K, dist = np.asarray(camera.K, dtype=float), np.asarray(camera.dist, dtype=float).ravel()
     size = view.image_size()
     image = f"{size[0]:.0f} x {size[1]:.0f}" if size is not None else "-"
-    k1, k2 = (f"{dist[i]:.4g}" if dist.size > i else "-" for i in (0, 1))
-    return [f"{K[0, 0]:.1f}", f"{K[1, 1]:.1f}", f"{K[0, 2]:.1f}", f"{K[1, 2]:.1f}", k1, k2, image]
+    k1, k2 = (_number(dist[i], 4) if dist.size > i else "-" for i in (0, 1))
+    return [_number(K[0, 0], 1), _number(K[1, 1], 1), _number(K[0, 2], 1), _number(K[1, 2], 1), k1, k2, image]
 
 
 def evaluation_table(document: dict) -> str:
@@ -539,6 +548,21 @@ def _identity(entry: Any) -> str:
     return f"{entry.get('path', '?')}" + (f" ({extra})" if extra else "")
 
 
+# What a reader of the sync table asks first: why one camera's offset is known to a
+# millisecond and another's only to a frame.
+SYNC_NOTE = (
+    "<p>Offset: where the camera's first frame falls on the projection's timeline, from the "
+    "light codes at its start and end. Its 1&sigma; is small (a fraction of a frame) when the "
+    "camera's frames fall at many phases of the projector's frames, so that some frames catch a "
+    "light change during their exposure: a frame rate that differs slightly from the projector's "
+    "(29.97 against 30 fps) or a long exposure. A camera whose frames keep a fixed phase to the "
+    "projector's (the same frame rate, a multiple of it, or a small ratio) with a short exposure "
+    "never sees a light change within a frame: any offset within about a frame gives the same "
+    "video, hence a 1&sigma; of about a frame. The frame picking allows for it (frames near a "
+    "pattern change are not used), so it does not reach the poses; a known exposure "
+    "(<code>--exposure</code>) narrows it.</p>")
+
+
 def sync_table(detect_report: dict) -> str:
     """Per camera: its sync to the projector with uncertainties, its frames and what
     the markers of each scale gave (``detect_report.json``'s values)."""
@@ -563,10 +587,11 @@ def _sync_cells(camera: dict) -> list[str]:
     offset_sigma = sync.get("offset_uncertainty_frames")
     offset = _number(sync.get("offset_s"), 4)
     if offset_sigma is not None and fps > 0:
-        offset += f" &plusmn; {offset_sigma / fps:.4f}"
+        offset += f" &plusmn; {_number(offset_sigma / fps, 4)}"
     readout = "-"
     if sync.get("readout_s") is not None:
-        readout = f"{1e3 * sync['readout_s']:.2f} &plusmn; {1e3 * (sync.get('readout_sigma_s') or 0.0):.2f}"
+        readout_sigma = 1e3 * (sync.get("readout_sigma_s") or 0.0)
+        readout = f"{_number(1e3 * sync['readout_s'], 2)} &plusmn; {_number(readout_sigma, 2)}"
     used = patterns.get("whole_frame", 0) + patterns.get("in_regions", 0)
     kept = ", ".join(f"{scale.get('kept', 0)} at {scale.get('scale', '?'):g}x" for scale in camera.get("scales", []))
     return [offset, _number(sync.get("drift_ppm"), 1), _number(sync.get("exposure_frames"), 2), readout,
@@ -597,6 +622,7 @@ def _anchor(name: str) -> str:
 def _number(value: Any, digits: int) -> str:
     """A number with ``digits`` decimals; "-" for None and anything not a number (the
     JSON files shown may have been edited by hand)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         return "-"
-    return f"{value:.{digits}f}"
+    text = f"{value:.{digits}f}"
+    return text[1:] if text.startswith("-") and float(text) == 0.0 else text  # no "-0.000"
