@@ -72,3 +72,25 @@ def test_log_lines_do_not_cut_a_bar_on_a_terminal(monkeypatch: pytest.MonkeyPatc
     text = terminal.getvalue()
     # The message stands on its own line: a bar's carriage return may precede it, no bar text follows it.
     assert any(line.split("\r")[-1] == "camera far1: a message" for line in text.split("\n"))
+
+
+def test_a_cameras_bar_closes_when_its_own_ingest_ends(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its time and rate stay its own (a finished camera's bar used to tick on until the
+    slowest camera ended), and a complete one shows every frame it decoded as done."""
+    from calibproj.ingest import _Progress
+
+    terminal = Terminal()
+    monkeypatch.setattr("sys.stderr", terminal)
+    bars = _Progress(["ceiling", "far5"], enabled=True)
+    bars.callback("ceiling")(575, 599)  # the container's count was an estimate
+    bars.callback("far5")(100, 1620)
+    bars.finish("ceiling", complete=True)
+    ceiling = bars.bars["ceiling"]
+    assert ceiling.disable and ceiling.n == ceiling.total == 575
+    drawn = len(terminal.getvalue())
+    assert terminal.getvalue().rsplit("camera ceiling", 1)[1].split("\r")[0].count("575/575") == 1
+    bars.callback("far5")(1620, 1620)
+    bars.finish("far5", complete=True)
+    bars.close()  # closing again draws nothing more
+    later = terminal.getvalue()[drawn:]
+    assert "camera far5" in later and "camera ceiling" not in later and bars.bars["far5"].n == 1620
