@@ -344,6 +344,8 @@ def test_mistakes_seen_before_the_ingest_stop_it_in_one_line_naming_both_sides(
     line = refused_before_the_ingest(capsys, out, str(videos), "--sequence",
                                      str(tmp_path / "projection" / "projection.mp4"), "--intrinsics", str(intrinsics))
     assert line.endswith(f"the sequence file beside it is {tmp_path / 'projection' / 'sequence.json'}")
+    line = refused_before_the_ingest(capsys, out, str(sequence), *common)
+    assert line.endswith("; a sequence file is given with --sequence, the camera videos as their folder")
     line = refused_before_the_ingest(capsys, out, str(videos / "cam2.mp4"), *common)
     assert line.endswith(f"{videos / 'cam2.mp4'}: is a video (MP4/MOV), not a calibproj tracks file; camera videos "
                          f"are given as their folder ({videos})")

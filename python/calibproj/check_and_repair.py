@@ -137,6 +137,7 @@ def check(
         ValueError: unreadable results, a source without any calibrated point, bad options.
     """
     from calibproj.ingest import ingest
+    from calibproj.ingest_inputs import check_videos
     from calibproj.io.output_folder import OutputFolder
     from calibproj.pipeline import video_files, write_results
     from calibproj.provenance import provenance, write_provenance
@@ -161,6 +162,8 @@ def check(
     try:
         ingest_result = None
         if from_videos:
+            # A single camera may be checked; the other mistakes are found before the ingest.
+            check_videos(Path(source), sequence, folder_in / INTRINSICS_DIR, earlier=None)
             ingest_result = ingest(source, sequence, folder_in / INTRINSICS_DIR, workers=workers, progress=progress)
             tracks = ingest_result.tracks
         else:

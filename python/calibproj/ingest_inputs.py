@@ -32,6 +32,25 @@ PROJECTOR_LENGTH_FRAMES = 2
 NAME_SIMILARITY = 0.5
 
 
+def check_videos(folder: Path, sequence: Any, intrinsics: Any, earlier: Iterable[str] | None = ()) -> None:
+    """Every check of this module on a folder of camera videos: the projector's video
+    among them (with ``sequence``: a ``Sequence`` or its file), their names against the
+    intrinsics' (``intrinsics``: a folder or a mapping; None skips it), and, unless
+    ``earlier`` is None (a check of stored cameras), at least two cameras with the
+    ``earlier`` ones merged in. A folder without videos is left to the ingest to report."""
+    from calibproj.ingest import VIDEO_SUFFIXES, video_paths
+    from calibproj.sequence.sequence import Sequence
+
+    if not folder.is_dir() or not any(p.suffix.lower() in VIDEO_SUFFIXES for p in folder.iterdir()):
+        return
+    videos = video_paths(folder)
+    if sequence is not None:
+        check_no_projector_video(videos, sequence if isinstance(sequence, Sequence) else Sequence.load(sequence))
+    if earlier is not None:
+        check_camera_count(folder, list(videos), earlier)
+    check_intrinsics_names(folder, list(videos), intrinsics)
+
+
 def check_camera_count(folder: Path, names: list[str], earlier: Iterable[str] = ()) -> None:
     """ValueError unless the videos (with the cameras of earlier observations merged in)
     give at least two cameras."""

@@ -23,6 +23,7 @@ from typing import Any
 
 from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics, has_intrinsics_file, intrinsics_of_cameras, write_intrinsics_dir
+from calibproj.ingest_inputs import check_videos
 from calibproj.ingest_options import IngestOptions
 from calibproj.io.output_folder import OutputFolder
 from calibproj.registration import RegistrationOptions
@@ -127,7 +128,8 @@ def calibrate(
     folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
         if videos is not None:  # the output is known to be writable: now the inputs, before the ingest
-            _check_videos(videos, sequence, intrinsics if nominal_fov_deg is None else None, merge)
+            check_videos(videos, sequence, intrinsics if nominal_fov_deg is None else None,
+                         _earlier_cameras(merge) if merge is not None else ())
         intrinsics_source = intrinsics
         given = source if videos is not None or isinstance(source, Tracks) else Tracks.read(source)
         # Before the ingest: a bad or missing file fails its own camera only (the reason
@@ -257,22 +259,6 @@ def _videos_folder(source: Tracks | str | os.PathLike) -> Path | None:
         return None
     path = Path(source)
     return None if path.is_file() or path.suffix.lower() == ".json" else path
-
-
-def _check_videos(videos: Path, sequence: Any, intrinsics: Any, merge: str | os.PathLike | None) -> None:
-    """The mistakes ``calibproj.ingest_inputs`` sees before the ingest (ValueError)."""
-    from calibproj.ingest import video_paths
-    from calibproj.ingest_inputs import check_camera_count, check_intrinsics_names, check_no_projector_video
-    from calibproj.sequence.sequence import Sequence
-
-    names = video_camera_names(videos)
-    if not names:
-        return  # the ingest says what is wrong with the folder
-    if sequence is not None:
-        check_no_projector_video(video_paths(videos), sequence if isinstance(sequence, Sequence)
-                                 else Sequence.load(sequence))
-    check_camera_count(videos, names, _earlier_cameras(merge) if merge is not None else ())
-    check_intrinsics_names(videos, names, intrinsics)
 
 
 def video_camera_names(folder: Path) -> list[str]:

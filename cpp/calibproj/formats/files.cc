@@ -161,6 +161,15 @@ std::string VideoGivenHint(const fs::path& path, const std::string& kind) {
   return "";
 }
 
+// Where a calibproj file of kind `found` goes when it was given for one of kind `expected`.
+std::string KindGivenHint(const std::string& found, const std::string& expected) {
+  if (found == "sequence" && expected == "tracks") {
+    return "; a sequence file is given with --sequence, the camera videos as their folder";
+  }
+  if (found == "tracks" && expected == "sequence") return "; a tracks file is given with --tracks";
+  return "";
+}
+
 }  // namespace
 
 nlohmann::json ReadJson(const fs::path& path) {
@@ -218,7 +227,7 @@ nlohmann::json ReadSchemaJson(const fs::path& path, const std::string& kind, int
   const std::string found_major = tag.substr(slash + 1);
   if (found_kind != kind) {
     throw InputError(path.string() + ": is a calibproj " + found_kind + " file, expected " + kind + " ('" + expected +
-                     "')");
+                     "')" + KindGivenHint(found_kind, kind));
   }
   if (found_major.empty() || found_major.find_first_not_of("0123456789") != std::string::npos ||
       std::stoi(found_major) > major) {
