@@ -29,11 +29,14 @@ using nlohmann::ordered_json;
 struct Held {
   Eigen::Matrix3Xd points;
   Eigen::Matrix2Xd observed;
-  int observations = 0;  // of the camera, of any point
+  std::set<Eigen::Index> rows;  // the stored points observed
+  int observations = 0;         // of the camera, of any point
 };
 
+// `only`: when given, the observations of those stored points only.
 Held HeldObservations(const formats::Tracks* tracks, const std::string& name,
-                      const std::map<std::int64_t, Eigen::Index>& stored, const formats::Calibration& calibration) {
+                      const std::map<std::int64_t, Eigen::Index>& stored, const formats::Calibration& calibration,
+                      const std::set<Eigen::Index>* only = nullptr) {
   Held held;
   if (tracks == nullptr) return held;
   const auto camera = std::find(tracks->cameras.begin(), tracks->cameras.end(), name);
@@ -44,8 +47,9 @@ Held HeldObservations(const formats::Tracks* tracks, const std::string& name,
     if (tracks->camera_index[k] != index) continue;
     ++held.observations;
     const auto found = stored.find(tracks->point_ids[tracks->point_index[k]]);
-    if (found == stored.end()) continue;
+    if (found == stored.end() || (only != nullptr && only->count(found->second) == 0)) continue;
     rows.push_back(found->second);
+    held.rows.insert(found->second);
     observations.push_back(k);
   }
   held.points.resize(3, static_cast<Eigen::Index>(rows.size()));
@@ -92,7 +96,13 @@ CameraVerdict CheckOne(const std::string& name, const formats::CameraPose& pose,
                                  : "no marker";
     return {"not seen", seen + ": it keeps its stored pose", 0, 0, std::nullopt};
   }
-  const Held reference = HeldObservations(inputs.stored_tracks, name, stored, calibration);
+  // The reference: the calibration's observations of the same points, when enough of
+  // them: a fit to another part of the image would differ by the lens model's and the
+  // floor's small errors there, which the new observations do not share.
+  Held reference = HeldObservations(inputs.stored_tracks, name, stored, calibration, &held.rows);
+  if (reference.points.cols() < options.min_points) {
+    reference = HeldObservations(inputs.stored_tracks, name, stored, calibration);
+  }
   const Eigen::Matrix3d& K = intrinsics->second.K;
   CameraCheckInput input;
   input.K = {K(0, 0), K(1, 1), K(0, 2), K(1, 2), K(0, 1)};
