@@ -67,7 +67,22 @@ def test_yaml_reads_back_with_filestorage(small, exported) -> None:
         np.testing.assert_allclose(cv2.Rodrigues(node.getNode("rvec").mat())[0], R, atol=1e-12)
         size = (int(node.getNode("image_width").real()), int(node.getNode("image_height").real()))
         assert size == sim.intrinsics[name].resolution
+        # How well the camera is known travels with it (the reference has no sigma of its own).
+        status, metrics = node.getNode("status").string(), calibration.metrics[name]
+        assert status == expected_status(calibration, name)
+        assert node.getNode("mean_error_px").real() == pytest.approx(metrics.mean_px)
+        if status != "reference":
+            assert node.getNode("rotation_sigma_deg").real() == pytest.approx(metrics.rotation_sigma_deg)
+            assert node.getNode("centre_sigma").real() == pytest.approx(metrics.centre_sigma)
+        else:
+            assert node.getNode("rotation_sigma_deg").empty()
     storage.release()
+
+
+def expected_status(calibration, name: str) -> str:
+    if calibration.registration_order[0] == name:
+        return "reference"
+    return "weak" if calibration.metrics[name].weak else "ok"
 
 
 # -- COLMAP --------------------------------------------------------------------------------
@@ -124,6 +139,13 @@ def test_colmap_model_parses_and_matches(small, exported) -> None:
         for image_id, index in point["track"]:
             assert images[image_id]["point_ids"][index] == point_id
     assert np.median([p["error"] for p in points.values()]) < 1.0
+    # COLMAP skips comments: each camera's status and sigmas are in cameras.txt's.
+    comments = [line for line in (exported / "colmap" / "cameras.txt").read_text().splitlines()
+                if line.startswith("# calibproj camera ")]
+    assert len(comments) == len(calibration.poses)
+    for line, name in zip(comments, calibration.poses):
+        assert line.split(": ", 1)[1].startswith(f"{name} {expected_status(calibration, name)}")
+        assert (" deg, centre " in line) == (expected_status(calibration, name) != "reference")
 
 
 def test_colmap_camera_models() -> None:
@@ -159,6 +181,9 @@ def test_anipose_toml_loads_with_the_same_values(small, exported) -> None:
         np.testing.assert_array_equal(camera["distortions"], sim.intrinsics[name].dist)
         np.testing.assert_allclose(cv2.Rodrigues(np.array(camera["rotation"]))[0], R, atol=1e-12)
         np.testing.assert_array_equal(camera["translation"], t)
+        assert camera["status"] == expected_status(calibration, name)
+        if camera["status"] != "reference":
+            assert camera["rotation_sigma_deg"] == pytest.approx(calibration.metrics[name].rotation_sigma_deg)
     metadata = document["metadata"]
     assert metadata["unit"] == "m" and 0.0 < metadata["error"] < 1.0
 

@@ -5,14 +5,18 @@ code as ``calibproj-native calibrate --export``, so both write the same bytes.
 
 Every format holds the registered cameras only (a failed camera has no pose), with
 world-to-camera poses ``x_cam = R X + t`` in the calibration's floor frame and unit
-(metres after ``--scale``, arbitrary otherwise).
+(metres after ``--scale``, arbitrary otherwise), and how well each is known where the
+format has room for it: its status (``reference``: the first registered camera, which
+the others' sigmas are relative to; ``ok``; ``weak``), its 1-sigma rotation (deg) and
+centre (the calibration's unit).
 
 ``yaml`` -> ``calibration_opencv.yaml``
     One ``cv2.FileStorage`` file: ``schema``, ``unit``, ``frame``, ``camera_count`` and
     a sequence ``cameras`` of maps with ``name``, ``image_width``, ``image_height``,
     ``camera_matrix`` (3x3), ``distortion_coefficients`` (1xN, OpenCV order), ``R``
     (3x3), ``t`` (3x1) and ``rvec`` (3x1, Rodrigues of R). The per-camera keys are the
-    ones OpenCV calibration tools write, so one entry reads like an intrinsics file.
+    ones OpenCV calibration tools write, so one entry reads like an intrinsics file;
+    ``status``, ``rotation_sigma_deg``, ``centre_sigma`` and ``mean_error_px`` follow.
 
 ``colmap`` -> ``colmap/cameras.txt``, ``colmap/images.txt``, ``colmap/points3D.txt``
     COLMAP's text model. One COLMAP camera and one image per camera (image name = the
@@ -25,12 +29,15 @@ world-to-camera poses ``x_cam = R X + t`` in the calibration's floor frame and u
     of the same world-to-camera convention; with tracks, each image lists its
     observations as distorted image points (COLMAP applies the camera model itself),
     and ``points3D.txt`` gives every point its track and its mean reprojection error
-    (undistorted pixels). Point ids are the calibration's point ids.
+    (undistorted pixels). Point ids are the calibration's point ids. ``cameras.txt``
+    has a comment line per camera with its status and sigmas (COLMAP skips comments).
 
 ``anipose`` -> ``calibration.toml``
     aniposelib's ``CameraGroup.dump`` layout, for multi-view pose triangulation: one
     table ``cam_<i>`` per camera with ``name``, ``size`` ([width, height]), ``matrix``,
-    ``distortions``, ``rotation`` (Rodrigues vector) and ``translation``, and a
+    ``distortions``, ``rotation`` (Rodrigues vector) and ``translation`` (then
+    ``status``, ``rotation_sigma_deg`` and ``centre_sigma``, which aniposelib passes
+    over), and a
     ``metadata`` table (``adjusted``, ``error`` = mean reprojection error of the inlier
     observations in pixels, plus
     ``unit``, ``frame`` and ``source``). Triangulated points come out in the

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <unordered_map>
@@ -61,6 +62,43 @@ Eigen::Vector3d Rodrigues(const Eigen::Matrix3d& R) {
 
 cv::Mat Column(const Eigen::Vector3d& v) { return (cv::Mat_<double>(3, 1) << v.x(), v.y(), v.z()); }
 
+// How well a registered camera is known, as the results say it: its status (the first
+// registered camera is the reference the others' sigmas are relative to), its 1-sigma
+// rotation (deg) and centre (the calibration's unit), and its mean reprojection error.
+struct Quality {
+  std::string status = "ok";  // reference, ok or weak
+  std::optional<double> rotation_sigma_deg, centre_sigma, mean_px;
+};
+
+Quality QualityOf(const Calibration& calibration, const std::string& name) {
+  Quality quality;
+  for (const auto& [camera, metrics] : calibration.metrics) {
+    if (camera != name) continue;
+    quality.status = metrics.weak ? "weak" : "ok";
+    quality.rotation_sigma_deg = metrics.rotation_sigma_deg;
+    quality.centre_sigma = metrics.centre_sigma;
+    quality.mean_px = metrics.mean_px;
+  }
+  if (!calibration.registration_order.empty() && calibration.registration_order.front() == name) {
+    quality = Quality{"reference", std::nullopt, std::nullopt, quality.mean_px};
+  }
+  return quality;
+}
+
+// "far2 ok: rotation 0.0037 deg, centre 0.00114 m (1 sigma), mean error 0.026 px".
+std::string QualityLine(const Calibration& calibration, const std::string& name) {
+  const Quality quality = QualityOf(calibration, name);
+  std::string line = name + " " + quality.status;
+  if (quality.rotation_sigma_deg && quality.centre_sigma) {
+    line += ": rotation " + FormatNumber("%.3g", *quality.rotation_sigma_deg) + " deg, centre " +
+            FormatNumber("%.3g", *quality.centre_sigma) + " " + (calibration.unit == "m" ? "m" : "units") +
+            " (1 sigma, relative to the reference)";
+  }
+  if (quality.mean_px) line += (quality.rotation_sigma_deg ? ", mean error " : ": mean error ") +
+                               FormatNumber("%.3g", *quality.mean_px) + " px";
+  return line;
+}
+
 // -- OpenCV YAML --------------------------------------------------------------------------
 
 std::vector<fs::path> WriteOpenCvYaml(const Calibration& calibration, const fs::path& directory,
@@ -79,7 +117,13 @@ std::vector<fs::path> WriteOpenCvYaml(const Calibration& calibration, const fs::
     cv::eigen2cv(pose.R, R);
     storage << "{" << "name" << pose.name << "image_width" << width << "image_height" << height;
     storage << "camera_matrix" << K << "distortion_coefficients" << cv::Mat(camera.dist, true).reshape(1, 1);
-    storage << "R" << R << "t" << Column(pose.t) << "rvec" << Column(Rodrigues(pose.R)) << "}";
+    storage << "R" << R << "t" << Column(pose.t) << "rvec" << Column(Rodrigues(pose.R));
+    const Quality quality = QualityOf(calibration, pose.name);
+    storage << "status" << quality.status;  // reference, ok or weak
+    if (quality.rotation_sigma_deg) storage << "rotation_sigma_deg" << *quality.rotation_sigma_deg;
+    if (quality.centre_sigma) storage << "centre_sigma" << *quality.centre_sigma;
+    if (quality.mean_px) storage << "mean_error_px" << *quality.mean_px;
+    storage << "}";
   }
   storage << "]";
   const fs::path path = directory / kYamlFile;
@@ -151,6 +195,11 @@ std::string ColmapCamerasText(const Calibration& calibration,
                               std::vector<std::string>* warnings) {
   std::string text = "# Camera list with one line of data per camera:\n#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n"
                      "# Number of cameras: " + std::to_string(calibration.poses.size()) + "\n";
+  // COLMAP skips comment lines: how well each camera is known goes here.
+  int quality_id = 1;
+  for (const auto& pose : calibration.poses) {
+    text += "# calibproj camera " + std::to_string(quality_id++) + ": " + QualityLine(calibration, pose.name) + "\n";
+  }
   int camera_id = 1;
   for (const auto& pose : calibration.poses) {
     const CameraIntrinsics& camera = intrinsics.at(pose.name);
@@ -290,7 +339,13 @@ std::vector<fs::path> WriteAniposeToml(const Calibration& calibration, const fs:
     text += "matrix = " + matrix + "]\n";
     text += "distortions = " + TomlNumbers(camera.dist) + "\n";
     text += "rotation = " + TomlNumbers({rotation.x(), rotation.y(), rotation.z()}) + "\n";
-    text += "translation = " + TomlNumbers({pose.t.x(), pose.t.y(), pose.t.z()}) + "\n\n";
+    text += "translation = " + TomlNumbers({pose.t.x(), pose.t.y(), pose.t.z()}) + "\n";
+    // aniposelib reads the keys above; these say how well the camera is known.
+    const Quality quality = QualityOf(calibration, pose.name);
+    text += "status = " + TomlString(quality.status) + "\n";
+    if (quality.rotation_sigma_deg) text += "rotation_sigma_deg = " + PythonFloat(*quality.rotation_sigma_deg) + "\n";
+    if (quality.centre_sigma) text += "centre_sigma = " + PythonFloat(*quality.centre_sigma) + "\n";
+    text += "\n";
   }
   text += "[metadata]\nadjusted = true\n";  // the poses come out of a bundle adjustment
   text += "error = " + PythonFloat(MeanError(calibration)) + "\n";
