@@ -146,6 +146,11 @@ def test_report_page_has_viewport_warnings_numbers_and_no_provenance_note(report
     assert "Positions and intrinsics" in page and "tilt from down [deg]" in page
     assert "No provenance recorded" in page  # results written without calibrate
     assert "relief, estimated" in page  # coplanar: the points leave the floor by its relief only
+    # The first registered camera is named the reference, not given sigmas of 0.
+    reference = report_with_a_failed_camera[1].registration_order[0]
+    row = re.search(rf'>{reference}</a></td>(.*?)</tr>', page).group(1)
+    assert "reference (the others' sigmas are relative to it)" in row and "0.0000" not in row
+    assert page.count("reference (the others' sigmas are relative to it)") == 1
 
 
 def test_error_bar_whiskers_stop_at_zero() -> None:

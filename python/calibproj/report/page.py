@@ -248,7 +248,7 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         "(inliers). It measures how well the model fits, not how accurate the pose is: a camera "
         "with few points fits them closely. &sigma;: one standard deviation from the bundle "
         "adjustment's covariance, worst axis, relative to the first camera of the registration.</p>",
-        _scroll(_camera_table(views, calibration.unit)),
+        _scroll(_camera_table(views, calibration.unit, reference_camera(calibration))),
         *(["<h2>Evaluation on independent points</h2>", evaluation_table(inputs.evaluation)]
           if inputs.evaluation else []),
         "<h2>Positions and intrinsics</h2>",
@@ -359,7 +359,12 @@ def _scale_source(calibration: Calibration, provenance: dict | None) -> str:
     return "unknown (no provenance)" if calibration.unit == "m" and not provenance else "no measurement"
 
 
-def _camera_table(views: list[CameraView], unit: str) -> str:
+def reference_camera(calibration: Calibration) -> str | None:
+    """The first registered camera: the others' sigmas are relative to it."""
+    return calibration.registration_order[0] if calibration.registration_order else None
+
+
+def _camera_table(views: list[CameraView], unit: str, reference: str | None) -> str:
     centre_unit = "mm" if unit == "m" else "units"
     header = ("<tr><th class=\"name\">camera</th><th>fit residual mean [px]</th><th>std [px]</th>"
               "<th>observations</th><th>inliers</th><th>track &ge; 2 observations</th><th>view score</th>"
@@ -373,14 +378,18 @@ def _camera_table(views: list[CameraView], unit: str) -> str:
             continue
         m = view.metrics
         centre_sigma = None if m is None or m.centre_sigma is None else m.centre_sigma * (1e3 if unit == "m" else 1.0)
+        # The reference's sigmas are 0 by construction: it is named instead.
+        sigmas = (['<td class="name" colspan="2">reference (the others\' sigmas are relative to it)</td>']
+                  if view.name == reference else
+                  [f"<td>{_number(m.rotation_sigma_deg, 4) if m else '-'}</td>",
+                   f"<td>{_number(centre_sigma, 2 if unit == 'm' else 5)}</td>"])
         cells = [_number(m.mean_px, 3), _number(m.std_px, 3), str(m.observations), str(m.inliers),
-                 str(m.track2_observations), str(m.view_score), _number(m.rotation_sigma_deg, 4),
-                 _number(centre_sigma, 2 if unit == "m" else 5)] if m else ["-"] * 8
+                 str(m.track2_observations), str(m.view_score)] if m else ["-"] * 6
         weak = (f'<tr><td></td><td class="weak" colspan="8">WEAK: rotation known to '
                 f'{m.rotation_sigma_deg:.3f} deg (1 sigma); more points in its view help: '
                 f'<code>calibproj generate --densify</code> plans a short extra projection for it</td></tr>'
                 if m is not None and m.weak and m.rotation_sigma_deg is not None else "")
-        rows.append(f"<tr>{name}" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>" + weak)
+        rows.append(f"<tr>{name}" + "".join(f"<td>{c}</td>" for c in cells) + "".join(sigmas) + "</tr>" + weak)
     return "<table>" + "".join(rows) + "</table>"
 
 
