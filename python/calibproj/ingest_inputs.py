@@ -12,15 +12,12 @@ folder is started:
 from __future__ import annotations
 
 import difflib
-import logging
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-logger = logging.getLogger(__name__)
 
 # Mean absolute difference (grey levels, 0-255) under which a decoded frame is the
 # projector's own image of the same pattern: compression leaves a few levels, a camera
