@@ -192,7 +192,7 @@ def test_cli_scale_writes_metric_results(small_simulation, tmp_path, capsys) -> 
     truth = read_poses(small_simulation / "truth.json")
     height = truth.center("cam1")[2]
     assert main(calibrate_args(small_simulation, tmp_path / "r", "--scale", f"camera-height:cam1={height}")) == 0
-    assert "unit: m" in capsys.readouterr().out
+    assert capsys.readouterr().out.splitlines()[-1] == f"results: {tmp_path / 'r'} (in metres)"
     result = Calibration.load(tmp_path / "r")
     assert result.unit == "m"
     assert result.center("cam1")[2] == pytest.approx(height, rel=1e-9)
