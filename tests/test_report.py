@@ -73,7 +73,7 @@ def test_report_names_every_camera_and_the_failure(report_with_a_failed_camera) 
     reason = calibration.failed["cam3"]
     failed_cells = re.findall(r'<td class="failed"[^>]*>([^<]*)</td>', page)
     assert failed_cells == [f"FAILED: {reason}"]
-    assert page.count('class="failed"') == 2  # in the table and in the camera's section
+    assert page.count('class="failed"') == 3  # in the headline, the table and the camera's section
 
 
 def test_calibrate_writes_the_report_by_default(tmp_path, capsys) -> None:
@@ -142,15 +142,22 @@ def test_the_page_fits_a_phone() -> None:
 def test_report_page_has_viewport_warnings_numbers_and_no_provenance_note(report_with_a_failed_camera) -> None:
     page = report_with_a_failed_camera[0].read_text(encoding="utf-8")
     assert '<meta name="viewport" content="width=device-width, initial-scale=1">' in page
-    assert "Camera cam3 FAILED" in page  # in the warnings above the tables
+    assert "Camera cam3 FAILED" in page  # in the headline above the tables
     assert "Positions and intrinsics" in page and "tilt from down [deg]" in page
     assert "No provenance recorded" in page  # results written without calibrate
     assert "relief, estimated" in page  # coplanar: the points leave the floor by its relief only
+    # The first screen answers whether every camera is OK: a line per camera, the
+    # reference named, the others with their sigmas, the failure with its reason.
+    head = re.search(r'<div class="headline">(.*?)</div>', page).group(1)
+    calibration = report_with_a_failed_camera[1]
+    assert f"<b>{len(calibration.poses)} of 3 cameras calibrated</b>" in head and head.count("<li") == 3
+    assert f"Camera cam3 FAILED: {calibration.failed['cam3']}" in head
+    assert re.search(r"cam2(: ok,| is WEAK:) rotation \d\.\d{4} deg, centre \d+\.\d+ ", head)
     # The first registered camera is named the reference, not given sigmas of 0.
     reference = report_with_a_failed_camera[1].registration_order[0]
     row = re.search(rf'>{reference}</a></td>(.*?)</tr>', page).group(1)
     assert "reference (the others' sigmas are relative to it)" in row and "0.0000" not in row
-    assert page.count("reference (the others' sigmas are relative to it)") == 1
+    assert page.count("reference (the others' sigmas are relative to it)") == 2  # the headline and the table
 
 
 def test_error_bar_whiskers_stop_at_zero() -> None:

@@ -60,6 +60,17 @@ class Calibration:
     def registered(self) -> list[str]:
         return list(self.poses)
 
+    def status(self, name: str) -> str:
+        """``reference`` (the first registered camera: the others' sigmas are relative to
+        it), ``ok``, ``weak`` (its rotation known worse than the registration's limit) or
+        ``failed``."""
+        if name not in self.poses:
+            return "failed"
+        if self.registration_order and self.registration_order[0] == name:
+            return "reference"
+        metrics = self.metrics.get(name)
+        return "weak" if metrics is not None and metrics.weak else "ok"
+
     def center(self, name: str) -> np.ndarray:
         R, t = self.poses[name]
         return -R.T @ t

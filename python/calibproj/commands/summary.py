@@ -14,14 +14,9 @@ FAILED = "FAILED"
 
 
 def camera_status(calibration: Any, name: str) -> str:
-    """``reference`` (the first registered camera: the others' sigmas are relative to
-    it), ``ok``, ``WEAK`` or ``FAILED``."""
-    if name not in calibration.poses:
-        return FAILED
-    if calibration.registration_order and calibration.registration_order[0] == name:
-        return REFERENCE
-    metrics = calibration.metrics.get(name)
-    return WEAK if metrics is not None and metrics.weak else OK
+    """``Calibration.status``, a problem in capitals: ``reference``, ``ok``, ``WEAK``, ``FAILED``."""
+    status = calibration.status(name)
+    return status.upper() if status in ("weak", "failed") else status
 
 
 def centre_unit(calibration: Any) -> tuple[str, float]:
@@ -74,4 +69,4 @@ def unit_words(calibration: Any) -> str:
 
 def row_status(calibration: Any, name: str) -> str:
     """The status as the JSON summary gives it (lower case)."""
-    return camera_status(calibration, name).lower()
+    return calibration.status(name)

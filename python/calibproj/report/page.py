@@ -53,6 +53,8 @@ figure { margin: 0.5em 0; }
 .grid { display: grid; grid-template-columns: repeat(auto-fit, minmax(320px, 1fr)); gap: 0.5em 1em; }
 p.failed, p.warning { color: #c0392b; font-weight: bold; }
 div.warnings { border-left: 4px solid #c0392b; background: #fdf2f0; padding: 0.3em 1em; }
+div.headline { border-left: 4px solid #2b7bba; background: #f2f7fc; padding: 0.3em 1em; margin: 1em 0; }
+div.headline li.weak, div.headline li.failed { color: #c0392b; font-weight: bold; }
 section.camera { border-top: 1px solid #ddd; margin-top: 1.5em; }
 @media print {
   body { max-width: none; margin: 0; font-size: 10pt; }
@@ -239,6 +241,7 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         f"<style>{STYLE}</style></head><body>",
         "<h1>Calibration report</h1>",
         _meta_line(inputs.provenance),
+        headline(calibration, views, inputs.evaluation),
         _warnings(views, inputs.self_calibration),
         _scroll(_summary(calibration, views, inputs.provenance)),
         *(["<h2>Check against the stored calibration</h2>", check_table(inputs.check, calibration.unit)]
@@ -282,23 +285,41 @@ def _meta_line(provenance: dict | None) -> str:
     return f'<p class="meta">Made {created} with calibproj {version}; see Provenance at the end.</p>'
 
 
+def headline(calibration: Calibration, views: list[CameraView], evaluation: dict | None) -> str:
+    """The first screen's answer to "is every camera OK, and how well is it known?":
+    how many cameras are calibrated, the evaluation's success when there is one, and per
+    camera its status with its sigma or its reason."""
+    registered = sum(1 for view in views if view.registered)
+    rates = (evaluation or {}).get("success_rate") or {}
+    success = (f"; on independent points {html.escape(str(rates['0.5']))} % of the cameras within 0.5 px"
+               if "0.5" in rates else "")
+    items = [_status_item(calibration, view) for view in views]
+    return (f'<div class="headline"><p><b>{registered} of {len(views)} cameras calibrated</b>{success}.</p>'
+            f'<ul>{"".join(items)}</ul></div>')
+
+
+def _status_item(calibration: Calibration, view: CameraView) -> str:
+    name, status, m = html.escape(view.name), calibration.status(view.name), view.metrics
+    if status == "failed":
+        return f'<li class="failed">Camera {name} FAILED: {html.escape(view.failure or "not registered")}</li>'
+    if status == "reference":
+        return f"<li>{name}: the reference (the others' sigmas are relative to it)</li>"
+    metric = calibration.unit == "m"
+    centre = None if m is None or m.centre_sigma is None else m.centre_sigma * (1e3 if metric else 1.0)
+    sigmas = (f"rotation {_number(m.rotation_sigma_deg, 4)} deg, centre {_number(centre, 2 if metric else 5)} "
+              f"{'mm' if metric else 'units'} (1 &sigma;)") if m is not None else "no sigma"
+    if status == "weak":
+        return (f'<li class="weak">Camera {name} is WEAK: {sigmas} from {m.inliers} observations; a short '
+                f"extra projection for it helps (<code>calibproj generate --densify</code>)</li>")
+    return f"<li>{name}: ok, {sigmas}</li>"
+
+
 def _warnings(views: list[CameraView], self_calibration: dict | None = None) -> str:
+    """What the headline does not say: a focal length asked for but held."""
     held_focal = _held_focal(self_calibration)
-    lines = []
-    for view in views:
-        m = view.metrics
-        if view.registered and view.name in held_focal:
-            lines.append(f"<p class=\"warning\">Camera {html.escape(view.name)} is WEAK: its focal length was not "
-                         f"refined ({html.escape(held_focal[view.name])}); its pose rests on the focal length "
-                         "given.</p>")
-        elif view.registered and m is not None and m.weak:
-            sigma = "unknown" if m.rotation_sigma_deg is None else f"{m.rotation_sigma_deg:.3f} deg"
-            lines.append(f"<p class=\"warning\">Camera {html.escape(view.name)} is WEAK: its rotation is known "
-                         f"to {sigma} (1 &sigma;) from {m.inliers} observations. Its small fit residual does not "
-                         "mean it is accurate; more points in its view (a denser grid, more arrays) help.</p>")
-        elif not view.registered:
-            lines.append(f"<p class=\"warning\">Camera {html.escape(view.name)} FAILED: "
-                         f"{html.escape(view.failure or 'not registered')}</p>")
+    lines = [f"<p class=\"warning\">Camera {html.escape(view.name)} is WEAK: its focal length was not refined "
+             f"({html.escape(held_focal[view.name])}); its pose rests on the focal length given.</p>"
+             for view in views if view.registered and view.name in held_focal]
     return f'<div class="warnings">{"".join(lines)}</div>' if lines else ""
 
 
