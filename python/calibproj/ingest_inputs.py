@@ -113,8 +113,8 @@ def check_intrinsics_names(folder: Path, names: list[str], intrinsics: Any) -> N
         return
     where = intrinsics if isinstance(intrinsics, (str, os.PathLike)) else "the intrinsics given"
     videos = _video_file_names(folder, missing)
-    files = _intrinsics_file_names(intrinsics, unused)
-    renames = _likely_renames(folder, intrinsics, missing, unused)
+    files = _file_names(available, unused)
+    renames = _likely_renames(folder, available, missing, unused)
     hint = f" (rename {', '.join(renames)}?)" if renames else ""
     if not unused:
         raise ValueError(f"{folder}: no video has intrinsics in {where} ({', '.join(videos)} have none); "
@@ -142,7 +142,7 @@ def _intrinsics_names(intrinsics: Any) -> dict[str, Any] | None:
         return None
 
 
-def _likely_renames(folder: Path, intrinsics: Any, videos: list[str], unused: list[str]) -> list[str]:
+def _likely_renames(folder: Path, available: Mapping[str, Any], videos: list[str], unused: list[str]) -> list[str]:
     """Renames that would pair them: a single video to the single unused intrinsics'
     name; else each unused intrinsics file to the name of the video it is most alike
     (the videos name the cameras in every output)."""
@@ -153,7 +153,7 @@ def _likely_renames(folder: Path, intrinsics: Any, videos: list[str], unused: li
     for name in unused:
         close = difflib.get_close_matches(name, videos, n=1, cutoff=NAME_SIMILARITY)
         if close:
-            file = _intrinsics_file_names(intrinsics, [name])[0]
+            file = _file_names(available, [name])[0]
             renames.append(f"{file} to {close[0]}{Path(file).suffix}")
     return renames
 
@@ -169,10 +169,10 @@ def _video_file_names(folder: Path, names: Iterable[str]) -> list[str]:
     return found or sorted(wanted)
 
 
-def _intrinsics_file_names(intrinsics: Any, names: list[str]) -> list[str]:
-    listed = _intrinsics_names(intrinsics) or {}
+def _file_names(available: Mapping[str, Any], names: list[str]) -> list[str]:
+    """The intrinsics files of the named cameras (a mapping's entries are named by camera)."""
     out = []
     for name in names:
-        files = listed.get(name)
+        files = available.get(name)
         out += [Path(file).name for file in files] if isinstance(files, list) else [name]
     return out

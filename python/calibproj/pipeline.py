@@ -127,14 +127,13 @@ def calibrate(
     _check_nominal_fov(nominal_fov_deg, request, videos, intrinsics)
     folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
+        earlier_cameras = _earlier_cameras(merge) if merge is not None else []
         if videos is not None:  # the output is known to be writable: now the inputs, before the ingest
-            check_videos(videos, sequence, intrinsics if nominal_fov_deg is None else None,
-                         _earlier_cameras(merge) if merge is not None else ())
+            check_videos(videos, sequence, intrinsics if nominal_fov_deg is None else None, earlier_cameras)
         intrinsics_source = intrinsics
         given = source if videos is not None or isinstance(source, Tracks) else Tracks.read(source)
         # Before the ingest: a bad or missing file fails its own camera only (the reason
         # names the file and the problem), a missing or empty folder the whole run.
-        earlier_cameras = _earlier_cameras(merge) if merge is not None else []
         if nominal_fov_deg is None:
             names = video_camera_names(videos) if videos is not None else list(given.camera_names)
             intrinsics, unusable = intrinsics_of_cameras(

@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import Any
 
 REFERENCE = "reference"
-OK = "ok"
 WEAK = "WEAK"
 FAILED = "FAILED"
 
