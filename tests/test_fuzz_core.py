@@ -555,7 +555,25 @@ class Baselines:
         self.scale_fit = lambda: _core.formats.scale_factor(calibration, parse_scale("marker-size:1/4=0.1"), markers,
                                                              30.0)
         checked = self.check_call()
+        # The same calibration with its poses' covariance, and its uncertainty.json.
+        covariance = np.zeros((12, 12))
+        covariance[6:, 6:] = np.diag([1e-6] * 3 + [1e-5] * 3)
+        uncertainty_args = [("cameras", ["a", "b"]), ("reference", "a"), ("covariance", covariance),
+                            ("noise_px", [0.2, 0.3])]
+        self.pose_uncertainty = _core.uncertainty.PoseUncertainty(*(value for _, value in uncertainty_args))
+        uncertain = dataclasses.replace(calibration, uncertainty=self.pose_uncertainty)
+        _core.uncertainty.write(folder / "results", uncertain, intrinsics)
+        volume = np.array([[0.05, 0.05, 0.5], [0.1, 0.2, 0.0]])
         return {
+            "_core.uncertainty.PoseUncertainty": Spec(uncertainty_args),
+            "_core.uncertainty.PoseUncertainty.named": Spec([("names", ["x", "y"])]),
+            "_core.uncertainty.triangulation": Spec([("calibration", uncertain), ("intrinsics", intrinsics),
+                                                     ("points", volume), ("noise_px", 0.0)]),
+            "_core.uncertainty.projection": Spec([("calibration", uncertain), ("intrinsics", intrinsics),
+                                                  ("camera", "b"), ("points", volume)]),
+            "_core.uncertainty.write": Spec([("directory", folder), ("calibration", uncertain),
+                                             ("intrinsics", intrinsics)]),
+            "_core.uncertainty.read_pose_uncertainty": Spec([("directory", folder / "results")]),
             "_core.formats.read_calibration": Spec([("directory", folder / "results")]),
             "_core.formats.Calibration": Spec([]),
             "_core.formats.CameraPose": Spec([]),
@@ -646,6 +664,9 @@ class Baselines:
             "_core.check.CameraVerdict": {
                 state: (lambda state=state: self.check_call().cameras[state]) for state in ("a", "b")},
             "_core.formats.Calibration": {"read": lambda: _core.formats.read_calibration(self.results_folder)},
+            "_core.uncertainty.PoseUncertainty": {"built": lambda: self.pose_uncertainty,
+                                                  "numbered": lambda: _core.uncertainty.PoseUncertainty(
+                                                      ["0", "1"], "0", self.pose_uncertainty.covariance, [0.2, 0.3])},
             "_core.formats.ScaleFit": {"fitted": lambda: self.scale_fit()},
             "_core.video.VideoInfo": {"probed": lambda: _core.video.probe(self.files["tiny.mkv"])},
             "_core.detect.MarkerFamilyInfo": {

@@ -3,6 +3,7 @@
 #include <iostream>
 
 #include "calibproj/formats/export.h"
+#include "calibproj/uncertainty/volume_map.h"
 
 namespace calibproj::app {
 
@@ -23,6 +24,7 @@ void SaveResults(OutputFolder& folder, const formats::Calibration& calibration,
     }
     formats::WriteTracks(staging / "tracks.json", given);
     formats::WriteCalibration(staging, calibration);
+    uncertainty::WriteUncertainty(staging, calibration, intrinsics);
     std::vector<std::string> warnings;
     if (calibration.poses.empty() && !exports.empty()) {
       warnings.push_back("no camera registered: nothing exported");  // the failures in metrics.json say why

@@ -143,6 +143,9 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
       for (int i = 0; i < 6; ++i) for (int j = 0; j < 6; ++j) cov(c, i, j) = result.pose_covariances[c](i, j);
     }
     out["pose_covariances"] = covariances;
+    out["pose_covariance"] = result.pose_covariance;
+    out["covariance_time_s"] = result.covariance_time_s;
+    out["covariance_failure"] = result.covariance_failure;
   }
   out["report"] = result.report;
   return out;
@@ -211,7 +214,8 @@ sparse_schur | iterative_schur | dense_qr | sparse_normal_cholesky. The gauge ca
 pose is held fixed, and the scale through the plane offset (COPLANAR) or the distance
 to the scale camera (FREE; -1 picks the farthest). Returns a dict with the refined
 poses, points, plane, more_planes, per-observation residuals (N, 2), costs, iterations, termination,
-solve time and, if compute_covariance, pose_covariances (C, 6, 6) of [dtheta, dt].
+solve time and, if compute_covariance, pose_covariances (C, 6, 6) of [dtheta, dt], their
+joint covariance pose_covariance (6C, 6C) with the cross terms, and covariance_time_s.
 Bad input raises ValueError naming the problem. Releases the GIL while solving.)doc");
 }
 

@@ -92,6 +92,9 @@ Calibration CalibrationFrom(const py::object& c) {
     calibration.planes.push_back({plane["normal"].cast<Eigen::Vector3d>(), plane["offset"].cast<double>(),
                                   plane["points"].cast<std::int64_t>()});
   }
+  if (py::hasattr(c, "uncertainty") && !c.attr("uncertainty").is_none()) {
+    calibration.uncertainty = c.attr("uncertainty").cast<registration::PoseUncertainty>();
+  }
   return calibration;
 }
 
@@ -347,7 +350,11 @@ static void RegisterCalibrationTypes(py::module_& m) {
       .def_readonly("model", &Calibration::model)
       .def_readonly("registration_order", &Calibration::registration_order)
       .def_readonly("floor_rms", &Calibration::floor_rms)
-      .def_readonly("planes", &Calibration::planes);
+      .def_readonly("planes", &Calibration::planes)
+      .def_property_readonly(
+          "uncertainty",
+          [](const Calibration& c) { return c.uncertainty.empty() ? py::none() : py::cast(c.uncertainty); },
+          "the poses' joint covariance (PoseUncertainty), or None when not known");
 }
 
 void register_formats(py::module_& m) {

@@ -19,6 +19,8 @@ PYBIND11_MODULE(_core, m) {
   calibproj::bindings::register_ba(ba);
   auto geometry = m.def_submodule("geometry", "Two-view and multi-view geometry");
   calibproj::bindings::register_geometry(geometry);
+  auto uncertainty = m.def_submodule("uncertainty", "The poses' joint covariance and the triangulation error it gives");
+  calibproj::bindings::register_uncertainty(uncertainty);
   auto registration = m.def_submodule("registration", "Incremental registration of cameras from tracks");
   calibproj::bindings::register_registration(registration);
   auto detect = m.def_submodule("detect", "ArUco and AprilTag marker families and detection");

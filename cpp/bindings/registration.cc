@@ -135,6 +135,7 @@ py::dict ToDict(const registration::ReliefTest& t) {
 py::dict ToDict(const registration::RefineResult& r) {
   py::dict d;
   d["rounds"] = r.rounds; d["changed"] = r.changed; d["removed"] = r.removed; d["planes_found"] = r.planes_found; d["last"] = ToDict(r.last); d["thresholds"] = r.thresholds;
+  d["seconds"] = r.seconds; d["covariance_seconds"] = r.covariance_seconds;
   d["relief"] = ToDict(r.relief);
   return d;
 }
@@ -178,6 +179,7 @@ py::dict ToDict(const registration::RegistrationResult& r) {
   d["floor_rms"] = r.floor_rms;
   d["planes"] = RowMatrix(r.planes); d["point_plane"] = r.point_plane;
   d["frame_M"] = r.frame.M; d["frame_origin"] = r.frame.origin; d["frame_scale"] = r.frame.scale;
+  d["uncertainty"] = r.uncertainty.empty() ? py::none() : py::cast(r.uncertainty);
   return d;
 }
 

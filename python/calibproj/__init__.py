@@ -5,6 +5,8 @@ videos to MSM tracks), ``calibrate`` (videos or tracks to a calibration and its 
 folder), ``compare`` (poses against a reference) and ``evaluate`` (on independent
 data); ``detect_markers`` finds markers in one image. Simulated camera networks live
 in the subpackage ``calibproj.simulate`` (``simulate_tracks`` is also exported here).
+``triangulation_uncertainty`` tells how accurately the calibrated cameras place given
+points.
 
 Every module is importable by its dotted name: no name exported here is also the name
 of a submodule (the projection sequence lives in ``calibproj.sequence``, the pose
@@ -30,6 +32,7 @@ if TYPE_CHECKING:
     from calibproj.sequence import generate
     from calibproj.simulate import simulate_tracks
     from calibproj.tracks import Tracks
+    from calibproj.uncertainty import triangulation_uncertainty
 
 # Each exported name and the module that defines it, imported on first use: the
 # command line starts without numpy, OpenCV, the C++ core (or even logging) loaded, so
@@ -47,6 +50,7 @@ _EXPORTS = {
     "evaluate": "calibproj.evaluation",
     "generate": "calibproj.sequence",
     "simulate_tracks": "calibproj.simulate",
+    "triangulation_uncertainty": "calibproj.uncertainty",
 }
 
 __all__ = list(_EXPORTS)

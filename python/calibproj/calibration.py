@@ -55,6 +55,9 @@ class Calibration:
     # Coplanar model: other planes the projection landed on (a table top), each
     # {"normal": [3], "offset": d, "points": n} with normal . X = d in the floor frame.
     planes: list[dict[str, Any]] = field(default_factory=list)
+    # The registered cameras' joint pose covariance (``_core.uncertainty.PoseUncertainty``)
+    # from the final bundle adjustment; None when not known. uncertainty.json holds it.
+    uncertainty: Any = None
 
     @property
     def registered(self) -> list[str]:
@@ -121,6 +124,7 @@ class Calibration:
             registration_order=[names[c] for c in summary["registration_order"]],
             floor_rms=float(summary["floor_rms"]),
             planes=_planes(summary),
+            uncertainty=None if summary.get("uncertainty") is None else summary["uncertainty"].named(names),
         )
 
     @classmethod
@@ -162,7 +166,8 @@ class Calibration:
                    point_ids=np.array(core.point_ids, dtype=np.int64), unit=core.unit, model=core.model,
                    registration_order=list(core.registration_order), floor_rms=core.floor_rms,
                    planes=[{"normal": [float(v) for v in plane.normal], "offset": plane.offset,
-                            "points": plane.points} for plane in core.planes])
+                            "points": plane.points} for plane in core.planes],
+                   uncertainty=core.uncertainty)
 
 
 def _planes(summary: dict[str, Any]) -> list[dict[str, Any]]:

@@ -351,6 +351,10 @@ def write_results(out: Path, final: Path, calibration: Calibration, tracks: Trac
         relative = {name: Path(path).relative_to(out).as_posix() for name, path in thumbnails.items()}
         ingest_result.write_report(out / DETECT_REPORT_FILE, relative, recorded_from=final)
     calibration.save(out)
+    if calibration.uncertainty is not None and calibration.poses:
+        from calibproj import _core
+
+        _core.uncertainty.write(out, calibration, used)
     if calibration.poses:
         export_all(calibration, formats, out, used, tracks)
     elif formats:  # the failures in metrics.json say why

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "calibproj/ba/manifolds.h"
+#include "calibproj/ba/reduced_covariance.h"
 #include "calibproj/ba/relief_cost.h"
 #include "calibproj/ba/reprojection_cost.h"
 #include "calibproj/ba/rotation_cache.h"
@@ -458,43 +459,71 @@ ceres::Solver::Options SolverOptions(const Options& options, int num_cameras,
   return solver;
 }
 
-// Ceres covariance of each free pose in the gauge frame, mapped to [dtheta, dt]
-// in the caller's frame (see Result::pose_covariances).
-std::vector<Matrix6d> PoseCovariances(ceres::Problem* problem, Parameters& params, const Gauge& gauge,
-                                      const FrameChange& change, const Options& options) {
+// The blocks the covariance keeps besides the poses: planes, projector maps and lens,
+// relief nodes; the variable ones, in a fixed order.
+std::vector<double*> OtherKeptBlocks(const ceres::Problem& problem, Parameters& params) {
+  std::vector<double*> blocks;
+  const auto keep = [&](double* block) {
+    if (problem.HasParameterBlock(block) && !problem.IsParameterBlockConstant(block)) blocks.push_back(block);
+  };
+  for (int k = 0; k < 1 + static_cast<int>(params.more_planes.rows()); ++k) keep(params.Plane(k));
+  for (int k = 0; k < static_cast<int>(params.map_valid.size()); ++k) {
+    if (params.map_valid[k]) keep(params.Map(k));
+  }
+  keep(params.lens.data());
+  for (int node = 0; node < params.relief_grid.size(); ++node) keep(params.ReliefNode(node));
+  return blocks;
+}
+
+// The map from a pose block's tangent to [dtheta, dt] in the caller's frame.
+Eigen::MatrixXd PoseTangentToCaller(const ceres::Problem& problem, const double* pose, const FrameChange& change) {
+  const Eigen::Vector3d w = Eigen::Map<const Eigen::Vector3d>(pose);
+  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+  const Eigen::Matrix3d J_left = LeftJacobian(w);
+  A.topLeftCorner<3, 3>() = J_left;
+  A.bottomLeftCorner<3, 3>() = -Skew(RotationFromAngleAxis(w) * change.t) * J_left;
+  A.bottomRightCorner<3, 3>().setIdentity();
+  const ceres::Manifold* manifold = problem.GetManifold(pose);
+  if (manifold == nullptr) return A;
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> plus(6, manifold->TangentSize());
+  manifold->PlusJacobian(pose, plus.data());
+  return A * plus;
+}
+
+// The joint covariance of every pose, [dtheta, dt] per camera in the caller's frame
+// (see Result::pose_covariance), from the reduced camera system.
+Eigen::MatrixXd JointPoseCovariance(ceres::Problem* problem, Parameters& params, const Gauge& gauge,
+                                    const FrameChange& change) {
   const int num_cameras = static_cast<int>(params.poses.rows());
   if (gauge.scale_camera >= 0) {
     // The padded manifold used for speed has an inert direction; covariance needs the exact one.
     problem->SetManifold(params.poses.row(gauge.scale_camera).data(),
                          ScaleGaugeManifold(params, gauge.scale_camera).release());
   }
-  std::vector<std::pair<const double*, const double*>> blocks;
-  for (int c = 0; c < num_cameras; ++c) {
-    if (!problem->IsParameterBlockConstant(params.poses.row(c).data())) {
-      blocks.emplace_back(params.poses.row(c).data(), params.poses.row(c).data());
-    }
+  std::vector<double*> points, kept;
+  for (int p = 0; p < static_cast<int>(params.points.rows()); ++p) {
+    if (!problem->IsParameterBlockConstant(params.PointBlock(p))) points.push_back(params.PointBlock(p));
   }
-  ceres::Covariance::Options covariance_options;
-  covariance_options.num_threads = options.num_threads;
-  ceres::Covariance covariance(covariance_options);
-  if (!covariance.Compute(blocks, problem)) {
-    throw std::runtime_error("covariance: the Jacobian is rank deficient; the poses are not determined");
-  }
-  std::vector<Matrix6d> out(num_cameras, Matrix6d::Zero());
+  std::vector<int> pose_column(num_cameras, -1);
+  int columns = 0;
   for (int c = 0; c < num_cameras; ++c) {
-    const double* pose = params.poses.row(c).data();
+    double* pose = params.poses.row(c).data();
     if (problem->IsParameterBlockConstant(pose)) continue;
-    Matrix6d ambient;
-    covariance.GetCovarianceBlock(pose, pose, ambient.data());
-    const Eigen::Vector3d w = params.poses.row(c).head<3>().transpose();
-    Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
-    const Eigen::Matrix3d J_left = LeftJacobian(w);
-    A.topLeftCorner<3, 3>() = J_left;
-    A.bottomLeftCorner<3, 3>() = -Skew(RotationFromAngleAxis(w) * change.t) * J_left;
-    A.bottomRightCorner<3, 3>().setIdentity();
-    out[c] = A * ambient * A.transpose();
+    kept.push_back(pose);
+    pose_column[c] = columns;
+    columns += problem->ParameterBlockTangentSize(pose);
   }
-  return out;
+  const std::vector<double*> others = OtherKeptBlocks(*problem, params);
+  kept.insert(kept.end(), others.begin(), others.end());
+  const Eigen::MatrixXd tangent = ReducedCovariance(problem, points, kept);
+  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(6 * num_cameras, columns);
+  for (int c = 0; c < num_cameras; ++c) {
+    if (pose_column[c] < 0) continue;
+    const Eigen::MatrixXd map = PoseTangentToCaller(*problem, params.poses.row(c).data(), change);
+    M.block(6 * c, pose_column[c], 6, map.cols()) = map;
+  }
+  const Eigen::MatrixXd joint = M * tangent.topLeftCorner(columns, columns) * M.transpose();
+  return 0.5 * (joint + joint.transpose());
 }
 
 const char* ModelName(Model model) { return model == Model::kFree ? "free" : "coplanar"; }
@@ -727,7 +756,15 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   if (rotations) rotations->Refresh();  // the last evaluation may have been a rejected step
   if (options.compute_covariance && result.usable) {
     if (shared_errors) DiscountSharedErrors(data, options.error_correlation, projector_terms, &losses);
-    result.pose_covariances = PoseCovariances(&problem, params, gauge, change, options);
+    const auto covariance_start = std::chrono::steady_clock::now();
+    try {
+      result.pose_covariance = JointPoseCovariance(&problem, params, gauge, change);
+      for (int c = 0; c < num_cameras; ++c) result.pose_covariances.push_back(result.pose_covariance.block<6, 6>(6 * c, 6 * c));
+    } catch (const std::runtime_error& error) {
+      result.covariance_failure = error.what();  // the solution stands without it
+    }
+    result.covariance_time_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - covariance_start).count();
   }
   if (options.model == Model::kCoplanar) CopyProjectorOut(gauge_data, params, change, &result);
   if (params.HasRelief()) {

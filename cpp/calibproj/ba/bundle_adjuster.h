@@ -131,6 +131,7 @@ struct Result {
   std::string termination;
   bool usable = false;
   double solve_time_s = 0.0;
+  double covariance_time_s = 0.0;  // of the covariance, when requested
   int gauge_camera = -1;
   int scale_camera = -1;      // FREE with poses and points refined; -1 otherwise
   PoseMatrix poses;
@@ -138,9 +139,15 @@ struct Result {
   Eigen::Vector4d plane = Eigen::Vector4d::Zero();
   PlaneMatrix more_planes;    // COPLANAR: the other planes, refined
   PixelMatrix residuals;      // per observation, projected minus observed, pixels
-  // Per camera when requested: covariance of [dtheta, dt] with R = Exp(dtheta) R_hat,
-  // t = t_hat + dt, in the caller's frame. Zero for the gauge camera.
+  // When requested: the joint covariance (6C x 6C, cross terms included) of every
+  // camera's [dtheta, dt] with R = Exp(dtheta) R_hat, t = t_hat + dt, in the caller's
+  // frame, for residuals of unit variance (each camera's weight applied); the gauge
+  // camera's rows are zero. And its diagonal blocks, per camera.
+  Eigen::MatrixXd pose_covariance;
   std::vector<Matrix6d> pose_covariances;
+  // Why the covariance was requested but not given (the poses not all determined: a
+  // camera seeing too little); empty otherwise.
+  std::string covariance_failure;
   // With a projector term: per plane (0 the main one) its map, the lens, per point the
   // projector residual G(a, b) - u in normalised projector units (NaN without a term),
   // and how many points had one.

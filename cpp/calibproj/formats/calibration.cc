@@ -23,6 +23,10 @@ void Calibration::Check() const {
   if (unit != "arbitrary" && unit != "m") {
     throw std::invalid_argument("unit must be one of ('arbitrary', 'm'), got " + PythonRepr(unit));
   }
+  uncertainty.Check();
+  for (const auto& camera : uncertainty.cameras) {
+    if (PoseOf(camera) == nullptr) throw std::invalid_argument("pose covariance: camera " + camera + " has no pose");
+  }
 }
 
 const CameraPose* Calibration::PoseOf(const std::string& name) const {
@@ -103,6 +107,7 @@ Calibration FromRegistration(const registration::RegistrationResult& result, con
   for (int c : result.registration_order) calibration.registration_order.push_back(cameras[c]);
   calibration.floor_rms = result.floor_rms;
   calibration.planes = PlanesOf(result);
+  calibration.uncertainty = result.uncertainty.Named(cameras);
   return calibration;
 }
 
@@ -120,6 +125,7 @@ Calibration Scaled(const Calibration& calibration, double factor) {
   out.unit = "m";
   out.floor_rms *= factor;
   for (auto& plane : out.planes) plane.offset *= factor;
+  out.uncertainty = calibration.uncertainty.Scaled(factor);
   return out;
 }
 

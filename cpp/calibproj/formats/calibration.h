@@ -59,6 +59,9 @@ struct Calibration {
   std::vector<std::string> registration_order;
   double floor_rms = 0.0;  // RMS distance of the floor's points to the floor
   std::vector<Plane> planes;
+  // The poses' joint covariance from the final bundle adjustment (uncertainty.json holds
+  // it; the three files do not); empty when not known.
+  registration::PoseUncertainty uncertainty;
 
   // std::invalid_argument when points and ids differ in number or the unit is unknown.
   void Check() const;

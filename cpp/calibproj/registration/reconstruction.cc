@@ -5,6 +5,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -921,20 +922,13 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   ba_options.error_correlation = options_.error_correlation;
   ba_options.relief_cells = options_.relief_cells;
   if (cameras.size() < 2 && options_.model == ba::Model::kFree) return result;
-  ba::Result solved;
-  try {
-    solved = ba::BundleAdjust(data, ba_options);
-  } catch (const std::runtime_error&) {
-    if (!covariance) throw;
-    // The poses are not all determined: solve again without the covariance.
-    ba_options.compute_covariance = false;
-    solved = ba::BundleAdjust(data, ba_options);
-  }
+  // Without a covariance (the poses not all determined) the solution stands all the same.
+  const ba::Result solved = ba::BundleAdjust(data, ba_options);
   if (coplanar && HasProjector()) {
     projector_lens_ = solved.projector_lens;
     projector_surfaces_ = solved.projector_surfaces;
   }
-  if (covariance) StoreCovariances(solved, cameras, static_cast<int>(kept.size()), static_cast<int>(points.size()));
+  if (covariance) StoreCovariances(solved, data, cameras, static_cast<int>(points.size()));
   for (size_t k = 0; k < cameras.size(); ++k) poses_.row(cameras[k]) = solved.poses.row(k);
   for (size_t k = 0; k < points.size(); ++k) points_.row(points[k]) = solved.points.row(k);
   if (coplanar) {
@@ -952,6 +946,7 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   result.points = static_cast<int>(points.size());
   result.observations = static_cast<int>(kept.size());
   result.solve_time_s = solved.solve_time_s;
+  result.covariance_time_s = solved.covariance_time_s;
   return result;
 }
 
@@ -1013,9 +1008,11 @@ int Reconstruction::FilterOutliers(const std::vector<double>& threshold) {
   return changed;
 }
 
-void Reconstruction::StoreCovariances(const ba::Result& solved, const std::vector<int>& cameras, int observations,
+void Reconstruction::StoreCovariances(const ba::Result& solved, const ba::Data& data, const std::vector<int>& cameras,
                                       int points) {
   pose_covariances_.clear();
+  pose_covariance_.resize(0, 0);
+  covariance_noise_px_.clear();
   if (solved.pose_covariances.size() != cameras.size()) return;
   // Ceres gives the covariance for residuals of unit variance; scale it by the
   // variance the residuals show (per image coordinate).
@@ -1023,11 +1020,21 @@ void Reconstruction::StoreCovariances(const ba::Result& solved, const std::vecto
   for (const auto& surface : solved.projector_surfaces) maps += surface.valid ? 1 : 0;
   const int parameters = 6 * static_cast<int>(cameras.size()) + (options_.model == ba::Model::kCoplanar ? 2 : 3) * points +
                          8 * maps + (maps > 0 ? 2 : 0);
-  const int dof = 2 * observations + 2 * solved.projector_terms - parameters;
+  const int dof = 2 * static_cast<int>(data.camera_index.size()) + 2 * solved.projector_terms - parameters;
   if (dof <= 0) return;
   const double variance = 2.0 * solved.final_cost / dof;
-  pose_covariances_.assign(cameras_.size(), ba::Matrix6d::Constant(std::numeric_limits<double>::quiet_NaN()));
-  for (size_t k = 0; k < cameras.size(); ++k) pose_covariances_[cameras[k]] = variance * solved.pose_covariances[k];
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  pose_covariances_.assign(cameras_.size(), ba::Matrix6d::Constant(nan));
+  pose_covariance_ = Eigen::MatrixXd::Constant(6 * num_cameras(), 6 * num_cameras(), nan);
+  covariance_noise_px_.assign(cameras_.size(), nan);
+  for (size_t a = 0; a < cameras.size(); ++a) {
+    pose_covariances_[cameras[a]] = variance * solved.pose_covariances[a];
+    const double weight = data.camera_weights.size() > 0 ? data.camera_weights(static_cast<int>(a)) : 1.0;
+    covariance_noise_px_[cameras[a]] = std::sqrt(variance) / weight;
+    for (size_t b = 0; b < cameras.size(); ++b) {
+      pose_covariance_.block<6, 6>(6 * cameras[a], 6 * cameras[b]) = variance * solved.pose_covariance.block<6, 6>(6 * a, 6 * b);
+    }
+  }
 }
 
 int Reconstruction::FindPlanes() {
@@ -1131,12 +1138,18 @@ ReliefTest Reconstruction::TestRelief() {
 }
 
 RefineResult Reconstruction::Refine() {
+  const auto start = std::chrono::steady_clock::now();
   RefineResult result;
   pose_covariances_.clear();
+  pose_covariance_.resize(0, 0);
+  covariance_noise_px_.clear();
   result.planes_found = FindPlanes();
   result.relief = TestRelief();
   for (int round = 0; round < options_.max_refine_rounds; ++round) {
-    result.last = Adjust(true, round + 1 == options_.max_refine_rounds);
+    // The covariance of every round (cheap: the reduced camera system): the last one
+    // stands, its weights settled.
+    result.last = Adjust(true, true);
+    result.covariance_seconds += result.last.covariance_time_s;
     ++result.rounds;
     const std::vector<double> before = camera_sigma_px_;
     const std::vector<double> projector_before = projector_sigma_px_;
@@ -1145,13 +1158,12 @@ RefineResult Reconstruction::Refine() {
     const int changed = FilterOutliers(result.thresholds);
     result.changed += changed;
     if (changed == 0 && NoiseSettled(before, projector_before)) {
-      // Converged: once more from the same state, for the covariance.
-      if (pose_covariances_.empty()) Adjust(true, true);
       break;
     }
   }
   result.removed = static_cast<int>(std::count(active_.begin(), active_.end(), false));
   CheckPlanarAmbiguity();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }
 

@@ -126,6 +126,7 @@ struct AdjustResult {
   std::string termination;
   int cameras = 0, points = 0, observations = 0;
   double solve_time_s = 0.0;
+  double covariance_time_s = 0.0;
 };
 
 // COPLANAR with a relief prior (Options::floor_relief): whether the main plane's relief
@@ -152,6 +153,8 @@ struct RefineResult {
   ReliefTest relief;
   AdjustResult last;
   std::vector<double> thresholds;  // per camera, pixels
+  double seconds = 0.0;             // wall time of the whole refinement
+  double covariance_seconds = 0.0;  // of it, the covariance's
 };
 
 class Reconstruction {
@@ -214,6 +217,11 @@ class Reconstruction {
   // R_hat) relative to the gauge camera, scaled by the residuals' variance; empty when
   // not computed or not determined.
   const std::vector<ba::Matrix6d>& pose_covariances() const { return pose_covariances_; }
+  // The same jointly (6 x 6 blocks per camera pair, NaN for cameras out of the solve), and
+  // per camera the noise (px, 1 sigma per coordinate) this covariance stands for: its
+  // weight's share of the residuals' variance. Empty when not computed.
+  const Eigen::MatrixXd& pose_covariance() const { return pose_covariance_; }
+  const std::vector<double>& covariance_noise_px() const { return covariance_noise_px_; }
   // Projector after an adjustment: per plane its map, the lens; per group of points
   // (projector_group_sides_px: the largest marker's side, NaN for the points whose side
   // is not known) the maps' noise (projector px; NaN until estimated); per camera its
@@ -251,7 +259,7 @@ class Reconstruction {
   std::vector<Eigen::Matrix3d> Rotations() const;  // per camera, from the poses
   bool InFront(int observation, const std::vector<Eigen::Matrix3d>& rotations) const;
   int ThirdCamera(int camera1, int camera2) const;
-  void StoreCovariances(const ba::Result& solved, const std::vector<int>& cameras, int observations, int points);
+  void StoreCovariances(const ba::Result& solved, const ba::Data& data, const std::vector<int>& cameras, int points);
   bool KnownPoint(int point, Eigen::Vector3d* X) const;
   // True when the points of observations[k], k in subset, all lie on the main plane.
   bool AllOnMainPlane(const std::vector<int>& observations, const std::vector<int>& subset) const;
@@ -298,6 +306,8 @@ class Reconstruction {
   int gauge_camera_ = -1;
   std::vector<int> order_;
   std::vector<ba::Matrix6d> pose_covariances_;
+  Eigen::MatrixXd pose_covariance_;
+  std::vector<double> covariance_noise_px_;
   ba::PixelMatrix projector_;  // normalised pixels (ba/projector_cost.h), per point
   double projector_width_ = 1.0;
   Eigen::Vector2d projector_lens_ = Eigen::Vector2d::Zero();

@@ -60,6 +60,35 @@ std::pair<double, double> PoseSigmas(const ba::Matrix6d& covariance, const Eigen
   return {largest(rotation) * 180.0 / M_PI, largest(centre)};
 }
 
+// The joint pose covariance of the registered cameras in the floor frame X_f = s M (X - o):
+// a camera's R_f = R M^T keeps dtheta, and t_f = s (R o + t) moves by s (dt - [R o]x dtheta).
+PoseUncertainty FloorFrameUncertainty(const Reconstruction& rec, const std::vector<int>& registered,
+                                      const ba::PoseMatrix& poses, const FloorFrame& frame) {
+  PoseUncertainty out;
+  const Eigen::MatrixXd& joint = rec.pose_covariance();
+  if (joint.rows() != 6 * rec.num_cameras()) return out;
+  const int n = static_cast<int>(registered.size());
+  Eigen::MatrixXd B = Eigen::MatrixXd::Zero(6 * n, 6 * n);
+  Eigen::VectorXi rows(6 * n);
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Matrix3d R = ba::RotationFromAngleAxis(poses.row(k).head<3>().transpose());
+    B.block<3, 3>(6 * k, 6 * k).setIdentity();
+    B.block<3, 3>(6 * k + 3, 6 * k) = -frame.scale * ba::Skew(R * frame.origin);
+    B.block<3, 3>(6 * k + 3, 6 * k + 3) = frame.scale * Eigen::Matrix3d::Identity();
+    for (int i = 0; i < 6; ++i) rows(6 * k + i) = 6 * registered[k] + i;
+  }
+  const Eigen::MatrixXd sub = joint(rows, rows);
+  if (!sub.allFinite()) return out;
+  out.covariance = B * sub * B.transpose();
+  out.covariance = 0.5 * (out.covariance + out.covariance.transpose());
+  for (int k = 0; k < n; ++k) {
+    out.cameras.push_back(std::to_string(registered[k]));
+    out.noise_px.push_back(rec.covariance_noise_px()[registered[k]]);
+  }
+  out.reference = std::to_string(rec.gauge_camera());
+  return out;
+}
+
 }  // namespace
 
 RegistrationResult Summarize(const Reconstruction& rec) {
@@ -111,6 +140,7 @@ RegistrationResult Summarize(const Reconstruction& rec) {
       camera.weak = camera.rotation_sigma_deg > rec.options().weak_rotation_sigma_deg;
     }
   }
+  result.uncertainty = FloorFrameUncertainty(rec, registered, poses, result.frame);
   double sum_sq = 0.0;
   int on_floor = 0;
   for (int p = 0; p < result.points.rows(); ++p) {

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "calibproj/registration/floor_frame.h"
+#include "calibproj/registration/pose_uncertainty.h"
 #include "calibproj/registration/reconstruction.h"
 
 namespace calibproj::registration {
@@ -41,6 +42,9 @@ struct RegistrationResult {
   // `points` its plane (0 the floor, k >= 1 planes[k - 1], -1 off every plane).
   ba::PlaneMatrix planes;
   std::vector<int> point_plane;
+  // The registered cameras' joint pose covariance in the floor frame, the cameras named
+  // by their index ("0", "1", ...: the caller names them); empty when not computed.
+  PoseUncertainty uncertainty;
 };
 
 // Floor frame (plane of the COPLANAR model, or a robust plane fit to the FREE points),

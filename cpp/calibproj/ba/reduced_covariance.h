@@ -1,0 +1,30 @@
+#pragma once
+// The joint covariance of a solved bundle adjustment's camera-side blocks (poses,
+// planes, projector maps, relief nodes: everything but the points), cross terms
+// included, from the reduced camera system: the points are eliminated from the normal
+// equations J^T J by their Schur complement, as the Schur linear solvers do, and the
+// small dense system left is inverted. Cheaper than a generic covariance of every
+// block (ceres::Covariance factors the whole Jacobian), and exact for the same problem.
+
+#include <Eigen/Core>
+#include <vector>
+
+namespace ceres {
+class Problem;
+}  // namespace ceres
+
+namespace calibproj::ba {
+
+// Covariance, for residuals of unit variance, of the `kept` blocks in their tangent
+// spaces and in the order given, with the `eliminated` blocks (each seen by residuals
+// that involve no other eliminated block: the points) marginalised out. Every block
+// must be a variable (not constant) block of `problem`, evaluated where it stands (an
+// evaluation callback of the problem must be up to date: it is not called). The
+// residual blocks are evaluated one by one, robust loss applied, and the system is
+// gathered block by block: no Jacobian matrix is built.
+// Throws std::runtime_error when the reduced system is singular (a gauge freedom left
+// open, or blocks the residuals do not determine).
+Eigen::MatrixXd ReducedCovariance(ceres::Problem* problem, const std::vector<double*>& eliminated,
+                                  const std::vector<double*>& kept);
+
+}  // namespace calibproj::ba

@@ -1,0 +1,39 @@
+#pragma once
+// What a calibration knows of its own poses: the joint covariance of every registered
+// camera's pose (cross terms included), from the final bundle adjustment, and each
+// camera's noise, in the frame and unit of the calibration's results.
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+namespace calibproj::registration {
+
+struct PoseUncertainty {
+  // The registered cameras, in the covariance's order.
+  std::vector<std::string> cameras;
+  // The gauge: this camera's pose and its distance to the floor were held in the bundle
+  // adjustment, so every uncertainty is relative to them (its own rows are zero).
+  std::string reference;
+  // 6C x 6C: per camera [dtheta (rad), dt (calibration unit)] of its world-to-camera pose,
+  // R = Exp(dtheta) R_hat and t = t_hat + dt.
+  Eigen::MatrixXd covariance;
+  // Per camera, the noise of its centres (1 sigma per image coordinate, undistorted px)
+  // that the covariance assumes.
+  std::vector<double> noise_px;
+
+  bool empty() const { return cameras.empty(); }
+  // std::invalid_argument naming the first inconsistency (sizes, non-finite values, a
+  // reference that is not one of the cameras, a noise that is not positive).
+  void Check() const;
+  // The same in a world scaled by `factor` (dt scales, dtheta does not).
+  PoseUncertainty Scaled(double factor) const;
+  // The covariance of camera `a` with camera `b` (6 x 6).
+  Eigen::Matrix<double, 6, 6> Block(int a, int b) const { return covariance.block<6, 6>(6 * a, 6 * b); }
+  int IndexOf(const std::string& camera) const;  // -1 when not there
+  // The same with cameras named by their index ("0", "1", ...: as the registration,
+  // which knows no names, gives them) renamed to names[index].
+  PoseUncertainty Named(const std::vector<std::string>& names) const;
+};
+
+}  // namespace calibproj::registration

@@ -1,0 +1,80 @@
+#pragma once
+// What a calibration's uncertainty means for the user's points: the expected error of a
+// point triangulated from the cameras that see it, and how far a point of the room may
+// project from where the calibration puts it in each camera's image.
+//
+// A point X seen by cameras c (in front, inside the image) is triangulated by weighted
+// least squares from their pixels u_c. To first order
+//   dX = H^-1 sum_c J_c^T W_c (du_c - P_c dpose_c),  H = sum_c J_c^T W_c J_c,
+// with J_c = d pixel / d X and P_c = d pixel / d pose_c. Each camera is weighed by how
+// well it places the point, W_c = (sigma_c^2 I + P_c Sigma_cc P_c^T)^-1 (its pixels'
+// noise sigma_c and its own pose's uncertainty there), so that a camera whose pose is
+// poorly known (a zoomed one, relative to the reference) does not drag the point. The
+// covariance is H^-1 (sum_c sigma_c^2 J_c^T W_c W_c J_c + G Sigma G^T) H^-1, with G the
+// blocks J_c^T W_c P_c side by side and Sigma the poses' joint covariance: the cross
+// terms between cameras enter (two cameras whose poses err together err less relative
+// to each other). The gauge is the calibration's: the reference camera's pose and its
+// distance to the floor held.
+
+#include <Eigen/Core>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "calibproj/formats/calibration.h"
+#include "calibproj/formats/intrinsics_file.h"
+
+namespace calibproj::uncertainty {
+
+struct PointUncertainty {
+  bool determined = false;          // seen by two cameras at least, not along one line
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // calibration unit squared
+  Eigen::Matrix3d from_poses = Eigen::Matrix3d::Zero();  // the poses' share of it
+  std::vector<int> cameras;         // indices into the model's cameras
+
+  // 1 sigma along the worst direction.
+  double WorstSigma() const;
+};
+
+class UncertaintyModel {
+ public:
+  // The calibration's registered cameras that have intrinsics and a pose covariance.
+  // std::invalid_argument when the calibration carries no pose uncertainty, or a camera
+  // of it has no pose or no intrinsics.
+  UncertaintyModel(const formats::Calibration& calibration,
+                   const std::map<std::string, formats::CameraIntrinsics>& intrinsics);
+
+  int num_cameras() const { return static_cast<int>(cameras_.size()); }
+  const std::string& name(int camera) const { return cameras_[camera].name; }
+  double noise_px(int camera) const { return cameras_[camera].noise_px; }
+  const std::string& reference() const { return reference_; }
+
+  // Whether the camera sees X: in front, and its distorted pixel inside the image.
+  bool Sees(int camera, const Eigen::Vector3d& X) const;
+  // Triangulation from the cameras that see X; `noise_px` > 0 replaces every camera's
+  // noise for the new pixels (the user's detector), else each camera's own.
+  PointUncertainty Triangulation(const Eigen::Vector3d& X, double noise_px = 0.0) const;
+  // Covariance (px^2) of X's pixel in the camera from its pose's uncertainty alone.
+  Eigen::Matrix2d Projection(int camera, const Eigen::Vector3d& X) const;
+
+ private:
+  struct Camera {
+    std::string name;
+    int block = 0;  // in the pose covariance
+    Eigen::Matrix3d K;
+    Eigen::Matrix3d R;
+    Eigen::Vector3d t;
+    std::vector<double> dist;
+    double width = 0.0, height = 0.0;
+    double noise_px = 1.0;
+  };
+  // Pixel of X and its derivatives by X and by the pose's [dtheta, dt].
+  void Jacobians(const Camera& camera, const Eigen::Vector3d& X, Eigen::Matrix<double, 2, 3>* by_point,
+                 Eigen::Matrix<double, 2, 6>* by_pose) const;
+
+  std::vector<Camera> cameras_;
+  Eigen::MatrixXd covariance_;  // joint, in the order of the calibration's uncertainty
+  std::string reference_;
+};
+
+}  // namespace calibproj::uncertainty
