@@ -55,7 +55,7 @@ def simulation(tmp_path_factory) -> Path:
     return out
 
 
-CALIBRATION_FILES = ["camera_poses.json", "metrics.json", "points.ply"]
+CALIBRATION_FILES = ["camera_poses.json", "metrics.json", "points.ply", "uncertainty.json"]
 EXPORT_FILES = ["calibration_opencv.yaml", "calibration.toml", "colmap/cameras.txt", "colmap/images.txt",
                 "colmap/points3D.txt"]
 

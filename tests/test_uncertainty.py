@@ -1,0 +1,153 @@
+"""The expected triangulation error from the poses' joint covariance, against the spread
+of re-noised solutions; uncertainty.json as calibrate writes it; the API's errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibproj import _core, triangulation_uncertainty
+from calibproj.calibration import Calibration, CameraMetrics
+from calibproj.io.intrinsics import Intrinsics
+from calibproj.io.jsonio import FormatError
+from calibproj.pipeline import calibrate
+from calibproj.simulate import simulate_tracks
+from calibproj.synthetic import matrix_from_rotvec, paper_ring_rig
+
+SIGMA_PX = 0.5
+
+
+def _calibration_of(rig, poses: np.ndarray, covariance: np.ndarray) -> tuple[Calibration, dict[str, Intrinsics]]:
+    names = [f"cam{c}" for c in range(len(poses))]
+    posed = {name: (matrix_from_rotvec(pose[:3]), pose[3:].copy()) for name, pose in zip(names, poses)}
+    metrics = {name: CameraMetrics(0.5, 0.1, 1, 1, 1, 1) for name in names}
+    uncertainty = _core.uncertainty.PoseUncertainty(names, names[0], covariance, [SIGMA_PX] * len(names))
+    calibration = Calibration(posed, {}, metrics, rig.points, np.arange(len(rig.points)), unit="m",
+                              registration_order=names, uncertainty=uncertainty)
+    intrinsics = {name: Intrinsics(name, rig.resolution, rig.K[c], np.zeros(5)) for c, name in enumerate(names)}
+    return calibration, intrinsics
+
+
+def _project(K: np.ndarray, pose: np.ndarray, X: np.ndarray) -> np.ndarray:
+    x = matrix_from_rotvec(pose[:3]) @ X + pose[3:]
+    return (K @ (x / x[2]))[:2]
+
+
+def _triangulate(Ks, poses, pixels, weights, start: np.ndarray) -> np.ndarray:
+    """Weighted Gauss-Newton from `start`, numeric Jacobians: an independent triangulation."""
+    X = start.copy()
+    for _ in range(5):
+        H, g = np.zeros((3, 3)), np.zeros(3)
+        for K, pose, u, W in zip(Ks, poses, pixels, weights):
+            r = _project(K, pose, X) - u
+            J = np.column_stack([(_project(K, pose, X + e) - _project(K, pose, X - e)) / 2e-6
+                                 for e in np.eye(3) * 1e-6])
+            H += J.T @ W @ J
+            g += J.T @ W @ r
+        X = X - np.linalg.solve(H, g)
+    return X
+
+
+def test_predicted_triangulation_error_matches_re_noised_calibrations() -> None:
+    """A rig calibrated 200 times from fresh 0.5 px noise (the reference camera's pose and
+    the floor's distance held, as in calibproj); each time points of the room are
+    triangulated from fresh pixels with the calibration of that run. The spread of the
+    points matches the prediction within 25 %, and the prediction's cross terms matter."""
+    rig = paper_ring_rig(seed=5, noise_px=0.0, num_points=150)
+    nominal = _core.ba.bundle_adjust(rig.camera_index, rig.point_index, rig.observed, rig.K, rig.poses, rig.points,
+                                     rig.plane, model="coplanar", compute_covariance=True)
+    calibration, intrinsics = _calibration_of(rig, rig.poses, SIGMA_PX**2 * nominal["pose_covariance"])
+    targets = np.array([[0.3, -0.2, 0.9], [-0.6, 0.4, 1.7], [0.9, 0.5, 0.0]])
+    predicted = triangulation_uncertainty(calibration, targets, intrinsics=intrinsics)
+    assert np.isfinite(predicted.sigma).all()
+    names = list(calibration.poses)
+    rng = np.random.default_rng(3)
+    runs = []
+    for _ in range(200):
+        noisy = rig.observed + rng.normal(0.0, SIGMA_PX, rig.observed.shape)
+        solved = _core.ba.bundle_adjust(rig.camera_index, rig.point_index, noisy, rig.K, rig.poses, rig.points,
+                                        rig.plane, model="coplanar")["poses"]
+        placed = []
+        for X, seen in zip(targets, predicted.cameras):
+            cams = [names.index(name) for name in seen]
+            pixels = [_project(rig.K[c], rig.poses[c], X) + rng.normal(0.0, SIGMA_PX, 2) for c in cams]
+            # The prediction's weights: each camera's pixel noise and its own pose's spread.
+            weights = [np.linalg.inv(SIGMA_PX**2 * np.eye(2) + _core.uncertainty.projection(
+                calibration, intrinsics, names[c], X[None])[0]) for c in cams]
+            placed.append(_triangulate(rig.K[cams], solved[cams], pixels, weights, X))
+        runs.append(placed)
+    runs = np.array(runs)  # (runs, targets, 3)
+    for k in range(len(targets)):
+        empirical = np.cov(runs[:, k].T)
+        ratio = np.sqrt(np.trace(empirical) / np.trace(predicted.covariance[k]))
+        assert 0.75 < ratio < 1.25, (k, ratio)
+        assert np.linalg.norm(runs[:, k].mean(axis=0) - targets[k]) < 0.3 * predicted.sigma[k]
+    # The poses' share, and within it the cross terms between cameras, are not negligible.
+    blocks_only = dataclasses.replace(calibration, uncertainty=_core.uncertainty.PoseUncertainty(
+        names, names[0], _block_diagonal(calibration.uncertainty.covariance), [SIGMA_PX] * len(names)))
+    without_cross = triangulation_uncertainty(blocks_only, targets, intrinsics=intrinsics)
+    assert np.max(np.abs(without_cross.sigma / predicted.sigma - 1.0)) > 0.1
+
+
+def _block_diagonal(covariance: np.ndarray) -> np.ndarray:
+    out = np.zeros_like(covariance)
+    for c in range(0, len(covariance), 6):
+        out[c:c + 6, c:c + 6] = covariance[c:c + 6, c:c + 6]
+    return out
+
+
+@pytest.fixture(scope="module")
+def demo_results(tmp_path_factory) -> Path:
+    sim = simulate_tracks("demo", None, noise_px=0.2, seed=0)
+    out = tmp_path_factory.mktemp("uncertainty") / "results"
+    calibrate(sim.tracks, sim.intrinsics, out=out, scale="camera-height:far1=2.7", report=False, progress=False)
+    return out
+
+
+def test_calibrate_writes_the_expected_error_over_the_working_volume(demo_results: Path) -> None:
+    document = json.loads((demo_results / "uncertainty.json").read_text())
+    assert document["schema"] == "calibproj.uncertainty/1" and document["unit"] == "m"
+    reference = document["gauge"]["reference_camera"]
+    cameras = {camera["name"]: camera for camera in document["cameras"]}
+    assert cameras[reference]["projection_sigma_px"] == {"median": 0.0, "max": 0.0}
+    # The noise each camera's centres show: the simulation's 0.2 px.
+    assert all(0.15 < camera["noise_px"] < 0.25 for camera in cameras.values())
+    grid = document["map"]
+    assert grid["z"] == [0.0, 0.5, 0.9, 1.3, 1.7, 2.0]
+    sigma = np.array(grid["sigma"], dtype=float)
+    assert sigma.shape == (6, len(grid["y"]), len(grid["x"]))
+    seen = [[[len(cell) for cell in row] for row in level] for level in grid["seen_by"]]
+    assert np.array_equal(np.isfinite(sigma), np.array(seen) >= 2)
+    # Millimetres over the room with 0.2 px centres: well below a centimetre.
+    assert 0.0002 < document["volume"]["median_sigma"] < 0.005
+    assert document["volume"]["cells_seen_by_2"] == int(np.isfinite(sigma).sum())
+    # The API reads the folder and gives the file's figure at the projection's centre.
+    centre = document["centre"]
+    answer = triangulation_uncertainty(demo_results, centre["point"])
+    assert answer.sigma[0] == pytest.approx(centre["sigma"], rel=1e-5)
+    assert answer.cameras[0] == centre["cameras"] and answer.unit == "m"
+    # A point no two cameras see has no figure.
+    assert np.isnan(triangulation_uncertainty(demo_results, [[50.0, 50.0, 1.0]]).sigma).all()
+
+
+def test_a_results_folder_without_or_with_a_damaged_uncertainty_file_says_so(demo_results: Path,
+                                                                            tmp_path: Path) -> None:
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(demo_results, copy)
+    (copy / "uncertainty.json").unlink()
+    with pytest.raises(FormatError, match=r"uncertainty\.json: no such file"):
+        triangulation_uncertainty(copy, [0.0, 0.0, 0.9])
+    document = json.loads((demo_results / "uncertainty.json").read_text())
+    for damage in ({"pose_covariance": None}, {"gauge": {"reference_camera": "nobody"}}):
+        (copy / "uncertainty.json").write_text(json.dumps({**document, **damage}))
+        with pytest.raises(FormatError) as error:
+            triangulation_uncertainty(copy, [0.0, 0.0, 0.9])
+        assert "uncertainty.json" in str(error.value) and "\n" not in str(error.value)
+    with pytest.raises(ValueError, match="noise_px"):
+        triangulation_uncertainty(demo_results, [0.0, 0.0, 0.9], noise_px=-1.0)
