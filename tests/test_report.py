@@ -16,8 +16,10 @@ from calibproj.report import write_report
 from calibproj.simulate import simulate_tracks
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-# Plots of the whole calibration: errors per camera, 3D scene, top and side views.
+# Plots of the whole calibration: errors per camera, 3D scene, top and side views; with
+# uncertainty.json (calibrate writes it) the maps of the expected 3D error.
 SCENE_PLOTS = 3
+ERROR_MAPS = 1
 # Plots of each camera: error histogram, residuals over the image, coverage (and a
 # frame of its video with its detections, when calibrated from videos).
 CAMERA_PLOTS = 3
@@ -82,8 +84,9 @@ def test_calibrate_writes_the_report_by_default(tmp_path, capsys) -> None:
                    str(tmp_path / "sim" / "intrinsics"), "--out", str(tmp_path / "r")])
     assert status == 0
     page = (tmp_path / "r" / "report.html").read_text(encoding="utf-8")
-    assert len(embedded_images(page)) == SCENE_PLOTS + CAMERA_PLOTS * 3
+    assert len(embedded_images(page)) == SCENE_PLOTS + ERROR_MAPS + CAMERA_PLOTS * 3
     assert (tmp_path / "r" / "report" / "scene_3d.png").is_file()
+    assert (tmp_path / "r" / "report" / "uncertainty_maps.png").is_file()
     assert sorted(p.name for p in (tmp_path / "r" / "intrinsics").iterdir()) == ["cam1.json", "cam2.json", "cam3.json"]
 
 

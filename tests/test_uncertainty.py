@@ -151,3 +151,28 @@ def test_a_results_folder_without_or_with_a_damaged_uncertainty_file_says_so(dem
         assert "uncertainty.json" in str(error.value) and "\n" not in str(error.value)
     with pytest.raises(ValueError, match="noise_px"):
         triangulation_uncertainty(demo_results, [0.0, 0.0, 0.9], noise_px=-1.0)
+
+
+def test_the_report_leads_with_the_expected_error_and_maps_it(demo_results: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from calibproj.report import write_report
+
+    folder = tmp_path / "results"
+    shutil.copytree(demo_results, folder)
+    page = write_report(folder).read_text()
+    document = json.loads((folder / "uncertainty.json").read_text())
+    headline = page[page.index('<div class="headline">'):page.index("</div>", page.index('<div class="headline">'))]
+    assert f"Expected 3D error {1000 * document['centre']['sigma']:.1f} mm</b>" in headline
+    assert f"{1000 * document['volume']['median_sigma']:.1f} mm at the median" in headline
+    assert (folder / "report" / "uncertainty_maps.png").stat().st_size > 10_000
+    caption = "<figcaption>Expected 3D error of a point the cameras triangulate"
+    assert caption in page
+    for camera in document["cameras"]:
+        assert f"<td>{camera['name']}</td><td>{camera['noise_px']:.3f}</td>" in page
+    # Without the file the report says nothing of it, and a damaged one draws no map.
+    (folder / "uncertainty.json").write_text(json.dumps({**document, "map": {"x": "damaged"}}))
+    page = write_report(folder).read_text()
+    assert "Expected 3D error" in page and caption not in page
+    (folder / "uncertainty.json").unlink()
+    assert "Expected 3D error" not in write_report(folder).read_text()

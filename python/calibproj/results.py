@@ -10,6 +10,8 @@
   (a grey thumbnail per camera): the observations;
 - ``provenance.json``: when, how and from what the folder was made
   (``calibproj.provenance``);
+- ``uncertainty.json``: the poses' joint covariance and the expected 3D error over the
+  working volume (``calibproj.uncertainty``);
 - ``evaluation.json``: the evaluation on independent points, when one was made
   (``calibproj evaluate --save``);
 - ``intrinsics/``: the intrinsics used, one file per camera;
@@ -33,6 +35,7 @@ INTRINSICS_DIR = "intrinsics"
 FRAMES_DIR = "frames"
 EVALUATION_FILE = "evaluation.json"
 CHECK_FILE = "check.json"  # of a folder `calibproj check --out` repaired
+UNCERTAINTY_FILE = "uncertainty.json"  # the poses' covariance and the expected 3D error (calibproj.uncertainty)
 
 
 def load_results(results: Calibration | str | os.PathLike) -> Calibration:

@@ -21,9 +21,7 @@ import numpy as np
 from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics
 from calibproj.io.jsonio import FormatError
-from calibproj.results import load_results, resolve_intrinsics
-
-UNCERTAINTY_FILE = "uncertainty.json"
+from calibproj.results import UNCERTAINTY_FILE, load_results, resolve_intrinsics
 
 
 @dataclass(frozen=True)

@@ -204,6 +204,48 @@ def scene_views(calibration: Calibration, views: Sequence[CameraView], dpi: int 
     return png_bytes(figure, dpi)
 
 
+# Levels of uncertainty.json's map the report draws, by the heights they stand for (m).
+MAP_LEVELS_M = ((0.0, "floor"), (0.9, "table, 0.9 m"), (1.7, "head, 1.7 m"))
+
+
+def uncertainty_maps(document: dict, calibration: Calibration, views: Sequence[CameraView],
+                     dpi: int = DEFAULT_DPI) -> bytes:
+    """The expected 3D error (1 sigma, worst axis; mm in a metric calibration) over the
+    floor at the floor, table and head heights of uncertainty.json's map, with the
+    cameras seen from above; blank where fewer than two cameras see."""
+    grid = document["map"]
+    xs, ys, zs = (np.asarray(grid[axis], dtype=float) for axis in ("x", "y", "z"))
+    sigma = np.array(grid["sigma"], dtype=float)
+    metric = calibration.unit == "m"
+    values = sigma * (1000.0 if metric else 1.0)
+    scale = zs[-1] / 2.0 if len(zs) and zs[-1] > 0 else 1.0  # map heights stand for 0 to 2 m
+    levels = [(int(np.argmin(np.abs(zs - height * scale))), label) for height, label in MAP_LEVELS_M]
+    finite = values[[k for k, _ in levels]]
+    top = float(np.nanpercentile(finite, 98)) if np.isfinite(finite).any() else 1.0
+    figure = Figure(figsize=(13.5, 4.6), layout="constrained")
+    axes_row = figure.subplots(1, len(levels))
+    step_x = xs[1] - xs[0] if len(xs) > 1 else 1.0
+    step_y = ys[1] - ys[0] if len(ys) > 1 else 1.0
+    extent = (xs[0] - step_x / 2, xs[-1] + step_x / 2, ys[0] - step_y / 2, ys[-1] + step_y / 2)
+    drawable = _drawable(views)
+    image = None
+    for axes, (k, label) in zip(axes_row, levels):
+        image = axes.imshow(values[k], origin="lower", extent=extent, cmap="viridis", vmin=0.0, vmax=max(top, 1e-12),
+                            interpolation="nearest")
+        for view, colour in zip(drawable, camera_colours(len(drawable))):
+            R, t = view.pose
+            centre = -R.T @ t
+            axes.plot(centre[0], centre[1], "o", color=colour, markersize=6, markeredgecolor="white")
+            axes.annotate(view.name, centre[:2], textcoords="offset points", xytext=(4, 4), fontsize=8, color=colour)
+        axes.set_title(f"{label} (z = {zs[k]:.2f})")
+        axes.set_xlabel(f"x {_unit_label(calibration)}")
+        axes.set_aspect("equal", adjustable="datalim")
+    axes_row[0].set_ylabel(f"y {_unit_label(calibration)}")
+    colour_bar = figure.colorbar(image, ax=list(axes_row), shrink=0.85)
+    colour_bar.set_label("expected 3D error, 1 sigma worst axis " + ("[mm]" if metric else "[unit]"))
+    return png_bytes(figure, dpi)
+
+
 def _unit_label(calibration: Calibration) -> str:
     return "[m]" if calibration.unit == "m" else "[arbitrary unit]"
 

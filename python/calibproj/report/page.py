@@ -26,7 +26,7 @@ from calibproj.report import figures
 from calibproj.report.data import CameraView, camera_views
 from calibproj.provenance import read_provenance
 from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
-from calibproj.results import (CHECK_FILE, DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, intrinsics_source,
+from calibproj.results import (CHECK_FILE, DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, UNCERTAINTY_FILE, intrinsics_source,
                                load_results)
 from calibproj.tracks import Tracks
 from calibproj.version import __version__
@@ -114,14 +114,16 @@ def write_report(
                           provenance=read_provenance(results_dir),
                           evaluation=_optional_json(results_dir / EVALUATION_FILE, "evaluation"),
                           self_calibration=_optional_json(results_dir / SELF_CALIBRATION_FILE, "self-calibration"),
-                          check=_optional_json(results_dir / CHECK_FILE, "check"))
+                          check=_optional_json(results_dir / CHECK_FILE, "check"),
+                          uncertainty=_optional_json(results_dir / UNCERTAINTY_FILE, "expected 3D error"))
     scene, cameras = draw_plots(calibration, views, dpi, _thumbnails(results_dir, inputs.detect_report))
+    maps = uncertainty_plots(inputs.uncertainty, calibration, views, dpi)
     sync = sync_plots(inputs.detect_report, dpi)
     folder = results_dir / FIGURES_DIR
-    for plot in [*scene, *sync, *(plot for plots in cameras.values() for plot in plots)]:
+    for plot in [*scene, *maps, *sync, *(plot for plots in cameras.values() for plot in plots)]:
         atomic_write_bytes(folder / plot.file_name, plot.png)
     path = results_dir / REPORT_FILE
-    atomic_write_text(path, render_page(calibration, views, scene, cameras, inputs, sync))
+    atomic_write_text(path, render_page(calibration, views, scene, cameras, inputs, sync, maps))
     logger.info("report written: %s (%.1f MB)", path, path.stat().st_size / 1e6)
     return path
 
@@ -135,6 +137,7 @@ class ReportInputs:
     evaluation: dict | None = None
     self_calibration: dict | None = None
     check: dict | None = None  # check.json of a folder `calibproj check --out` repaired
+    uncertainty: dict | None = None  # uncertainty.json
 
 
 @dataclass(frozen=True, eq=False)  # numpy field
@@ -173,6 +176,21 @@ def draw_plots(calibration: Calibration, views: list[CameraView], dpi: int,
         ]
         cameras[view.name] = plots
     return scene, cameras
+
+
+def uncertainty_plots(document: dict | None, calibration: Calibration, views: list[CameraView],
+                      dpi: int) -> list[Plot]:
+    """The maps of the expected 3D error, when uncertainty.json holds them (one that does
+    not hold what the maps need is passed over, with a warning)."""
+    if not document or not calibration.poses:
+        return []
+    try:
+        png = figures.uncertainty_maps(document, calibration, views, dpi)
+    except (KeyError, TypeError, ValueError, IndexError) as error:
+        logger.warning("%s: its map is not drawn (%s)", UNCERTAINTY_FILE, error)
+        return []
+    return [Plot("uncertainty_maps.png", "Expected 3D error of a point the cameras triangulate, over the floor at "
+                 "three heights (blank: fewer than two cameras see there)", png)]
 
 
 def sync_plots(detect_report: dict | None, dpi: int) -> list[Plot]:
@@ -231,7 +249,7 @@ def _optional_json(path: Path, what: str) -> dict | None:
 
 def render_page(calibration: Calibration, views: list[CameraView], scene: list[Plot],
                 cameras: dict[str, list[Plot]], inputs: ReportInputs | None = None,
-                sync: list[Plot] | None = None) -> str:
+                sync: list[Plot] | None = None, maps: list[Plot] | None = None) -> str:
     inputs = inputs or ReportInputs()
     parts = [
         "<!DOCTYPE html>",
@@ -241,7 +259,7 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         f"<style>{STYLE}</style></head><body>",
         "<h1>Calibration report</h1>",
         _meta_line(inputs.provenance),
-        headline(calibration, views, inputs.evaluation),
+        headline(calibration, views, inputs.evaluation, inputs.uncertainty),
         _warnings(views, inputs.self_calibration),
         _scroll(_summary(calibration, views, inputs.provenance)),
         *(["<h2>Check against the stored calibration</h2>", check_table(inputs.check, calibration.unit)]
@@ -252,6 +270,9 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         "with few points fits them closely. &sigma;: one standard deviation from the bundle "
         "adjustment's covariance, worst axis, relative to the first camera of the registration.</p>",
         _scroll(_camera_table(views, calibration.unit, reference_camera(calibration))),
+        *(["<h2>Expected 3D error</h2>", EXPECTED_ERROR_NOTE, _scroll(projection_table(inputs.uncertainty)),
+           *map(_figure, maps or [])]
+          if inputs.uncertainty else []),
         *(["<h2>Evaluation on independent points</h2>", evaluation_table(inputs.evaluation)]
           if inputs.evaluation else []),
         "<h2>Positions and intrinsics</h2>",
@@ -285,17 +306,62 @@ def _meta_line(provenance: dict | None) -> str:
     return f'<p class="meta">Made {created} with calibproj {version}; see Provenance at the end.</p>'
 
 
-def headline(calibration: Calibration, views: list[CameraView], evaluation: dict | None) -> str:
-    """The first screen's answer to "is every camera OK, and how well is it known?":
-    how many cameras are calibrated, the evaluation's success when there is one, and per
-    camera its status with its sigma or its reason."""
+def headline(calibration: Calibration, views: list[CameraView], evaluation: dict | None,
+             uncertainty: dict | None = None) -> str:
+    """The first screen's answer to "is every camera OK, and how accurate is it?": how
+    many cameras are calibrated, the expected 3D error at the projection's centre and
+    over the working volume, the evaluation's success when there is one, and per camera
+    its status with its sigma or its reason."""
     registered = sum(1 for view in views if view.registered)
     rates = (evaluation or {}).get("success_rate") or {}
     success = (f"; on independent points {html.escape(str(rates['0.5']))} % of the cameras within 0.5 px"
                if "0.5" in rates else "")
     items = [_status_item(calibration, view) for view in views]
     return (f'<div class="headline"><p><b>{registered} of {len(views)} cameras calibrated</b>{success}.</p>'
-            f'<ul>{"".join(items)}</ul></div>')
+            f'{expected_error_line(uncertainty, calibration.unit)}<ul>{"".join(items)}</ul></div>')
+
+
+EXPECTED_ERROR_NOTE = (
+    "<p>From the final bundle adjustment's joint covariance of the poses (cross terms included) and each "
+    "camera's noise: how far a point triangulated by the cameras that see it may lie from where it is "
+    "(1 sigma, worst axis), and how far a point of the working volume may project from where the "
+    "calibration puts it in each camera's image. Relative to the reference camera, whose pose and height "
+    "the bundle adjustment held. Any point's figure: <code>calibproj.triangulation_uncertainty(RESULTS, "
+    "points)</code>.</p>")
+
+
+def projection_table(document: dict | None) -> str:
+    """Per camera of uncertainty.json: its noise and how far the volume's points it sees
+    may project (median, largest)."""
+    rows = []
+    for camera in (document or {}).get("cameras") or []:
+        if not isinstance(camera, dict):
+            continue
+        sigma = camera.get("projection_sigma_px") or {}
+        rows.append("<tr>" + "".join(f"<td>{cell}</td>" for cell in (
+            html.escape(str(camera.get("name", "?"))), _number(camera.get("noise_px"), 3),
+            html.escape(str(camera.get("cells_seen", "-"))), _number(sigma.get("median"), 3),
+            _number(sigma.get("max"), 3))) + "</tr>")
+    return ("<table><tr><th>camera</th><th>noise [px]</th><th>map cells seen</th>"
+            "<th>projection &sigma; median [px]</th><th>projection &sigma; max [px]</th></tr>"
+            + "".join(rows) + "</table>")
+
+
+def expected_error_line(document: dict | None, unit: str) -> str:
+    """The expected 3D error of a triangulated point at the table above the projection's
+    centre and over the volume (uncertainty.json), or nothing without the file."""
+    centre = (document or {}).get("centre") or {}
+    volume = (document or {}).get("volume") or {}
+    if not isinstance(centre.get("sigma"), (int, float)) or not isinstance(volume.get("median_sigma"), (int, float)):
+        return ""
+    length = (lambda v: f"{1000.0 * v:.1f} mm") if unit == "m" else (lambda v: f"{v:.3g} units")
+    p90 = volume.get("p90_sigma")
+    spread = f", 90 % of it under {length(p90)}" if isinstance(p90, (int, float)) else ""
+    cameras = ", ".join(html.escape(str(name)) for name in centre.get("cameras") or [])
+    return (f'<p><b>Expected 3D error {length(centre["sigma"])}</b> (1 sigma, worst axis) for a point at the '
+            f'table above the projection\'s centre, triangulated by {cameras}; over the working volume '
+            f'(floor to 2 m) {length(volume["median_sigma"])} at the median{spread}. Relative to the reference '
+            f'camera {html.escape(str((document.get("gauge") or {}).get("reference_camera", "")))}; maps below.</p>')
 
 
 def _status_item(calibration: Calibration, view: CameraView) -> str:
