@@ -62,9 +62,14 @@ def test_report_embeds_every_plot_and_saves_it(report_with_a_failed_camera) -> N
 
 
 def test_report_is_self_contained(report_with_a_failed_camera) -> None:
+    """Nothing is loaded from elsewhere: images embedded, the 3D view's library inline
+    (its code names web addresses it never fetches for a 3D scatter: map tiles, fonts)."""
     page = report_with_a_failed_camera[0].read_text(encoding="utf-8")
-    assert "http://" not in page and "https://" not in page
-    assert "<script" not in page and "<link" not in page
+    assert not re.search(r"<(script|img|iframe)[^>]*\ssrc=[\"']?(https?:)?//", page)
+    assert "<link" not in page and "@import" not in page
+    scripts = re.findall(r"<script[^>]*>", page)
+    assert scripts and all("src=" not in tag for tag in scripts)  # the 3D view, inline
+    assert 'class="interactive"' in page and "Plotly.newPlot" in page
 
 
 def test_report_names_every_camera_and_the_failure(report_with_a_failed_camera) -> None:

@@ -11,12 +11,19 @@ in interleaved runs; medians are reported. The last two lines are
   ba_speed coplanar: analytic_vs_autodiff=X analytic_vs_scipy=Y cost_rel_diff=Z
 
 with speed ratios = time of the other / time of ours, and cost_rel_diff the largest
-relative difference of the final costs from ours.
+relative difference of the final costs from ours. Then the cost of the poses' joint
+covariance (the reduced camera system, cross terms included) in a calibration of the
+paper rig and of the or-full room from their simulated tracks: its time over the time
+of the final bundle adjustment (the refinement: relief test, rounds of adjustment,
+noise estimate and outlier filter), each covariance of every round counted:
+
+  ba_speed covariance: paper_share=X or_full_share=Y
 """
 
 from __future__ import annotations
 
 import argparse
+import logging
 import statistics
 import time
 
@@ -35,6 +42,8 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--models", default="free,coplanar", help="comma-separated models (default free,coplanar)")
     parser.add_argument("--no-scipy", action="store_true", help="skip the scipy baseline")
     parser.add_argument("--report", action="store_true", help="print Ceres's full report of one analytic run")
+    parser.add_argument("--covariance-scenes", default="paper,or-full",
+                        help="scenes whose calibration times the covariance (default paper,or-full; empty: none)")
     return parser.parse_args()
 
 
@@ -160,6 +169,7 @@ def ceres_time_breakdown(solver, problem, model, poses, points, plane, threads) 
 
 def main() -> None:
     args = parse_args()
+    logging.basicConfig(level=logging.ERROR)  # the registration's warnings are not this bench's
     problem = paper_ring_rig(seed=args.seed, noise_px=args.noise)
     rng = np.random.default_rng(args.seed + 1)
     poses = perturb_poses(problem.poses, rotation_deg=2.0, translation_m=0.05, rng=rng)
@@ -207,9 +217,32 @@ def main() -> None:
     if args.report:
         print(_core.ba.bundle_adjust(problem.camera_index, problem.point_index, problem.observed, problem.K,
                                      poses, points, plane, full_report=True)["report"])
+    shares = {scene: covariance_share(scene, args.seed, args.runs) for scene in args.covariance_scenes.split(",") if scene}
+    if shares:
+        summary_lines.append("ba_speed covariance: " + " ".join(
+            f"{scene.replace('-', '_')}_share={share:.3f}" for scene, share in shares.items()))
     print()
     for line in summary_lines:
         print(line)
+
+
+def covariance_share(scene: str, seed: int, runs: int) -> float:
+    """Median over runs of the covariance's time over the refinement's, in a calibration
+    of the scene's simulated tracks (the registration driven as calibrate drives it)."""
+    from calibproj.registration import RegistrationDriver
+    from calibproj.simulate import simulate_tracks
+
+    sim = simulate_tracks(scene, None, noise_px=0.3, seed=seed)
+    shares, refine_times, covariance_times = [], [], []
+    for _ in range(runs):
+        driver = RegistrationDriver(sim.tracks, sim.intrinsics)
+        refined = next(step.info for step in driver.steps() if step.name == "refine")
+        shares.append(refined["covariance_seconds"] / refined["seconds"])
+        refine_times.append(refined["seconds"])
+        covariance_times.append(refined["covariance_seconds"])
+    print(f"covariance, {scene}: final bundle adjustment median {statistics.median(refine_times):.3f} s, "
+          f"its covariances {statistics.median(covariance_times):.4f} s ({statistics.median(shares):.1%})")
+    return statistics.median(shares)
 
 
 if __name__ == "__main__":

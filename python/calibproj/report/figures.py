@@ -59,7 +59,7 @@ def frustum(view: CameraView, depth: float) -> np.ndarray:
     return np.vstack([centre, rays @ R + centre])  # R^T ray for each row
 
 
-def _scene_extent(calibration: Calibration) -> tuple[np.ndarray, float]:
+def scene_extent(calibration: Calibration) -> tuple[np.ndarray, float]:
     centres = np.array([calibration.center(name) for name in calibration.poses]).reshape(-1, 3)
     everything = np.vstack([centres, calibration.points.reshape(-1, 3)])
     low, high = everything.min(axis=0), everything.max(axis=0)
@@ -96,12 +96,12 @@ def plane_outlines(calibration: Calibration, extent: float) -> list[np.ndarray]:
     return out
 
 
-def _subsampled(points: np.ndarray) -> np.ndarray:
+def subsampled(points: np.ndarray) -> np.ndarray:
     step = max(1, int(np.ceil(len(points) / MAX_SCENE_POINTS)))
     return points[::step]
 
 
-def _drawable(views: Sequence[CameraView]) -> list[CameraView]:
+def drawable_views(views: Sequence[CameraView]) -> list[CameraView]:
     return [v for v in views if v.registered and v.intrinsics is not None]
 
 
@@ -111,8 +111,8 @@ def scene_3d(calibration: Calibration, views: Sequence[CameraView], dpi: int = D
 
     figure = Figure(figsize=(10.0, 8.0))
     axes = figure.add_subplot(projection="3d")
-    everything, extent = _scene_extent(calibration)
-    points = _subsampled(calibration.points)
+    everything, extent = scene_extent(calibration)
+    points = subsampled(calibration.points)
     if len(points) >= 3:
         on_floor = np.abs(calibration.points[:, 2]) < 0.01 * extent
         outline = floor_outline(calibration.points[on_floor] if on_floor.sum() >= 3 else calibration.points)
@@ -125,7 +125,7 @@ def scene_3d(calibration: Calibration, views: Sequence[CameraView], dpi: int = D
     if len(points):
         axes.scatter(points[:, 0], points[:, 1], points[:, 2], s=0.5, c="#666666", alpha=0.5, linewidths=0,
                      depthshade=False)
-    drawable = _drawable(views)
+    drawable = drawable_views(views)
     for view, colour in zip(drawable, camera_colours(len(drawable))):
         corners = frustum(view, FRUSTUM_SHARE * extent)
         for i in range(1, 5):
@@ -170,9 +170,9 @@ def scene_views(calibration: Calibration, views: Sequence[CameraView], dpi: int 
     the legend says; dashed for a weak camera)."""
     figure = Figure(figsize=(12.0, 5.0))
     top, side = figure.subplots(1, 2)
-    _, extent = _scene_extent(calibration)
-    points = _subsampled(calibration.points)
-    drawable = _drawable(views)
+    _, extent = scene_extent(calibration)
+    points = subsampled(calibration.points)
+    drawable = drawable_views(views)
     unit = _unit_label(calibration)
     magnification = uncertainty_magnification(drawable, extent)
     for axes, (i, j), title in ((top, (0, 1), "from above"), (side, (0, 2), "from the side (y towards the viewer)")):
@@ -227,7 +227,7 @@ def uncertainty_maps(document: dict, calibration: Calibration, views: Sequence[C
     step_x = xs[1] - xs[0] if len(xs) > 1 else 1.0
     step_y = ys[1] - ys[0] if len(ys) > 1 else 1.0
     extent = (xs[0] - step_x / 2, xs[-1] + step_x / 2, ys[0] - step_y / 2, ys[-1] + step_y / 2)
-    drawable = _drawable(views)
+    drawable = drawable_views(views)
     image = None
     for axes, (k, label) in zip(axes_row, levels):
         image = axes.imshow(values[k], origin="lower", extent=extent, cmap="viridis", vmin=0.0, vmax=max(top, 1e-12),

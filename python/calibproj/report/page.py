@@ -24,6 +24,7 @@ from calibproj.io.intrinsics import Intrinsics, intrinsics_of_cameras
 from calibproj.io.jsonio import atomic_write_bytes, atomic_write_text
 from calibproj.report import figures
 from calibproj.report.data import CameraView, camera_views
+from calibproj.report.scene_view import scene_view_html
 from calibproj.provenance import read_provenance
 from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
 from calibproj.results import (CHECK_FILE, DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, UNCERTAINTY_FILE, intrinsics_source,
@@ -63,6 +64,7 @@ section.camera { border-top: 1px solid #ddd; margin-top: 1.5em; }
   th, td { padding: 0.15em 0.3em; word-break: break-word; }
   img { page-break-inside: avoid; }
   section.camera, figure { page-break-inside: avoid; }
+  div.interactive { display: none; }  /* the static views below print instead */
 }
 @media (max-width: 600px) {
   body { margin: 0.5em auto; padding: 0 0.5em; font-size: 15px; }
@@ -123,7 +125,8 @@ def write_report(
     for plot in [*scene, *maps, *sync, *(plot for plots in cameras.values() for plot in plots)]:
         atomic_write_bytes(folder / plot.file_name, plot.png)
     path = results_dir / REPORT_FILE
-    atomic_write_text(path, render_page(calibration, views, scene, cameras, inputs, sync, maps))
+    interactive = scene_view_html(calibration, views) if calibration.poses else ""
+    atomic_write_text(path, render_page(calibration, views, scene, cameras, inputs, sync, maps, interactive))
     logger.info("report written: %s (%.1f MB)", path, path.stat().st_size / 1e6)
     return path
 
@@ -249,7 +252,7 @@ def _optional_json(path: Path, what: str) -> dict | None:
 
 def render_page(calibration: Calibration, views: list[CameraView], scene: list[Plot],
                 cameras: dict[str, list[Plot]], inputs: ReportInputs | None = None,
-                sync: list[Plot] | None = None, maps: list[Plot] | None = None) -> str:
+                sync: list[Plot] | None = None, maps: list[Plot] | None = None, interactive: str = "") -> str:
     inputs = inputs or ReportInputs()
     parts = [
         "<!DOCTYPE html>",
@@ -283,6 +286,7 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
            *map(_figure, sync or [])]
           if inputs.detect_report else []),
         "<h2>Scene</h2>",
+        *([f'<div class="interactive">{interactive}</div>'] if interactive else []),
         *(_figure(plot) for plot in scene),
         "<h2>Per camera</h2>",
         *(_camera_section(view, cameras[view.name]) for view in views),
