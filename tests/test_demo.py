@@ -79,6 +79,9 @@ def test_demo_in_a_terminal_names_final_paths_and_ends_with_the_summary(tmp_path
     # with its sigma and what helps, and where the results and the report are.
     summary = lines[lines.index("The calibration:"):]
     assert summary[-2:] == ["results: demo/results (in metres)", "report: demo/results/report.html"]
+    # What the calibration's uncertainty means in millimetres (uncertainty.json).
+    assert re.fullmatch(r"expected 3D error \(1 sigma\): [0-9.]+ mm at the table above the projection's centre, "
+                        r"[0-9.]+ mm median over the working volume", summary[-3])
     rows = {line.split()[0]: line.split() for line in summary[1:] if line.split()[0] in cameras}
     assert rows["far1"][1] == "reference" and all(rows[name][1] == "ok" for name in ("far2", "far4", "far5", "near1"))
     assert rows["ceiling"][1] == "WEAK" and rows["ceiling"][3] == "deg"

@@ -19,7 +19,7 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 # Plots of the whole calibration: errors per camera, 3D scene, top and side views; with
 # uncertainty.json (calibrate writes it) the maps of the expected 3D error.
 SCENE_PLOTS = 3
-ERROR_MAPS = 1
+ERROR_MAPS = 3  # floor, table and head heights
 # Plots of each camera: error histogram, residuals over the image, coverage (and a
 # frame of its video with its detections, when calibrated from videos).
 CAMERA_PLOTS = 3
@@ -91,7 +91,7 @@ def test_calibrate_writes_the_report_by_default(tmp_path, capsys) -> None:
     page = (tmp_path / "r" / "report.html").read_text(encoding="utf-8")
     assert len(embedded_images(page)) == SCENE_PLOTS + ERROR_MAPS + CAMERA_PLOTS * 3
     assert (tmp_path / "r" / "report" / "scene_3d.png").is_file()
-    assert (tmp_path / "r" / "report" / "uncertainty_maps.png").is_file()
+    assert (tmp_path / "r" / "report" / "uncertainty_table.png").is_file()
     assert sorted(p.name for p in (tmp_path / "r" / "intrinsics").iterdir()) == ["cam1.json", "cam2.json", "cam3.json"]
 
 

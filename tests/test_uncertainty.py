@@ -165,8 +165,9 @@ def test_the_report_leads_with_the_expected_error_and_maps_it(demo_results: Path
     headline = page[page.index('<div class="headline">'):page.index("</div>", page.index('<div class="headline">'))]
     assert f"Expected 3D error {1000 * document['centre']['sigma']:.1f} mm</b>" in headline
     assert f"{1000 * document['volume']['median_sigma']:.1f} mm at the median" in headline
-    assert (folder / "report" / "uncertainty_maps.png").stat().st_size > 10_000
-    caption = "<figcaption>Expected 3D error of a point the cameras triangulate"
+    for level in ("floor", "table", "head"):
+        assert (folder / "report" / f"uncertainty_{level}.png").stat().st_size > 10_000
+    caption = "<figcaption>Expected 3D error at the table, 0.9 m</figcaption>"
     assert caption in page
     for camera in document["cameras"]:
         assert f"<td>{camera['name']}</td><td>{camera['noise_px']:.3f}</td>" in page

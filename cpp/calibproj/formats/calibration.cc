@@ -23,10 +23,7 @@ void Calibration::Check() const {
   if (unit != "arbitrary" && unit != "m") {
     throw std::invalid_argument("unit must be one of ('arbitrary', 'm'), got " + PythonRepr(unit));
   }
-  uncertainty.Check();
-  for (const auto& camera : uncertainty.cameras) {
-    if (PoseOf(camera) == nullptr) throw std::invalid_argument("pose covariance: camera " + camera + " has no pose");
-  }
+  uncertainty.Check();  // its cameras' poses are looked up where it is used (uncertainty::UncertaintyModel)
 }
 
 const CameraPose* Calibration::PoseOf(const std::string& name) const {

@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from calibproj.calibration import calibration_summary
-    from calibproj.commands.summary import format_cameras, row_status, unit_words
+    from calibproj.commands.summary import expected_error, format_cameras, row_status, unit_words
     from calibproj.ingest_options import IngestOptions
     from calibproj.pipeline import calibrate
     from calibproj.registration import RegistrationOptions
@@ -145,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
         print(format_cameras(calibration, args.out))
         for k, plane in enumerate(calibration.planes):
             print(f"plane {k + 1} besides the floor: {plane_text(plane, calibration.unit)}")
+        if (error := expected_error(args.out, calibration.unit)) is not None:
+            print(error)
         print(f"results: {args.out} ({unit_words(calibration)})")
         if not args.no_report and calibration.poses:
             print(f"report: {Path(args.out) / 'report.html'}")

@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
 
     from calibproj.commands.compare import format_table
     from calibproj.commands.evaluate import format_table as format_evaluation
-    from calibproj.commands.summary import format_cameras, unit_words
+    from calibproj.commands.summary import expected_error, format_cameras, unit_words
     from calibproj.demo import DemoOptions, run_demo
 
     options = dataclass_from_args(DemoOptions, args)
@@ -47,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
     results = result.report.parent
     print("\nThe calibration:")
     print(format_cameras(result.calibration, results))
+    if (error := expected_error(results, result.calibration.unit)) is not None:
+        print(error)
     print(f"results: {results} ({unit_words(result.calibration)})")
     print(f"report: {result.report}")
     return 0 if not result.comparison.missing else 1

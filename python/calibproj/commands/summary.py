@@ -60,6 +60,23 @@ def _weak_advice(metrics: Any, results: str | Path | None) -> str:
     return f"{known} (few points); more help: calibproj generate --densify {folder} --out DENSE"
 
 
+def expected_error(results: str | Path, unit: str) -> str | None:
+    """The expected 3D error of the results' uncertainty.json in one line, or None when
+    there is none (or it cannot be read: the report says more)."""
+    import json
+
+    from calibproj.results import UNCERTAINTY_FILE
+
+    try:
+        document = json.loads((Path(results) / UNCERTAINTY_FILE).read_text(encoding="utf-8"))
+        centre, median = float(document["centre"]["sigma"]), float(document["volume"]["median_sigma"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    length = (lambda v: f"{1000.0 * v:.1f} mm") if unit == "m" else (lambda v: f"{v:.3g} units")
+    return (f"expected 3D error (1 sigma): {length(centre)} at the table above the projection's centre, "
+            f"{length(median)} median over the working volume")
+
+
 def unit_words(calibration: Any) -> str:
     if calibration.unit == "m":
         return "in metres"

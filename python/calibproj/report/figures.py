@@ -205,31 +205,34 @@ def scene_views(calibration: Calibration, views: Sequence[CameraView], dpi: int 
 
 
 # Levels of uncertainty.json's map the report draws, by the heights they stand for (m).
-MAP_LEVELS_M = ((0.0, "floor"), (0.9, "table, 0.9 m"), (1.7, "head, 1.7 m"))
+MAP_LEVELS_M = ((0.0, "floor", "floor"), (0.9, "table", "table, 0.9 m"), (1.7, "head", "head, 1.7 m"))
 
 
 def uncertainty_maps(document: dict, calibration: Calibration, views: Sequence[CameraView],
-                     dpi: int = DEFAULT_DPI) -> bytes:
+                     dpi: int = DEFAULT_DPI) -> list[tuple[str, str, bytes]]:
     """The expected 3D error (1 sigma, worst axis; mm in a metric calibration) over the
-    floor at the floor, table and head heights of uncertainty.json's map, with the
-    cameras seen from above; blank where fewer than two cameras see."""
+    floor at the floor, table and head heights of uncertainty.json's map, one figure
+    each (stem, label, PNG) on one colour scale, with the cameras seen from above; blank where
+    fewer than two cameras see."""
     grid = document["map"]
     xs, ys, zs = (np.asarray(grid[axis], dtype=float) for axis in ("x", "y", "z"))
     sigma = np.array(grid["sigma"], dtype=float)
+    if sigma.shape != (len(zs), len(ys), len(xs)) or not len(xs) or not len(ys) or not len(zs):
+        raise ValueError(f"map: sigma of shape {sigma.shape} for {len(zs)} x {len(ys)} x {len(xs)} cells")
     metric = calibration.unit == "m"
     values = sigma * (1000.0 if metric else 1.0)
-    scale = zs[-1] / 2.0 if len(zs) and zs[-1] > 0 else 1.0  # map heights stand for 0 to 2 m
-    levels = [(int(np.argmin(np.abs(zs - height * scale))), label) for height, label in MAP_LEVELS_M]
-    finite = values[[k for k, _ in levels]]
-    top = float(np.nanpercentile(finite, 98)) if np.isfinite(finite).any() else 1.0
-    figure = Figure(figsize=(13.5, 4.6), layout="constrained")
-    axes_row = figure.subplots(1, len(levels))
+    scale = zs[-1] / 2.0 if zs[-1] > 0 else 1.0  # map heights stand for 0 to 2 m
+    levels = [(int(np.argmin(np.abs(zs - height * scale))), stem, label) for height, stem, label in MAP_LEVELS_M]
+    shown = values[[k for k, _, _ in levels]]
+    top = float(np.nanpercentile(shown, 98)) if np.isfinite(shown).any() else 1.0
     step_x = xs[1] - xs[0] if len(xs) > 1 else 1.0
     step_y = ys[1] - ys[0] if len(ys) > 1 else 1.0
     extent = (xs[0] - step_x / 2, xs[-1] + step_x / 2, ys[0] - step_y / 2, ys[-1] + step_y / 2)
     drawable = drawable_views(views)
-    image = None
-    for axes, (k, label) in zip(axes_row, levels):
+    out = []
+    for k, stem, label in levels:
+        figure = Figure(figsize=(5.2, 4.6), layout="constrained")
+        axes = figure.subplots()
         image = axes.imshow(values[k], origin="lower", extent=extent, cmap="viridis", vmin=0.0, vmax=max(top, 1e-12),
                             interpolation="nearest")
         for view, colour in zip(drawable, camera_colours(len(drawable))):
@@ -239,11 +242,12 @@ def uncertainty_maps(document: dict, calibration: Calibration, views: Sequence[C
             axes.annotate(view.name, centre[:2], textcoords="offset points", xytext=(4, 4), fontsize=8, color=colour)
         axes.set_title(f"{label} (z = {zs[k]:.2f})")
         axes.set_xlabel(f"x {_unit_label(calibration)}")
+        axes.set_ylabel(f"y {_unit_label(calibration)}")
         axes.set_aspect("equal", adjustable="datalim")
-    axes_row[0].set_ylabel(f"y {_unit_label(calibration)}")
-    colour_bar = figure.colorbar(image, ax=list(axes_row), shrink=0.85)
-    colour_bar.set_label("expected 3D error, 1 sigma worst axis " + ("[mm]" if metric else "[unit]"))
-    return png_bytes(figure, dpi)
+        colour_bar = figure.colorbar(image, ax=axes, shrink=0.8)
+        colour_bar.set_label("1 sigma, worst axis " + ("[mm]" if metric else "[unit]"))
+        out.append((stem, label, png_bytes(figure, dpi)))
+    return out
 
 
 def _unit_label(calibration: Calibration) -> str:

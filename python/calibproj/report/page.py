@@ -63,9 +63,12 @@ section.camera { border-top: 1px solid #ddd; margin-top: 1.5em; }
   table { font-size: 8pt; width: 100%; }
   th, td { padding: 0.15em 0.3em; word-break: break-word; }
   img { page-break-inside: avoid; }
-  section.camera, figure { page-break-inside: avoid; }
+  section.camera, figure, table, div.headline { page-break-inside: avoid; }
+  h2, h3 { page-break-after: avoid; }
   div.interactive { display: none; }  /* the static views below print instead */
 }
+div.maps { display: flex; flex-wrap: wrap; gap: 0.5em; }
+div.maps figure { flex: 1 1 300px; margin: 0; }
 @media (max-width: 600px) {
   body { margin: 0.5em auto; padding: 0 0.5em; font-size: 15px; }
   th, td { padding: 0.25em 0.4em; }
@@ -188,12 +191,11 @@ def uncertainty_plots(document: dict | None, calibration: Calibration, views: li
     if not document or not calibration.poses:
         return []
     try:
-        png = figures.uncertainty_maps(document, calibration, views, dpi)
+        maps = figures.uncertainty_maps(document, calibration, views, dpi)
     except (KeyError, TypeError, ValueError, IndexError) as error:
         logger.warning("%s: its map is not drawn (%s)", UNCERTAINTY_FILE, error)
         return []
-    return [Plot("uncertainty_maps.png", "Expected 3D error of a point the cameras triangulate, over the floor at "
-                 "three heights (blank: fewer than two cameras see there)", png)]
+    return [Plot(f"uncertainty_{stem}.png", f"Expected 3D error at the {label}", png) for stem, label, png in maps]
 
 
 def sync_plots(detect_report: dict | None, dpi: int) -> list[Plot]:
@@ -273,8 +275,8 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         "with few points fits them closely. &sigma;: one standard deviation from the bundle "
         "adjustment's covariance, worst axis, relative to the first camera of the registration.</p>",
         _scroll(_camera_table(views, calibration.unit, reference_camera(calibration))),
-        *(["<h2>Expected 3D error</h2>", EXPECTED_ERROR_NOTE, _scroll(projection_table(inputs.uncertainty)),
-           *map(_figure, maps or [])]
+        *(['<h2 id="expected-error">Expected 3D error</h2>', EXPECTED_ERROR_NOTE, _scroll(projection_table(inputs.uncertainty)),
+           *([f'<div class="maps">{"".join(map(_figure, maps))}</div>', MAPS_NOTE] if maps else [])]
           if inputs.uncertainty else []),
         *(["<h2>Evaluation on independent points</h2>", evaluation_table(inputs.evaluation)]
           if inputs.evaluation else []),
@@ -285,8 +287,9 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         *(["<h2>Sync and detection</h2>", _scroll(sync_table(inputs.detect_report)), SYNC_NOTE,
            *map(_figure, sync or [])]
           if inputs.detect_report else []),
-        "<h2>Scene</h2>",
-        *([f'<div class="interactive">{interactive}</div>'] if interactive else []),
+        '<h2 id="scene">Scene</h2>',
+        *([f'<div class="interactive">{interactive}<p><small>Cameras, frusta, floor, planes and points: drag to '
+           'turn, scroll to zoom, click a name to hide it.</small></p></div>'] if interactive else []),
         *(_figure(plot) for plot in scene),
         "<h2>Per camera</h2>",
         *(_camera_section(view, cameras[view.name]) for view in views),
@@ -334,6 +337,10 @@ EXPECTED_ERROR_NOTE = (
     "points)</code>.</p>")
 
 
+MAPS_NOTE = ("<p>The expected 3D error of a point the cameras triangulate, over the floor at three heights, "
+             "on one colour scale; blank where fewer than two cameras see.</p>")
+
+
 def projection_table(document: dict | None) -> str:
     """Per camera of uncertainty.json: its noise and how far the volume's points it sees
     may project (median, largest)."""
@@ -365,7 +372,7 @@ def expected_error_line(document: dict | None, unit: str) -> str:
     return (f'<p><b>Expected 3D error {length(centre["sigma"])}</b> (1 sigma, worst axis) for a point at the '
             f'table above the projection\'s centre, triangulated by {cameras}; over the working volume '
             f'(floor to 2 m) {length(volume["median_sigma"])} at the median{spread}. Relative to the reference '
-            f'camera {html.escape(str((document.get("gauge") or {}).get("reference_camera", "")))}; maps below.</p>')
+            f'camera {html.escape(str((document.get("gauge") or {}).get("reference_camera", "")))}; <a href="#expected-error">maps below</a>.</p>')
 
 
 def _status_item(calibration: Calibration, view: CameraView) -> str:

@@ -58,9 +58,7 @@ def scene_figure(calibration: Calibration, views: Sequence[CameraView]):
     figure.update_layout(
         scene={"aspectmode": "data", "xaxis_title": f"x [{unit}]", "yaxis_title": f"y [{unit}]",
                "zaxis_title": f"z [{unit}]"},
-        margin={"l": 0, "r": 0, "t": 30, "b": 0}, height=600,
-        title={"text": "Cameras, floor and points: drag to turn, scroll to zoom", "font": {"size": 14}},
-        legend={"itemsizing": "constant"})
+        margin={"l": 0, "r": 0, "t": 10, "b": 0}, height=600, legend={"itemsizing": "constant"})
     return figure
 
 
