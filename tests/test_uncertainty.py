@@ -177,3 +177,35 @@ def test_the_report_leads_with_the_expected_error_and_maps_it(demo_results: Path
     assert "Expected 3D error" in page and caption not in page
     (folder / "uncertainty.json").unlink()
     assert "Expected 3D error" not in write_report(folder).read_text()
+
+
+def test_damaged_uncertainty_files_give_one_clear_line(demo_results: Path, tmp_path: Path) -> None:
+    """uncertainty.json mutated every way the fuzz tests mutate the other files (entries
+    replaced by wrong types, huge, NaN or deeply nested values, deleted; truncations,
+    byte flips): the API answers, or raises FormatError (ValueError) naming the file in
+    one line; nothing else escapes and nothing crashes."""
+    import shutil
+
+    from fuzz_inputs import byte_level, structural
+
+    folder = tmp_path / "results"
+    shutil.copytree(demo_results, folder)
+    valid = (demo_results / "uncertainty.json").read_bytes()
+    document = json.loads(valid)
+    # The matrix and the map are long: mutate a document with their first rows only,
+    # besides the full one's bytes.
+    small = {**document, "map": {key: value[:2] if isinstance(value, list) else value
+                                 for key, value in document["map"].items()}}
+    rng = np.random.default_rng(7)
+    mutations = structural(small, rng, 60) + structural(document, rng, 20) + byte_level(valid, rng, 20)
+    for mutation in mutations:
+        (folder / "uncertainty.json").write_bytes(mutation.data)
+        try:
+            answer = triangulation_uncertainty(folder, [[0.0, 0.0, 0.9]])
+        except ValueError as error:  # FormatError among them
+            message = str(error)
+            assert "\n" not in message and len(message) < 2000, mutation.label
+            assert "uncertainty.json" in message or "pose covariance" in message, (mutation.label, message)
+            continue
+        assert not mutation.must_fail, mutation.label
+        assert answer.covariance.shape == (1, 3, 3)

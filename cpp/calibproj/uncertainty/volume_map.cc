@@ -174,6 +174,7 @@ std::string UncertaintyJson(const formats::Calibration& calibration, const Uncer
   body["unit"] = calibration.unit;
   body["gauge"] = {{"reference_camera", model.reference()},
                    {"held", "the reference camera's pose and its distance to the floor: every figure is relative to them"}};
+  body["intrinsics"] = "taken as exact: their own uncertainty (refined or from a board) is not in these figures";
   body["centre"] = PointJson(map.centre, map.at_centre, model);
   body["volume"] = {{"cells", map.cells.size()},
                     {"cells_seen_by_2", sigmas.size()},
