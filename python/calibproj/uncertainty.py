@@ -4,8 +4,9 @@ bundle adjustment's, cross terms included) and each camera's measured noise.
 
 A results folder holds that covariance in ``uncertainty.json`` (written by ``calibrate``
 with a map of the expected error over the working volume). Every figure is relative to
-the reference camera (the first one registered): its pose and its distance to the floor
-were held by the bundle adjustment. The computation is the C++ core's
+the reference camera (the first one registered): its pose and one distance (to the
+floor; in the free model to the camera farthest from it) were held by the bundle
+adjustment. The computation is the C++ core's
 (``cpp/calibproj/uncertainty``), which writes the file.
 """
 

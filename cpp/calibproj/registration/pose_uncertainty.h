@@ -12,8 +12,9 @@ namespace calibproj::registration {
 struct PoseUncertainty {
   // The registered cameras, in the covariance's order.
   std::vector<std::string> cameras;
-  // The gauge: this camera's pose and its distance to the floor were held in the bundle
-  // adjustment, so every uncertainty is relative to them (its own rows are zero).
+  // The gauge: this camera's pose and one distance (to the floor; in the free model to
+  // the camera farthest from it) were held in the bundle adjustment, so every
+  // uncertainty is relative to them (its own rows are zero).
   std::string reference;
   // 6C x 6C: per camera [dtheta (rad), dt (calibration unit)] of its world-to-camera pose,
   // R = Exp(dtheta) R_hat and t = t_hat + dt.

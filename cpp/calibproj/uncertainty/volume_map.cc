@@ -172,8 +172,11 @@ std::string UncertaintyJson(const formats::Calibration& calibration, const Uncer
   }
   ordered_json body;
   body["unit"] = calibration.unit;
+  // What the bundle adjustment held (ba::Options' gauge): the model says which distance.
+  const std::string distance = calibration.model == "free" ? "its distance to the camera farthest from it"
+                                                           : "its distance to the floor";
   body["gauge"] = {{"reference_camera", model.reference()},
-                   {"held", "the reference camera's pose and its distance to the floor: every figure is relative to them"}};
+                   {"held", "the reference camera's pose and " + distance + ": every figure is relative to them"}};
   body["intrinsics"] = "taken as exact: their own uncertainty (refined or from a board) is not in these figures";
   body["centre"] = PointJson(map.centre, map.at_centre, model);
   body["volume"] = {{"cells", map.cells.size()},

@@ -333,7 +333,7 @@ EXPECTED_ERROR_NOTE = (
     "camera's noise: how far a point triangulated by the cameras that see it may lie from where it is "
     "(1 sigma, worst axis), and how far a point of the working volume may project from where the "
     "calibration puts it in each camera's image. Relative to the reference camera, whose pose and height "
-    "the bundle adjustment held. Any point's figure: <code>calibproj.triangulation_uncertainty(RESULTS, "
+    "(free model: distance to the farthest camera) the bundle adjustment held. Any point's figure: <code>calibproj.triangulation_uncertainty(RESULTS, "
     "points)</code>.</p>")
 
 
