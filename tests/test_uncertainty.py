@@ -209,3 +209,14 @@ def test_damaged_uncertainty_files_give_one_clear_line(demo_results: Path, tmp_p
             continue
         assert not mutation.must_fail, mutation.label
         assert answer.covariance.shape == (1, 3, 3)
+
+
+def test_the_free_model_says_which_distance_it_held(tmp_path: Path) -> None:
+    from calibproj.registration import RegistrationOptions
+
+    sim = simulate_tracks("small", None, noise_px=0.3, seed=2)
+    calibrate(sim.tracks, sim.intrinsics, out=tmp_path / "r", options=RegistrationOptions(model="free"),
+              report=False, progress=False)
+    document = json.loads((tmp_path / "r" / "uncertainty.json").read_text())
+    assert "distance to the camera farthest from it" in document["gauge"]["held"]
+    assert document["volume"]["cells_seen_by_2"] > 0
