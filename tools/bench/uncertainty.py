@@ -3,9 +3,9 @@
 Per scene, a room's MSM tracks are simulated without noise and calibrated once with
 noise (the nominal calibration, whose covariance makes the prediction). Then the same
 observations get fresh noise of the same size --runs times and are calibrated again
-from scratch (the whole registration: noise estimate, outliers, final bundle
-adjustment), each calibration brought into the nominal one's gauge (the reference
-camera's pose and its height above the floor, which the covariance holds). Over the
+from scratch (the whole registration, coplanar model: noise estimate, outliers, final
+bundle adjustment), each calibration brought into the nominal one's gauge (the
+reference camera's pose and its height above the floor, which the covariance holds). Over the
 runs it measures:
 
 - per camera, how far the points of the working volume it sees project from run to
