@@ -217,7 +217,8 @@ def main() -> None:
     if args.report:
         print(_core.ba.bundle_adjust(problem.camera_index, problem.point_index, problem.observed, problem.K,
                                      poses, points, plane, full_report=True)["report"])
-    shares = {scene: covariance_share(scene, args.seed, args.runs) for scene in args.covariance_scenes.split(",") if scene}
+    scenes = [scene for scene in args.covariance_scenes.split(",") if scene]
+    shares = {scene: covariance_share(scene, args.seed, args.runs) for scene in scenes}
     if shares:
         summary_lines.append("ba_speed covariance: " + " ".join(
             f"{scene.replace('-', '_')}_share={share:.3f}" for scene, share in shares.items()))

@@ -27,8 +27,8 @@ from calibproj.report.data import CameraView, camera_views
 from calibproj.report.scene_view import scene_view_html
 from calibproj.provenance import read_provenance
 from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
-from calibproj.results import (CHECK_FILE, DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, UNCERTAINTY_FILE, intrinsics_source,
-                               load_results)
+from calibproj.results import (CHECK_FILE, DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, UNCERTAINTY_FILE,
+                               intrinsics_source, load_results)
 from calibproj.tracks import Tracks
 from calibproj.version import __version__
 
@@ -275,7 +275,8 @@ def render_page(calibration: Calibration, views: list[CameraView], scene: list[P
         "with few points fits them closely. &sigma;: one standard deviation from the bundle "
         "adjustment's covariance, worst axis, relative to the first camera of the registration.</p>",
         _scroll(_camera_table(views, calibration.unit, reference_camera(calibration))),
-        *(['<h2 id="expected-error">Expected 3D error</h2>', EXPECTED_ERROR_NOTE, _scroll(projection_table(inputs.uncertainty)),
+        *(['<h2 id="expected-error">Expected 3D error</h2>', EXPECTED_ERROR_NOTE,
+           _scroll(projection_table(inputs.uncertainty)),
            *([f'<div class="maps">{"".join(map(_figure, maps))}</div>', MAPS_NOTE] if maps else [])]
           if inputs.uncertainty else []),
         *(["<h2>Evaluation on independent points</h2>", evaluation_table(inputs.evaluation)]
@@ -333,8 +334,8 @@ EXPECTED_ERROR_NOTE = (
     "camera's noise: how far a point triangulated by the cameras that see it may lie from where it is "
     "(1 sigma, worst axis), and how far a point of the working volume may project from where the "
     "calibration puts it in each camera's image. Relative to the reference camera, whose pose and height "
-    "(free model: distance to the farthest camera) the bundle adjustment held. Any point's figure: <code>calibproj.triangulation_uncertainty(RESULTS, "
-    "points)</code>.</p>")
+    "(free model: distance to the farthest camera) the bundle adjustment held. Any point's figure: "
+    "<code>calibproj.triangulation_uncertainty(RESULTS, points)</code>.</p>")
 
 
 MAPS_NOTE = ("<p>The expected 3D error of a point the cameras triangulate, over the floor at three heights, "
@@ -369,10 +370,11 @@ def expected_error_line(document: dict | None, unit: str) -> str:
     p90 = volume.get("p90_sigma")
     spread = f", 90 % of it under {length(p90)}" if isinstance(p90, (int, float)) else ""
     cameras = ", ".join(html.escape(str(name)) for name in centre.get("cameras") or [])
+    reference = html.escape(str((document.get("gauge") or {}).get("reference_camera", "")))
     return (f'<p><b>Expected 3D error {length(centre["sigma"])}</b> (1 sigma, worst axis) for a point at the '
             f'table above the projection\'s centre, triangulated by {cameras}; over the working volume '
             f'(floor to 2 m) {length(volume["median_sigma"])} at the median{spread}. Relative to the reference '
-            f'camera {html.escape(str((document.get("gauge") or {}).get("reference_camera", "")))}; <a href="#expected-error">maps below</a>.</p>')
+            f'camera {reference}; <a href="#expected-error">maps below</a>.</p>')
 
 
 def _status_item(calibration: Calibration, view: CameraView) -> str:
