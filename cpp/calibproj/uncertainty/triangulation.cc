@@ -7,7 +7,6 @@
 #include <stdexcept>
 
 #include "calibproj/ba/rotation.h"
-#include "calibproj/detect/lens.h"
 
 namespace calibproj::uncertainty {
 
@@ -48,7 +47,9 @@ UncertaintyModel::UncertaintyModel(const formats::Calibration& calibration,
     camera.K = lens->second.K;
     camera.R = pose->R;
     camera.t = pose->t;
-    camera.dist = lens->second.dist;
+    const Eigen::Matrix3d& K = lens->second.K;
+    camera.lens.K = cv::Matx33d(K(0, 0), K(0, 1), K(0, 2), K(1, 0), K(1, 1), K(1, 2), K(2, 0), K(2, 1), K(2, 2));
+    camera.lens.dist = lens->second.dist;
     camera.width = lens->second.ImageWidth();
     camera.height = lens->second.ImageHeight();
     camera.noise_px = poses.noise_px[k];
@@ -61,10 +62,6 @@ bool UncertaintyModel::Sees(int index, const Eigen::Vector3d& X) const {
   const Eigen::Vector3d x = camera.R * X + camera.t;
   if (!(x.z() > kMinDepth)) return false;
   const Eigen::Vector3d pixel = camera.K * (x / x.z());
-  detect::LensModel lens;
-  lens.K = cv::Matx33d(camera.K(0, 0), camera.K(0, 1), camera.K(0, 2), camera.K(1, 0), camera.K(1, 1), camera.K(1, 2),
-                       camera.K(2, 0), camera.K(2, 1), camera.K(2, 2));
-  lens.dist = camera.dist;
   // A wide lens's distortion model folds back far outside its image: only undistorted
   // pixels near the image are mapped through it.
   const double margin = 0.5 * std::max(camera.width, camera.height);
@@ -73,8 +70,8 @@ bool UncertaintyModel::Sees(int index, const Eigen::Vector3d& X) const {
     return false;
   }
   const cv::Point2d distorted =
-      lens.HasDistortion() ? detect::DistortPixels(lens, {cv::Point2d(pixel.x(), pixel.y())})[0]
-                           : cv::Point2d(pixel.x(), pixel.y());
+      camera.lens.HasDistortion() ? detect::DistortPixels(camera.lens, {cv::Point2d(pixel.x(), pixel.y())})[0]
+                                  : cv::Point2d(pixel.x(), pixel.y());
   return distorted.x >= 0.0 && distorted.y >= 0.0 && distorted.x <= camera.width - 1.0 &&
          distorted.y <= camera.height - 1.0;
 }

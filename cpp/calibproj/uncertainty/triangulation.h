@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "calibproj/formats/calibration.h"
+#include "calibproj/detect/lens.h"
 #include "calibproj/formats/intrinsics_file.h"
 
 namespace calibproj::uncertainty {
@@ -64,7 +65,7 @@ class UncertaintyModel {
     Eigen::Matrix3d K;
     Eigen::Matrix3d R;
     Eigen::Vector3d t;
-    std::vector<double> dist;
+    detect::LensModel lens;  // K and distortion, to tell whether a pixel is in the image
     double width = 0.0, height = 0.0;
     double noise_px = 1.0;
   };

@@ -65,16 +65,17 @@ ordered_json PointJson(const Eigen::Vector3d& X, const PointUncertainty& u, cons
 }
 
 // Per camera: how far the volume's points it sees may project (1 sigma, worst axis, px).
+// Which cameras see a cell, the map's triangulation has found already.
 ordered_json CameraJson(const UncertaintyModel& model, const VolumeMap& map, int camera) {
   std::vector<double> sigmas;
-  size_t k = 0;
-  for (double z : map.zs) {
-    for (double y : map.ys) {
-      for (double x : map.xs) {
-        const Eigen::Vector3d X(x, y, z);
-        ++k;
-        if (!model.Sees(camera, X)) continue;
-        const double largest = Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(model.Projection(camera, X)).eigenvalues().maxCoeff();
+  for (size_t level = 0; level < map.zs.size(); ++level) {
+    for (size_t row = 0; row < map.ys.size(); ++row) {
+      for (size_t column = 0; column < map.xs.size(); ++column) {
+        const std::vector<int>& seen = map.At(level, row, column).cameras;
+        if (std::find(seen.begin(), seen.end(), camera) == seen.end()) continue;
+        const Eigen::Vector3d X(map.xs[column], map.ys[row], map.zs[level]);
+        const double largest =
+            Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(model.Projection(camera, X)).eigenvalues().maxCoeff();
         sigmas.push_back(std::sqrt(std::max(0.0, largest)));
       }
     }
