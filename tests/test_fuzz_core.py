@@ -428,6 +428,9 @@ class Baselines:
                  ("poses", s["poses"]), ("points", s["points"][:, :2])],
                 {"loss": "cauchy", "loss_scale": 2.0, "max_iterations": 5, "num_threads": 1,
                  "compute_covariance": True}),
+            "_core.selfcal.residual_by_lens": Spec([
+                ("K", np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])),
+                ("distortion", [-0.2, 0.05, 0.0, 0.0, 0.0]), ("normalised", np.array([0.1, -0.2]))]),
             "_core.selfcal.evaluate_planar_lens_cost": Spec([
                 ("shape", np.array([1.0, 0.0])), ("observed", x[0]), ("pose", pose), ("point", s["points"][0, :2]),
                 ("lens", np.array([500.0, 320.0, 240.0, -0.1, 0.01, 0, 0, 0]))]),
@@ -460,6 +463,9 @@ class Baselines:
             "_core.registration.Reconstruction.set_projector": Spec(
                 [("pixels", np.tile([960.0, 540.0], (len(s["points"]), 1))), ("width", 1920.0), ("height", 1080.0),
                  ("marker_sides", [24.0, float("nan")] * (len(s["points"]) // 2) + [72.0] * (len(s["points"]) % 2))]),
+            "_core.registration.Reconstruction.set_lens_uncertainty": Spec(
+                [("camera", 1), ("K", s["K"][1]), ("distortion", [0.01, 0.0, 0.0, 0.0, 0.0]),
+                 ("covariance", np.diag([0.25, 0.0, 0.0, 1e-6, 0.0, 0.0, 0.0, 0.0]))]),
             "_core.registration.Reconstruction.projector_prediction": Spec([("point", 0)]),
             "_core.registration.Reconstruction.run": Spec([("log", lambda message: None)]),
             "_core.registration.view_score": Spec([("pixels", s["observed"][:30]), ("width", 640.0),
@@ -556,10 +562,13 @@ class Baselines:
                                                              30.0)
         checked = self.check_call()
         # The same calibration with its poses' covariance, and its uncertainty.json.
-        covariance = np.zeros((12, 12))
-        covariance[6:, 6:] = np.diag([1e-6] * 3 + [1e-5] * 3)
+        # Camera b's lens refined: its 8 entries follow the poses, correlated with its pose.
+        covariance = np.zeros((20, 20))
+        covariance[6:12, 6:12] = np.diag([1e-6] * 3 + [1e-5] * 3)
+        covariance[12:, 12:] = np.diag([0.25, 0.0, 0.0, 1e-6, 0.0, 0.0, 0.0, 0.0])
+        covariance[6, 12] = covariance[12, 6] = 2e-4
         uncertainty_args = [("cameras", ["a", "b"]), ("reference", "a"), ("covariance", covariance),
-                            ("noise_px", [0.2, 0.3])]
+                            ("noise_px", [0.2, 0.3]), ("lens_block", [-1, 0])]
         self.pose_uncertainty = _core.uncertainty.PoseUncertainty(*(value for _, value in uncertainty_args))
         uncertain = dataclasses.replace(calibration, uncertainty=self.pose_uncertainty)
         _core.uncertainty.write(folder / "results", uncertain, intrinsics)

@@ -220,3 +220,133 @@ def test_the_free_model_says_which_distance_it_held(tmp_path: Path) -> None:
     document = json.loads((tmp_path / "r" / "uncertainty.json").read_text())
     assert "distance to the camera farthest from it" in document["gauge"]["held"]
     assert document["volume"]["cells_seen_by_2"] > 0
+
+
+def _lens_intrinsics(lens: np.ndarray, aspect: float, skew_ratio: float) -> Intrinsics:
+    """Intrinsics of a lens block [f, cx, cy, k1, k2, p1, p2, k3] and its shape."""
+    f, cx, cy, k1, k2, p1, p2, k3 = lens
+    K = np.array([[f, skew_ratio * f, cx], [0.0, aspect * f, cy], [0.0, 0.0, 1.0]])
+    return Intrinsics("lens", (1280, 960), K, np.array([k1, k2, p1, p2, k3]))
+
+
+def test_a_lens_error_moves_the_residual_as_its_derivative_says() -> None:
+    """d residual / d lens of a centre (the undistorted pixel residual that the bundle
+    adjustment sees, for a raw pixel undistorted with the lens) against central
+    differences of undistorting the same raw pixel with a perturbed lens."""
+    lens = np.array([610.0, 655.0, 470.0, -0.26, 0.09, 3e-4, -2e-4, -0.012])
+    aspect, skew_ratio = 1.002, 0.0  # Intrinsics files carry no skew
+    truth = _lens_intrinsics(lens, aspect, skew_ratio)
+    for normalised in ([0.1, -0.2], [-0.55, 0.38], [0.0, 0.0]):
+        projected = truth.K[:2, :2] @ np.array(normalised) + truth.K[:2, 2]  # the model's undistorted pixel
+        raw = truth.distort_points(projected[None])
+        analytic = _core.selfcal.residual_by_lens(truth.K, truth.dist, np.array(normalised))
+        numeric = np.zeros((2, 8))
+        for entry in range(8):
+            step = 1e-4 * max(1.0, abs(lens[entry])) if entry < 3 else 1e-6
+            sides = []
+            for sign in (1.0, -1.0):
+                moved = lens.copy()
+                moved[entry] += sign * step
+                other = _lens_intrinsics(moved, aspect, skew_ratio)
+                n = other.normalize(other.undistort_points(raw))[0]
+                # Projected minus observed, both in the moved lens's pinhole pixels.
+                sides.append(other.K[:2, :2] @ (np.array(normalised) - n))
+            numeric[:, entry] = (sides[0] - sides[1]) / (2 * step)
+        assert np.allclose(analytic, numeric, rtol=1e-4, atol=1e-6 * np.abs(analytic).max()), (normalised, analytic, numeric)
+
+
+def _pose_change(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """[dtheta, dt] per camera with R_after = Exp(dtheta) R_before (6C,)."""
+    from scipy.spatial.transform import Rotation
+
+    out = []
+    for a, b in zip(before, after):
+        dtheta = (Rotation.from_rotvec(b[:3]) * Rotation.from_rotvec(a[:3]).inv()).as_rotvec()
+        out.append(np.concatenate([dtheta, b[3:] - a[3:]]))
+    return np.concatenate(out)
+
+
+@pytest.mark.parametrize("model", ["coplanar", "free"])
+def test_the_poses_sensitivity_to_a_lens_matches_solving_again(model: str) -> None:
+    """A lens the bundle adjustment holds moves the observations it was undistorted with;
+    the sensitivity the adjustment reports (from its reduced system) matches the poses'
+    change when it is solved again with the observations moved, entry by entry."""
+    rig = paper_ring_rig(seed=2, noise_px=0.0, num_points=120)
+    rng = np.random.default_rng(4)
+    lens_block = np.full(len(rig.K), -1)
+    lens_block[[1, 3]] = [0, 1]
+    jacobians = rng.normal(0.0, 1.0, (len(rig.camera_index), 16)) * 0.01
+    jacobians[:, [0, 8]] = rng.normal(0.0, 0.5, (len(rig.camera_index), 2))  # focal: up to a pixel
+    jacobians[lens_block[rig.camera_index] < 0] = 0.0
+    solve = dict(model=model, compute_covariance=True, lens_block=lens_block, lens_jacobians=jacobians,
+                 loss="huber", loss_scale=0.5)
+    solved = _core.ba.bundle_adjust(rig.camera_index, rig.point_index, rig.observed, rig.K, rig.poses, rig.points,
+                                    rig.plane, **solve)
+    sensitivity = solved["lens_sensitivity"]
+    assert sensitivity.shape == (6 * len(rig.K), 16)
+    assert np.allclose(sensitivity[:6], 0.0)  # the gauge camera's pose is held
+    for column in (0, 3, 8, 12):
+        step = 1e-3
+        moved = []
+        for sign in (1.0, -1.0):
+            J = jacobians.reshape(-1, 2, 8)[:, :, column % 8] * (lens_block[rig.camera_index] == column // 8)[:, None]
+            # r = projected - observed: a lens change dr = J dk is the observations moving by -J dk.
+            observed = rig.observed - sign * step * J
+            moved.append(_core.ba.bundle_adjust(rig.camera_index, rig.point_index, observed, rig.K, solved["poses"],
+                                                solved["points"], solved["plane"], model=model, loss="huber",
+                                                loss_scale=0.5)["poses"])
+        numeric = _pose_change(moved[1], moved[0]) / (2 * step)
+        assert np.abs(numeric).max() > 1e-6
+        assert np.allclose(sensitivity[:, column], numeric, rtol=2e-3, atol=2e-3 * np.abs(numeric).max()), column
+
+
+@pytest.fixture(scope="module")
+def refined_results(tmp_path_factory) -> tuple[Path, Path]:
+    """The demo room calibrated from intrinsics 5 % off, refining them, and with the true
+    intrinsics taken as exact."""
+    from calibproj.self_calibration import convert_tracks
+
+    sim = simulate_tracks("demo", None, noise_px=0.2, seed=0)
+    given = {}
+    for name, truth in sim.intrinsics.items():
+        K = truth.K.copy()
+        K[:2, :2] *= 1.05
+        given[name] = Intrinsics(name, truth.resolution, K, truth.dist.copy())
+    folder = tmp_path_factory.mktemp("refined")
+    calibrate(convert_tracks(sim.tracks, sim.intrinsics, given), given, out=folder / "refined", report=False,
+              progress=False, refine_intrinsics="focal,k1")
+    calibrate(sim.tracks, sim.intrinsics, out=folder / "exact", report=False, progress=False)
+    return folder / "refined", folder / "exact"
+
+
+def test_refined_lenses_and_their_cross_terms_enter_the_expected_error(refined_results) -> None:
+    refined, exact = refined_results
+    document = json.loads((refined / "uncertainty.json").read_text())
+    refined_cameras = [name for name, report in json.loads((refined / "self_calibration.json").read_text())
+                       ["cameras"].items() if "focal" in report["refined"]]
+    assert refined_cameras
+    covariance = document["pose_covariance"]
+    blocks = dict(zip(covariance["cameras"], covariance["lens_block"]))
+    assert sorted(name for name, block in blocks.items() if block is not None) == sorted(refined_cameras)
+    assert covariance["lens_entries"] == ["f", "cx", "cy", "k1", "k2", "p1", "p2", "k3"]
+    assert "refined lenses" in document["intrinsics"]
+    matrix = np.array(covariance["matrix"])
+    C = len(covariance["cameras"])
+    assert matrix.shape == (6 * C + 8 * len(refined_cameras),) * 2
+    # The focal lengths' variance is the self-calibration's; a pose and its own lens err together.
+    camera = next(name for name in refined_cameras if name != document["gauge"]["reference_camera"])
+    index, block = covariance["cameras"].index(camera), blocks[camera]
+    focal = 6 * C + 8 * block
+    assert 0.0 < matrix[focal, focal] < (0.01 * 640) ** 2
+    assert np.abs(matrix[6 * index:6 * index + 6, focal]).max() > 0.0
+    # A pose known less well with its lens refined than with the lens taken as exact.
+    exact_matrix = np.array(json.loads((exact / "uncertainty.json").read_text())["pose_covariance"]["matrix"])
+    worse = [np.trace(matrix[6 * k + 3:6 * k + 6, 6 * k + 3:6 * k + 6]) >
+             np.trace(exact_matrix[6 * k + 3:6 * k + 6, 6 * k + 3:6 * k + 6])
+             for k, name in enumerate(covariance["cameras"])
+             if name in refined_cameras and name != document["gauge"]["reference_camera"]]
+    assert worse and all(worse)
+    # The file reads back (lens blocks included) and the API answers as the file does.
+    centre = document["centre"]
+    answer = triangulation_uncertainty(refined, centre["point"])
+    assert answer.sigma[0] == pytest.approx(centre["sigma"], rel=1e-5)

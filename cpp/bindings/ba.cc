@@ -76,6 +76,7 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
                         double parameter_tolerance, int num_threads, const std::string& linear_solver,
                         bool refine_poses, bool refine_points, int gauge_camera, int scale_camera,
                         bool compute_covariance, bool full_report, bool cache_rotations,
+                        const Eigen::VectorXi& lens_block, const RowMatrix& lens_jacobians,
                         const RowMatrix& more_planes, const Eigen::VectorXi& point_plane,
                         const ba::CostFactory& make_cost) {
   ba::Options options;
@@ -116,6 +117,8 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
     data.more_planes = RowsOf<ba::PlaneMatrix>(more_planes, 4, "more_planes");
     data.point_plane = point_plane;
   }
+  data.lens_block = lens_block;
+  data.lens_jacobians = RowsOf<ba::LensJacobianMatrix>(lens_jacobians, 2 * ba::kLensBlockSize, "lens_jacobians");
 
   ba::Result result;
   {
@@ -146,6 +149,7 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
     out["pose_covariance"] = result.pose_covariance;
     out["covariance_time_s"] = result.covariance_time_s;
     out["covariance_failure"] = result.covariance_failure;
+    if (lens_block.size() > 0) out["lens_sensitivity"] = result.lens_sensitivity;
   }
   out["report"] = result.report;
   return out;
@@ -186,12 +190,13 @@ void def_bundle_adjust(py::module_& m, const char* name, const ba::CostFactory& 
                   double function_tolerance, double gradient_tolerance, double parameter_tolerance,
                   int num_threads, const std::string& linear_solver, bool refine_poses, bool refine_points,
                   int gauge_camera, int scale_camera, bool compute_covariance, bool full_report,
-                  bool cache_rotations, const RowMatrix& more_planes, const Eigen::VectorXi& point_plane) {
+                  bool cache_rotations, const RowMatrix& more_planes, const Eigen::VectorXi& point_plane,
+                  const Eigen::VectorXi& lens_block, const RowMatrix& lens_jacobians) {
         return BundleAdjustPy(camera_index, point_index, observed, intrinsics, poses, points, plane, model, loss,
                               loss_scale, max_iterations, function_tolerance, gradient_tolerance,
                               parameter_tolerance, num_threads, linear_solver, refine_poses, refine_points,
                               gauge_camera, scale_camera, compute_covariance, full_report, cache_rotations,
-                              more_planes, point_plane, make_cost);
+                              lens_block, lens_jacobians, more_planes, point_plane, make_cost);
       },
       py::arg("camera_index"), py::arg("point_index"), py::arg("observed"), py::arg("intrinsics"), py::arg("poses"),
       py::arg("points"), py::arg("plane") = Eigen::VectorXd(), py::kw_only(), py::arg("model") = "free",
@@ -201,7 +206,8 @@ void def_bundle_adjust(py::module_& m, const char* name, const ba::CostFactory& 
       py::arg("refine_poses") = true, py::arg("refine_points") = true, py::arg("gauge_camera") = 0,
       py::arg("scale_camera") = -1, py::arg("compute_covariance") = false, py::arg("full_report") = false,
       py::arg("cache_rotations") = true, py::arg("more_planes") = RowMatrix(0, 4),
-      py::arg("point_plane") = Eigen::VectorXi(),
+      py::arg("point_plane") = Eigen::VectorXi(), py::arg("lens_block") = Eigen::VectorXi(),
+      py::arg("lens_jacobians") = RowMatrix(0, 16),
       R"doc(Bundle adjustment (Ceres).
 
 Observations: camera_index (N,), point_index (N,), observed (N, 2) undistorted pixels.
@@ -215,7 +221,10 @@ pose is held fixed, and the scale through the plane offset (COPLANAR) or the dis
 to the scale camera (FREE; -1 picks the farthest). Returns a dict with the refined
 poses, points, plane, more_planes, per-observation residuals (N, 2), costs, iterations, termination,
 solve time and, if compute_covariance, pose_covariances (C, 6, 6) of [dtheta, dt], their
-joint covariance pose_covariance (6C, 6C) with the cross terms, and covariance_time_s.
+joint covariance pose_covariance (6C, 6C) with the cross terms, and covariance_time_s;
+with lens_block (C,) (per camera its lens block, -1 none) and lens_jacobians (N, 16)
+(per observation d residual / d its camera's lens [f, cx, cy, k1, k2, p1, p2, k3],
+2 x 8 row-major), also lens_sensitivity (6C, 8L): d [dtheta, dt] / d lens.
 Bad input raises ValueError naming the problem. Releases the GIL while solving.)doc");
 }
 

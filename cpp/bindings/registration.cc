@@ -286,6 +286,19 @@ of calibproj.registration.RegistrationOptions.)doc")
            "Projector pixel (N, 2) of every point, NaN where unknown, and the projector's image size; optionally per\n"
            "point the side of the largest marker drawn at it (projector px, NaN unknown), which groups the\n"
            "projector's noise.")
+      .def("set_lens_uncertainty", [](Reconstruction& r, int camera, const Eigen::Matrix3d& K,
+                                      const std::vector<double>& distortion, const Eigen::MatrixXd& covariance) {
+             if (covariance.rows() != selfcal::kLensSize || covariance.cols() != selfcal::kLensSize) {
+               throw std::invalid_argument("lens covariance: expected shape (8, 8)");
+             }
+             registration::LensUncertainty u;
+             selfcal::LensOf(K, distortion.data(), static_cast<int>(distortion.size()), u.lens, &u.shape);
+             u.covariance = covariance;
+             r.SetLensUncertainty(camera, u);
+           }, py::arg("camera"), py::arg("K"), py::arg("distortion"), py::arg("covariance"),
+           "The refined intrinsics (K, OpenCV distortion) the camera's observations were undistorted with, and\n"
+           "the covariance (8, 8) of its lens [f, cx, cy, k1, k2, p1, p2, k3]: the poses' covariance then takes\n"
+           "it in.")
       .def("projector_prediction", [](const Reconstruction& r, int point) -> py::object {
              Eigen::Vector3d X;
              if (!r.ProjectorPrediction(point, &X)) return py::none();

@@ -4,6 +4,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -93,6 +94,23 @@ cam_from_floor [angle-axis, t]; points (P, 2) on the floor z = 0. Two points fix
 floor's gauge. Returns a dict with the refined lenses, poses, points, residuals (N, 2),
 noise_px (C,) and, if compute_covariance, lens_covariances (C, 8, 8) in each camera's
 measured noise. Bad input raises ValueError naming the problem. Releases the GIL.)doc");
+  m.def(
+      "residual_by_lens",
+      [](const Eigen::Matrix3d& K, const std::vector<double>& distortion, const Eigen::Vector2d& normalised) {
+        if (!K.allFinite() || !(K(0, 0) > 0.0) || !(K(1, 1) > 0.0)) throw std::invalid_argument("K: positive focal lengths needed");
+        for (double value : distortion) {
+          if (!std::isfinite(value)) throw std::invalid_argument("distortion: non-finite value");
+        }
+        if (!normalised.allFinite()) throw std::invalid_argument("normalised: non-finite value");
+        double lens[selfcal::kLensSize];
+        selfcal::LensShape shape;
+        selfcal::LensOf(K, distortion.data(), static_cast<int>(distortion.size()), lens, &shape);
+        return Eigen::Matrix<double, 2, selfcal::kLensSize>(selfcal::ResidualByLens(lens, shape, normalised));
+      },
+      py::arg("K"), py::arg("distortion"), py::arg("normalised"),
+      "d residual / d lens (2, 8) [f, cx, cy, k1, k2, p1, p2, k3] of a centre whose undistorted normalised\n"
+      "coordinates are `normalised`, for intrinsics K and OpenCV distortion: how a lens error moves its\n"
+      "undistorted pixel residual (projected minus observed).");
   m.def(
       "evaluate_planar_lens_cost",
       [](const Eigen::VectorXd& shape, const Eigen::VectorXd& observed, const Eigen::VectorXd& pose,

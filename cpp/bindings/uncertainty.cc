@@ -86,17 +86,22 @@ void register_uncertainty(py::module_& m) {
                               "The registered cameras' joint pose covariance from the final bundle adjustment, in "
                               "the calibration's frame and unit, relative to the reference camera.")
       .def(py::init([](std::vector<std::string> cameras, std::string reference, Eigen::MatrixXd covariance,
-                       std::vector<double> noise_px) {
-             PoseUncertainty out{std::move(cameras), std::move(reference), std::move(covariance), std::move(noise_px)};
+                       std::vector<double> noise_px, std::vector<int> lens_block) {
+             PoseUncertainty out{std::move(cameras), std::move(reference), std::move(covariance), std::move(noise_px),
+                                 std::move(lens_block)};
              out.Check();
              return out;
            }),
-           py::arg("cameras"), py::arg("reference"), py::arg("covariance"), py::arg("noise_px"))
+           py::arg("cameras"), py::arg("reference"), py::arg("covariance"), py::arg("noise_px"),
+           py::arg("lens_block") = std::vector<int>{})
       .def_readonly("cameras", &PoseUncertainty::cameras, "the registered cameras, in the covariance's order")
       .def_readonly("reference", &PoseUncertainty::reference,
                     "the camera whose pose and distance to the floor were held (its rows are zero)")
       .def_readonly("covariance", &PoseUncertainty::covariance,
-                    "(6C, 6C): per camera [dtheta (rad), dt] of its world-to-camera pose, R = Exp(dtheta) R_hat")
+                    "(6C + 8L, 6C + 8L): per camera [dtheta (rad), dt] of its world-to-camera pose, R = Exp(dtheta) "
+                    "R_hat; then per refined lens [f, cx, cy, k1, k2, p1, p2, k3]")
+      .def_readonly("lens_block", &PoseUncertainty::lens_block,
+                    "per camera the index of its refined lens's block (-1: intrinsics taken as exact); empty: none")
       .def_readonly("noise_px", &PoseUncertainty::noise_px, "per camera, its centres' noise (px, 1 sigma per coordinate)")
       .def("named", &PoseUncertainty::Named, py::arg("names"),
            "the same with cameras given by index renamed to names[index]");

@@ -243,7 +243,8 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
                                 earlier=result.reports if result is not None else None)
         tracks = convert_tracks(tracks, intrinsics, result.intrinsics)
         intrinsics = result.intrinsics
-        calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector)
+        calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector,
+                               lens_covariances=result.lens_covariances)
     for name, report in result.reports.items():
         # Its pose rests on a focal length nobody checked: it must not steer comparisons.
         if "focal" in report.held and name in calibration.poses and not calibration.metrics[name].weak:

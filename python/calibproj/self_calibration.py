@@ -191,10 +191,13 @@ class LensReport:
 @dataclass
 class SelfCalibration:
     """Refined intrinsics (every camera of the input; unchanged where nothing was refined)
-    and one report per camera that was asked for."""
+    and one report per camera that was asked for; per camera whose lens was refined, the
+    covariance (8, 8) of its lens ``LENS_ENTRIES`` (zero outside the refined entries, in
+    pixels of its measured noise), which the registration takes into the poses'."""
 
     intrinsics: dict[str, Intrinsics]
     reports: dict[str, LensReport]
+    lens_covariances: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def check_request(request: RefineRequest, intrinsics: Mapping[str, Intrinsics],
@@ -243,7 +246,17 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
     solution = _hold_undetermined(problem, solution, options, reports, solve)
     if solution is not None and problem.hold_at_given():  # a later round held an entry the first one had moved
         solution = problem.solve(loss="none", loss_scale=1.0, **solve)
-    return SelfCalibration(_refined_intrinsics(problem, solution, intrinsics, given, reports, refused), reports)
+    refined = _refined_intrinsics(problem, solution, intrinsics, given, reports, refused)
+    return SelfCalibration(refined, reports, _lens_covariances(problem, solution, reports, refused))
+
+
+def _lens_covariances(problem: _Problem, solution: dict[str, Any] | None, reports: Mapping[str, LensReport],
+                      refused: Mapping[str, str]) -> dict[str, np.ndarray]:
+    """The covariance of every lens the solution refined."""
+    if solution is None:
+        return {}
+    return {name: np.array(solution["lens_covariances"][c]) for c, name in enumerate(problem.cameras)
+            if problem.refine[c] and name in reports and name not in refused}
 
 
 def _refined_intrinsics(problem: _Problem, solution: dict[str, Any] | None, intrinsics: Mapping[str, Intrinsics],

@@ -23,20 +23,31 @@ which white noise does not have; its factor is printed). The last line:
     uncertainty: cells_within_25pct=.. projection_within_25pct=..
 
     python tools/bench/uncertainty.py --scenes or-full,demo --runs 50
+
+With --refine-intrinsics, the intrinsics given are --focal-error off (the simulated
+distortion kept) and every calibration refines them: the prediction then carries the
+refined lenses' uncertainty, and each run's new pixels are undistorted with that run's
+own lenses (a point is triangulated from raw pixels; a projection is compared in the
+nominal calibration's undistorted pixels):
+
+    python tools/bench/uncertainty.py --scenes demo,or-full --runs 50 --refine-intrinsics focal,k1
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import tempfile
 import time
-from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
 from calibproj import _core
+from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
+from calibproj.self_calibration import convert_tracks
 from calibproj.simulate import simulate_tracks
 from calibproj.tracks import Tracks
 
@@ -47,7 +58,40 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--runs", type=int, default=50, help="re-noised calibrations per scene (default 50)")
     parser.add_argument("--noise", type=float, default=0.3, help="centre noise in px (default 0.3)")
     parser.add_argument("--seed", type=int, default=0, help="scene and noise seed (default 0)")
+    parser.add_argument("--refine-intrinsics", default=None,
+                        help="lens entries every calibration refines (e.g. focal,k1); default: none")
+    parser.add_argument("--focal-error", type=float, default=0.05,
+                        help="with --refine-intrinsics: the given focal lengths' error, a share (default 0.05)")
     return parser.parse_args()
+
+
+def focal_off(intrinsics: Intrinsics, share: float) -> Intrinsics:
+    K = intrinsics.K.copy()
+    K[:2, :2] *= 1.0 + share
+    return Intrinsics(intrinsics.name, intrinsics.resolution, K, intrinsics.dist.copy())
+
+
+class Calibrator:
+    """Calibrates re-noised tracks, with the given intrinsics or refining them; returns
+    the calibration and the intrinsics it ends with."""
+
+    def __init__(self, clean, args: argparse.Namespace, folder: Path) -> None:
+        self.refine = args.refine_intrinsics
+        self.given = dict(clean.intrinsics)
+        self.tracks = clean.tracks
+        if self.refine:
+            self.given = {name: focal_off(i, args.focal_error) for name, i in clean.intrinsics.items()}
+            self.tracks = convert_tracks(clean.tracks, clean.intrinsics, self.given)
+        self.folder = folder
+
+    def __call__(self, noise_px: float, rng: np.random.Generator, **kwargs):
+        tracks = renoised(self.tracks, noise_px, rng)
+        if not self.refine:
+            return calibrate(tracks, self.given, progress=False, **kwargs), self.given
+        out = self.folder / "run"
+        calibration = calibrate(tracks, self.given, progress=False, refine_intrinsics=[self.refine], out=out,
+                                force=True, report=False, **kwargs)
+        return calibration, load_intrinsics_dir(out / "intrinsics")
 
 
 def renoised(tracks: Tracks, noise_px: float, rng: np.random.Generator) -> Tracks:
@@ -105,24 +149,30 @@ def sigma_of(covariances: np.ndarray) -> np.ndarray:
 
 def study(scene: str, args: argparse.Namespace) -> tuple[float, float]:
     clean = simulate_tracks(scene, None, noise_px=0.0, seed=args.seed)
+    with tempfile.TemporaryDirectory() as folder:
+        return study_with(scene, clean, Calibrator(clean, args, Path(folder)), args)
+
+
+def study_with(scene: str, clean, calibrator: Calibrator, args: argparse.Namespace) -> tuple[float, float]:
     rng = np.random.default_rng(args.seed)
     options = RegistrationOptions(error_correlation=0.0)
     start = time.perf_counter()
-    nominal = calibrate(renoised(clean.tracks, args.noise, rng), clean.intrinsics, options=options, progress=False)
-    default = calibrate(renoised(clean.tracks, args.noise, np.random.default_rng(args.seed)), clean.intrinsics,
-                        progress=False)
+    nominal, intrinsics = calibrator(args.noise, rng, options=options)
+    default, _ = calibrator(args.noise, np.random.default_rng(args.seed))
     one = time.perf_counter() - start
     u = nominal.uncertainty
     reference, names = u.reference, list(u.cameras)
-    intrinsics = {name: clean.intrinsics[name] for name in names}
+    intrinsics = {name: intrinsics[name] for name in names}
     cells = volume_cells(nominal, intrinsics)
     predicted, _, seen = _core.uncertainty.triangulation(nominal, intrinsics, cells, 0.0)
     usable = np.isfinite(predicted).all(axis=(1, 2))
     cells, predicted, seen = cells[usable], predicted[usable], [s for s, ok in zip(seen, usable) if ok]
     inflation = np.median(sigma_of(_core.uncertainty.triangulation(default, intrinsics, cells, 0.0)[0])
                           / sigma_of(predicted))
+    lenses = [name for name, block in zip(names, u.lens_block) if block >= 0]
     print(f"\n{scene}: {len(names)} cameras, reference {reference}, {len(cells)} cells seen by 2+, "
-          f"noise {args.noise} px, {args.runs} runs (~{one / 2:.1f} s each)")
+          f"noise {args.noise} px, {args.runs} runs (~{one / 2:.1f} s each); "
+          f"lenses in the prediction: {', '.join(lenses) or 'none'}")
     print(f"  the default error_correlation widens the predicted error by {inflation:.2f}x (median)")
     masks = [np.array([name in s for s in seen]) for name in names]
     projections = {name: _core.uncertainty.projection(nominal, intrinsics, name, cells) for name in names}
@@ -132,17 +182,19 @@ def study(scene: str, args: argparse.Namespace) -> tuple[float, float]:
     truth = [project(Ks[c], *nominal.poses[name], cells[masks[c]]) for c, name in enumerate(names)]
     placed, projected = [], {name: [] for name in names}
     for run in range(args.runs):
-        calibration = calibrate(renoised(clean.tracks, args.noise, rng), clean.intrinsics, options=options,
-                                progress=False)
+        calibration, lenses_of_run = calibrator(args.noise, rng, options=options)
         if sorted(calibration.poses) != sorted(nominal.poses):
             print(f"  run {run}: cameras {sorted(calibration.poses)} registered; left out")
             continue
         poses = into_gauge(calibration.poses, nominal.poses, reference)
-        cameras = [(Ks[c], *poses[name]) for c, name in enumerate(names)]
-        pixels = [truth[c] + rng.normal(0.0, u.noise_px[c], truth[c].shape) for c in range(len(names))]
+        run_Ks = [np.asarray(lenses_of_run[name].K, dtype=float) for name in names]
+        cameras = [(run_Ks[c], *poses[name]) for c, name in enumerate(names)]
+        # Raw pixels of the nominal calibration's points, undistorted with the run's lenses.
+        pixels = [lenses_of_run[name].undistort_points(intrinsics[name].distort_points(
+            truth[c] + rng.normal(0.0, u.noise_px[c], truth[c].shape))) for c, name in enumerate(names)]
         placed.append(triangulate(cameras, pixels, weights, masks, cells))
         for c, name in enumerate(names):
-            projected[name].append(project(Ks[c], *poses[name], cells[masks[c]]))
+            projected[name].append(lenses_of_run[name].distort_points(project(run_Ks[c], *poses[name], cells[masks[c]])))
     placed = np.array(placed)
     deviations = placed - placed.mean(axis=0)
     empirical = np.einsum("rni,rnj->nij", deviations, deviations) / (len(placed) - 1)
@@ -157,19 +209,30 @@ def study(scene: str, args: argparse.Namespace) -> tuple[float, float]:
             continue
         shots = np.array(projected[name])
         spread = np.mean(np.sum(np.var(shots, axis=0, ddof=1), axis=-1))
-        expected = np.mean(np.trace(projections[name][masks[c]], axis1=1, axis2=2))
+        raw = raw_covariances(intrinsics[name], truth[c], projections[name][masks[c]])
+        expected = np.mean(np.trace(raw, axis1=1, axis2=2))
         r = float(np.sqrt(spread / expected))
         within.append(abs(r - 1.0) <= 0.25)
+        per_cell = np.sqrt(np.sum(np.var(shots, axis=0, ddof=1), axis=-1)
+                           / np.trace(raw, axis1=1, axis2=2))
         print(f"  projection {name:<10} predicted {np.sqrt(expected):8.4f} px  empirical {np.sqrt(spread):8.4f} px  "
-              f"ratio {r:.3f}")
+              f"ratio {r:.3f} (per cell: median {np.median(per_cell):.3f}, max {per_cell.max():.3f})")
     return cells_ok, float(np.mean(within))
+
+
+def raw_covariances(lens: Intrinsics, undistorted: np.ndarray, covariances: np.ndarray) -> np.ndarray:
+    """Covariances of undistorted pixels as the raw (distorted) pixels' they make:
+    T C T^T, with T the lens's derivative there (central differences). The spread is
+    compared in raw pixels, where a point lands in the image."""
+    step = 1e-3
+    T = np.stack([(lens.distort_points(undistorted + e) - lens.distort_points(undistorted - e)) / (2 * step)
+                  for e in np.eye(2) * step], axis=-1)
+    return T @ covariances @ np.transpose(T, (0, 2, 1))
 
 
 def volume_cells(calibration, intrinsics) -> np.ndarray:
     """The centres of uncertainty.json's map (the volume the report maps)."""
     import json
-    import tempfile
-    from pathlib import Path
 
     with tempfile.TemporaryDirectory() as folder:
         _core.uncertainty.write(Path(folder), calibration, intrinsics)

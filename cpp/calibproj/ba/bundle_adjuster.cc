@@ -9,6 +9,8 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
+#include <vector>
 
 #include "calibproj/ba/manifolds.h"
 #include "calibproj/ba/reduced_covariance.h"
@@ -350,7 +352,8 @@ void DiscountSharedErrors(const Data& data, double correlation, int projector_te
 // Returns the number of projector terms.
 int BuildProblem(const Data& data, const Options& options, const Gauge& gauge, Parameters& params,
                  const CostFactory& make_cost, const RotationCache* rotations, const GroupLosses& losses,
-                 ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering) {
+                 ceres::Problem* problem, ceres::ParameterBlockOrdering* ordering,
+                 std::vector<ceres::ResidualBlockId>* observation_blocks) {
   const bool coplanar = options.model == Model::kCoplanar;
   for (int p = 0; p < static_cast<int>(data.points.rows()); ++p) {
     problem->AddParameterBlock(params.PointBlock(p), params.point_plane[p] < 0 ? 3 : 2);
@@ -385,12 +388,13 @@ int BuildProblem(const Data& data, const Options& options, const Gauge& gauge, P
     if (on_plane >= 0 && !params.relief_cell.empty() && params.relief_cell[p] >= 0) {
       std::vector<double*> blocks = {pose, params.Plane(on_plane), params.PointBlock(p)};
       for (int node : params.relief_grid.NodesOf(params.relief_cell[p])) blocks.push_back(params.ReliefNode(node));
-      problem->AddResidualBlock(new ReliefReprojectionCost(cost, params.relief_grid, params.relief_cell[p]),
-                                camera_loss, blocks);
+      observation_blocks->push_back(problem->AddResidualBlock(
+          new ReliefReprojectionCost(cost, params.relief_grid, params.relief_cell[p]), camera_loss, blocks));
     } else if (on_plane >= 0) {
-      problem->AddResidualBlock(cost, camera_loss, pose, params.Plane(on_plane), params.PointBlock(p));
+      observation_blocks->push_back(
+          problem->AddResidualBlock(cost, camera_loss, pose, params.Plane(on_plane), params.PointBlock(p)));
     } else {
-      problem->AddResidualBlock(cost, camera_loss, pose, params.PointBlock(p));
+      observation_blocks->push_back(problem->AddResidualBlock(cost, camera_loss, pose, params.PointBlock(p)));
     }
   }
   const int projector_terms = AddProjectorTerms(data, params, losses.Projector(), problem, ordering);
@@ -490,10 +494,37 @@ Eigen::MatrixXd PoseTangentToCaller(const ceres::Problem& problem, const double*
   return A * plus;
 }
 
+// The lenses of Data::lens_block as considered parameters of the reduced system: an
+// observation's residual block depends on its camera's lens block.
+ConsideredParameters ConsideredLenses(const Data& data, const std::vector<ceres::ResidualBlockId>& observation_blocks) {
+  auto observation_of = std::make_shared<std::unordered_map<ceres::ResidualBlockId, int>>();
+  for (size_t i = 0; i < observation_blocks.size(); ++i) observation_of->emplace(observation_blocks[i], static_cast<int>(i));
+  ConsideredParameters considered;
+  considered.columns = kLensBlockSize * (data.lens_block.maxCoeff() + 1);
+  considered.jacobian = [&data, observation_of](ceres::ResidualBlockId id, Eigen::MatrixXd* jacobian) {
+    const auto it = observation_of->find(id);
+    const int block = it == observation_of->end() ? -1 : data.lens_block(data.camera_index(it->second));
+    if (block < 0) {
+      jacobian->resize(0, 0);
+      return 0;
+    }
+    *jacobian = Eigen::Map<const Eigen::Matrix<double, 2, kLensBlockSize, Eigen::RowMajor>>(
+        data.lens_jacobians.row(it->second).data());
+    return kLensBlockSize * block;
+  };
+  return considered;
+}
+
+struct PoseCovariance {
+  Eigen::MatrixXd joint;             // see Result::pose_covariance
+  Eigen::MatrixXd lens_sensitivity;  // see Result::lens_sensitivity; with considered lenses only
+};
+
 // The joint covariance of every pose, [dtheta, dt] per camera in the caller's frame
-// (see Result::pose_covariance), from the reduced camera system.
-Eigen::MatrixXd JointPoseCovariance(ceres::Problem* problem, Parameters& params, const Gauge& gauge,
-                                    const FrameChange& change) {
+// (see Result::pose_covariance), from the reduced camera system; with `lenses`, also
+// the poses' sensitivity to them.
+PoseCovariance JointPoseCovariance(ceres::Problem* problem, Parameters& params, const Gauge& gauge,
+                                   const FrameChange& change, const ConsideredParameters* lenses) {
   const int num_cameras = static_cast<int>(params.poses.rows());
   if (gauge.scale_camera >= 0) {
     // The padded manifold used for speed has an inert direction; covariance needs the exact one.
@@ -515,15 +546,23 @@ Eigen::MatrixXd JointPoseCovariance(ceres::Problem* problem, Parameters& params,
   }
   const std::vector<double*> others = OtherKeptBlocks(*problem, params);
   kept.insert(kept.end(), others.begin(), others.end());
-  const Eigen::MatrixXd tangent = ReducedCovariance(problem, points, kept);
+  ReducedSolution reduced;
+  if (lenses != nullptr) {
+    reduced = ReducedCovarianceWithSensitivity(problem, points, kept, *lenses);
+  } else {
+    reduced.covariance = ReducedCovariance(problem, points, kept);
+  }
   Eigen::MatrixXd M = Eigen::MatrixXd::Zero(6 * num_cameras, columns);
   for (int c = 0; c < num_cameras; ++c) {
     if (pose_column[c] < 0) continue;
     const Eigen::MatrixXd map = PoseTangentToCaller(*problem, params.poses.row(c).data(), change);
     M.block(6 * c, pose_column[c], 6, map.cols()) = map;
   }
-  const Eigen::MatrixXd joint = M * tangent.topLeftCorner(columns, columns) * M.transpose();
-  return 0.5 * (joint + joint.transpose());
+  PoseCovariance out;
+  const Eigen::MatrixXd joint = M * reduced.covariance.topLeftCorner(columns, columns) * M.transpose();
+  out.joint = 0.5 * (joint + joint.transpose());
+  if (lenses != nullptr) out.lens_sensitivity = M * reduced.sensitivity.topRows(columns);
+  return out;
 }
 
 const char* ModelName(Model model) { return model == Model::kFree ? "free" : "coplanar"; }
@@ -554,6 +593,33 @@ void Options::Check() const {
           "options: error_correlation must be in [0, 1], got " + Str(error_correlation));
   limits::RequireInRange(relief_cells, 1, kMaxReliefCells, "options: relief_cells");
 }
+
+namespace {
+
+// The considered lenses: a block index per camera (-1: none), blocks numbered 0..L-1
+// without gaps, and a finite 2 x 8 derivative per observation.
+void ValidateLenses(const Data& data, int num_cameras) {
+  if (data.lens_block.size() == 0 && data.lens_jacobians.rows() == 0) return;
+  Require(data.lens_block.size() == num_cameras,
+          "lens blocks: " + Str(int(data.lens_block.size())) + " entries for " + Str(num_cameras) + " cameras");
+  Require(data.lens_jacobians.rows() == data.camera_index.size(),
+          "lens Jacobians: " + Str(int(data.lens_jacobians.rows())) + " rows for " + Str(int(data.camera_index.size())) +
+              " observations");
+  Require(data.lens_jacobians.allFinite(), "lens Jacobians: non-finite value");
+  std::vector<int> cameras_of_block(num_cameras, 0);
+  for (int c = 0; c < num_cameras; ++c) {
+    const int block = data.lens_block(c);
+    Require(block >= -1 && block < num_cameras, "lens blocks: camera " + Str(c) + " has block " + Str(block));
+    if (block >= 0) ++cameras_of_block[block];
+  }
+  const int blocks = data.lens_block.maxCoeff() + 1;
+  for (int b = 0; b < blocks; ++b) {
+    Require(cameras_of_block[b] == 1, "lens blocks: block " + Str(b) + " belongs to " + Str(cameras_of_block[b]) +
+                                          " cameras (one each, numbered without gaps)");
+  }
+}
+
+}  // namespace
 
 void ValidateData(const Data& data, const Options& options) {
   options.Check();
@@ -636,6 +702,7 @@ void ValidateData(const Data& data, const Options& options) {
                (data.projector_point_weights.array() > 0.0).all()),
           "projector: one finite positive weight factor per point, or none");
   Require(std::isfinite(data.relief_weight) && data.relief_weight >= 0.0, "relief: the weight must be finite and >= 0");
+  ValidateLenses(data, num_cameras);
   Require(options.gauge_camera >= 0 && options.gauge_camera < num_cameras,
           "options: gauge camera " + Str(options.gauge_camera) + " out of range [0, " + Str(num_cameras) + ")");
   Require(options.scale_camera >= -1 && options.scale_camera < num_cameras &&
@@ -733,8 +800,10 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
   const bool shared_errors = options.compute_covariance && options.error_correlation > 0.0;
   GroupLosses losses = MakeGroupLosses(data, loss.get(), shared_errors);
+  std::vector<ceres::ResidualBlockId> observation_blocks;
   const int projector_terms =
-      BuildProblem(gauge_data, options, gauge, params, make_cost, rotations.get(), losses, &problem, ordering.get());
+      BuildProblem(gauge_data, options, gauge, params, make_cost, rotations.get(), losses, &problem, ordering.get(),
+                   &observation_blocks);
 
   ceres::Solver::Summary summary;
   const auto start = std::chrono::steady_clock::now();
@@ -755,10 +824,20 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
 
   if (rotations) rotations->Refresh();  // the last evaluation may have been a rejected step
   if (options.compute_covariance && result.usable) {
-    if (shared_errors) DiscountSharedErrors(data, options.error_correlation, projector_terms, &losses);
     const auto covariance_start = std::chrono::steady_clock::now();
+    const bool lenses = data.lens_block.size() > 0 && data.lens_block.maxCoeff() >= 0;
+    const ConsideredParameters considered = lenses ? ConsideredLenses(data, observation_blocks) : ConsideredParameters();
     try {
-      result.pose_covariance = JointPoseCovariance(&problem, params, gauge, change);
+      // The lenses move the poses as the solve weighs the residuals: their sensitivity
+      // is taken before the covariance discounts shared errors.
+      PoseCovariance with_lenses;
+      if (lenses) {
+        with_lenses = JointPoseCovariance(&problem, params, gauge, change, &considered);
+        result.lens_sensitivity = with_lenses.lens_sensitivity;
+      }
+      if (shared_errors) DiscountSharedErrors(data, options.error_correlation, projector_terms, &losses);
+      result.pose_covariance = lenses && !shared_errors ? with_lenses.joint
+                                                        : JointPoseCovariance(&problem, params, gauge, change, nullptr).joint;
       for (int c = 0; c < num_cameras; ++c) result.pose_covariances.push_back(result.pose_covariance.block<6, 6>(6 * c, 6 * c));
     } catch (const std::runtime_error& error) {
       result.covariance_failure = error.what();  // the solution stands without it

@@ -73,6 +73,8 @@ struct Options {
 };
 
 using PlaneMatrix = Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>;
+constexpr int kLensBlockSize = 8;
+using LensJacobianMatrix = Eigen::Matrix<double, Eigen::Dynamic, 2 * kLensBlockSize, Eigen::RowMajor>;
 
 struct Data {
   Eigen::VectorXi camera_index;   // per observation
@@ -104,6 +106,14 @@ struct Data {
   // whose nodes have a prior of weight relief_weight = the reference noise (px) over the
   // expected root mean square height (world units); <= 0: the plane is flat.
   double relief_weight = 0.0;
+  // With compute_covariance: lenses the solve holds but whose own uncertainty is known
+  // elsewhere (intrinsics refined by the self-calibration), whose effect on the poses the
+  // result gives (Result::lens_sensitivity). Per camera the index of its lens block (-1:
+  // none), and per observation the derivative of its residual by its camera's lens
+  // block [f, cx, cy, k1, k2, p1, p2, k3] (selfcal/lens.h: ResidualByLens), 2 x 8
+  // row-major. Both empty: no lens considered.
+  Eigen::VectorXi lens_block;
+  LensJacobianMatrix lens_jacobians;
 };
 
 constexpr int kMaxReliefCells = 16;
@@ -145,6 +155,10 @@ struct Result {
   // camera's rows are zero. And its diagonal blocks, per camera.
   Eigen::MatrixXd pose_covariance;
   std::vector<Matrix6d> pose_covariances;
+  // With Data::lens_block: d [dtheta, dt] / d lens (6C x 8L, lens block l in columns 8l
+  // to 8l + 7), in the caller's frame; the gauge camera's rows are zero. The poses'
+  // covariance from the lenses' is lens_sensitivity * Sigma_lens * lens_sensitivity^T.
+  Eigen::MatrixXd lens_sensitivity;
   // Why the covariance was requested but not given (the poses not all determined: a
   // camera seeing too little); empty otherwise.
   std::string covariance_failure;

@@ -3,6 +3,7 @@
 #include <ceres/ceres.h>
 
 #include <Eigen/Cholesky>
+#include <cmath>
 #include <stdexcept>
 #include <unordered_map>
 #include <vector>
@@ -24,11 +25,12 @@ using ConstJacobian = Eigen::Map<const RowMajor>;
 struct Layout {
   std::unordered_map<const double*, int> eliminated;
   std::unordered_map<const double*, int> kept_column;
+  int kept_columns = 0;  // the considered parameters' columns follow them
   int columns = 0;
 };
 
 Layout MakeLayout(const ceres::Problem& problem, const std::vector<double*>& eliminated,
-                  const std::vector<double*>& kept) {
+                  const std::vector<double*>& kept, int considered_columns) {
   Layout layout;
   for (size_t b = 0; b < eliminated.size(); ++b) {
     if (problem.ParameterBlockTangentSize(eliminated[b]) > kMaxEliminatedSize) {
@@ -40,6 +42,8 @@ Layout MakeLayout(const ceres::Problem& problem, const std::vector<double*>& eli
     layout.kept_column.emplace(block, layout.columns);
     layout.columns += problem.ParameterBlockTangentSize(block);
   }
+  layout.kept_columns = layout.columns;
+  layout.columns += considered_columns;
   return layout;
 }
 
@@ -65,6 +69,22 @@ std::vector<std::vector<ceres::ResidualBlockId>> GroupResiduals(const ceres::Pro
   return groups;
 }
 
+// A Jacobian of the residual r before the robust loss made what Ceres evaluates with it:
+// sqrt(rho') (J - alpha / |r|^2 r r^T J) (ceres/internal/corrector.cc).
+void ApplyLoss(const ceres::LossFunction* loss, const Eigen::VectorXd& r, RowMajor* J) {
+  if (loss == nullptr) return;
+  const double squared_norm = r.squaredNorm();
+  double rho[3];
+  loss->Evaluate(squared_norm, rho);
+  const double sqrt_rho1 = std::sqrt(rho[1]);
+  if (squared_norm == 0.0 || rho[2] <= 0.0) {
+    *J *= sqrt_rho1;
+    return;
+  }
+  const double alpha = 1.0 - std::sqrt(1.0 + 2.0 * squared_norm * rho[2] / rho[1]);
+  *J = sqrt_rho1 * (*J - (alpha / squared_norm) * r * (r.transpose() * *J));
+}
+
 // One kept block's part of a residual block's Jacobian.
 struct KeptPart {
   int column = 0;
@@ -78,9 +98,11 @@ struct KeptPart {
 // touches.
 class GroupReducer {
  public:
-  GroupReducer(ceres::Problem* problem, const Layout& layout, Eigen::MatrixXd* S)
+  GroupReducer(ceres::Problem* problem, const Layout& layout, const ConsideredParameters* considered,
+               Eigen::MatrixXd* S)
       : problem_(problem),
         layout_(layout),
+        considered_(considered),
         S_(S),
         W_(Eigen::MatrixXd::Zero(kMaxEliminatedSize, layout.columns)),
         compact_(Eigen::MatrixXd::Zero(kMaxEliminatedSize, layout.columns)),
@@ -162,6 +184,7 @@ class GroupReducer {
                                                                     residuals_.data(), pointers_.data())) {
       throw std::runtime_error("covariance: a residual could not be evaluated at the solution");
     }
+    AddConsidered(id, rows);
     for (const KeptPart& a : parts_) {
       const ConstJacobian Ja(a.jacobian, rows, a.size);
       for (const KeptPart& b : parts_) {
@@ -181,8 +204,32 @@ class GroupReducer {
     }
   }
 
+  // The considered parameters' part of the residual block's Jacobian, as a kept part.
+  void AddConsidered(ceres::ResidualBlockId id, int rows) {
+    if (considered_ == nullptr) return;
+    const int first = considered_->jacobian(id, &raw_);
+    if (raw_.cols() == 0) return;
+    if (raw_.rows() != rows || first < 0 || first + raw_.cols() > considered_->columns) {
+      throw std::logic_error("reduced covariance: a considered Jacobian outside its columns");
+    }
+    considered_jacobian_ = raw_;
+    const ceres::LossFunction* loss = problem_->GetLossFunctionForResidualBlock(id);
+    if (loss != nullptr) {
+      Eigen::VectorXd r(rows);
+      if (!problem_->EvaluateResidualBlockAssumingParametersUnchanged(id, /*apply_loss_function=*/false, nullptr,
+                                                                      r.data(), nullptr)) {
+        throw std::runtime_error("covariance: a residual could not be evaluated at the solution");
+      }
+      ApplyLoss(loss, r, &considered_jacobian_);
+    }
+    parts_.push_back({layout_.kept_columns + first, static_cast<int>(raw_.cols()), considered_jacobian_.data()});
+  }
+
   ceres::Problem* problem_;
   const Layout& layout_;
+  const ConsideredParameters* considered_;
+  Eigen::MatrixXd raw_;
+  RowMajor considered_jacobian_;
   Eigen::MatrixXd* S_;
   Eigen::Matrix3d EtE_;
   Eigen::MatrixXd W_;  // E^T F of the group, on its touched columns (zero elsewhere)
@@ -211,17 +258,35 @@ Eigen::MatrixXd Inverse(const Eigen::MatrixXd& S) {
   return scale.asDiagonal() * inverse * scale.asDiagonal();
 }
 
+// The reduced system over the kept blocks' and the considered parameters' columns.
+Eigen::MatrixXd ReducedSystem(ceres::Problem* problem, const std::vector<double*>& eliminated, const Layout& layout,
+                              const ConsideredParameters* considered) {
+  const auto groups = GroupResiduals(*problem, layout, eliminated.size());
+  Eigen::MatrixXd S = Eigen::MatrixXd::Zero(layout.columns, layout.columns);
+  GroupReducer reducer(problem, layout, considered, &S);
+  for (size_t b = 0; b < eliminated.size(); ++b) reducer.Reduce(groups[b], eliminated[b]);
+  reducer.Reduce(groups.back(), nullptr);
+  return S;
+}
+
 }  // namespace
 
 Eigen::MatrixXd ReducedCovariance(ceres::Problem* problem, const std::vector<double*>& eliminated,
                                   const std::vector<double*>& kept) {
-  const Layout layout = MakeLayout(*problem, eliminated, kept);
-  const auto groups = GroupResiduals(*problem, layout, eliminated.size());
-  Eigen::MatrixXd S = Eigen::MatrixXd::Zero(layout.columns, layout.columns);
-  GroupReducer reducer(problem, layout, &S);
-  for (size_t b = 0; b < eliminated.size(); ++b) reducer.Reduce(groups[b], eliminated[b]);
-  reducer.Reduce(groups.back(), nullptr);
-  return Inverse(S);
+  const Layout layout = MakeLayout(*problem, eliminated, kept, 0);
+  return Inverse(ReducedSystem(problem, eliminated, layout, nullptr));
+}
+
+ReducedSolution ReducedCovarianceWithSensitivity(ceres::Problem* problem, const std::vector<double*>& eliminated,
+                                                 const std::vector<double*>& kept,
+                                                 const ConsideredParameters& considered) {
+  const Layout layout = MakeLayout(*problem, eliminated, kept, considered.columns);
+  const Eigen::MatrixXd S = ReducedSystem(problem, eliminated, layout, &considered);
+  const int n = layout.kept_columns;
+  ReducedSolution out;
+  out.covariance = Inverse(S.topLeftCorner(n, n));
+  out.sensitivity = -out.covariance * S.topRightCorner(n, considered.columns);
+  return out;
 }
 
 }  // namespace calibproj::ba

@@ -6,12 +6,11 @@
 // small dense system left is inverted. Cheaper than a generic covariance of every
 // block (ceres::Covariance factors the whole Jacobian), and exact for the same problem.
 
-#include <Eigen/Core>
-#include <vector>
+#include <ceres/problem.h>
 
-namespace ceres {
-class Problem;
-}  // namespace ceres
+#include <Eigen/Core>
+#include <functional>
+#include <vector>
 
 namespace calibproj::ba {
 
@@ -26,5 +25,29 @@ namespace calibproj::ba {
 // open, or blocks the residuals do not determine).
 Eigen::MatrixXd ReducedCovariance(ceres::Problem* problem, const std::vector<double*>& eliminated,
                                   const std::vector<double*>& kept);
+
+// Parameters the residuals depend on but the solve held ("consider" parameters: a lens
+// refined elsewhere, whose own uncertainty is known there). `jacobian` gives, for a
+// residual block, the first of the `columns` it depends on and its derivative by them
+// (rows x width, of the residual before the robust loss: the loss is applied here as
+// Ceres applies it to the other blocks' Jacobians); a width of 0: none.
+struct ConsideredParameters {
+  int columns = 0;
+  std::function<int(ceres::ResidualBlockId id, Eigen::MatrixXd* jacobian)> jacobian;
+};
+
+struct ReducedSolution {
+  Eigen::MatrixXd covariance;   // as ReducedCovariance
+  // d kept / d considered (kept tangent entries x considered columns): how the solution
+  // moves when the considered parameters do, the points re-solved with it.
+  Eigen::MatrixXd sensitivity;
+};
+
+// ReducedCovariance, and the sensitivity of the kept blocks to the considered
+// parameters: -S^-1 B, with S the reduced system and B the reduced cross terms between
+// the kept blocks and the considered parameters.
+ReducedSolution ReducedCovarianceWithSensitivity(ceres::Problem* problem, const std::vector<double*>& eliminated,
+                                                 const std::vector<double*>& kept,
+                                                 const ConsideredParameters& considered);
 
 }  // namespace calibproj::ba

@@ -7,12 +7,42 @@
 
 namespace calibproj::registration {
 
+int PoseUncertainty::num_lenses() const {
+  return lens_block.empty() ? 0 : std::max(0, *std::max_element(lens_block.begin(), lens_block.end()) + 1);
+}
+
+std::vector<int> PoseUncertainty::ParametersOf(int k) const {
+  std::vector<int> rows;
+  for (int i = 0; i < 6; ++i) rows.push_back(6 * k + i);
+  const int block = lens_block.empty() ? -1 : lens_block[k];
+  const int first = 6 * static_cast<int>(cameras.size()) + kLensSize * block;
+  for (int i = 0; i < kLensSize && block >= 0; ++i) rows.push_back(first + i);
+  return rows;
+}
+
 void PoseUncertainty::Check() const {
-  const auto size = static_cast<Eigen::Index>(6 * cameras.size());
+  if (!lens_block.empty() && lens_block.size() != cameras.size()) {
+    throw std::invalid_argument("lens blocks: " + std::to_string(lens_block.size()) + " for " +
+                                std::to_string(cameras.size()) + " cameras");
+  }
+  std::vector<int> owners(cameras.size(), 0);
+  for (int block : lens_block) {
+    if (block < -1 || block >= static_cast<int>(cameras.size())) {
+      throw std::invalid_argument("lens blocks: block " + std::to_string(block) + " out of range");
+    }
+    if (block >= 0 && ++owners[block] > 1) {
+      throw std::invalid_argument("lens blocks: block " + std::to_string(block) + " given to two cameras");
+    }
+  }
+  for (int block = 0; block < num_lenses(); ++block) {
+    if (owners[block] == 0) throw std::invalid_argument("lens blocks: block " + std::to_string(block) + " is nobody's");
+  }
+  const auto size = static_cast<Eigen::Index>(6 * cameras.size() + kLensSize * num_lenses());
   if (covariance.rows() != size || covariance.cols() != size) {
     throw std::invalid_argument("pose covariance: " + std::to_string(covariance.rows()) + " x " +
                                 std::to_string(covariance.cols()) + " for " + std::to_string(cameras.size()) +
-                                " cameras (needs 6 rows and columns per camera)");
+                                " cameras and " + std::to_string(num_lenses()) +
+                                " lenses (needs 6 rows and columns per camera, 8 per lens)");
   }
   if (!covariance.allFinite()) throw std::invalid_argument("pose covariance: non-finite value");
   if (noise_px.size() != cameras.size()) {

@@ -17,13 +17,23 @@ struct PoseUncertainty {
   // uncertainty is relative to them (its own rows are zero).
   std::string reference;
   // 6C x 6C: per camera [dtheta (rad), dt (calibration unit)] of its world-to-camera pose,
-  // R = Exp(dtheta) R_hat and t = t_hat + dt.
+  // R = Exp(dtheta) R_hat and t = t_hat + dt; then, with refined lenses, 8 rows and
+  // columns per lens block [f, cx, cy, k1, k2, p1, p2, k3] (selfcal/lens.h), so
+  // (6C + 8L) x (6C + 8L) with the poses' cross terms with the lenses.
   Eigen::MatrixXd covariance;
   // Per camera, the noise of its centres (1 sigma per image coordinate, undistorted px)
   // that the covariance assumes.
   std::vector<double> noise_px;
+  // Per camera the index of its lens block (-1: its intrinsics taken as exact); empty:
+  // every camera's.
+  std::vector<int> lens_block;
+
+  static constexpr int kLensSize = 8;
 
   bool empty() const { return cameras.empty(); }
+  int num_lenses() const;
+  // Rows of the covariance that camera `k` depends on: its pose's 6, then its lens's 8.
+  std::vector<int> ParametersOf(int k) const;
   // std::invalid_argument naming the first inconsistency (sizes, non-finite values, a
   // reference that is not one of the cameras, a noise that is not positive).
   void Check() const;

@@ -11,6 +11,7 @@
 #include <limits>
 #include <random>
 #include <map>
+#include <optional>
 #include <numeric>
 #include <stdexcept>
 #include <tuple>
@@ -224,6 +225,43 @@ Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eige
   single_view_.assign(num_points_, false);
   active_.assign(num_obs, true);
   camera_sigma_px_.assign(cameras_.size(), std::numeric_limits<double>::quiet_NaN());
+  lenses_.assign(cameras_.size(), std::nullopt);
+}
+
+void Reconstruction::SetLensUncertainty(int camera, const LensUncertainty& lens) {
+  Require(camera >= 0 && camera < num_cameras(), "lens: camera " + Str(camera) + " out of range");
+  const ba::Intrinsics& K = cameras_[camera].K;
+  for (double value : lens.lens) Require(std::isfinite(value), "lens: non-finite entry");
+  Require(std::abs(lens.lens[selfcal::kFocal] - K.fx) <= 1e-9 * K.fx && std::abs(lens.lens[selfcal::kCx] - K.cx) <= 1e-6 &&
+              std::abs(lens.lens[selfcal::kCy] - K.cy) <= 1e-6,
+          "lens: camera " + Str(camera) + "'s lens is not the one of its intrinsics");
+  Require(lens.covariance.allFinite() && (lens.covariance - lens.covariance.transpose()).norm() <=
+                                             1e-9 * std::max(1.0, lens.covariance.norm()),
+          "lens: camera " + Str(camera) + "'s covariance is not a finite symmetric matrix");
+  Require(Eigen::SelfAdjointEigenSolver<LensCovariance>(lens.covariance).eigenvalues().minCoeff() >=
+              -1e-9 * std::max(1e-300, lens.covariance.diagonal().maxCoeff()),
+          "lens: camera " + Str(camera) + "'s covariance is not positive semi-definite");
+  lenses_[camera] = lens;
+}
+
+void Reconstruction::AddLenses(const std::vector<int>& cameras, ba::Data* data) const {
+  if (std::none_of(cameras.begin(), cameras.end(), [&](int c) { return lenses_[c].has_value(); })) return;
+  data->lens_block = Eigen::VectorXi::Constant(static_cast<int>(cameras.size()), -1);
+  int blocks = 0;
+  for (size_t k = 0; k < cameras.size(); ++k) {
+    if (lenses_[cameras[k]]) data->lens_block(static_cast<int>(k)) = blocks++;
+  }
+  data->lens_jacobians = ba::LensJacobianMatrix::Zero(data->camera_index.size(), 2 * ba::kLensBlockSize);
+  for (int i = 0; i < data->camera_index.size(); ++i) {
+    const int k = data->camera_index(i);
+    const auto& lens = lenses_[cameras[k]];
+    if (!lens) continue;
+    const ba::Intrinsics& K = data->intrinsics[k];
+    const double y = (data->observed(i, 1) - K.cy) / K.fy;
+    const Eigen::Vector2d normalised((data->observed(i, 0) - K.cx - K.skew * y) / K.fx, y);
+    const selfcal::LensJacobian J = selfcal::ResidualByLens(lens->lens, lens->shape, normalised);
+    data->lens_jacobians.row(i) = Eigen::Map<const Eigen::Matrix<double, 1, 2 * ba::kLensBlockSize>>(J.data());
+  }
 }
 
 void Reconstruction::SetProjector(const PixelMatrix& pixels, double width, double height,
@@ -919,6 +957,7 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   ba_options.max_iterations = final ? options_.final_ba_iterations : options_.intermediate_ba_iterations;
   if (!final) ba_options.function_tolerance = 1e-6;
   ba_options.compute_covariance = covariance;
+  if (covariance) AddLenses(cameras, &data);
   ba_options.error_correlation = options_.error_correlation;
   ba_options.relief_cells = options_.relief_cells;
   if (cameras.size() < 2 && options_.model == ba::Model::kFree) return result;
@@ -928,7 +967,10 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
     projector_lens_ = solved.projector_lens;
     projector_surfaces_ = solved.projector_surfaces;
   }
-  if (covariance) StoreCovariances(solved, data, cameras, static_cast<int>(points.size()));
+  if (covariance) {
+    StoreCovariances(solved, data, cameras, static_cast<int>(points.size()));
+    StoreLensCovariances(solved, data, cameras);
+  }
   for (size_t k = 0; k < cameras.size(); ++k) poses_.row(cameras[k]) = solved.poses.row(k);
   for (size_t k = 0; k < points.size(); ++k) points_.row(points[k]) = solved.points.row(k);
   if (coplanar) {
@@ -1012,6 +1054,8 @@ void Reconstruction::StoreCovariances(const ba::Result& solved, const ba::Data& 
                                       int points) {
   pose_covariances_.clear();
   pose_covariance_.resize(0, 0);
+  pose_lens_covariance_.resize(0, 0);
+  lens_covariance_.resize(0, 0);
   covariance_noise_px_.clear();
   if (solved.pose_covariances.size() != cameras.size()) return;
   // Ceres gives the covariance for residuals of unit variance; scale it by the
@@ -1034,6 +1078,38 @@ void Reconstruction::StoreCovariances(const ba::Result& solved, const ba::Data& 
     for (size_t b = 0; b < cameras.size(); ++b) {
       pose_covariance_.block<6, 6>(6 * cameras[a], 6 * cameras[b]) = variance * solved.pose_covariance.block<6, 6>(6 * a, 6 * b);
     }
+  }
+}
+
+void Reconstruction::StoreLensCovariances(const ba::Result& solved, const ba::Data& data, const std::vector<int>& cameras) {
+  pose_lens_covariance_.resize(0, 0);
+  lens_covariance_.resize(0, 0);
+  if (pose_covariance_.size() == 0 || solved.lens_sensitivity.size() == 0) return;
+  const int C = num_cameras();
+  constexpr int L = selfcal::kLensSize;
+  std::vector<int> observations(cameras.size(), 0);
+  for (int i = 0; i < data.camera_index.size(); ++i) ++observations[data.camera_index(i)];
+  // The adjustment's camera k, and where its pose and lens sit in the solve's sensitivity.
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(6 * C, L * C);  // d pose / d lens, every camera
+  lens_covariance_ = Eigen::MatrixXd::Zero(L * C, L * C);
+  for (size_t k = 0; k < cameras.size(); ++k) {
+    const int block = data.lens_block(static_cast<int>(k));
+    if (block < 0) continue;
+    const int c = cameras[k];
+    for (size_t j = 0; j < cameras.size(); ++j) {
+      A.block(6 * cameras[j], L * c, 6, L) = solved.lens_sensitivity.block(6 * j, L * block, 6, L);
+    }
+    // The lens was fitted to the same centres as the poses: their shared errors discount
+    // its information as they do the poses' (ba::Options::error_correlation).
+    const double shared = 1.0 + std::max(0, observations[k] - 1) * options_.error_correlation;
+    lens_covariance_.block(L * c, L * c, L, L) = shared * lenses_[c]->covariance;
+  }
+  // Cameras out of the solve keep their NaN rows; the others gain the lenses' share.
+  pose_lens_covariance_ = A * lens_covariance_;
+  const Eigen::MatrixXd from_lenses = pose_lens_covariance_ * A.transpose();
+  pose_covariance_ += 0.5 * (from_lenses + from_lenses.transpose());
+  for (int c = 0; c < C; ++c) {
+    if (!pose_covariances_.empty()) pose_covariances_[c] = pose_covariance_.block<6, 6>(6 * c, 6 * c);
   }
 }
 
@@ -1142,6 +1218,8 @@ RefineResult Reconstruction::Refine() {
   RefineResult result;
   pose_covariances_.clear();
   pose_covariance_.resize(0, 0);
+  pose_lens_covariance_.resize(0, 0);
+  lens_covariance_.resize(0, 0);
   covariance_noise_px_.clear();
   result.planes_found = FindPlanes();
   result.relief = TestRelief();

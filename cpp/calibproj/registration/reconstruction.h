@@ -18,6 +18,7 @@
 #include "calibproj/ba/bundle_adjuster.h"
 #include "calibproj/geometry/triangulation.h"
 #include "calibproj/registration/noise_model.h"
+#include "calibproj/selfcal/lens.h"
 
 namespace calibproj::registration {
 
@@ -80,6 +81,16 @@ struct Options {
 struct Camera {
   ba::Intrinsics K;
   double width = 0.0, height = 0.0;
+};
+
+using LensCovariance = Eigen::Matrix<double, selfcal::kLensSize, selfcal::kLensSize>;
+
+// A lens refined elsewhere (the self-calibration), with its covariance: the observations
+// are undistorted with it, and the poses' covariance takes its uncertainty in.
+struct LensUncertainty {
+  double lens[selfcal::kLensSize] = {};  // [f, cx, cy, k1, k2, p1, p2, k3]
+  selfcal::LensShape shape;
+  LensCovariance covariance = LensCovariance::Zero();  // zero outside the refined entries
 };
 
 struct PairCandidate {
@@ -191,6 +202,11 @@ class Reconstruction {
   // centre (NaN: not known), which groups the projector's noise (noise_model.h).
   void SetProjector(const PixelMatrix& pixels, double width, double height,
                     const std::vector<double>& marker_side_px = {});
+  // The lens camera `camera`'s observations were undistorted with and its uncertainty
+  // (std::invalid_argument naming the problem: a camera out of range, a lens whose focal
+  // length differs from the camera's intrinsics, a covariance that is not symmetric
+  // positive semi-definite).
+  void SetLensUncertainty(int camera, const LensUncertainty& lens);
   // Where the projector draws point `point` on the main plane (false without a map).
   bool ProjectorPrediction(int point, Eigen::Vector3d* X) const;
 
@@ -221,6 +237,13 @@ class Reconstruction {
   // per camera the noise (px, 1 sigma per coordinate) this covariance stands for: its
   // weight's share of the residuals' variance. Empty when not computed.
   const Eigen::MatrixXd& pose_covariance() const { return pose_covariance_; }
+  // With lenses (SetLensUncertainty): pose_covariance() includes their share, and these
+  // give the poses' covariance with the lenses (6C x 8C, camera c's lens in columns 8c
+  // to 8c + 7) and the lenses' own (8C x 8C; zero for a camera without one). Empty
+  // when not computed or without lenses.
+  const Eigen::MatrixXd& pose_lens_covariance() const { return pose_lens_covariance_; }
+  const Eigen::MatrixXd& lens_covariance() const { return lens_covariance_; }
+  bool has_lens(int camera) const { return lenses_[camera].has_value(); }
   const std::vector<double>& covariance_noise_px() const { return covariance_noise_px_; }
   // Projector after an adjustment: per plane its map, the lens; per group of points
   // (projector_group_sides_px: the largest marker's side, NaN for the points whose side
@@ -260,6 +283,10 @@ class Reconstruction {
   bool InFront(int observation, const std::vector<Eigen::Matrix3d>& rotations) const;
   int ThirdCamera(int camera1, int camera2) const;
   void StoreCovariances(const ba::Result& solved, const ba::Data& data, const std::vector<int>& cameras, int points);
+  // The lenses' covariance and their share of the poses' (see pose_lens_covariance()).
+  void StoreLensCovariances(const ba::Result& solved, const ba::Data& data, const std::vector<int>& cameras);
+  // Data::lens_block and lens_jacobians of an adjustment of `cameras`.
+  void AddLenses(const std::vector<int>& cameras, ba::Data* data) const;
   bool KnownPoint(int point, Eigen::Vector3d* X) const;
   // True when the points of observations[k], k in subset, all lie on the main plane.
   bool AllOnMainPlane(const std::vector<int>& observations, const std::vector<int>& subset) const;
@@ -307,6 +334,8 @@ class Reconstruction {
   std::vector<int> order_;
   std::vector<ba::Matrix6d> pose_covariances_;
   Eigen::MatrixXd pose_covariance_;
+  Eigen::MatrixXd pose_lens_covariance_, lens_covariance_;
+  std::vector<std::optional<LensUncertainty>> lenses_;
   std::vector<double> covariance_noise_px_;
   ba::PixelMatrix projector_;  // normalised pixels (ba/projector_cost.h), per point
   double projector_width_ = 1.0;

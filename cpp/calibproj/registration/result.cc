@@ -62,25 +62,42 @@ std::pair<double, double> PoseSigmas(const ba::Matrix6d& covariance, const Eigen
 
 // The joint pose covariance of the registered cameras in the floor frame X_f = s M (X - o):
 // a camera's R_f = R M^T keeps dtheta, and t_f = s (R o + t) moves by s (dt - [R o]x dtheta).
+// Refined lenses follow the poses, unchanged by the frame.
 PoseUncertainty FloorFrameUncertainty(const Reconstruction& rec, const std::vector<int>& registered,
                                       const ba::PoseMatrix& poses, const FloorFrame& frame) {
   PoseUncertainty out;
-  const Eigen::MatrixXd& joint = rec.pose_covariance();
-  if (joint.rows() != 6 * rec.num_cameras()) return out;
+  const Eigen::MatrixXd& poses_joint = rec.pose_covariance();
+  const int C = rec.num_cameras();
+  if (poses_joint.rows() != 6 * C) return out;
+  constexpr int L = PoseUncertainty::kLensSize;
+  const bool lenses = rec.lens_covariance().rows() == L * C;
+  // Every camera's pose, then every camera's lens, as the reconstruction holds them.
+  Eigen::MatrixXd joint = poses_joint;
+  if (lenses) {
+    joint.resize((6 + L) * C, (6 + L) * C);
+    joint << poses_joint, rec.pose_lens_covariance(), rec.pose_lens_covariance().transpose(), rec.lens_covariance();
+  }
   const int n = static_cast<int>(registered.size());
-  Eigen::MatrixXd B = Eigen::MatrixXd::Zero(6 * n, 6 * n);
-  Eigen::VectorXi rows(6 * n);
+  std::vector<int> rows;
+  for (int k = 0; k < n; ++k) {
+    for (int i = 0; i < 6; ++i) rows.push_back(6 * registered[k] + i);
+  }
+  for (int k = 0; k < n && lenses; ++k) {
+    const int c = registered[k];
+    out.lens_block.push_back(rec.has_lens(c) ? out.num_lenses() : -1);
+    for (int i = 0; i < L && rec.has_lens(c); ++i) rows.push_back(6 * C + L * c + i);
+  }
+  Eigen::MatrixXd B = Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(rows.size()), static_cast<Eigen::Index>(rows.size()));
   for (int k = 0; k < n; ++k) {
     const Eigen::Matrix3d R = ba::RotationFromAngleAxis(poses.row(k).head<3>().transpose());
-    B.block<3, 3>(6 * k, 6 * k).setIdentity();
     B.block<3, 3>(6 * k + 3, 6 * k) = -frame.scale * ba::Skew(R * frame.origin);
     B.block<3, 3>(6 * k + 3, 6 * k + 3) = frame.scale * Eigen::Matrix3d::Identity();
-    for (int i = 0; i < 6; ++i) rows(6 * k + i) = 6 * registered[k] + i;
   }
   const Eigen::MatrixXd sub = joint(rows, rows);
-  if (!sub.allFinite()) return out;
+  if (!sub.allFinite()) return PoseUncertainty();
   out.covariance = B * sub * B.transpose();
   out.covariance = 0.5 * (out.covariance + out.covariance.transpose());
+  if (out.num_lenses() == 0) out.lens_block.clear();
   for (int k = 0; k < n; ++k) {
     out.cameras.push_back(std::to_string(registered[k]));
     out.noise_px.push_back(rec.covariance_noise_px()[registered[k]]);

@@ -1,5 +1,7 @@
 #include "calibproj/selfcal/lens.h"
 
+#include <Eigen/LU>
+
 #include "calibproj/ba/camera.h"
 
 namespace calibproj::selfcal {
@@ -42,6 +44,32 @@ bool ProjectThroughLens(const double* lens, const LensShape& shape, const Eigen:
     d_pixel_d_lens->rightCols<5>() = J_pinhole * J_coefficients;
   }
   return true;
+}
+
+}  // namespace calibproj::selfcal
+
+namespace calibproj::selfcal {
+
+void LensOf(const Eigen::Matrix3d& K, const double* distortion, int num_distortion, double* lens, LensShape* shape) {
+  lens[kFocal] = K(0, 0);
+  lens[kCx] = K(0, 2);
+  lens[kCy] = K(1, 2);
+  const int opencv_order[5] = {kK1, kK2, kP1, kP2, kK3};
+  for (int i = 0; i < 5; ++i) lens[opencv_order[i]] = i < num_distortion ? distortion[i] : 0.0;
+  shape->aspect = K(1, 1) / K(0, 0);
+  shape->skew_ratio = K(0, 1) / K(0, 0);
+}
+
+LensJacobian ResidualByLens(const double* lens, const LensShape& shape, const Eigen::Vector2d& normalised) {
+  Eigen::Vector2d pixel;
+  Eigen::Matrix<double, 2, 3> by_point;
+  LensJacobian by_lens;
+  ProjectThroughLens(lens, shape, Eigen::Vector3d(normalised.x(), normalised.y(), 1.0), &pixel, &by_point, &by_lens);
+  Eigen::Matrix2d pinhole;
+  pinhole << lens[kFocal], shape.skew_ratio * lens[kFocal], 0.0, shape.aspect * lens[kFocal];
+  // At z = 1 the derivative by the point's x and y is the one by the normalised coordinates.
+  const Eigen::Matrix2d by_normalised = by_point.leftCols<2>();
+  return pinhole * by_normalised.inverse() * by_lens;
 }
 
 }  // namespace calibproj::selfcal

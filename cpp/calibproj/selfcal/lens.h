@@ -31,3 +31,21 @@ bool ProjectThroughLens(const double* lens, const LensShape& shape, const Eigen:
                         LensJacobian* d_pixel_d_lens);
 
 }  // namespace calibproj::selfcal
+
+namespace calibproj::selfcal {
+
+// The lens block and shape of pinhole intrinsics K (fx, fy, skew, cx, cy) and OpenCV
+// distortion [k1, k2, p1, p2, k3] (missing entries 0; more must be 0, as the
+// self-calibration refines only these five).
+void LensOf(const Eigen::Matrix3d& K, const double* distortion, int num_distortion, double* lens, LensShape* shape);
+
+// How an error of the lens moves a centre's undistorted pixel residual (projected minus
+// observed, in the pinhole pixels of K that the bundle adjustment works in): for a
+// centre whose undistorted normalised coordinates are `normalised`, d residual / d lens
+// = K (dL/dm)^-1 dL/dlens, with L the lens's map from normalised coordinates m to raw
+// pixels. A lens error moves the raw pixel's undistortion, not the raw pixel: to first
+// order this is the whole of it (the pinhole projection's own change is that of the
+// residual over f).
+LensJacobian ResidualByLens(const double* lens, const LensShape& shape, const Eigen::Vector2d& normalised);
+
+}  // namespace calibproj::selfcal

@@ -43,7 +43,11 @@ UncertaintyModel::UncertaintyModel(const formats::Calibration& calibration,
     if (lens == intrinsics.end()) throw std::invalid_argument("camera " + name + ": no intrinsics");
     Camera camera;
     camera.name = name;
-    camera.block = static_cast<int>(k);
+    camera.parameters = poses.ParametersOf(static_cast<int>(k));
+    camera.own_covariance = covariance_(camera.parameters, camera.parameters);
+    camera.refined_lens = camera.parameters.size() > 6;
+    const std::vector<double>& dist = lens->second.dist;
+    selfcal::LensOf(lens->second.K, dist.data(), static_cast<int>(dist.size()), camera.lens_block, &camera.shape);
     camera.K = lens->second.K;
     camera.R = pose->R;
     camera.t = pose->t;
@@ -77,7 +81,7 @@ bool UncertaintyModel::Sees(int index, const Eigen::Vector3d& X) const {
 }
 
 void UncertaintyModel::Jacobians(const Camera& camera, const Eigen::Vector3d& X, Eigen::Matrix<double, 2, 3>* by_point,
-                                 Eigen::Matrix<double, 2, 6>* by_pose) const {
+                                 Eigen::Matrix<double, 2, Eigen::Dynamic>* by_parameters) const {
   const Eigen::Vector3d x = camera.R * X + camera.t;
   // Pinhole pixel u = K [x/z, y/z, 1]: du/dx through the normalised coordinates.
   Eigen::Matrix<double, 2, 3> projection;
@@ -85,25 +89,30 @@ void UncertaintyModel::Jacobians(const Camera& camera, const Eigen::Vector3d& X,
   const Eigen::Matrix<double, 2, 3> by_camera_point = camera.K.topLeftCorner<2, 2>() * projection;
   *by_point = by_camera_point * camera.R;
   // R = Exp(dtheta) R_hat moves x by dtheta x (R_hat X); t by dt.
-  by_pose->leftCols<3>() = -by_camera_point * ba::Skew(camera.R * X);
-  by_pose->rightCols<3>() = by_camera_point;
+  by_parameters->resize(2, static_cast<Eigen::Index>(camera.parameters.size()));
+  by_parameters->leftCols<3>() = -by_camera_point * ba::Skew(camera.R * X);
+  by_parameters->middleCols<3>(3) = by_camera_point;
+  if (camera.refined_lens) {
+    by_parameters->rightCols<8>() =
+        selfcal::ResidualByLens(camera.lens_block, camera.shape, Eigen::Vector2d(x.x() / x.z(), x.y() / x.z()));
+  }
 }
 
 PointUncertainty UncertaintyModel::Triangulation(const Eigen::Vector3d& X, double noise_px) const {
   PointUncertainty out;
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero(), pixel_part = Eigen::Matrix3d::Zero();
-  std::vector<Eigen::Matrix<double, 3, 6>> G;
+  std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> G;
   for (int c = 0; c < num_cameras(); ++c) {
     if (!Sees(c, X)) continue;
     Eigen::Matrix<double, 2, 3> J;
-    Eigen::Matrix<double, 2, 6> P;
+    Eigen::Matrix<double, 2, Eigen::Dynamic> P;
     Jacobians(cameras_[c], X, &J, &P);
     const double sigma = noise_px > 0.0 ? noise_px : cameras_[c].noise_px;
-    const int block = cameras_[c].block;
     // Each camera weighed by how well it places the point: its pixels' noise and its
-    // own pose's uncertainty there (a camera whose pose is poorly known counts less).
-    const Eigen::Matrix2d own = sigma * sigma * Eigen::Matrix2d::Identity() +
-                                P * covariance_.block<6, 6>(6 * block, 6 * block) * P.transpose();
+    // own pose's (and lens's) uncertainty there (a camera whose pose is poorly known
+    // counts less).
+    const Eigen::Matrix2d own =
+        sigma * sigma * Eigen::Matrix2d::Identity() + P * cameras_[c].own_covariance * P.transpose();
     const Eigen::Matrix2d W = own.inverse();
     H += J.transpose() * W * J;
     pixel_part += sigma * sigma * J.transpose() * W * W * J;
@@ -116,10 +125,9 @@ PointUncertainty UncertaintyModel::Triangulation(const Eigen::Vector3d& X, doubl
   const Eigen::Matrix3d H_inverse = lu.inverse();
   Eigen::Matrix3d pose_part = Eigen::Matrix3d::Zero();
   for (size_t a = 0; a < out.cameras.size(); ++a) {
-    const int block_a = cameras_[out.cameras[a]].block;
+    const std::vector<int>& rows = cameras_[out.cameras[a]].parameters;
     for (size_t b = 0; b < out.cameras.size(); ++b) {
-      const int block_b = cameras_[out.cameras[b]].block;
-      pose_part += G[a] * covariance_.block<6, 6>(6 * block_a, 6 * block_b) * G[b].transpose();
+      pose_part += G[a] * covariance_(rows, cameras_[out.cameras[b]].parameters) * G[b].transpose();
     }
   }
   out.from_poses = H_inverse * pose_part * H_inverse.transpose();
@@ -131,10 +139,9 @@ PointUncertainty UncertaintyModel::Triangulation(const Eigen::Vector3d& X, doubl
 
 Eigen::Matrix2d UncertaintyModel::Projection(int camera, const Eigen::Vector3d& X) const {
   Eigen::Matrix<double, 2, 3> J;
-  Eigen::Matrix<double, 2, 6> P;
+  Eigen::Matrix<double, 2, Eigen::Dynamic> P;
   Jacobians(cameras_[camera], X, &J, &P);
-  const int block = cameras_[camera].block;
-  return P * covariance_.block<6, 6>(6 * block, 6 * block) * P.transpose();
+  return P * cameras_[camera].own_covariance * P.transpose();
 }
 
 }  // namespace calibproj::uncertainty

@@ -15,6 +15,11 @@
 // terms between cameras enter (two cameras whose poses err together err less relative
 // to each other). The gauge is the calibration's: the reference camera's pose and its
 // distance to the floor held.
+//
+// A camera whose intrinsics were refined (--refine-intrinsics) has its lens in the joint
+// covariance too (registration::PoseUncertainty): P_c then also holds the pixel's
+// derivative by the lens (selfcal::ResidualByLens), and its cross terms with the poses
+// enter as the poses' do.
 
 #include <Eigen/Core>
 #include <map>
@@ -24,13 +29,14 @@
 #include "calibproj/formats/calibration.h"
 #include "calibproj/detect/lens.h"
 #include "calibproj/formats/intrinsics_file.h"
+#include "calibproj/selfcal/lens.h"
 
 namespace calibproj::uncertainty {
 
 struct PointUncertainty {
   bool determined = false;          // seen by two cameras at least, not along one line
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // calibration unit squared
-  Eigen::Matrix3d from_poses = Eigen::Matrix3d::Zero();  // the poses' share of it
+  Eigen::Matrix3d from_poses = Eigen::Matrix3d::Zero();  // the calibration's share of it (poses, lenses)
   std::vector<int> cameras;         // indices into the model's cameras
 
   // 1 sigma along the worst direction.
@@ -55,13 +61,18 @@ class UncertaintyModel {
   // Triangulation from the cameras that see X; `noise_px` > 0 replaces every camera's
   // noise for the new pixels (the user's detector), else each camera's own.
   PointUncertainty Triangulation(const Eigen::Vector3d& X, double noise_px = 0.0) const;
-  // Covariance (px^2) of X's pixel in the camera from its pose's uncertainty alone.
+  // Covariance (px^2) of X's pixel in the camera from the calibration's uncertainty
+  // alone: its pose's, and its lens's where refined.
   Eigen::Matrix2d Projection(int camera, const Eigen::Vector3d& X) const;
 
  private:
   struct Camera {
     std::string name;
-    int block = 0;  // in the pose covariance
+    std::vector<int> parameters;  // its rows of the joint covariance: pose, then lens
+    Eigen::MatrixXd own_covariance;  // of its parameters
+    bool refined_lens = false;
+    double lens_block[8] = {};  // [f, cx, cy, k1, k2, p1, p2, k3] when refined
+    selfcal::LensShape shape;
     Eigen::Matrix3d K;
     Eigen::Matrix3d R;
     Eigen::Vector3d t;
@@ -69,9 +80,10 @@ class UncertaintyModel {
     double width = 0.0, height = 0.0;
     double noise_px = 1.0;
   };
-  // Pixel of X and its derivatives by X and by the pose's [dtheta, dt].
+  // Pixel of X and its derivatives by X and by the camera's parameters (its pose's
+  // [dtheta, dt], then its lens's entries when refined).
   void Jacobians(const Camera& camera, const Eigen::Vector3d& X, Eigen::Matrix<double, 2, 3>* by_point,
-                 Eigen::Matrix<double, 2, 6>* by_pose) const;
+                 Eigen::Matrix<double, 2, Eigen::Dynamic>* by_parameters) const;
 
   std::vector<Camera> cameras_;
   Eigen::MatrixXd covariance_;  // joint, in the order of the calibration's uncertainty

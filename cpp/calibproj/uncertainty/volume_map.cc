@@ -120,6 +120,19 @@ ordered_json MapJson(const VolumeMap& map) {
   return out;
 }
 
+// How the figures take the intrinsics: the refined lenses with their uncertainty (and
+// its cross terms with the poses), the others as exact.
+std::string IntrinsicsNote(const registration::PoseUncertainty& poses) {
+  std::string refined;
+  for (size_t k = 0; k < poses.lens_block.size(); ++k) {
+    if (poses.lens_block[k] >= 0) refined += (refined.empty() ? "" : ", ") + poses.cameras[k];
+  }
+  if (refined.empty()) return "taken as exact: their own uncertainty (refined or from a board) is not in these figures";
+  const bool all = std::count(poses.lens_block.begin(), poses.lens_block.end(), -1) == 0;
+  return "refined lenses (" + refined + ") with their uncertainty from the self-calibration, cross terms with the "
+         "poses included" + (all ? std::string() : "; the other cameras' taken as exact");
+}
+
 ordered_json CovarianceJson(const registration::PoseUncertainty& poses) {
   ordered_json matrix = ordered_json::array();
   for (Eigen::Index i = 0; i < poses.covariance.rows(); ++i) {
@@ -129,7 +142,16 @@ ordered_json CovarianceJson(const registration::PoseUncertainty& poses) {
   }
   ordered_json noise = ordered_json::array();
   for (double value : poses.noise_px) noise.push_back(value);
-  return {{"cameras", poses.cameras}, {"noise_px", noise}, {"matrix", matrix}};
+  ordered_json out = {{"cameras", poses.cameras}, {"noise_px", noise}};
+  if (!poses.lens_block.empty()) {
+    // The refined lenses' rows follow the poses', in this order per lens block.
+    ordered_json blocks = ordered_json::array();
+    for (int block : poses.lens_block) blocks.push_back(block >= 0 ? ordered_json(block) : ordered_json(nullptr));
+    out["lens_block"] = blocks;
+    out["lens_entries"] = {"f", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
+  }
+  out["matrix"] = matrix;
+  return out;
 }
 
 }  // namespace
@@ -178,7 +200,7 @@ std::string UncertaintyJson(const formats::Calibration& calibration, const Uncer
                                                            : "its distance to the floor";
   body["gauge"] = {{"reference_camera", model.reference()},
                    {"held", "the reference camera's pose and " + distance + ": every figure is relative to them"}};
-  body["intrinsics"] = "taken as exact: their own uncertainty (refined or from a board) is not in these figures";
+  body["intrinsics"] = IntrinsicsNote(calibration.uncertainty);
   body["centre"] = PointJson(map.centre, map.at_centre, model);
   body["volume"] = {{"cells", map.cells.size()},
                     {"cells_seen_by_2", sigmas.size()},
@@ -211,6 +233,11 @@ registration::PoseUncertainty ReadPoseUncertainty(const std::filesystem::path& d
     out.cameras = covariance.at("cameras").get<std::vector<std::string>>();
     out.noise_px = covariance.at("noise_px").get<std::vector<double>>();
     out.reference = document.at("gauge").at("reference_camera").get<std::string>();
+    if (covariance.contains("lens_block")) {
+      for (const nlohmann::json& block : covariance.at("lens_block")) {
+        out.lens_block.push_back(block.is_null() ? -1 : block.get<int>());
+      }
+    }
     const auto rows = covariance.at("matrix").get<std::vector<std::vector<double>>>();
     out.covariance.resize(static_cast<Eigen::Index>(rows.size()), static_cast<Eigen::Index>(rows.size()));
     for (size_t i = 0; i < rows.size(); ++i) {
