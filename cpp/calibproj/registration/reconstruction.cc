@@ -1104,13 +1104,12 @@ void Reconstruction::StoreLensCovariances(const ba::Result& solved, const ba::Da
     const double shared = 1.0 + std::max(0, observations[k] - 1) * options_.error_correlation;
     lens_covariance_.block(L * c, L * c, L, L) = shared * lenses_[c]->covariance;
   }
-  // Cameras out of the solve keep their NaN rows; the others gain the lenses' share.
+  // Cameras out of the solve keep their NaN rows; the others gain the lenses' share. The
+  // per-camera blocks (pose_covariances(): the sigmas and the weak flag) stay those of
+  // the poses given the lenses, what the projection's centres fix.
   pose_lens_covariance_ = A * lens_covariance_;
   const Eigen::MatrixXd from_lenses = pose_lens_covariance_ * A.transpose();
   pose_covariance_ += 0.5 * (from_lenses + from_lenses.transpose());
-  for (int c = 0; c < C; ++c) {
-    if (!pose_covariances_.empty()) pose_covariances_[c] = pose_covariance_.block<6, 6>(6 * c, 6 * c);
-  }
 }
 
 int Reconstruction::FindPlanes() {

@@ -237,7 +237,9 @@ class Reconstruction {
   // per camera the noise (px, 1 sigma per coordinate) this covariance stands for: its
   // weight's share of the residuals' variance. Empty when not computed.
   const Eigen::MatrixXd& pose_covariance() const { return pose_covariance_; }
-  // With lenses (SetLensUncertainty): pose_covariance() includes their share, and these
+  // With lenses (SetLensUncertainty): pose_covariance() includes their share (the
+  // per-camera pose_covariances() do not: they tell how well the centres fix each pose
+  // given the lenses, which the sigmas and the weak flag report), and these
   // give the poses' covariance with the lenses (6C x 8C, camera c's lens in columns 8c
   // to 8c + 7) and the lenses' own (8C x 8C; zero for a camera without one). Empty
   // when not computed or without lenses.
