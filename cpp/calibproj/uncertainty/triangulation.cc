@@ -33,7 +33,6 @@ UncertaintyModel::UncertaintyModel(const formats::Calibration& calibration,
     throw std::invalid_argument("the calibration has no pose covariance (its final bundle adjustment gave none)");
   }
   poses.Check();
-  covariance_ = poses.covariance;
   reference_ = poses.reference;
   for (size_t k = 0; k < poses.cameras.size(); ++k) {
     const std::string& name = poses.cameras[k];
@@ -44,7 +43,6 @@ UncertaintyModel::UncertaintyModel(const formats::Calibration& calibration,
     Camera camera;
     camera.name = name;
     camera.parameters = poses.ParametersOf(static_cast<int>(k));
-    camera.own_covariance = covariance_(camera.parameters, camera.parameters);
     camera.refined_lens = camera.parameters.size() > 6;
     const std::vector<double>& dist = lens->second.dist;
     selfcal::LensOf(lens->second.K, dist.data(), static_cast<int>(dist.size()), camera.lens_block, &camera.shape);
@@ -58,6 +56,9 @@ UncertaintyModel::UncertaintyModel(const formats::Calibration& calibration,
     camera.height = lens->second.ImageHeight();
     camera.noise_px = poses.noise_px[k];
     cameras_.push_back(std::move(camera));
+  }
+  for (const Camera& a : cameras_) {
+    for (const Camera& b : cameras_) cross_.push_back(poses.covariance(a.parameters, b.parameters));
   }
 }
 
@@ -112,7 +113,7 @@ PointUncertainty UncertaintyModel::Triangulation(const Eigen::Vector3d& X, doubl
     // own pose's (and lens's) uncertainty there (a camera whose pose is poorly known
     // counts less).
     const Eigen::Matrix2d own =
-        sigma * sigma * Eigen::Matrix2d::Identity() + P * cameras_[c].own_covariance * P.transpose();
+        sigma * sigma * Eigen::Matrix2d::Identity() + P * Cross(c, c) * P.transpose();
     const Eigen::Matrix2d W = own.inverse();
     H += J.transpose() * W * J;
     pixel_part += sigma * sigma * J.transpose() * W * W * J;
@@ -125,9 +126,8 @@ PointUncertainty UncertaintyModel::Triangulation(const Eigen::Vector3d& X, doubl
   const Eigen::Matrix3d H_inverse = lu.inverse();
   Eigen::Matrix3d pose_part = Eigen::Matrix3d::Zero();
   for (size_t a = 0; a < out.cameras.size(); ++a) {
-    const std::vector<int>& rows = cameras_[out.cameras[a]].parameters;
     for (size_t b = 0; b < out.cameras.size(); ++b) {
-      pose_part += G[a] * covariance_(rows, cameras_[out.cameras[b]].parameters) * G[b].transpose();
+      pose_part += G[a] * Cross(out.cameras[a], out.cameras[b]) * G[b].transpose();
     }
   }
   out.from_poses = H_inverse * pose_part * H_inverse.transpose();
@@ -141,7 +141,7 @@ Eigen::Matrix2d UncertaintyModel::Projection(int camera, const Eigen::Vector3d& 
   Eigen::Matrix<double, 2, 3> J;
   Eigen::Matrix<double, 2, Eigen::Dynamic> P;
   Jacobians(cameras_[camera], X, &J, &P);
-  return P * cameras_[camera].own_covariance * P.transpose();
+  return P * Cross(camera, camera) * P.transpose();
 }
 
 }  // namespace calibproj::uncertainty

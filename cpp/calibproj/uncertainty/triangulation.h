@@ -69,7 +69,6 @@ class UncertaintyModel {
   struct Camera {
     std::string name;
     std::vector<int> parameters;  // its rows of the joint covariance: pose, then lens
-    Eigen::MatrixXd own_covariance;  // of its parameters
     bool refined_lens = false;
     double lens_block[8] = {};  // [f, cx, cy, k1, k2, p1, p2, k3] when refined
     selfcal::LensShape shape;
@@ -85,8 +84,12 @@ class UncertaintyModel {
   void Jacobians(const Camera& camera, const Eigen::Vector3d& X, Eigen::Matrix<double, 2, 3>* by_point,
                  Eigen::Matrix<double, 2, Eigen::Dynamic>* by_parameters) const;
 
+  // The covariance of camera a's parameters with camera b's, at [a * num_cameras() + b]:
+  // taken out of the joint covariance once, not at every point.
+  const Eigen::MatrixXd& Cross(int a, int b) const { return cross_[a * cameras_.size() + b]; }
+
   std::vector<Camera> cameras_;
-  Eigen::MatrixXd covariance_;  // joint, in the order of the calibration's uncertainty
+  std::vector<Eigen::MatrixXd> cross_;
   std::string reference_;
 };
 
