@@ -13,8 +13,9 @@ of a submodule (the projection sequence lives in ``calibproj.sequence``, the pos
 comparison in ``calibproj.comparison``, the evaluation in ``calibproj.evaluation``).
 """
 
-from __future__ import annotations
-
+# No "from __future__ import ..." and no call at the top level: importing __future__
+# runs the import machinery in this module's frame, and a Ctrl-C at the very start
+# (before the command line's handler exists) would be reported from here.
 import importlib
 
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing at start
@@ -53,7 +54,7 @@ _EXPORTS = {
     "triangulation_uncertainty": "calibproj.uncertainty",
 }
 
-__all__ = list(_EXPORTS)
+__all__ = [*_EXPORTS]
 
 
 def __getattr__(name: str) -> object:
