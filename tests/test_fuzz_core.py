@@ -466,6 +466,9 @@ class Baselines:
             "_core.registration.Reconstruction.set_lens_uncertainty": Spec(
                 [("camera", 1), ("K", s["K"][1]), ("distortion", [0.01, 0.0, 0.0, 0.0, 0.0]),
                  ("covariance", np.diag([0.25, 0.0, 0.0, 1e-6, 0.0, 0.0, 0.0, 0.0]))]),
+            # A fresh reconstruction has no lens: the valid call names none.
+            "_core.registration.Reconstruction.set_lens_cross_covariances": Spec(
+                [("cameras", []), ("joint", np.zeros((0, 0)))]),
             "_core.registration.Reconstruction.projector_prediction": Spec([("point", 0)]),
             "_core.registration.Reconstruction.run": Spec([("log", lambda message: None)]),
             "_core.registration.view_score": Spec([("pixels", s["observed"][:30]), ("width", 640.0),

@@ -113,16 +113,25 @@ def test_solver_recovers_focal_and_distortion_from_a_wrong_start() -> None:
 
 def test_covariance_matches_the_scatter_of_repeated_solves() -> None:
     """The focal length's 1 sigma from the covariance agrees with the spread of the
-    estimates over independent noise draws (to the precision 25 draws allow)."""
-    estimates, sigmas = [], []
-    for seed in range(25):
+    estimates over independent noise draws, and so does how two cameras' k1 err together
+    (fitted to the same floor points: correlated by about 0.5), to the precision 100
+    draws allow."""
+    estimates, sigmas, correlations = [], [], []
+    for seed in range(100):
         camera_index, point_index, observed, poses, points = synthetic_floor(seed, noise_px=0.5)
         solution = selfcal.self_calibrate(camera_index, point_index, observed, np.tile(LENS, (5, 1)),
                                           np.tile(SHAPE, (5, 1)), [[0, 3]] * 5, poses, points)
-        estimates.append(solution["lenses"][0, 0])
-        sigmas.append(np.sqrt(solution["lens_covariances"][0, 0, 0]))
-    ratio = np.std(estimates) / np.mean(sigmas)
+        estimates.append(solution["lenses"][:2, [0, 3]].ravel())
+        joint = solution["lens_covariance"]
+        np.testing.assert_array_equal(joint[8:16, 8:16], solution["lens_covariances"][1])
+        sigmas.append(np.sqrt(joint[0, 0]))
+        correlations.append(joint[3, 11] / np.sqrt(joint[3, 3] * joint[11, 11]))
+    estimates = np.array(estimates)
+    ratio = np.std(estimates[:, 0]) / np.mean(sigmas)
     assert 0.6 < ratio < 1.5
+    scatter = np.corrcoef(estimates[:, 1], estimates[:, 3])[0, 1]
+    assert np.mean(correlations) > 0.3
+    assert abs(scatter - np.mean(correlations)) < 0.2
 
 
 def test_bad_input_is_a_clear_error() -> None:

@@ -339,6 +339,11 @@ def test_refined_lenses_and_their_cross_terms_enter_the_expected_error(refined_r
     focal = 6 * C + 8 * block
     assert 0.0 < matrix[focal, focal] < (0.01 * 640) ** 2
     assert np.abs(matrix[6 * index:6 * index + 6, focal]).max() > 0.0
+    # Lenses fitted to the same floor points err together, and the whole stays a covariance.
+    other = next(name for name in refined_cameras if name != camera)
+    other_focal = 6 * C + 8 * blocks[other]
+    assert matrix[focal, other_focal] == matrix[other_focal, focal] != 0.0
+    assert np.linalg.eigvalsh(matrix).min() >= -1e-9 * np.abs(matrix).max()
     # A pose known less well with its lens refined than with the lens taken as exact.
     exact_matrix = np.array(json.loads((exact / "uncertainty.json").read_text())["pose_covariance"]["matrix"])
     worse = [np.trace(matrix[6 * k + 3:6 * k + 6, 6 * k + 3:6 * k + 6]) >
@@ -350,3 +355,26 @@ def test_refined_lenses_and_their_cross_terms_enter_the_expected_error(refined_r
     centre = document["centre"]
     answer = triangulation_uncertainty(refined, centre["point"])
     assert answer.sigma[0] == pytest.approx(centre["sigma"], rel=1e-5)
+
+
+def test_lens_cross_covariances_must_agree_with_the_lenses() -> None:
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    reconstruction = _core.registration.Reconstruction(np.stack([K, K, K]), np.array([[640, 480]] * 3), 1,
+                                                       np.array([0, 1, 2]), np.array([0, 0, 0]),
+                                                       np.array([[1.0, 2], [3, 4], [5, 6]]))
+    first, third = np.diag([0.25, 0, 0, 1e-6, 0, 0, 0, 0]), np.diag([0.16, 0, 0, 4e-6, 0, 0, 0, 0])
+    reconstruction.set_lens_uncertainty(0, K, [0.0] * 5, first)
+    reconstruction.set_lens_uncertainty(2, K, [0.0] * 5, third)
+    joint = np.zeros((16, 16))
+    joint[:8, :8], joint[8:, 8:] = first, third
+    joint[0, 8] = joint[8, 0] = 0.1  # focal lengths correlated by 0.5
+    reconstruction.set_lens_cross_covariances([0, 2], joint)
+    impossible = joint.copy()
+    impossible[0, 8] = impossible[8, 0] = 0.3  # a correlation of 1.5
+    for cameras, matrix, problem in [([0, 1], joint, "camera 1 has no lens"),
+                                     ([0, 2], 2 * joint, "camera 0's block differs from its lens's covariance"),
+                                     ([0, 0], joint, "camera 0 out of range or repeated"),
+                                     ([0], joint, "expected a 8 x 8 matrix for 1 cameras"),
+                                     ([0, 2], impossible, "not a finite symmetric positive semi-definite matrix")]:
+        with pytest.raises(ValueError, match=problem):
+            reconstruction.set_lens_cross_covariances(cameras, matrix)

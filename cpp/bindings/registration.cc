@@ -299,6 +299,10 @@ of calibproj.registration.RegistrationOptions.)doc")
            "The refined intrinsics (K, OpenCV distortion) the camera's observations were undistorted with, and\n"
            "the covariance (8, 8) of its lens [f, cx, cy, k1, k2, p1, p2, k3]: the poses' covariance then takes\n"
            "it in.")
+      .def("set_lens_cross_covariances", &Reconstruction::SetLensCrossCovariances, py::arg("cameras"), py::arg("joint"),
+           "How the lenses of these cameras (each given by set_lens_uncertainty first) err together: their joint\n"
+           "covariance (8n, 8n), the k-th camera in rows and columns 8k to 8k + 7, whose diagonal blocks are the\n"
+           "lenses' own.")
       .def("projector_prediction", [](const Reconstruction& r, int point) -> py::object {
              Eigen::Vector3d X;
              if (!r.ProjectorPrediction(point, &X)) return py::none();

@@ -65,15 +65,17 @@ py::dict SelfCalibratePy(const Eigen::VectorXi& camera_index, const Eigen::Vecto
   out["points"] = result.points;
   out["residuals"] = result.residuals;
   out["noise_px"] = result.noise_px;
-  const auto cameras = static_cast<py::ssize_t>(result.lens_covariances.size());
+  const auto cameras = static_cast<py::ssize_t>(result.lens_covariance.rows() / selfcal::kLensSize);
   py::array_t<double> covariances({cameras, py::ssize_t{selfcal::kLensSize}, py::ssize_t{selfcal::kLensSize}});
   auto cov = covariances.mutable_unchecked<3>();
   for (py::ssize_t c = 0; c < cameras; ++c) {
+    const selfcal::LensCovariance block = result.LensCovarianceOf(static_cast<int>(c), static_cast<int>(c));
     for (int i = 0; i < selfcal::kLensSize; ++i) {
-      for (int j = 0; j < selfcal::kLensSize; ++j) cov(c, i, j) = result.lens_covariances[c](i, j);
+      for (int j = 0; j < selfcal::kLensSize; ++j) cov(c, i, j) = block(i, j);
     }
   }
   out["lens_covariances"] = covariances;
+  out["lens_covariance"] = result.lens_covariance;
   return out;
 }
 
@@ -92,8 +94,10 @@ lenses (C, 8) [f, cx, cy, k1, k2, p1, p2, k3]; shapes (C, 2) [fy/fx, skew/fx];
 refine: per camera the lens entries (indices into the 8) that move; poses (C, 6)
 cam_from_floor [angle-axis, t]; points (P, 2) on the floor z = 0. Two points fix the
 floor's gauge. Returns a dict with the refined lenses, poses, points, residuals (N, 2),
-noise_px (C,) and, if compute_covariance, lens_covariances (C, 8, 8) in each camera's
-measured noise. Bad input raises ValueError naming the problem. Releases the GIL.)doc");
+noise_px (C,) and, if compute_covariance, the lenses' joint covariance lens_covariance
+(8C, 8C; camera c in rows and columns 8c to 8c + 7) and its diagonal blocks
+lens_covariances (C, 8, 8), in each camera's measured noise. Bad input raises
+ValueError naming the problem. Releases the GIL.)doc");
   m.def(
       "residual_by_lens",
       [](const Eigen::Matrix3d& K, const std::vector<double>& distortion, const Eigen::Vector2d& normalised) {

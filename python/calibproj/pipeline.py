@@ -244,7 +244,7 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
         tracks = convert_tracks(tracks, intrinsics, result.intrinsics)
         intrinsics = result.intrinsics
         calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector,
-                               lens_covariances=result.lens_covariances)
+                               lens_covariance=result.lens_covariance)
     for name, report in result.reports.items():
         # Its pose rests on a focal length nobody checked: it must not steer comparisons.
         if "focal" in report.held and name in calibration.poses and not calibration.metrics[name].weak:

@@ -30,6 +30,7 @@ from calibproj.tracks import Tracks
 
 if TYPE_CHECKING:
     from calibproj.scale import ProjectedMarkers
+    from calibproj.self_calibration import LensCovariance
 
 logger = logging.getLogger(__name__)
 
@@ -83,7 +84,7 @@ class RegistrationDriver:
         options: RegistrationOptions | None = None,
         left_out: Mapping[str, str] | None = None,
         projector: ProjectedMarkers | None = None,
-        lens_covariances: Mapping[str, np.ndarray] | None = None,
+        lens_covariance: LensCovariance | None = None,
     ) -> None:
         self.options = options or RegistrationOptions()
         # Cameras that failed before registration (e.g. their video), with the reason.
@@ -110,12 +111,19 @@ class RegistrationDriver:
         if projector is not None:
             ids = np.asarray(self.tracks.point_ids, dtype=np.int64)
             self.reconstruction.set_projector(projector.pixels(ids), *projector.projector, projector.largest_sides(ids))
-        for name, covariance in (lens_covariances or {}).items():
-            if name in self.intrinsics:  # the poses' covariance takes the refined lens's in
-                lens = self.intrinsics[name]
-                self.reconstruction.set_lens_uncertainty(self.tracks.camera_names.index(name), lens.K,
-                                                         np.asarray(lens.dist, dtype=float).ravel(), covariance)
+        if lens_covariance is not None:
+            self._set_lenses(lens_covariance)
 
+    def _set_lenses(self, lens_covariance: LensCovariance) -> None:
+        """The refined lenses and how they err: the poses' covariance takes them in."""
+        cameras = [name for name in lens_covariance.cameras if name in self.intrinsics]
+        for name in cameras:
+            lens = self.intrinsics[name]
+            self.reconstruction.set_lens_uncertainty(self.tracks.camera_names.index(name), lens.K,
+                                                     np.asarray(lens.dist, dtype=float).ravel(),
+                                                     lens_covariance.of(name))
+        self.reconstruction.set_lens_cross_covariances([self.tracks.camera_names.index(name) for name in cameras],
+                                                       lens_covariance.among(cameras))
 
     def name(self, camera: int) -> str:
         return self.tracks.camera_names[camera]
@@ -202,14 +210,14 @@ def calibrate(
     callback: Callable[[Step], bool | None] | None = None,
     left_out: Mapping[str, str] | None = None,
     projector: ProjectedMarkers | None = None,
-    lens_covariances: Mapping[str, np.ndarray] | None = None,
+    lens_covariance: LensCovariance | None = None,
 ) -> Calibration:
     """Register every camera of ``tracks`` and return the ``Calibration`` (floor frame).
 
     ``left_out`` names cameras that failed before registration, with the reason.
     ``projector``: where the projector drew every MSM (from the sequence); with it the
     coplanar model ties each centre to the floor through the projector's maps.
-    ``lens_covariances``: per camera whose intrinsics were refined (self-calibration),
-    the covariance of its lens; the poses' covariance then takes it in.
+    ``lens_covariance``: how the lenses refined by the self-calibration err (their joint
+    covariance); the poses' covariance then takes it in.
     """
-    return RegistrationDriver(tracks, intrinsics, options, left_out, projector, lens_covariances).run(callback)
+    return RegistrationDriver(tracks, intrinsics, options, left_out, projector, lens_covariance).run(callback)

@@ -40,6 +40,7 @@ logger = logging.getLogger(__name__)
 
 # Entries of a lens block, in the order of calibproj._core.selfcal.
 LENS_ENTRIES = ("focal", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+LENS_SIZE = len(LENS_ENTRIES)
 # Names a user gives, the lens entries each stands for and the group it belongs to.
 REFINABLE = {
     "focal": ((0,), "focal"),
@@ -188,16 +189,35 @@ class LensReport:
         return asdict(self)
 
 
+@dataclass(frozen=True)
+class LensCovariance:
+    """How the refined lenses of ``cameras`` err, together: their joint covariance
+    ``matrix`` (8n, 8n) over ``LENS_ENTRIES``, the k-th camera in rows and columns 8k to
+    8k + 7, zero outside the refined entries, in pixels of each camera's measured noise.
+    Lenses fitted to the same floor points err together: the off-diagonal blocks say how."""
+
+    cameras: tuple[str, ...] = ()
+    matrix: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    def of(self, name: str) -> np.ndarray:
+        """The covariance (8, 8) of camera ``name``'s lens."""
+        return self.among([name])
+
+    def among(self, names: Sequence[str]) -> np.ndarray:
+        """The joint covariance (8n, 8n) of these cameras' lenses, in their order."""
+        rows = np.array([LENS_SIZE * self.cameras.index(name) + i for name in names for i in range(LENS_SIZE)], dtype=int)
+        return self.matrix[np.ix_(rows, rows)]
+
+
 @dataclass
 class SelfCalibration:
-    """Refined intrinsics (every camera of the input; unchanged where nothing was refined)
-    and one report per camera that was asked for; per camera whose lens was refined, the
-    covariance (8, 8) of its lens ``LENS_ENTRIES`` (zero outside the refined entries, in
-    pixels of its measured noise), which the registration takes into the poses'."""
+    """Refined intrinsics (every camera of the input; unchanged where nothing was refined),
+    one report per camera that was asked for, and the joint covariance of the lenses it
+    refined, which the registration takes into the poses'."""
 
     intrinsics: dict[str, Intrinsics]
     reports: dict[str, LensReport]
-    lens_covariances: dict[str, np.ndarray] = field(default_factory=dict)
+    lens_covariance: LensCovariance = field(default_factory=LensCovariance)
 
 
 def check_request(request: RefineRequest, intrinsics: Mapping[str, Intrinsics],
@@ -251,12 +271,15 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
 
 
 def _lens_covariances(problem: _Problem, solution: dict[str, Any] | None, reports: Mapping[str, LensReport],
-                      refused: Mapping[str, str]) -> dict[str, np.ndarray]:
-    """The covariance of every lens the solution refined."""
+                      refused: Mapping[str, str]) -> LensCovariance:
+    """The joint covariance of every lens the solution refined."""
     if solution is None:
-        return {}
-    return {name: np.array(solution["lens_covariances"][c]) for c, name in enumerate(problem.cameras)
-            if problem.refine[c] and name in reports and name not in refused}
+        return LensCovariance()
+    chosen = [c for c, name in enumerate(problem.cameras)
+              if problem.refine[c] and name in reports and name not in refused]
+    every = LensCovariance(tuple(problem.cameras), np.asarray(solution["lens_covariance"]))
+    names = [problem.cameras[c] for c in chosen]
+    return LensCovariance(tuple(names), every.among(names))
 
 
 def _refined_intrinsics(problem: _Problem, solution: dict[str, Any] | None, intrinsics: Mapping[str, Intrinsics],

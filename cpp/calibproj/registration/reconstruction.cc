@@ -228,6 +228,17 @@ Reconstruction::Reconstruction(std::vector<Camera> cameras, int num_points, Eige
   lenses_.assign(cameras_.size(), std::nullopt);
 }
 
+namespace {
+
+bool SymmetricPositiveSemiDefinite(const Eigen::MatrixXd& m) {
+  if (!m.allFinite() || (m - m.transpose()).norm() > 1e-9 * std::max(1.0, m.norm())) return false;
+  if (m.size() == 0) return true;
+  const double largest = std::max(1e-300, m.diagonal().cwiseAbs().maxCoeff());
+  return Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(m).eigenvalues().minCoeff() >= -1e-9 * largest;
+}
+
+}  // namespace
+
 void Reconstruction::SetLensUncertainty(int camera, const LensUncertainty& lens) {
   Require(camera >= 0 && camera < num_cameras(), "lens: camera " + Str(camera) + " out of range");
   const ba::Intrinsics& K = cameras_[camera].K;
@@ -235,13 +246,37 @@ void Reconstruction::SetLensUncertainty(int camera, const LensUncertainty& lens)
   Require(std::abs(lens.lens[selfcal::kFocal] - K.fx) <= 1e-9 * K.fx && std::abs(lens.lens[selfcal::kCx] - K.cx) <= 1e-6 &&
               std::abs(lens.lens[selfcal::kCy] - K.cy) <= 1e-6,
           "lens: camera " + Str(camera) + "'s lens is not the one of its intrinsics");
-  Require(lens.covariance.allFinite() && (lens.covariance - lens.covariance.transpose()).norm() <=
-                                             1e-9 * std::max(1.0, lens.covariance.norm()),
-          "lens: camera " + Str(camera) + "'s covariance is not a finite symmetric matrix");
-  Require(Eigen::SelfAdjointEigenSolver<LensCovariance>(lens.covariance).eigenvalues().minCoeff() >=
-              -1e-9 * std::max(1e-300, lens.covariance.diagonal().maxCoeff()),
-          "lens: camera " + Str(camera) + "'s covariance is not positive semi-definite");
+  Require(SymmetricPositiveSemiDefinite(lens.covariance),
+          "lens: camera " + Str(camera) + "'s covariance is not a finite symmetric positive semi-definite matrix");
   lenses_[camera] = lens;
+  if (lens_cross_covariance_.size() > 0) {  // a new lens: how it errs with the others is not known
+    lens_cross_covariance_.middleRows(selfcal::kLensSize * camera, selfcal::kLensSize).setZero();
+    lens_cross_covariance_.middleCols(selfcal::kLensSize * camera, selfcal::kLensSize).setZero();
+  }
+}
+
+void Reconstruction::SetLensCrossCovariances(const std::vector<int>& cameras, const Eigen::MatrixXd& joint) {
+  constexpr int L = selfcal::kLensSize;
+  const int n = static_cast<int>(cameras.size());
+  Require(joint.rows() == L * n && joint.cols() == L * n,
+          "lens cross covariances: expected a " + Str(L * n) + " x " + Str(L * n) + " matrix for " + Str(n) + " cameras");
+  Require(SymmetricPositiveSemiDefinite(joint), "lens cross covariances: not a finite symmetric positive semi-definite matrix");
+  std::vector<bool> seen(cameras_.size(), false);
+  for (int k = 0; k < n; ++k) {
+    const int c = cameras[k];
+    Require(c >= 0 && c < num_cameras() && !seen[c], "lens cross covariances: camera " + Str(c) + " out of range or repeated");
+    seen[c] = true;
+    Require(lenses_[c].has_value(), "lens cross covariances: camera " + Str(c) + " has no lens (set_lens_uncertainty)");
+    const LensCovariance own = joint.block<L, L>(L * k, L * k);
+    Require((own - lenses_[c]->covariance).norm() <= 1e-9 * std::max(1e-300, own.norm()),
+            "lens cross covariances: camera " + Str(c) + "'s block differs from its lens's covariance");
+  }
+  if (lens_cross_covariance_.size() == 0) lens_cross_covariance_ = Eigen::MatrixXd::Zero(L * num_cameras(), L * num_cameras());
+  for (int a = 0; a < n; ++a) {
+    for (int b = 0; b < n; ++b) {
+      if (a != b) lens_cross_covariance_.block<L, L>(L * cameras[a], L * cameras[b]) = joint.block<L, L>(L * a, L * b);
+    }
+  }
 }
 
 void Reconstruction::AddLenses(const std::vector<int>& cameras, ba::Data* data) const {
@@ -1092,6 +1127,7 @@ void Reconstruction::StoreLensCovariances(const ba::Result& solved, const ba::Da
   // The adjustment's camera k, and where its pose and lens sit in the solve's sensitivity.
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(6 * C, L * C);  // d pose / d lens, every camera
   lens_covariance_ = Eigen::MatrixXd::Zero(L * C, L * C);
+  std::vector<double> shared(cameras.size(), 1.0);
   for (size_t k = 0; k < cameras.size(); ++k) {
     const int block = data.lens_block(static_cast<int>(k));
     if (block < 0) continue;
@@ -1101,8 +1137,16 @@ void Reconstruction::StoreLensCovariances(const ba::Result& solved, const ba::Da
     }
     // The lens was fitted to the same centres as the poses: their shared errors discount
     // its information as they do the poses' (ba::Options::error_correlation).
-    const double shared = 1.0 + std::max(0, observations[k] - 1) * options_.error_correlation;
-    lens_covariance_.block(L * c, L * c, L, L) = shared * lenses_[c]->covariance;
+    shared[k] = 1.0 + std::max(0, observations[k] - 1) * options_.error_correlation;
+    lens_covariance_.block(L * c, L * c, L, L) = shared[k] * lenses_[c]->covariance;
+  }
+  // Lenses fitted to the same floor points err together (SetLensCrossCovariances).
+  for (size_t k = 0; k < cameras.size() && lens_cross_covariance_.size() > 0; ++k) {
+    for (size_t j = 0; j < cameras.size(); ++j) {
+      if (j == k || data.lens_block(static_cast<int>(k)) < 0 || data.lens_block(static_cast<int>(j)) < 0) continue;
+      lens_covariance_.block(L * cameras[k], L * cameras[j], L, L) =
+          std::sqrt(shared[k] * shared[j]) * lens_cross_covariance_.block(L * cameras[k], L * cameras[j], L, L);
+    }
   }
   // Cameras out of the solve keep their NaN rows; the others gain the lenses' share. The
   // per-camera blocks (pose_covariances(): the sigmas and the weak flag) stay those of

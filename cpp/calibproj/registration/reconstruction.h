@@ -207,6 +207,11 @@ class Reconstruction {
   // length differs from the camera's intrinsics, a covariance that is not symmetric
   // positive semi-definite).
   void SetLensUncertainty(int camera, const LensUncertainty& lens);
+  // How the lenses of `cameras` (each set by SetLensUncertainty first) err together:
+  // their joint covariance (8n x 8n, the k-th camera in rows and columns 8k to 8k + 7),
+  // whose diagonal blocks are the lenses' own covariances (std::invalid_argument naming
+  // the problem otherwise, or when it is not symmetric positive semi-definite).
+  void SetLensCrossCovariances(const std::vector<int>& cameras, const Eigen::MatrixXd& joint);
   // Where the projector draws point `point` on the main plane (false without a map).
   bool ProjectorPrediction(int point, Eigen::Vector3d* X) const;
 
@@ -338,6 +343,7 @@ class Reconstruction {
   Eigen::MatrixXd pose_covariance_;
   Eigen::MatrixXd pose_lens_covariance_, lens_covariance_;
   std::vector<std::optional<LensUncertainty>> lenses_;
+  Eigen::MatrixXd lens_cross_covariance_;  // 8C x 8C, off-diagonal blocks only; empty: none given
   std::vector<double> covariance_noise_px_;
   ba::PixelMatrix projector_;  // normalised pixels (ba/projector_cost.h), per point
   double projector_width_ = 1.0;

@@ -96,8 +96,8 @@ Columns CameraColumns(const Data& data) {
   return columns;
 }
 
-// Per camera covariance of the lens blocks at the solution (see the header).
-std::vector<LensCovariance> LensCovariances(const Data& data, const Result& result) {
+// Joint covariance of the lenses at the solution (see the header).
+Eigen::MatrixXd LensCovariances(const Data& data, const Result& result) {
   const Columns columns = CameraColumns(data);
   const int n = columns.size;
   Eigen::MatrixXd S = Eigen::MatrixXd::Zero(n, n);
@@ -147,11 +147,15 @@ std::vector<LensCovariance> LensCovariances(const Data& data, const Result& resu
   const Eigen::MatrixXd covariance =
       scale.asDiagonal() * (eigen.eigenvectors() * inverse_values.asDiagonal() * eigen.eigenvectors().transpose()) *
       scale.asDiagonal();
-  std::vector<LensCovariance> out(data.poses.rows(), LensCovariance::Zero());
-  for (int c = 0; c < static_cast<int>(data.poses.rows()); ++c) {
-    for (size_t a = 0; a < data.refine[c].size(); ++a) {
-      for (size_t b = 0; b < data.refine[c].size(); ++b) {
-        out[c](data.refine[c][a], data.refine[c][b]) = covariance(columns.lens[c][a], columns.lens[c][b]);
+  const int C = static_cast<int>(data.poses.rows());
+  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(kLensSize * C, kLensSize * C);
+  for (int c = 0; c < C; ++c) {
+    for (int d = 0; d < C; ++d) {
+      for (size_t a = 0; a < data.refine[c].size(); ++a) {
+        for (size_t b = 0; b < data.refine[d].size(); ++b) {
+          out(kLensSize * c + data.refine[c][a], kLensSize * d + data.refine[d][b]) =
+              covariance(columns.lens[c][a], columns.lens[d][b]);
+        }
       }
     }
   }
@@ -271,7 +275,7 @@ Result SelfCalibrate(const Data& data, const Options& options) {
   result.usable = summary.IsSolutionUsable();
   result.residuals = Residuals(data, result.lenses, result.poses, result.points);
   result.noise_px = NoisePerCamera(data, result.residuals);
-  if (options.compute_covariance && result.usable) result.lens_covariances = LensCovariances(data, result);
+  if (options.compute_covariance && result.usable) result.lens_covariance = LensCovariances(data, result);
   return result;
 }
 

@@ -61,7 +61,13 @@ struct Result {
   FloorMatrix points;
   ba::PixelMatrix residuals;                  // per observation, NaN where not projectable
   Eigen::VectorXd noise_px;                   // per camera: RMS of one residual coordinate
-  std::vector<LensCovariance> lens_covariances;  // per camera (when compute_covariance)
+  // When compute_covariance: the lenses' joint covariance (8C x 8C, camera c in rows and
+  // columns 8c to 8c + 7; zero outside the refined entries). Lenses fitted to the same
+  // floor points err together: the off-diagonal blocks say how.
+  Eigen::MatrixXd lens_covariance;
+  LensCovariance LensCovarianceOf(int a, int b) const {
+    return lens_covariance.block<kLensSize, kLensSize>(kLensSize * a, kLensSize * b);
+  }
 };
 
 // std::invalid_argument naming the problem: sizes, indices, non-finite values,
