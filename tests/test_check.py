@@ -303,6 +303,17 @@ def test_the_moved_and_rezoomed_cameras_are_found_and_repaired(room) -> None:
     assert K[0, 0] == pytest.approx(room["changed"].camera("ceiling").fx, rel=0.002)
     document = json.loads((out / CHECK_FILE).read_text())
     assert document["schema"] == "calibproj.check/1" and document["cameras"]["far2"]["status"] == "moved"
+    # The repaired folder says how accurate it is: the ceiling's new focal length is in
+    # its covariance, and the repaired cameras are known less well than before.
+    uncertainty = json.loads((out / "uncertainty.json").read_text())
+    was = json.loads((room["folder"] / "results" / "uncertainty.json").read_text())
+    lens_blocks = dict(zip(uncertainty["pose_covariance"]["cameras"], uncertainty["pose_covariance"]["lens_block"]))
+    assert [name for name, block in lens_blocks.items() if block is not None] == ["ceiling"]
+    assert "ceiling" in uncertainty["intrinsics"]
+    now = {camera["name"]: camera["projection_sigma_px"]["max"] for camera in uncertainty["cameras"]}
+    before = {camera["name"]: camera["projection_sigma_px"]["max"] for camera in was["cameras"]}
+    assert now["far2"] > before["far2"] and now["ceiling"] > before["ceiling"]
+    assert now["far1"] == before["far1"]
     # The report shows the check: which cameras changed and the residuals before and after.
     page = (out / "report.html").read_text()
     assert "Check against the stored calibration" in page
@@ -382,7 +393,7 @@ def test_the_native_check_prints_writes_and_exits_as_the_python_command(room, tm
     assert alone.returncode == 0, alone.stderr
     assert json.loads(alone.stdout)["cameras"]["far2"]["status"] == "moved"
     for name in ("check.json", "camera_poses.json", "metrics.json", "points.ply", "tracks.json",
-                 "intrinsics/ceiling.json", "intrinsics/far2.json"):
+                 "intrinsics/ceiling.json", "intrinsics/far2.json", "uncertainty.json"):
         assert (tmp_path / "native" / name).read_bytes() == (tmp_path / "python" / name).read_bytes(), name
     # Tracks of other points than the calibrated ones: one line naming the file, status 2.
     from calibproj.tracks import Tracks
@@ -569,6 +580,83 @@ def test_a_repaired_rezoomed_camera_gets_its_pixels_undistorted_with_its_new_foc
     np.testing.assert_array_equal(ids, expected_ids)
     # Undistorted again with the estimated focal length (0.1 % from the true one).
     assert np.abs(pixels - expected).max() < 0.05
+
+
+def test_a_repaired_camera_is_as_uncertain_as_the_repair_says(room) -> None:
+    """The repaired covariance of the moved camera's pose and of the re-zoomed camera's
+    focal length (its new lens block) matches their scatter over 30 draws of the check's
+    noise (0.5 px on both cameras); the other cameras' blocks stay the stored ones."""
+    import cv2
+
+    from calibproj.calibration import Calibration
+    from calibproj.check_and_repair import _with_stored_uncertainty, check_cameras, repaired
+    from calibproj.io.intrinsics import load_intrinsics_dir
+    from calibproj.tracks import Tracks
+
+    results, again = room["folder"] / "results", room["again"].tracks
+    calibration = _with_stored_uncertainty(results, Calibration.load(results))
+    assert calibration.uncertainty is not None
+    stored = np.array(calibration.uncertainty.covariance)
+    intrinsics, stored_tracks = load_intrinsics_dir(results / "intrinsics"), Tracks.read(results / "tracks.json")
+    names = np.asarray(again.camera_names)[again.camera_index]
+    rng = np.random.default_rng(1)
+    poses, focals, added, focal_variances = [], [], [], []
+    for _ in range(30):
+        xy = again.xy + rng.normal(0.0, 0.5, again.xy.shape) * np.isin(names, ["far2", "ceiling"])[:, None]
+        tracks = Tracks.from_observations(again.camera_names, names, again.point_ids[again.point_index], xy,
+                                          again.markers_per_array)
+        result = check_cameras(calibration, intrinsics, tracks, stored_tracks=stored_tracks)
+        if [result.cameras[name].status for name in ("far2", "ceiling")] != ["moved", "rezoomed"]:
+            continue  # at this noise the ceiling's zoom passes for a move in 4 % of checks
+        fixed, fixed_intrinsics, _ = repaired(calibration, intrinsics, stored_tracks, tracks, result, 0.05)
+        uncertainty = fixed.uncertainty
+        cameras, covariance = list(uncertainty.cameras), np.array(uncertainty.covariance)
+        k, ceiling = cameras.index("far2"), cameras.index("ceiling")
+        unchanged = [6 * i + j for i, name in enumerate(cameras) if name not in ("far2", "ceiling") for j in range(6)]
+        np.testing.assert_array_equal(covariance[np.ix_(unchanged, unchanged)], stored[np.ix_(unchanged, unchanged)])
+        added.append(covariance[6 * k:6 * k + 6, 6 * k:6 * k + 6] - stored[6 * k:6 * k + 6, 6 * k:6 * k + 6])
+        focal = 6 * len(cameras) + 8 * list(uncertainty.lens_block)[ceiling]
+        focal_variances.append(covariance[focal, focal])
+        poses.append(fixed.poses["far2"])
+        focals.append(fixed_intrinsics["ceiling"].K[0, 0])
+    assert len(poses) >= 25
+    # [dtheta, dt] of each repaired pose about the first, as the covariance defines them.
+    first = poses[0][0]
+    scatter = np.array([np.concatenate([cv2.Rodrigues(R @ first.T)[0].ravel(), t]) for R, t in poses])
+    empirical, predicted = np.cov(scatter.T), np.mean(added, axis=0)
+    assert 0.7 < np.sqrt(np.trace(empirical[:3, :3]) / np.trace(predicted[:3, :3])) < 1.4
+    assert 0.7 < np.sqrt(np.trace(empirical[3:, 3:]) / np.trace(predicted[3:, 3:])) < 1.4
+    assert 0.7 < np.std(focals, ddof=1) / np.sqrt(np.mean(focal_variances)) < 1.4
+
+
+@pytest.mark.parametrize("damage", ["garbage", "other cameras"])
+def test_a_bad_stored_uncertainty_costs_only_the_repaired_one(room, tmp_path, damage: str) -> None:
+    """Both commands repair as before and say in one line why the repaired folder has no
+    uncertainty.json."""
+    import shutil
+
+    from test_native import find_native
+    from test_pipeline import run_cli
+
+    results = tmp_path / "results"
+    shutil.copytree(room["folder"] / "results", results)
+    path = results / "uncertainty.json"
+    if damage == "garbage":
+        path.write_text('{"schema": "calibproj.uncertainty/1", "pose_covariance": [')
+    else:
+        document = json.loads(path.read_text())
+        document["pose_covariance"]["cameras"][0] = "stranger"
+        document["gauge"]["reference_camera"] = "stranger"
+        path.write_text(json.dumps(document))
+    again = room["folder"] / "again" / "tracks.json"
+    python = run_cli("check", str(results), "--tracks", str(again), "--out", str(tmp_path / "python"), "--no-report")
+    native = subprocess.run([str(find_native()), "check", str(results), "--tracks", str(again), "--out",
+                             str(tmp_path / "native")], capture_output=True, text=True)
+    for run, out in ((python, tmp_path / "python"), (native, tmp_path / "native")):
+        assert run.returncode == 0, run.stderr
+        warnings = [line for line in run.stderr.splitlines() if "uncertainty.json" in line]
+        assert len(warnings) == 1 and str(path) in warnings[0], run.stderr
+        assert (out / "camera_poses.json").is_file() and not (out / "uncertainty.json").exists()
 
 
 def test_cameras_that_cannot_be_tested_say_why_and_the_others_are(room, tmp_path) -> None:

@@ -586,6 +586,8 @@ class Baselines:
             "_core.uncertainty.write": Spec([("directory", folder), ("calibration", uncertain),
                                              ("intrinsics", intrinsics)]),
             "_core.uncertainty.read_pose_uncertainty": Spec([("directory", folder / "results")]),
+            "_core.uncertainty.stored_pose_uncertainty": Spec([("directory", folder / "results"),
+                                                               ("calibration", calibration)]),
             "_core.formats.read_calibration": Spec([("directory", folder / "results")]),
             "_core.formats.Calibration": Spec([]),
             "_core.formats.CameraPose": Spec([]),

@@ -12,6 +12,7 @@
 #include "calibproj/formats/intrinsics_file.h"
 #include "calibproj/formats/tracks_file.h"
 #include "calibproj/registration/reconstruction.h"
+#include "calibproj/uncertainty/volume_map.h"
 #include "output_folder.h"
 #include "results_folder.h"
 #include "table_flags.h"
@@ -78,7 +79,11 @@ int RunCheck(const CheckArguments& arguments, Interrupts& interrupts) {
     out->Open();
   }
   const fs::path results = arguments.results;
-  const formats::Calibration calibration = formats::ReadCalibration(results);
+  formats::Calibration calibration = formats::ReadCalibration(results);
+  // The stored covariance, which the repair carries over (a bad file only costs it).
+  std::string warning;
+  calibration.uncertainty = uncertainty::StoredPoseUncertainty(results, calibration, &warning);
+  if (!warning.empty()) std::cerr << warning << "; the repaired results will have no uncertainty.json\n";
   std::map<std::string, std::string> unusable;
   const auto intrinsics = IntrinsicsOf(results / "intrinsics", calibration.poses, &unusable);
   const formats::Tracks stored = formats::ReadTracks(results / "tracks.json");

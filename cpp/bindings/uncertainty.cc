@@ -125,6 +125,16 @@ void register_uncertainty(py::module_& m) {
       "Writes uncertainty.json into the folder when the calibration carries a pose covariance; False when not.");
   m.def("read_pose_uncertainty", &uncertainty::ReadPoseUncertainty, py::arg("directory"),
         "The joint pose covariance a results folder's uncertainty.json holds (InputError naming the file).");
+  m.def(
+      "stored_pose_uncertainty",
+      [](const std::filesystem::path& directory, const py::object& calibration) {
+        std::string warning;
+        const auto stored = uncertainty::StoredPoseUncertainty(directory, CalibrationFromPython(calibration), &warning);
+        return py::make_tuple(stored.empty() ? py::none() : py::cast(stored), warning);
+      },
+      py::arg("directory"), py::arg("calibration"),
+      "(PoseUncertainty or None, warning): the covariance the results folder's uncertainty.json stores for this\n"
+      "calibration; None with why when it is unreadable or of other cameras (an empty warning: no such file).");
   m.attr("FILE") = uncertainty::kUncertaintyFile;
 }
 

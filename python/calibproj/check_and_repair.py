@@ -103,6 +103,17 @@ def write_check(path: str | os.PathLike, result: CheckResult) -> None:
     _core.check.write_check(Path(path), result)
 
 
+def _with_stored_uncertainty(folder: Path, calibration: Calibration) -> Calibration:
+    """The calibration with the covariance its folder's uncertainty.json stores, which the
+    repair carries over (a bad file only costs it, with a warning)."""
+    from dataclasses import replace
+
+    stored, warning = _core.uncertainty.stored_pose_uncertainty(folder, calibration)
+    if warning:
+        log.warning("%s; the repaired results will have no uncertainty.json", warning)
+    return replace(calibration, uncertainty=stored)
+
+
 def check(
     results: str | os.PathLike,
     source: Tracks | str | os.PathLike,
@@ -148,7 +159,7 @@ def check(
     from calibproj.export import parse_formats
 
     folder_in = Path(results)
-    calibration = load_results(folder_in)
+    calibration = _with_stored_uncertainty(folder_in, load_results(folder_in))
     # A bad intrinsics file leaves its own camera untested (said why), not the check.
     intrinsics, unusable = intrinsics_of_cameras(folder_in / INTRINSICS_DIR, calibration.registered)
     stored_tracks = Tracks.read(folder_in / TRACKS_FILE)

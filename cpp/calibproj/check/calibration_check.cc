@@ -1,5 +1,6 @@
 #include "calibproj/check/calibration_check.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -152,6 +153,75 @@ std::optional<double> LargerSigma(std::optional<double> stored, double fitted) {
   std::optional<double> larger = stored && *stored != 0.0 ? stored : std::nullopt;
   if (fitted != 0.0 && (!larger || fitted > *larger)) larger = fitted;
   return larger;
+}
+
+// SO(3)'s left Jacobian: Exp(w + dw) = Exp(J(w) dw) Exp(w) to first order.
+Eigen::Matrix3d LeftJacobian(const Eigen::Vector3d& w) {
+  const double angle = w.norm();
+  Eigen::Matrix3d W;
+  W << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
+  if (angle < 1e-8) return Eigen::Matrix3d::Identity() + 0.5 * W;
+  return Eigen::Matrix3d::Identity() + (1.0 - std::cos(angle)) / (angle * angle) * W +
+         (angle - std::sin(angle)) / (angle * angle * angle) * W * W;
+}
+
+// The stored joint covariance with the changed cameras as they are now. A repaired
+// camera was fitted to the held points, which the other cameras placed: it keeps its
+// stored covariance and its cross terms with them (it stands to those points as
+// before) and gains its fit's, from the new observations. A re-zoomed camera's focal
+// length gets a lens block (its variance and its cross terms with the pose) when it has
+// none. Empty when nothing is stored or a changed camera is not in it.
+registration::PoseUncertainty RepairedUncertainty(const formats::Calibration& stored, const CalibrationCheck& check,
+                                                  const std::map<std::string, formats::CameraIntrinsics>& before) {
+  registration::PoseUncertainty out = stored.uncertainty;
+  if (out.empty()) return out;
+  const int C = static_cast<int>(out.cameras.size());
+  constexpr int L = registration::PoseUncertainty::kLensSize;
+  std::vector<std::string> changed = check.Changed();
+  for (const std::string& name : changed) {
+    if (out.IndexOf(name) < 0) return {};
+  }
+  // New lens blocks for re-zoomed cameras without one.
+  if (out.lens_block.empty()) out.lens_block.assign(C, -1);
+  int lenses = out.num_lenses();
+  for (const std::string& name : changed) {
+    const CameraCheck& fit = *check.Find(name)->figures;
+    if (fit.fit_covariance(6, 6) > 0.0 && out.lens_block[out.IndexOf(name)] < 0) out.lens_block[out.IndexOf(name)] = lenses++;
+  }
+  const int size = 6 * C + L * lenses;
+  Eigen::MatrixXd covariance = Eigen::MatrixXd::Zero(size, size);
+  covariance.topLeftCorner(stored.uncertainty.covariance.rows(), stored.uncertainty.covariance.cols()) =
+      stored.uncertainty.covariance;
+  for (const std::string& name : changed) {
+    const int k = out.IndexOf(name);
+    const CameraCheck& fit = *check.Find(name)->figures;
+    const formats::CameraPose& was = *stored.PoseOf(name);
+    // (w, centre, focal scale) -> (dtheta, dt, df): R = Exp(dtheta) R, t = -R C, f = s f_stored.
+    const Eigen::AngleAxisd turn(fit.R * was.R.transpose());
+    const Eigen::Matrix3d J = LeftJacobian(turn.angle() * turn.axis());
+    Eigen::Matrix3d t_cross;
+    t_cross << 0.0, -fit.t.z(), fit.t.y(), fit.t.z(), 0.0, -fit.t.x(), -fit.t.y(), fit.t.x(), 0.0;
+    Eigen::Matrix<double, 7, 7> T = Eigen::Matrix<double, 7, 7>::Zero();
+    T.block<3, 3>(0, 0) = J;
+    T.block<3, 3>(3, 0) = -t_cross * J;
+    T.block<3, 3>(3, 3) = -fit.R;
+    T(6, 6) = before.at(name).K(0, 0);
+    const Eigen::Matrix<double, 7, 7> mapped = T * fit.fit_covariance * T.transpose();
+    const Eigen::Matrix<double, 7, 7> added = 0.5 * (mapped + mapped.transpose());
+    std::vector<int> rows;
+    for (int i = 0; i < 6; ++i) rows.push_back(6 * k + i);
+    rows.push_back(out.lens_block[k] >= 0 ? 6 * C + L * out.lens_block[k] : -1);  // f, first of its lens
+    for (int a = 0; a < 7; ++a) {
+      for (int b = 0; b < 7; ++b) {
+        if (rows[a] >= 0 && rows[b] >= 0) covariance(rows[a], rows[b]) += added(a, b);
+      }
+    }
+    if (fit.noise_px > 0.0) out.noise_px[k] = fit.noise_px;
+  }
+  out.covariance = covariance;
+  if (std::count(out.lens_block.begin(), out.lens_block.end(), -1) == C) out.lens_block.clear();
+  out.Check();
+  return out;
 }
 
 // `stored` with the observations of `cameras` replaced by theirs in `now`.
@@ -341,6 +411,7 @@ Repair Repaired(const CheckInputs& inputs, const CalibrationCheck& check, double
     }
   }
   repair.tracks = WithObservationsOf(*inputs.stored_tracks, now, changed);
+  repair.calibration.uncertainty = RepairedUncertainty(*inputs.calibration, check, *inputs.intrinsics);
   return repair;
 }
 

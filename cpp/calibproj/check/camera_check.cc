@@ -563,6 +563,7 @@ CameraCheck CheckCamera(const CameraCheckInput& input, const CheckOptions& optio
     out.R = now_camera.R;
     out.t = now_camera.t;
     out.focal_scale = chosen->s;
+    out.fit_covariance = CovarianceOf(chosen->information, freed) * variance;
     out.rms_after_px = std::sqrt(SumSquares(now, *chosen, used) / n);
     out.reason = kind + ": " + figures;
   } else {

@@ -107,6 +107,10 @@ struct CameraCheck {
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
   Eigen::Vector3d t = Eigen::Vector3d::Zero();
   double focal_scale = 1.0;
+  // A changed camera's: the covariance of its fit to the held points (w, centre, focal
+  // scale; R = Exp(w) R_stored, zero rows for what the fit held), from the new
+  // observations alone (the held points' own uncertainty is not in it).
+  Eigen::Matrix<double, 7, 7> fit_covariance = Eigen::Matrix<double, 7, 7>::Zero();
 };
 
 // The uncertainty (1 sigma, px) of the largest move of a working-volume point the camera

@@ -120,8 +120,8 @@ ordered_json MapJson(const VolumeMap& map) {
   return out;
 }
 
-// How the figures take the intrinsics: the refined lenses with their uncertainty (and
-// its cross terms with the poses), the others as exact.
+// How the figures take the intrinsics: the refined lenses (or re-zoomed: the check's
+// repair) with their uncertainty and its cross terms with the poses, the others as exact.
 std::string IntrinsicsNote(const registration::PoseUncertainty& poses) {
   std::string refined;
   for (size_t k = 0; k < poses.lens_block.size(); ++k) {
@@ -129,8 +129,9 @@ std::string IntrinsicsNote(const registration::PoseUncertainty& poses) {
   }
   if (refined.empty()) return "taken as exact: their own uncertainty (refined or from a board) is not in these figures";
   const bool all = std::count(poses.lens_block.begin(), poses.lens_block.end(), -1) == 0;
-  return "refined lenses (" + refined + ") with their uncertainty from the self-calibration, cross terms with the "
-         "poses included" + (all ? std::string() : "; the other cameras' taken as exact");
+  return "refined lenses (" + refined + ") with their uncertainty (from the self-calibration, or from a check's fit "
+         "of a re-zoomed camera), cross terms with the poses included" +
+         (all ? std::string() : "; the other cameras' taken as exact");
 }
 
 ordered_json CovarianceJson(const registration::PoseUncertainty& poses) {
@@ -251,6 +252,30 @@ registration::PoseUncertainty ReadPoseUncertainty(const std::filesystem::path& d
     throw formats::InputError(path.string() + ": " + error.what());
   }
   return out;
+}
+
+registration::PoseUncertainty StoredPoseUncertainty(const std::filesystem::path& directory,
+                                                    const formats::Calibration& calibration, std::string* warning) {
+  warning->clear();
+  std::error_code error;
+  if (!std::filesystem::exists(directory / kUncertaintyFile, error)) return {};
+  registration::PoseUncertainty stored;
+  try {
+    stored = ReadPoseUncertainty(directory);
+  } catch (const formats::InputError& problem) {
+    *warning = problem.what();
+    return {};
+  }
+  std::vector<std::string> registered, covered = stored.cameras;
+  for (const auto& pose : calibration.poses) registered.push_back(pose.name);
+  std::sort(registered.begin(), registered.end());
+  std::sort(covered.begin(), covered.end());
+  if (registered != covered) {
+    *warning = (directory / kUncertaintyFile).string() + ": its cameras are not the registered cameras of " +
+               directory.string();
+    return {};
+  }
+  return stored;
 }
 
 }  // namespace calibproj::uncertainty

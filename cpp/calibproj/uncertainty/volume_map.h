@@ -55,4 +55,10 @@ bool WriteUncertainty(const std::filesystem::path& directory, const formats::Cal
 // the file and the problem.
 registration::PoseUncertainty ReadPoseUncertainty(const std::filesystem::path& directory);
 
+// The joint pose covariance stored beside `calibration` in its results folder
+// `directory`, when its uncertainty.json is there and is of those cameras; else empty,
+// with why in *warning (left empty when the folder has no such file).
+registration::PoseUncertainty StoredPoseUncertainty(const std::filesystem::path& directory,
+                                                    const formats::Calibration& calibration, std::string* warning);
+
 }  // namespace calibproj::uncertainty
