@@ -198,8 +198,13 @@ def test_damaged_uncertainty_files_give_one_clear_line(demo_results: Path, tmp_p
                                  for key, value in document["map"].items()}}
     rng = np.random.default_rng(7)
     mutations = structural(small, rng, 60) + structural(document, rng, 20) + byte_level(valid, rng, 20)
+    calibration = Calibration.load(folder)
     for mutation in mutations:
         (folder / "uncertainty.json").write_bytes(mutation.data)
+        # What check reads to carry the covariance into a repair: the covariance, or why not.
+        stored, warning = _core.uncertainty.stored_pose_uncertainty(folder, calibration)
+        assert (stored is None) == bool(warning), mutation.label
+        assert "\n" not in warning and (not warning or "uncertainty.json" in warning), (mutation.label, warning)
         try:
             answer = triangulation_uncertainty(folder, [[0.0, 0.0, 0.9]])
         except ValueError as error:  # FormatError among them

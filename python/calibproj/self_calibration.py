@@ -205,7 +205,8 @@ class LensCovariance:
 
     def among(self, names: Sequence[str]) -> np.ndarray:
         """The joint covariance (8n, 8n) of these cameras' lenses, in their order."""
-        rows = np.array([LENS_SIZE * self.cameras.index(name) + i for name in names for i in range(LENS_SIZE)], dtype=int)
+        rows = np.array([LENS_SIZE * self.cameras.index(name) + i for name in names for i in range(LENS_SIZE)],
+                        dtype=int)
         return self.matrix[np.ix_(rows, rows)]
 
 

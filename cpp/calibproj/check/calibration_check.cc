@@ -220,7 +220,11 @@ registration::PoseUncertainty RepairedUncertainty(const formats::Calibration& st
   }
   out.covariance = covariance;
   if (std::count(out.lens_block.begin(), out.lens_block.end(), -1) == C) out.lens_block.clear();
-  out.Check();
+  try {
+    out.Check();
+  } catch (const std::invalid_argument&) {
+    return {};  // a stored file readable but absurd (values near overflow): no uncertainty rather than a wrong one
+  }
   return out;
 }
 
