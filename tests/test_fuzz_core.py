@@ -53,7 +53,8 @@ EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "
 BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "_core.detect.MarkerFamilyInfo", "_core.ingest.ingest_camera", "_core.check.CameraCheck",
                         "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.Calibration",
                         "_core.formats.CameraPose", "_core.formats.CameraMetrics", "_core.formats.Plane",
-                        "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit"}
+                        "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
+                        "_core.selfcal.Result"}
 
 # Keyword options of registration.Reconstruction (cpp/bindings/registration.cc).
 REGISTRATION_OPTIONS = {
@@ -381,6 +382,11 @@ class Baselines:
             r.run()
         return r
 
+    def self_calibration(self, compute_covariance: bool) -> Any:
+        call = self.specs()["_core.selfcal.self_calibrate"]
+        return _core.selfcal.self_calibrate(*(value for _, value in call.args),
+                                            **{**call.kwargs, "compute_covariance": compute_covariance})
+
     def specs(self) -> dict[str, Spec | None]:
         """Valid calls by qualified name (None: a property or a method without arguments
         whose receivers are listed in receivers())."""
@@ -428,6 +434,8 @@ class Baselines:
                  ("poses", s["poses"]), ("points", s["points"][:, :2])],
                 {"loss": "cauchy", "loss_scale": 2.0, "max_iterations": 5, "num_threads": 1,
                  "compute_covariance": True}),
+            "_core.selfcal.Result": Spec([]),
+            "_core.selfcal.Result.lens_covariance_of": Spec([("a", 0), ("b", 1)]),
             "_core.selfcal.residual_by_lens": Spec([
                 ("K", np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])),
                 ("distortion", [-0.2, 0.05, 0.0, 0.0, 0.0]), ("normalised", np.array([0.1, -0.2]))]),
@@ -675,6 +683,8 @@ class Baselines:
             "_core.check.CameraCheck": {"checked": lambda: _core.check.check_camera(
                 *(value for _, value in self.camera_check_args()))},
             "_core.check.CalibrationCheck": {"checked": lambda: self.check_call()},
+            "_core.selfcal.Result": {"solved": lambda: self.self_calibration(True),
+                                     "without covariance": lambda: self.self_calibration(False)},
             "_core.check.CameraVerdict": {
                 state: (lambda state=state: self.check_call().cameras[state]) for state in ("a", "b")},
             "_core.formats.Calibration": {"read": lambda: _core.formats.read_calibration(self.results_folder)},

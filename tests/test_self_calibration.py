@@ -100,15 +100,17 @@ def test_solver_recovers_focal_and_distortion_from_a_wrong_start() -> None:
     refine = [[0, 3, 4, 5, 6, 7]] * 5
     solution = selfcal.self_calibrate(camera_index, point_index, observed, start, np.tile(SHAPE, (5, 1)), refine,
                                       noisy_poses, points + rng.normal(0, 0.01, points.shape), max_iterations=200)
-    assert solution["usable"]
+    assert solution.usable
     # The gauge: two points are held, so the scale and the floor frame are those of the truth.
-    np.testing.assert_allclose(solution["lenses"][:, 0], LENS[0], rtol=1e-6)
-    np.testing.assert_allclose(solution["lenses"][:, 3:], np.tile(LENS[3:], (5, 1)), atol=1e-5)
-    assert np.abs(solution["residuals"]).max() < 1e-5
+    np.testing.assert_allclose(solution.lenses[:, 0], LENS[0], rtol=1e-6)
+    np.testing.assert_allclose(solution.lenses[:, 3:], np.tile(LENS[3:], (5, 1)), atol=1e-5)
+    assert np.abs(solution.residuals).max() < 1e-5
     # Covariances: refined entries only, positive on the diagonal.
-    covariances = solution["lens_covariances"]
-    assert covariances.shape == (5, 8, 8)
+    assert solution.lens_covariance.shape == (40, 40)
+    covariances = np.array([solution.lens_covariance_of(c, c) for c in range(5)])
     assert np.all(covariances[:, 0, 0] > 0) and np.all(covariances[:, 1, 1] == 0)
+    with pytest.raises(ValueError, match="camera out of range"):
+        solution.lens_covariance_of(0, 5)
 
 
 def test_covariance_matches_the_scatter_of_repeated_solves() -> None:
@@ -121,9 +123,9 @@ def test_covariance_matches_the_scatter_of_repeated_solves() -> None:
         camera_index, point_index, observed, poses, points = synthetic_floor(seed, noise_px=0.5)
         solution = selfcal.self_calibrate(camera_index, point_index, observed, np.tile(LENS, (5, 1)),
                                           np.tile(SHAPE, (5, 1)), [[0, 3]] * 5, poses, points)
-        estimates.append(solution["lenses"][:2, [0, 3]].ravel())
-        joint = solution["lens_covariance"]
-        np.testing.assert_array_equal(joint[8:16, 8:16], solution["lens_covariances"][1])
+        estimates.append(solution.lenses[:2, [0, 3]].ravel())
+        joint = solution.lens_covariance
+        np.testing.assert_array_equal(joint[8:16, 8:16], solution.lens_covariance_of(1, 1))
         sigmas.append(np.sqrt(joint[0, 0]))
         correlations.append(joint[3, 11] / np.sqrt(joint[3, 3] * joint[11, 11]))
     estimates = np.array(estimates)

@@ -1,4 +1,4 @@
-// Bindings of calibproj::selfcal: numpy arrays in, a dict of numpy arrays out.
+// Bindings of calibproj::selfcal: numpy arrays in, its Result out.
 
 #include <pybind11/eigen.h>
 #include <pybind11/pybind11.h>
@@ -28,7 +28,7 @@ std::vector<selfcal::LensShape> Shapes(const RowMatrix& shapes) {
   return out;
 }
 
-py::dict SelfCalibratePy(const Eigen::VectorXi& camera_index, const Eigen::VectorXi& point_index,
+selfcal::Result SelfCalibratePy(const Eigen::VectorXi& camera_index, const Eigen::VectorXi& point_index,
                          const RowMatrix& observed, const RowMatrix& lenses, const RowMatrix& shapes,
                          const std::vector<std::vector<int>>& refine, const RowMatrix& poses, const RowMatrix& points,
                          const std::string& loss, double loss_scale, int max_iterations, int num_threads,
@@ -53,36 +53,35 @@ py::dict SelfCalibratePy(const Eigen::VectorXi& camera_index, const Eigen::Vecto
     py::gil_scoped_release release;
     result = selfcal::SelfCalibrate(data, options);
   }
-  py::dict out;
-  out["initial_cost"] = result.initial_cost;
-  out["final_cost"] = result.final_cost;
-  out["iterations"] = result.iterations;
-  out["termination"] = result.termination;
-  out["usable"] = result.usable;
-  out["gauge_points"] = Eigen::VectorXi(result.gauge_points);
-  out["lenses"] = result.lenses;
-  out["poses"] = result.poses;
-  out["points"] = result.points;
-  out["residuals"] = result.residuals;
-  out["noise_px"] = result.noise_px;
-  const auto cameras = static_cast<py::ssize_t>(result.lens_covariance.rows() / selfcal::kLensSize);
-  py::array_t<double> covariances({cameras, py::ssize_t{selfcal::kLensSize}, py::ssize_t{selfcal::kLensSize}});
-  auto cov = covariances.mutable_unchecked<3>();
-  for (py::ssize_t c = 0; c < cameras; ++c) {
-    const selfcal::LensCovariance block = result.LensCovarianceOf(static_cast<int>(c), static_cast<int>(c));
-    for (int i = 0; i < selfcal::kLensSize; ++i) {
-      for (int j = 0; j < selfcal::kLensSize; ++j) cov(c, i, j) = block(i, j);
-    }
-  }
-  out["lens_covariances"] = covariances;
-  out["lens_covariance"] = result.lens_covariance;
-  return out;
+  return result;
+}
+
+void RegisterResult(py::module_& m) {
+  using selfcal::Result;
+  py::class_<Result>(m, "Result", "A self-calibration's solution: lenses, poses and floor points, and how well they fit.")
+      .def_readonly("initial_cost", &Result::initial_cost)
+      .def_readonly("final_cost", &Result::final_cost)
+      .def_readonly("iterations", &Result::iterations)
+      .def_readonly("termination", &Result::termination, "Ceres's termination message")
+      .def_readonly("usable", &Result::usable, "the solver's solution can be used")
+      .def_readonly("gauge_points", &Result::gauge_points, "the two points held fixed (the floor's gauge)")
+      .def_readonly("lenses", &Result::lenses, "(C, 8) [f, cx, cy, k1, k2, p1, p2, k3]")
+      .def_readonly("poses", &Result::poses, "(C, 6) cam_from_floor [angle-axis, t]")
+      .def_readonly("points", &Result::points, "(P, 2) on the floor z = 0")
+      .def_readonly("residuals", &Result::residuals, "(N, 2) px, NaN where not projectable")
+      .def_readonly("noise_px", &Result::noise_px, "(C,) RMS of one residual coordinate per camera")
+      .def_readonly("lens_covariance", &Result::lens_covariance,
+                    "(8C, 8C) the lenses' joint covariance, camera c in rows and columns 8c to 8c + 7, zero\n"
+                    "outside the refined entries, in each camera's measured noise; (0, 0) when not computed")
+      .def("lens_covariance_of", &Result::LensCovarianceOf, py::arg("a"), py::arg("b"),
+           "(8, 8) the covariance of camera a's lens with camera b's (ValueError out of range)");
 }
 
 }  // namespace
 
 void register_selfcal(py::module_& m) {
   m.attr("lens_size") = selfcal::kLensSize;
+  RegisterResult(m);
   m.def("self_calibrate", &SelfCalibratePy, py::arg("camera_index"), py::arg("point_index"), py::arg("observed"),
         py::arg("lenses"), py::arg("shapes"), py::arg("refine"), py::arg("poses"), py::arg("points"), py::kw_only(),
         py::arg("loss") = "none", py::arg("loss_scale") = 1.0, py::arg("max_iterations") = 100,
@@ -93,11 +92,9 @@ Observations: camera_index (N,), point_index (N,), observed (N, 2) raw pixels.
 lenses (C, 8) [f, cx, cy, k1, k2, p1, p2, k3]; shapes (C, 2) [fy/fx, skew/fx];
 refine: per camera the lens entries (indices into the 8) that move; poses (C, 6)
 cam_from_floor [angle-axis, t]; points (P, 2) on the floor z = 0. Two points fix the
-floor's gauge. Returns a dict with the refined lenses, poses, points, residuals (N, 2),
-noise_px (C,) and, if compute_covariance, the lenses' joint covariance lens_covariance
-(8C, 8C; camera c in rows and columns 8c to 8c + 7) and its diagonal blocks
-lens_covariances (C, 8, 8), in each camera's measured noise. Bad input raises
-ValueError naming the problem. Releases the GIL.)doc");
+floor's gauge. Returns a Result (the refined lenses, poses, points, residuals, per-camera
+noise and, if compute_covariance, the lenses' joint covariance in each camera's measured
+noise). Bad input raises ValueError naming the problem. Releases the GIL.)doc");
   m.def(
       "residual_by_lens",
       [](const Eigen::Matrix3d& K, const std::vector<double>& distortion, const Eigen::Vector2d& normalised) {

@@ -271,19 +271,19 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
     return SelfCalibration(refined, reports, _lens_covariances(problem, solution, reports, refused))
 
 
-def _lens_covariances(problem: _Problem, solution: dict[str, Any] | None, reports: Mapping[str, LensReport],
+def _lens_covariances(problem: _Problem, solution: _core.selfcal.Result | None, reports: Mapping[str, LensReport],
                       refused: Mapping[str, str]) -> LensCovariance:
     """The joint covariance of every lens the solution refined."""
     if solution is None:
         return LensCovariance()
     chosen = [c for c, name in enumerate(problem.cameras)
               if problem.refine[c] and name in reports and name not in refused]
-    every = LensCovariance(tuple(problem.cameras), np.asarray(solution["lens_covariance"]))
+    every = LensCovariance(tuple(problem.cameras), np.asarray(solution.lens_covariance))
     names = [problem.cameras[c] for c in chosen]
     return LensCovariance(tuple(names), every.among(names))
 
 
-def _refined_intrinsics(problem: _Problem, solution: dict[str, Any] | None, intrinsics: Mapping[str, Intrinsics],
+def _refined_intrinsics(problem: _Problem, solution: _core.selfcal.Result | None, intrinsics: Mapping[str, Intrinsics],
                         given: Mapping[str, Intrinsics], reports: dict[str, LensReport],
                         refused: Mapping[str, str]) -> dict[str, Intrinsics]:
     """Every camera's intrinsics after the refinement, the reports completed."""
@@ -297,12 +297,12 @@ def _refined_intrinsics(problem: _Problem, solution: dict[str, Any] | None, intr
     for c, name in enumerate(problem.cameras):
         if name not in reports or name in refused:
             continue
-        lens = solution["lenses"][c] if solution is not None and problem.refine[c] else problem.given[c]
+        lens = solution.lenses[c] if solution is not None and problem.refine[c] else problem.given[c]
         refined[name] = _intrinsics_of(given[name], lens)
         report = reports[name]
         report.refined = [entry for entry in report.requested if entry not in report.held]
         report.result = _lens_dict(lens)
-        report.noise_px = float(solution["noise_px"][c]) if solution is not None else None
+        report.noise_px = float(solution.noise_px[c]) if solution is not None else None
         report.observations = int(np.sum(problem.camera_index == c))
         _log_report(report)
     for name, observations in problem.dropped.items():
@@ -314,7 +314,7 @@ def _refined_intrinsics(problem: _Problem, solution: dict[str, Any] | None, intr
 
 
 def _choose_and_refine(problem: _Problem, options: SelfCalibrationOptions, reports: dict[str, LensReport],
-                       solve: dict[str, Any]) -> dict[str, Any]:
+                       solve: dict[str, Any]) -> _core.selfcal.Result:
     """Frees the requested entries stage by stage, keeping those that earn their place."""
     # A first robust solve with the first two stages' entries brings the residuals near the
     # noise, so that gross outliers can be told apart; the stages then start over.
@@ -329,7 +329,7 @@ def _choose_and_refine(problem: _Problem, options: SelfCalibrationOptions, repor
 
 
 def _refine_again(problem: _Problem, earlier: Mapping[str, LensReport], options: SelfCalibrationOptions,
-                  reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any] | None:
+                  reports: dict[str, LensReport], solve: dict[str, Any]) -> _core.selfcal.Result | None:
     """Refines the entries an earlier round chose, from where it left off."""
     for c, name in reversed(list(enumerate(problem.cameras))):
         before = earlier.get(name)
@@ -347,8 +347,9 @@ def _refine_again(problem: _Problem, earlier: Mapping[str, LensReport], options:
     return problem.solve(loss="none", loss_scale=1.0, **solve)
 
 
-def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: dict[str, Any], options: SelfCalibrationOptions,
-               reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any]:
+def _run_stage(problem: _Problem, stage: tuple[str, ...], solution: _core.selfcal.Result,
+               options: SelfCalibrationOptions, reports: dict[str, LensReport],
+               solve: dict[str, Any]) -> _core.selfcal.Result:
     """Frees the stage's requested entries and solves; a camera whose fit they do not
     improve significantly gets them held at their given values and the stage starts
     over from where it began. Returns the last solution."""
@@ -394,8 +395,8 @@ def _hold_for_coverage(problem: _Problem, c: int, stage: tuple[str, ...], option
     return True
 
 
-def _hold_undetermined(problem: _Problem, solution: dict[str, Any] | None, options: SelfCalibrationOptions,
-                       reports: dict[str, LensReport], solve: dict[str, Any]) -> dict[str, Any] | None:
+def _hold_undetermined(problem: _Problem, solution: _core.selfcal.Result | None, options: SelfCalibrationOptions,
+                       reports: dict[str, LensReport], solve: dict[str, Any]) -> _core.selfcal.Result | None:
     """Holds at its given values the group whose uncertainty exceeds its limit the most
     (over every camera), solves again, and repeats until every group left is determined:
     one at a time, since holding one may determine the others (three cameras do not
@@ -549,17 +550,18 @@ class _Problem:
                    [[] for _ in cameras], poses, points, start.copy(), [image_size(intrinsics[n]) for n in cameras],
                    requested)
 
-    def solve(self, **kwargs: Any) -> dict[str, Any]:
+    def solve(self, **kwargs: Any) -> _core.selfcal.Result:
         solution = _core.selfcal.self_calibrate(self.camera_index, self.point_index, self.observed, self.lenses,
                                                 self.shapes, self.refine, self.poses, self.points, **kwargs)
-        self.lenses, self.poses, self.points = solution["lenses"], solution["poses"], solution["points"]
+        # Copies: the result's arrays are read-only views of it, and the problem's move on.
+        self.lenses, self.poses, self.points = (np.array(a) for a in (solution.lenses, solution.poses, solution.points))
         return solution
 
-    def gate(self, solution: dict[str, Any], options: SelfCalibrationOptions) -> None:
+    def gate(self, solution: _core.selfcal.Result, options: SelfCalibrationOptions) -> None:
         """Keeps the observations within the gate of their camera's noise, and the
         points still seen twice."""
-        error = np.linalg.norm(solution["residuals"], axis=1)
-        noise = solution["noise_px"]
+        error = np.linalg.norm(solution.residuals, axis=1)
+        noise = solution.noise_px
         keep = np.isfinite(error)
         for c in range(len(self.cameras)):
             rows = self.camera_index == c
@@ -620,31 +622,31 @@ class _Problem:
             out.append(sorted(set(entries) | set(added)))
         return out
 
-    def insignificant(self, c: int, before: dict[str, Any], after: dict[str, Any], added: int,
+    def insignificant(self, c: int, before: _core.selfcal.Result, after: _core.selfcal.Result, added: int,
                       options: SelfCalibrationOptions) -> str | None:
         """Why the entries just freed do not earn their place for camera ``c`` (its
         residuals, in units of its noise, fell by less than ``min_chi2_drop`` per entry),
         or None. Without this test an entry that only fits noise would be kept."""
         rows = self.camera_index == c
-        variance = float(after["noise_px"][c]) ** 2
-        drop = (np.nansum(before["residuals"][rows] ** 2) - np.nansum(after["residuals"][rows] ** 2)) / variance
+        variance = float(after.noise_px[c]) ** 2
+        drop = (np.nansum(before.residuals[rows] ** 2) - np.nansum(after.residuals[rows] ** 2)) / variance
         if drop >= options.min_chi2_drop * added:
             return None
         return (f"does not improve the fit: the residuals fell by {max(drop, 0.0):.1f} noise variances, "
                 f"less than {options.min_chi2_drop:g} per entry")
 
-    def undetermined(self, c: int, solution: dict[str, Any], options: SelfCalibrationOptions,
+    def undetermined(self, c: int, solution: _core.selfcal.Result, options: SelfCalibrationOptions,
                      report: LensReport) -> tuple[str, str | None, float]:
         """The group of camera ``c``'s refined lens that the data determine worst, if
         beyond its limit, with why and by how much: ``(why, group, sigma / limit)``, or
         ``("", None, 0)``; records the groups' uncertainties in ``report``."""
-        lens = solution["lenses"][c]
-        sigmas = _group_sigmas(solution["lens_covariances"][c], lens, self.shapes[c],
+        lens = solution.lenses[c]
+        sigmas = _group_sigmas(solution.lens_covariance_of(c, c), lens, self.shapes[c],
                                self.seen(c, options.max_sampled_points))
         report.focal_sigma = sigmas.get("focal", report.focal_sigma)
         report.principal_point_sigma_px = sigmas.get("principal point", report.principal_point_sigma_px)
         report.distortion_sigma_px = sigmas.get("distortion", report.distortion_sigma_px)
-        limits = _limits(options, lens[0], float(solution["noise_px"][c]))
+        limits = _limits(options, lens[0], float(solution.noise_px[c]))
         excess = {group: sigma / limits[group] for group, sigma in sigmas.items() if sigma > limits[group]}
         if not excess:
             return "", None, 0.0

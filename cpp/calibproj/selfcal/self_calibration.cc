@@ -164,6 +164,15 @@ Eigen::MatrixXd LensCovariances(const Data& data, const Result& result) {
 
 }  // namespace
 
+LensCovariance Result::LensCovarianceOf(int a, int b) const {
+  const int cameras = static_cast<int>(lens_covariance.rows() / kLensSize);
+  if (a < 0 || b < 0 || a >= cameras || b >= cameras) {
+    throw std::invalid_argument("lens covariance: camera out of range (the result holds " + std::to_string(cameras) +
+                                (cameras == 0 ? "; none was computed)" : ")"));
+  }
+  return lens_covariance.block<kLensSize, kLensSize>(kLensSize * a, kLensSize * b);
+}
+
 void Options::Check() const {
   Require(loss_scale_px > 0.0 && std::isfinite(loss_scale_px), "options: loss scale must be a positive number of pixels");
   limits::RequireInRange(max_iterations, 0, limits::kMaxIterations, "options: max_iterations");

@@ -65,9 +65,9 @@ struct Result {
   // columns 8c to 8c + 7; zero outside the refined entries). Lenses fitted to the same
   // floor points err together: the off-diagonal blocks say how.
   Eigen::MatrixXd lens_covariance;
-  LensCovariance LensCovarianceOf(int a, int b) const {
-    return lens_covariance.block<kLensSize, kLensSize>(kLensSize * a, kLensSize * b);
-  }
+  // The covariance of camera a's lens with camera b's (std::invalid_argument when either
+  // is out of range or no covariance was computed).
+  LensCovariance LensCovarianceOf(int a, int b) const;
 };
 
 // std::invalid_argument naming the problem: sizes, indices, non-finite values,
