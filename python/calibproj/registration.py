@@ -24,7 +24,7 @@ import numpy as np
 
 from calibproj import _core
 from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics
+from calibproj.io.intrinsics import Intrinsics, image_size
 from calibproj.option_tables import options_class
 from calibproj.tracks import Tracks
 
@@ -60,13 +60,6 @@ class Step:
     name: str  # initialize, register, adjust, refine, done
     camera: str | None = None
     info: dict[str, Any] = field(default_factory=dict)
-
-
-def image_size(intrinsics: Intrinsics) -> tuple[float, float]:
-    """The camera's image size, or twice its principal point when the file gives none."""
-    if intrinsics.resolution is not None:
-        return float(intrinsics.resolution[0]), float(intrinsics.resolution[1])
-    return 2.0 * float(intrinsics.K[0, 2]) + 1.0, 2.0 * float(intrinsics.K[1, 2]) + 1.0
 
 
 

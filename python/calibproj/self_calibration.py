@@ -32,7 +32,7 @@ import numpy as np
 
 from calibproj import _core
 from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics, intrinsics_from_json
+from calibproj.io.intrinsics import Intrinsics, image_size, intrinsics_from_json
 from calibproj.io.jsonio import FormatError, read_json, write_json
 from calibproj.tracks import Tracks
 
@@ -529,8 +529,6 @@ class _Problem:
     @classmethod
     def build(cls, tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
               request: RefineRequest, refused: Mapping[str, str], given: Mapping[str, Intrinsics]) -> _Problem:
-        from calibproj.registration import image_size
-
         cameras = [n for n in tracks.camera_names if n in calibration.poses and n in intrinsics]
         kept = tracks.keep_cameras(cameras).with_min_track_length(2) if cameras else Tracks.empty([])
         cameras = list(kept.camera_names)

@@ -208,11 +208,18 @@ def _intrinsics_problem(K: np.ndarray, dist: np.ndarray, resolution: Any) -> str
     if resolution is not None:
         if len(resolution) != 2 or not all(math.isfinite(v) and v == int(v) and v > 0 for v in resolution):
             return f"resolution must be two positive integers [width, height], got {resolution}"
-    # Without a resolution the principal point gives the image size (registration.image_size).
+    # Without a resolution the principal point gives the image size (image_size).
     sides = resolution if resolution is not None else (2.0 * K[0, 2] + 1.0, 2.0 * K[1, 2] + 1.0)
     if not all(0 < side <= MAX_IMAGE_SIDE for side in sides):
         return f"image size must be at most {MAX_IMAGE_SIDE} pixels per side, got {sides[0]:g}x{sides[1]:g}"
     return None
+
+
+def image_size(intrinsics: Intrinsics) -> tuple[float, float]:
+    """The camera's image size, or twice its principal point when the file gives none."""
+    if intrinsics.resolution is not None:
+        return float(intrinsics.resolution[0]), float(intrinsics.resolution[1])
+    return 2.0 * float(intrinsics.K[0, 2]) + 1.0, 2.0 * float(intrinsics.K[1, 2]) + 1.0
 
 
 def read_intrinsics(path: str | os.PathLike, name: str | None = None) -> Intrinsics:
