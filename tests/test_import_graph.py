@@ -47,7 +47,9 @@ def is_module(name: str, modules: dict[str, Path]) -> bool:
     if any((folder.parent / (last + suffix)).exists() for suffix in importlib.machinery.EXTENSION_SUFFIXES):
         return True
     spec = importlib.util.find_spec(name)
-    return spec is not None and isinstance(spec.loader, importlib.machinery.ExtensionFileLoader)
+    # An editable install wraps the extension's loader; its origin still names the library.
+    return spec is not None and (isinstance(spec.loader, importlib.machinery.ExtensionFileLoader) or
+                                 str(spec.origin).endswith(tuple(importlib.machinery.EXTENSION_SUFFIXES)))
 
 
 def imported_names(module: str, path: Path, modules: dict[str, Path]) -> set[str]:
