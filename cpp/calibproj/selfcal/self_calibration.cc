@@ -144,9 +144,11 @@ Eigen::MatrixXd LensCovariances(const Data& data, const Result& result) {
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(normalised);
   const double floor = kRelativeEigenvalueFloor * std::max(eigen.eigenvalues().maxCoeff(), 1e-300);
   const Eigen::VectorXd inverse_values = eigen.eigenvalues().cwiseMax(floor).cwiseInverse();
-  const Eigen::MatrixXd covariance =
+  const Eigen::MatrixXd product =
       scale.asDiagonal() * (eigen.eigenvectors() * inverse_values.asDiagonal() * eigen.eigenvectors().transpose()) *
       scale.asDiagonal();
+  // Symmetric to the last bit: the product's rounding is not, and its blocks are read both ways.
+  const Eigen::MatrixXd covariance = 0.5 * (product + product.transpose());
   const int C = static_cast<int>(data.poses.rows());
   Eigen::MatrixXd out = Eigen::MatrixXd::Zero(kLensSize * C, kLensSize * C);
   for (int c = 0; c < C; ++c) {
