@@ -50,7 +50,8 @@ MODULES = {"_core": _core, "_bench": _bench}
 EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "_core.sync.synchronise",
                 "_core.ingest.ingest_camera"}
 # No constructor by design (results of a call); the tiny video holds no light code.
-BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "_core.detect.MarkerFamilyInfo", "_core.ingest.ingest_camera", "_core.check.CameraCheck",
+BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "_core.detect.MarkerFamilyInfo", "_core.ingest.ingest_camera",
+                        "_core.ingest.ingest_camera[live]", "_core.check.CameraCheck",
                         "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.Calibration",
                         "_core.formats.CameraPose", "_core.formats.CameraMetrics", "_core.formats.Plane",
                         "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
@@ -501,6 +502,9 @@ class Baselines:
             "_core.video.probe": Spec([("path", f["tiny.mkv"])]),
             "_core.video.VideoInfo": Spec([]),
             "_core.video.frame_timestamps": Spec([("path", f["tiny.mkv"])]),
+            "_core.video.SourceOptions": Spec([("live", True), ("format", ""), ("ffmpeg_options", {}),
+                                              ("open_timeout_s", 0.5), ("stall_timeout_s", 0.5),
+                                              ("record_path", "")]),
             "_core.video.frame_period": Spec([("times", [0.0, 0.04, 0.08, 0.16, 0.2])]),
             "_core.video.luma_signal": Spec([("path", f["tiny.mkv"]), ("gamma", 2.2), ("row_step", 2),
                                             ("use_timestamps", True), ("max_frame_gap_s", 2.0)]),
@@ -535,8 +539,16 @@ class Baselines:
             "_core.ingest.ingest_camera": Spec(
                 [("video", f["tiny.mkv"]), ("sequence", self.core_sequence), ("K", self.K), ("dist", self.dist),
                  ("resolution", (64, 48)), ("source", "cam"), ("aruco", _core.detect.ArucoOptions()),
-                 ("apriltag", _core.detect.AprilTagOptions()), ("progress", lambda decoded, total: None)],
+                 ("apriltag", _core.detect.AprilTagOptions()), ("progress", lambda decoded, total: None),
+                 ("live", None)],
                 options=ingest_options),
+            # The tiny video read as a live source (FFmpeg's file protocol), recorded.
+            "_core.ingest.ingest_camera[live]": Spec(
+                [("video", f["tiny.mkv"]), ("sequence", self.core_sequence), ("K", self.K), ("dist", self.dist),
+                 ("resolution", (64, 48)), ("source", "cam"), ("aruco", _core.detect.ArucoOptions()),
+                 ("apriltag", _core.detect.AprilTagOptions()), ("progress", None),
+                 ("live", _core.video.SourceOptions(open_timeout_s=2.0, stall_timeout_s=2.0,
+                                                    record_path=str(self.files["tiny.mkv"]) + ".rec.mkv"))]),
         }
 
     def format_specs(self) -> dict[str, Spec]:
@@ -693,6 +705,7 @@ class Baselines:
                                                       ["0", "1"], "0", self.pose_uncertainty.covariance, [0.2, 0.3])},
             "_core.formats.ScaleFit": {"fitted": lambda: self.scale_fit()},
             "_core.video.VideoInfo": {"probed": lambda: _core.video.probe(self.files["tiny.mkv"])},
+            "_core.video.SourceOptions": {"default": _core.video.SourceOptions},
             "_core.detect.MarkerFamilyInfo": {
                 family: (lambda family=family: _core.detect.family_info(family))
                 for family in ("aruco:4X4_50", "apriltag:tagStandard41h12")},
@@ -818,6 +831,12 @@ def generate_calls(files: dict[str, str]) -> list[Call]:
         else:
             own = [Call(name, f"{name}: no baseline", lambda name=name: missing_baseline(name))]
         calls += sample(own, rng)
+    # Second baselines of a callable ("name[variant]"): another path through it.
+    for index, variant in enumerate(sorted(key for key in specs if "[" in key)):
+        rng = np.random.default_rng([SEED, 1_000_000 + index])
+        name = variant.partition("[")[0]
+        calls += sample(spec_calls(name, variant, lambda name=name: resolve(name), specs[variant], baselines, rng),
+                        rng)
     return calls
 
 
@@ -1020,13 +1039,13 @@ def test_every_public_callable_has_a_baseline(tmp_path: Path) -> None:
         needs_spec = owner not in receivers or (callable(attribute) and takes_arguments(attribute))
         assert name in covered or not needs_spec, f"{name} is bound but not fuzzed: add a baseline"
         assert owner not in receivers or owner in covered, f"{owner}: its constructor needs a baseline"
-    stale = covered - set(public_callables())
+    stale = {name.partition("[")[0] for name in covered} - set(public_callables())
     assert not stale, f"baselines of callables that are no longer bound: {sorted(stale)}"
     # The valid calls are valid, so that the bad ones test what they claim to.
     for name, spec in baselines.specs().items():
         if name.rpartition(".")[0] in receivers or name in BASELINES_THAT_RAISE:
             continue
-        resolve(name)(*[v for _, v in spec.args], **spec.kwargs)
+        resolve(name.partition("[")[0])(*[v for _, v in spec.args], **spec.kwargs)
 
 
 def test_bad_calls_neither_crash_nor_hang(tmp_path: Path) -> None:

@@ -9,7 +9,7 @@ packages=(
   libceres-dev libeigen3-dev
   libopencv-dev libopencv-contrib-dev
   libapriltag-dev
-  libavformat-dev libavcodec-dev libavutil-dev libswscale-dev
+  libavformat-dev libavcodec-dev libavutil-dev libswscale-dev libavdevice-dev
   nlohmann-json3-dev libcli11-dev
   ffmpeg
   opencv-doc  # OpenCV's sample images: tests/test_board.py checks calibproj intrinsics on them

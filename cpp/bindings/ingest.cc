@@ -16,6 +16,7 @@
 #include "checks.h"
 #include "ingest_options.h"
 #include "json_convert.h"
+#include "calibproj/video/video_reader.h"
 #include "registry.h"
 #include "sync_convert.h"
 
@@ -284,7 +285,8 @@ void register_ingest(py::module_& m) {
          const DoubleArray& dist,
          const std::optional<std::pair<int, int>>& resolution, const std::string& source,
          const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
-         const std::optional<py::function>& progress, const py::kwargs& kwargs) {
+         const std::optional<py::function>& progress, const std::optional<video::SourceOptions>& live,
+         const py::kwargs& kwargs) {
         const ingest::CameraModel camera = CameraFromArrays(K, dist, resolution, source);
         const ingest::IngestOptions options = IngestOptionsFromKwargs(aruco, apriltag, kwargs);
         ingest::ProgressCallback callback;
@@ -297,15 +299,18 @@ void register_ingest(py::module_& m) {
         ingest::CameraIngestResult result;
         {
           py::gil_scoped_release release;
-          result = ingest::IngestCamera(video, description, camera, options, callback);
+          result = ingest::IngestCamera(video, description, camera, options, callback, live.value_or(video::SourceOptions{}));
         }
         return ResultDict(result, description);
       },
       py::arg("video"), py::arg("sequence"), py::arg("K"), py::arg("dist"), py::arg("resolution"),
       py::arg("source"), py::arg("aruco"), py::arg("apriltag"), py::arg("progress") = py::none(),
+      py::arg("live") = py::none(),
       "Synchronise one camera's video with the sequence (a Sequence) and detect its "
       "MSMs: sync, statistics, per-scale records and merged centres (undistorted pixels). "
-      "`progress(decoded, total)` is called now and then. Keyword options: see option_table().");
+      "`progress(decoded, total)` is called now and then. `live` (a video.SourceOptions): `video` "
+      "is a stream or device, ingested as its frames arrive (and recorded where it says) until the "
+      "end light code is in. Keyword options: see option_table().");
 }
 
 }  // namespace calibproj::bindings

@@ -4,6 +4,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <atomic>
+#include <map>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -26,6 +29,33 @@ void register_video(py::module_& m) {
       .def_readonly("declared_fps", &video::VideoInfo::declared_fps, "the container's average frame rate")
       .def_readonly("timed", &video::VideoInfo::timed, "the container gives frame timestamps")
       .def_readonly("frame_count", &video::VideoInfo::frame_count, "as the container declares it (may be approximate)");
+  py::class_<video::SourceOptions>(m, "SourceOptions",
+                                   "How a live source (a stream URL or a device) is opened, read and recorded.")
+      .def(py::init([](bool live, const std::string& format, const std::map<std::string, std::string>& ffmpeg_options,
+                       double open_timeout_s, double stall_timeout_s, const std::string& record_path) {
+             video::SourceOptions options;
+             options.live = live;
+             options.format = format;
+             options.ffmpeg_options = ffmpeg_options;
+             options.open_timeout_s = open_timeout_s;
+             options.stall_timeout_s = stall_timeout_s;
+             options.record_path = record_path;
+             options.stop = std::make_shared<std::atomic<bool>>(false);
+             options.Check();
+             return options;
+           }),
+           py::arg("live") = true, py::arg("format") = "", py::arg("ffmpeg_options") = std::map<std::string, std::string>{},
+           py::arg("open_timeout_s") = 10.0, py::arg("stall_timeout_s") = 5.0, py::arg("record_path") = "",
+           "ValueError naming the first bad field.")
+      .def_readonly("live", &video::SourceOptions::live)
+      .def_readonly("format", &video::SourceOptions::format, "FFmpeg's input format; empty: from the URL")
+      .def_readonly("ffmpeg_options", &video::SourceOptions::ffmpeg_options, "options of FFmpeg's protocol or device")
+      .def_readonly("open_timeout_s", &video::SourceOptions::open_timeout_s, "first frames within this")
+      .def_readonly("stall_timeout_s", &video::SourceOptions::stall_timeout_s, "nothing for this long: ended")
+      .def_readonly("record_path", &video::SourceOptions::record_path, "Matroska recording; empty: none")
+      .def("request_stop", [](const video::SourceOptions& options) { options.stop->store(true); },
+           "Ends reading at once (from any thread), blocking network reads included.")
+      .def_property_readonly("stop_requested", [](const video::SourceOptions& options) { return options.stop->load(); });
   m.def(
       "probe",
       [](const std::string& path) {

@@ -20,7 +20,7 @@ from __future__ import annotations
 import logging
 import os
 import threading
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -192,6 +192,8 @@ def ingest(
     workers: int = DEFAULT_WORKERS,
     progress: bool = True,
     exposures: Mapping[str, float] | None = None,
+    live: Mapping[str, Any] | None = None,
+    observer: Callable[[str, int], None] | None = None,
 ) -> IngestResult:
     """Synchronise and detect every camera's video; tracks and reports.
 
@@ -209,6 +211,12 @@ def ingest(
         progress: show a progress bar per camera (on terminals).
         exposures: known exposure times in seconds of some cameras (camera name ->
             seconds), overriding ``options.exposure_s`` (see there when it matters).
+        live: cameras whose "video" is a live source (a stream URL or a device), name ->
+            ``calibproj._core.video.SourceOptions``: each is ingested as its frames
+            arrive, all at once whatever ``workers`` says, and recorded where its options
+            say; the ingest of one ends once the end light code is in.
+        observer: called from the cameras' threads as ``observer(name, frames_decoded)``
+            now and then (every 25 frames, and at the first).
 
     Raises:
         ValueError: no videos, an unreadable sequence file, bad options. Per-camera
@@ -216,21 +224,25 @@ def ingest(
     """
     sequence, sequence_source = _load_sequence(sequence)
     options = options or IngestOptions()
-    paths = video_paths(videos)
+    live = dict(live or {})
+    paths = video_paths(videos, urls=set(live))
+    unknown = sorted(set(live) - set(paths))
+    if unknown:
+        raise ValueError(f"live sources given for camera(s) without a source: {', '.join(unknown)}")
     aruco, apriltag = _detector_options(sequence.markers.system, detector_options or {})
     core_sequence = sequence.core()  # read by the core once, for every camera
     names = list(paths)
-    bars = _Progress(names, enabled=progress)
+    bars = _Progress(names, enabled=progress, observer=observer, live=live)
     exposures = dict(exposures or {})
     check_exposures(exposures, names)
 
     def run(name: str) -> CameraIngest:
         camera_options = options.replace(exposure_s=exposures.get(name, options.exposure_s))
-        job = _CameraJob(core_sequence, camera_options, aruco, apriltag, bars)
+        job = _CameraJob(core_sequence, camera_options, aruco, apriltag, bars, live.get(name))
         return job.run(name, paths[name], _intrinsics_for(intrinsics, name))
 
     try:
-        with ThreadPoolExecutor(max_workers=max(1, workers), thread_name_prefix="ingest") as pool:
+        with ThreadPoolExecutor(max_workers=max(1, workers, len(live)), thread_name_prefix="ingest") as pool:
             try:
                 cameras = dict(zip(names, pool.map(run, names)))
             except BaseException:
@@ -249,14 +261,15 @@ class _CameraJob:
     """Runs the C++ ingest of one camera and turns failures into reports."""
 
     def __init__(self, sequence: Any, options: IngestOptions, aruco: Any, apriltag: Any,
-                 bars: _Progress) -> None:
+                 bars: _Progress, live: Any = None) -> None:
         self.sequence = sequence  # the core's (Sequence.core())
         self.kwargs = options.to_kwargs()
         self.aruco = aruco
         self.apriltag = apriltag
         self.bars = bars
+        self.live = live
 
-    def run(self, name: str, video: Path, intrinsics: tuple[Intrinsics | None, str]) -> CameraIngest:
+    def run(self, name: str, video: Path | str, intrinsics: tuple[Intrinsics | None, str]) -> CameraIngest:
         from calibproj import _core
 
         camera_intrinsics, source = intrinsics
@@ -267,14 +280,14 @@ class _CameraJob:
             resolution = camera_intrinsics.resolution
             report.raw = _core.ingest.ingest_camera(
                 str(video), self.sequence, camera_intrinsics.K, camera_intrinsics.dist, resolution, source,
-                self.aruco, self.apriltag, self.bars.callback(name), **self.kwargs)
+                self.aruco, self.apriltag, self.bars.callback(name), live=self.live, **self.kwargs)
         except (ValueError, RuntimeError, OSError) as error:
             if self.bars.cancelled.is_set():  # the C++ core reports the interruption as its error
                 raise KeyboardInterrupt(f"camera {name}: ingest interrupted") from None
             self.bars.finish(name, complete=False)
             report.error = str(error)
             logger.error("camera %s failed: %s", name, error)
-            if SYNC_FAILURE in report.error:
+            if SYNC_FAILURE in report.error and self.live is None:
                 report.brightness, report.brightness_step = _brightness_trace(video, self.kwargs)
         else:
             self.bars.finish(name, complete=True)
@@ -288,8 +301,11 @@ class _Progress:
     ``cancel`` is called, the next progress call of every camera raises, which unwinds
     its C++ ingest within a fraction of a second (it calls back every 25 frames)."""
 
-    def __init__(self, names: list[str], enabled: bool) -> None:
+    def __init__(self, names: list[str], enabled: bool, observer: Callable[[str, int], None] | None = None,
+                 live: Mapping[str, Any] | None = None) -> None:
         self.enabled = enabled
+        self.observer = observer
+        self.live = dict(live or {})  # their reads are stopped at once on cancel
         self.bars: dict[str, Any] = {}
         self.lock = threading.Lock()
         self.positions = {name: index for index, name in enumerate(names)}
@@ -297,11 +313,15 @@ class _Progress:
 
     def cancel(self) -> None:
         self.cancelled.set()
+        for source in self.live.values():
+            source.request_stop()
 
     def callback(self, name: str) -> Any:
         def update(decoded: int, total: int) -> None:
             if self.cancelled.is_set():
                 raise KeyboardInterrupt(f"camera {name}: ingest interrupted")
+            if self.observer is not None:
+                self.observer(name, decoded)
             if not self.enabled:
                 return
             bar = self._bar(name, total)
@@ -396,10 +416,11 @@ def _load_sequence(sequence: Any) -> tuple[Any, str]:
     return Sequence.load(sequence), str(sequence)
 
 
-def video_paths(videos: Any) -> dict[str, Path]:
-    """Camera name -> video path, in name order."""
+def video_paths(videos: Any, urls: set[str] = frozenset()) -> dict[str, Path | str]:
+    """Camera name -> video path, in name order; the sources of the cameras named in
+    ``urls`` (live streams) are kept as given."""
     if isinstance(videos, Mapping):
-        paths = {str(name): Path(path) for name, path in videos.items()}
+        paths = {str(name): str(path) if str(name) in urls else Path(path) for name, path in videos.items()}
     elif isinstance(videos, (str, os.PathLike)):
         folder = Path(videos)
         if not folder.is_dir():

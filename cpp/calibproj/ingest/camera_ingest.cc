@@ -65,11 +65,11 @@ double MeanSide(const detect::Quad& quad) {
 class CameraIngest {
  public:
   CameraIngest(const std::string& path, const SequenceDescription& sequence, const CameraModel& camera,
-               const IngestOptions& options, const ProgressCallback& progress)
+               const IngestOptions& options, const ProgressCallback& progress, const video::SourceOptions& source)
       : path_(path),
         sequence_(sequence),
         camera_(camera),
-        reader_(path),
+        reader_(path, source),
         options_(Prepared(options, sequence, reader_.info().fps)),
         progress_(progress),
         family_(detect::ParseMarkerFamily(sequence.markers)),
@@ -101,6 +101,7 @@ class CameraIngest {
 
   CameraIngestResult Run() {
     const auto started = std::chrono::steady_clock::now();
+    bool seen_end = false;  // every frame the sync and the picks need was decoded
     while (reader_.Grab()) {
       const int decoded = reader_.frame_index() + 1;
       if (progress_ && decoded % kProgressInterval == 1) progress_(decoded, reader_.info().frame_count);
@@ -114,10 +115,18 @@ class CameraIngest {
         OnFrameAfterStart(frame);
         // Past the end code's window and the last planned pick nothing is used: a
         // recording that runs on after the projection is not decoded further.
-        if (frame >= last_needed_frame_) break;
+        if (frame >= last_needed_frame_) {
+          seen_end = true;
+          break;
+        }
       } else {
         OnFrameBeforeStart(frame);
       }
+    }
+    if (!seen_end && !reader_.end_reason().empty()) {
+      // A live source that stalled or was stopped: the projection is not all there.
+      throw std::runtime_error(path_ + ": the source " + reader_.end_reason() + " before " +
+                               (started_ ? "the end of the projection" : "the start light code was seen"));
     }
     result_.frames_decoded = reader_.frame_index() + 1;
     result_.timing = clock_.Stats();
@@ -798,11 +807,11 @@ void IngestOptions::Check() const {
 
 CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,
                                 const CameraModel& camera, const IngestOptions& options,
-                                const ProgressCallback& progress) {
+                                const ProgressCallback& progress, const video::SourceOptions& source) {
   camera.lens.Check();
   sequence.Check();
   options.Check();
-  return CameraIngest(video_path, sequence, camera, options, progress).Run();
+  return CameraIngest(video_path, sequence, camera, options, progress, source).Run();
 }
 
 }  // namespace calibproj::ingest

@@ -187,8 +187,12 @@ using ProgressCallback = std::function<void(int decoded, int total)>;
 // Ingests one camera. Throws std::runtime_error / std::invalid_argument naming the
 // video (or the intrinsics source) when the video cannot be read, has another frame
 // size than the intrinsics, or cannot be synchronised with the sequence.
+// With a live `source` (a stream or device, video_reader.h) the camera is ingested as
+// its frames arrive (and recorded, when the source says where): the ingest ends
+// once the frames of the end light code are in, and a source that stalls or is
+// stopped before then fails with the reason.
 CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,
                                 const CameraModel& camera, const IngestOptions& options,
-                                const ProgressCallback& progress = {});
+                                const ProgressCallback& progress = {}, const video::SourceOptions& source = {});
 
 }  // namespace calibproj::ingest

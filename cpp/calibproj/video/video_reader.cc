@@ -1,9 +1,11 @@
 #include "calibproj/video/video_reader.h"
 
+#include "calibproj/video/ffmpeg_log.h"
+#include "calibproj/video/recording.h"
+
 extern "C" {
 #include <libavcodec/avcodec.h>
 #include <libavformat/avformat.h>
-#include <libavutil/log.h>
 #include <libavutil/pixdesc.h>
 #include <libswscale/swscale.h>
 }
@@ -11,8 +13,8 @@ extern "C" {
 #include <opencv2/core.hpp>
 
 #include <algorithm>
-#include <cctype>
-#include <cstdarg>
+#include <chrono>
+#include <cstdio>
 #include <mutex>
 #include <cmath>
 #include <deque>
@@ -23,32 +25,6 @@ extern "C" {
 namespace calibproj::video {
 
 namespace {
-
-// FFmpeg's own messages do not reach the user's terminal: its last error on this thread
-// is kept and named in the one error line of a video that cannot be read.
-thread_local std::string last_ffmpeg_error;
-
-void KeepError(void* context, int level, const char* format, va_list arguments) {
-  if (level > AV_LOG_ERROR) return;
-  char line[512];
-  int print_prefix = 0;  // without FFmpeg's "[component @ 0x...]" prefix
-  av_log_format_line2(context, level, format, arguments, line, sizeof line, &print_prefix);
-  std::string text(line);
-  while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
-  if (!text.empty()) last_ffmpeg_error = text;
-}
-
-void KeepFfmpegErrors() {
-  static std::once_flag once;
-  std::call_once(once, [] { av_log_set_callback(KeepError); });
-}
-
-// "; FFmpeg: <its last error>" (and forgets it), or "" when it said nothing.
-std::string FfmpegSaid() {
-  std::string said;
-  said.swap(last_ffmpeg_error);
-  return said.empty() ? "" : "; FFmpeg: " + said;
-}
 
 double Rate(AVRational r) { return r.num > 0 && r.den > 0 ? av_q2d(r) : 0.0; }
 
@@ -110,6 +86,49 @@ struct VideoReader::Decoder {
   bool draining = false;
   std::deque<AVPacket*> peeked;  // read ahead at opening, decoded first
   const cv::Mat limited_to_full = LimitedToFullTable();
+  SourceOptions source;
+  std::unique_ptr<PacketRecorder> recorder;
+  // A live read blocked past this moment is interrupted (FFmpeg polls Interrupted).
+  std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
+  std::string end_reason;
+
+  static int Interrupted(void* opaque) {
+    Decoder& d = *static_cast<Decoder*>(opaque);
+    if (d.source.stop && d.source.stop->load()) {
+      d.end_reason = "stopped";
+      return 1;
+    }
+    if (std::chrono::steady_clock::now() > d.deadline) {
+      if (d.end_reason.empty()) d.end_reason = "stalled: no data for " + Seconds(d.source.stall_timeout_s);
+      return 1;
+    }
+    return 0;
+  }
+
+  static std::string Seconds(double seconds) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%g s", seconds);
+    return text;
+  }
+
+  void ArmDeadline(double seconds) {
+    if (!source.live) return;
+    deadline = std::chrono::steady_clock::now() +
+               std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(seconds));
+  }
+
+  // The next packet of any stream (recording those of the video stream); false at the
+  // end of the stream, when stopped or stalled.
+  bool Read(AVPacket* p, double timeout_s) {
+    ArmDeadline(timeout_s);
+    if (source.stop && source.stop->load()) {
+      end_reason = "stopped";
+      return false;
+    }
+    if (av_read_frame(format, p) < 0) return false;
+    if (recorder && p->stream_index == stream) recorder->Write(*p);
+    return true;
+  }
 
   ~Decoder() {
     for (AVPacket* p : peeked) av_packet_free(&p);
@@ -130,7 +149,7 @@ struct VideoReader::Decoder {
         av_packet_move_ref(packet, peeked.front());
         av_packet_free(&peeked.front());
         peeked.pop_front();
-      } else if (av_read_frame(format, packet) < 0) {
+      } else if (!Read(packet, source.stall_timeout_s)) {
         // End of file (or unreadable from here on): flush the frames still inside.
         draining = true;
         avcodec_send_packet(codec, nullptr);
@@ -155,7 +174,7 @@ struct VideoReader::Decoder {
     while (static_cast<int>(peeked.size()) < kPeekPackets) {
       AVPacket* p = av_packet_alloc();
       if (p == nullptr) throw std::bad_alloc();
-      if (av_read_frame(format, p) < 0) {
+      if (!Read(p, peeked.empty() ? source.open_timeout_s : source.stall_timeout_s)) {
         av_packet_free(&p);
         break;
       }
@@ -171,16 +190,45 @@ struct VideoReader::Decoder {
   }
 };
 
-VideoReader::VideoReader(const std::string& path) : decoder_(std::make_unique<Decoder>()) {
+VideoReader::VideoReader(const std::string& path, const SourceOptions& source)
+    : decoder_(std::make_unique<Decoder>()) {
+  source.Check();
   info_.path = path;
-  if (!std::filesystem::is_regular_file(path)) throw std::runtime_error(path + ": no such video file");
+  if (!source.live && !std::filesystem::is_regular_file(path)) throw std::runtime_error(path + ": no such video file");
   KeepFfmpegErrors();
-  const auto unreadable = [&path] {
+  Decoder& d = *decoder_;
+  d.source = source;
+  const auto unreadable = [&path, &d] {
+    if (d.source.live) {
+      const std::string why = d.end_reason == "stopped" ? "stopped while opening"
+                              : !d.end_reason.empty()   ? "no answer within " + Decoder::Seconds(d.source.open_timeout_s)
+                                                        : "not a stream FFmpeg reads";
+      return std::runtime_error(path + ": cannot open the live source (" + why + FfmpegSaid() + ")");
+    }
     return std::runtime_error(path + ": cannot open the video (corrupt, truncated or not a video FFmpeg reads" +
                               FfmpegSaid() + ")");
   };
-  Decoder& d = *decoder_;
-  if (avformat_open_input(&d.format, path.c_str(), nullptr, nullptr) < 0) throw unreadable();
+  d.format = avformat_alloc_context();
+  if (d.format == nullptr) throw std::bad_alloc();
+  d.format->interrupt_callback = AVIOInterruptCB{&Decoder::Interrupted, &d};
+  const AVInputFormat* input_format = nullptr;
+  if (!source.format.empty()) {
+    input_format = av_find_input_format(source.format.c_str());
+    if (input_format == nullptr) {
+      throw std::runtime_error(path + ": FFmpeg has no input format \"" + source.format + "\"");
+    }
+  }
+  AVDictionary* ffmpeg_options = nullptr;
+  for (const auto& [key, value] : source.ffmpeg_options) av_dict_set(&ffmpeg_options, key.c_str(), value.c_str(), 0);
+  d.ArmDeadline(source.open_timeout_s);
+  const int opened = avformat_open_input(&d.format, path.c_str(), input_format, &ffmpeg_options);
+  const AVDictionaryEntry* unused = av_dict_get(ffmpeg_options, "", nullptr, AV_DICT_IGNORE_SUFFIX);
+  const std::string unused_key = unused != nullptr ? unused->key : "";
+  av_dict_free(&ffmpeg_options);
+  if (opened < 0) throw unreadable();  // avformat_open_input freed the context
+  if (!unused_key.empty()) {
+    throw std::runtime_error(path + ": FFmpeg's source does not know the option \"" + unused_key + "\"");
+  }
   if (avformat_find_stream_info(d.format, nullptr) < 0) throw unreadable();
   const AVCodec* codec = nullptr;
   d.stream = av_find_best_stream(d.format, AVMEDIA_TYPE_VIDEO, -1, -1, &codec, 0);
@@ -198,9 +246,18 @@ VideoReader::VideoReader(const std::string& path) : decoder_(std::make_unique<De
 
   info_.width = stream->codecpar->width;
   info_.height = stream->codecpar->height;
+  if (info_.width <= 0 || info_.height <= 0) {
+    // A live stream joined between key frames has not told its parameters yet.
+    throw std::runtime_error(path + (source.live ? ": the stream sent no key frame with its frame size within " +
+                                                       Decoder::Seconds(source.open_timeout_s)
+                                                 : ": the video declares no frame size"));
+  }
+  if (!source.record_path.empty()) d.recorder = std::make_unique<PacketRecorder>(source.record_path, *stream);
   info_.declared_fps =
       Rate(stream->avg_frame_rate) > 0.0 ? Rate(stream->avg_frame_rate) : Rate(stream->r_frame_rate);
-  info_.fps = GridRate(d.PeekTimes(), {Rate(stream->r_frame_rate), Rate(stream->avg_frame_rate)});
+  const std::vector<double> first_times = d.PeekTimes();
+  if (source.live && d.peeked.empty()) throw unreadable();
+  info_.fps = GridRate(first_times, {Rate(stream->r_frame_rate), Rate(stream->avg_frame_rate)});
   info_.timed = info_.fps > 0.0;
   if (!info_.timed) info_.fps = info_.declared_fps;
   if (stream->nb_frames > 0) {
@@ -208,13 +265,31 @@ VideoReader::VideoReader(const std::string& path) : decoder_(std::make_unique<De
   } else if (stream->duration > 0) {
     info_.frame_count = static_cast<int>(std::lround(stream->duration * av_q2d(stream->time_base) * info_.fps));
   }
-  if (info_.width <= 0 || info_.height <= 0) throw std::runtime_error(path + ": the video declares no frame size");
   if (!(info_.fps > 0.0) || !std::isfinite(info_.fps)) {
     throw std::runtime_error(path + ": the video declares no frame rate");
   }
 }
 
 VideoReader::~VideoReader() = default;
+
+const std::string& VideoReader::end_reason() const { return decoder_->end_reason; }
+
+long long VideoReader::recorded_packets() const {
+  return decoder_->recorder ? decoder_->recorder->packets() : 0;
+}
+
+void SourceOptions::Check() const {
+  const auto require = [](bool ok, const std::string& message) {
+    if (!ok) throw std::invalid_argument("source options: " + message);
+  };
+  require(open_timeout_s > 0.0 && open_timeout_s <= 3600.0, "open_timeout_s must be in (0, 3600]");
+  require(stall_timeout_s > 0.0 && stall_timeout_s <= 3600.0, "stall_timeout_s must be in (0, 3600]");
+  require(live || (format.empty() && ffmpeg_options.empty()), "a format and FFmpeg options are for live sources");
+  for (const auto& [key, value] : ffmpeg_options) {
+    require(!key.empty() && key.find('\0') == std::string::npos && value.find('\0') == std::string::npos,
+            "FFmpeg option names must be non-empty text");
+  }
+}
 
 bool VideoReader::Grab() {
   if (!decoder_->Next()) return false;

@@ -10,6 +10,8 @@
 
 #include <opencv2/core.hpp>
 
+#include <atomic>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -28,11 +30,36 @@ struct VideoInfo {
   int frame_count = 0;        // as the container declares it (may be approximate)
 };
 
+// How a video is opened: a file (the default), or a live source that FFmpeg reads (a
+// stream URL such as rtsp://, http://, udp://, or a device such as /dev/video0 with
+// format "v4l2"), optionally recorded while it is read.
+struct SourceOptions {
+  bool live = false;
+  // FFmpeg's input format ("v4l2", "mpegts", ...); empty: found from the URL or content.
+  std::string format;
+  // Options of FFmpeg's protocol or device (e.g. rtsp_transport=tcp, video_size=1280x720).
+  std::map<std::string, std::string> ffmpeg_options;
+  // A live source must give its first frames within open_timeout_s; one that then sends
+  // nothing for stall_timeout_s has ended (end_reason() says so).
+  double open_timeout_s = 10.0;
+  double stall_timeout_s = 5.0;
+  // Every packet of the video stream, as read (not re-encoded, timestamps kept), is
+  // written to this Matroska file; empty: nothing recorded.
+  std::string record_path;
+  // Set from another thread: reading ends at once, as at the end of the stream, blocking
+  // network reads included.
+  std::shared_ptr<std::atomic<bool>> stop;
+
+  // Throws std::invalid_argument naming the first bad field.
+  void Check() const;
+};
+
 class VideoReader {
  public:
-  // Opens the video; throws std::runtime_error naming the file when it cannot be
-  // opened, has no video stream FFmpeg decodes, or declares no frame size or rate.
-  explicit VideoReader(const std::string& path);
+  // Opens the video; throws std::runtime_error naming the file (or source) when it
+  // cannot be opened, has no video stream FFmpeg decodes, or declares no frame size or
+  // rate, and a live source that gives no frame within its open timeout.
+  explicit VideoReader(const std::string& path, const SourceOptions& source = {});
   ~VideoReader();
   VideoReader(const VideoReader&) = delete;
   VideoReader& operator=(const VideoReader&) = delete;
@@ -52,6 +79,13 @@ class VideoReader {
   // The image owns its pixels: it stays valid after the next Grab(). Throws
   // std::runtime_error naming the file when the frame is not of the declared size.
   cv::Mat Gray();
+
+  // Why Grab() returned false: "" at the end of the stream, else "stopped" or, for a
+  // live source, "stalled: no data for N s".
+  const std::string& end_reason() const;
+  // Packets written to the recording so far (0 without one). The recording is
+  // finished (readable to its last packet) when the reader is destroyed.
+  long long recorded_packets() const;
 
  private:
   struct Decoder;

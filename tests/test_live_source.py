@@ -1,0 +1,168 @@
+"""Live sources: a camera stream read over loopback as it arrives, synchronised and
+detected while it plays, and recorded unchanged; streams that never open, stall or are
+stopped give one line naming the source."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibproj import _core
+from calibproj.ingest import ingest
+from calibproj.simulate.render import RenderOptions, simulate_videos
+
+from test_ingest import msm_sequence  # the tests folder is on sys.path under pytest
+
+CAMERA = "cam1"
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory):
+    """One camera of the small room, rendered with the projection (about 6 s) and 1 s of
+    tail, and the same video re-encoded with a key frame every 0.5 s (a camera's stream:
+    a receiver that joins late is not left without the stream's parameters)."""
+    out = tmp_path_factory.mktemp("live")
+    sequence = msm_sequence("aruco:4X4_50")
+    simulate_videos("small", sequence, out, seed=7, options=RenderOptions(tail_s=1.0))
+    sequence_path = out / "sequence.json"
+    sequence.save(sequence_path)
+    stream = out / "stream.mkv"
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(out / "videos" / f"{CAMERA}.mp4"), "-c:v", "libx264",
+                    "-preset", "ultrafast", "-g", "15", "-pix_fmt", "yuv420p", str(stream)], check=True)
+    return out, sequence_path, stream
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def send(video: Path, url: str, delay_s: float, seconds: float | None = None) -> threading.Thread:
+    """Plays the video in real time to ``url`` (MPEG-TS over UDP) after ``delay_s``, as a
+    network camera sends: packets unchanged (``seconds``: only the first ones)."""
+    def run() -> None:
+        time.sleep(delay_s)
+        limit = ["-t", str(seconds)] if seconds is not None else []
+        subprocess.run(["ffmpeg", "-v", "error", "-re", *limit, "-i", str(video), "-c", "copy", "-f", "mpegts", url],
+                       check=False, timeout=60)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return thread
+
+
+def test_a_stream_is_ingested_as_it_arrives_and_recorded_unchanged(room, tmp_path):
+    out, sequence, stream = room
+    url = f"udp://127.0.0.1:{free_udp_port()}"
+    recording = tmp_path / "cam1.mkv"
+    source = _core.video.SourceOptions(record_path=str(recording), open_timeout_s=10.0, stall_timeout_s=3.0)
+    seen: list[int] = []
+    sender = send(stream, url, delay_s=0.5)
+    started = time.monotonic()
+    live = ingest({CAMERA: url}, sequence, out / "intrinsics", live={CAMERA: source}, progress=False,
+                  observer=lambda name, decoded: seen.append(decoded))
+    live_s = time.monotonic() - started
+    sender.join()
+    sent_s = time.monotonic() - started
+    camera = live.cameras[CAMERA]
+    assert camera.error is None, camera.error
+    assert seen and seen[0] == 1
+    # The ingest ends with the end light code, before the stream's tail has been sent.
+    assert live_s < sent_s
+
+    recorded = ingest({CAMERA: recording}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
+    assert recorded.error is None, recorded.error
+    # The recording holds the packets that were decoded live: the same frames, the same
+    # light code fit and the same centres.
+    for key in ("array", "marker"):
+        np.testing.assert_array_equal(recorded.raw["centres"][key], camera.raw["centres"][key])
+    np.testing.assert_allclose(recorded.raw["centres"]["xy"], camera.raw["centres"]["xy"], atol=1e-9)
+    assert recorded.raw["sync"]["offset"] == pytest.approx(camera.raw["sync"]["offset"], abs=1e-9)
+
+    # Against the file the stream was made from: the same MSMs within what the stream's
+    # re-encoding changes.
+    original = ingest({CAMERA: stream}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
+    assert len(camera.raw["centres"]["array"]) >= 0.95 * len(original.raw["centres"]["array"])
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["cameras"]  # the rendered room's truth is there for the capture tests
+
+
+def test_a_source_that_never_answers_is_named_in_one_line(room):
+    out, sequence, _ = room
+    url = f"udp://127.0.0.1:{free_udp_port()}"
+    source = _core.video.SourceOptions(open_timeout_s=1.0)
+    started = time.monotonic()
+    camera = ingest({CAMERA: url}, sequence, out / "intrinsics", live={CAMERA: source}, progress=False).cameras[CAMERA]
+    assert time.monotonic() - started < 10.0
+    assert camera.error.startswith(f"{url}: cannot open the live source (no answer within 1 s")
+    assert "\n" not in camera.error
+
+
+def test_a_refused_connection_is_named_in_one_line(room):
+    out, sequence, _ = room
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]  # closed again: nobody listens there
+    url = f"http://127.0.0.1:{port}/camera"
+    camera = ingest({CAMERA: url}, sequence, out / "intrinsics", live={CAMERA: _core.video.SourceOptions()},
+                    progress=False).cameras[CAMERA]
+    assert camera.error.startswith(f"{url}: cannot open the live source")
+    assert "refused" in camera.error.lower()
+
+
+def test_a_stream_that_dies_mid_projection_is_reported_with_the_reason(room, tmp_path):
+    out, sequence, stream = room
+    url = f"udp://127.0.0.1:{free_udp_port()}"
+    recording = tmp_path / "cut.mkv"
+    source = _core.video.SourceOptions(record_path=str(recording), open_timeout_s=10.0, stall_timeout_s=1.0)
+    sender = send(stream, url, delay_s=0.3, seconds=3.0)
+    camera = ingest({CAMERA: url}, sequence, out / "intrinsics", live={CAMERA: source}, progress=False).cameras[CAMERA]
+    sender.join()
+    assert camera.error.startswith(f"{url}: the source stalled: no data for 1 s before the end of the projection")
+    # What arrived is kept, readable.
+    info = _core.video.probe(str(recording))
+    assert (info.width, info.height) == (640, 360)
+
+
+def test_a_stop_ends_a_blocked_read_at_once(room):
+    out, sequence, _ = room
+    url = f"udp://127.0.0.1:{free_udp_port()}"
+    source = _core.video.SourceOptions(open_timeout_s=30.0)
+    threading.Timer(0.5, source.request_stop).start()
+    started = time.monotonic()
+    camera = ingest({CAMERA: url}, sequence, out / "intrinsics", live={CAMERA: source}, progress=False).cameras[CAMERA]
+    assert time.monotonic() - started < 5.0
+    assert source.stop_requested
+    assert camera.error == f"{url}: cannot open the live source (stopped while opening)"
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"open_timeout_s": 0.0}, "open_timeout_s must be in (0, 3600]"),
+    ({"stall_timeout_s": float("nan")}, "stall_timeout_s must be in (0, 3600]"),
+    ({"live": False, "format": "v4l2"}, "a format and FFmpeg options are for live sources"),
+    ({"ffmpeg_options": {"": "1"}}, "FFmpeg option names must be non-empty text"),
+])
+def test_bad_source_options_are_refused(fields, message):
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace("]", r"\]")):
+        _core.video.SourceOptions(**fields)
+
+
+def test_unknown_source_options_and_formats_are_named(room):
+    out, sequence, stream = room
+    url = str(stream)  # FFmpeg's file protocol: a source that opens at once
+    for source, message in [
+        (_core.video.SourceOptions(format="no-such-format"), 'FFmpeg has no input format "no-such-format"'),
+        (_core.video.SourceOptions(ffmpeg_options={"no_such_option": "1"}, open_timeout_s=1.0),
+         'does not know the option "no_such_option"'),
+    ]:
+        camera = ingest({CAMERA: url}, sequence, out / "intrinsics", live={CAMERA: source},
+                        progress=False).cameras[CAMERA]
+        assert camera.error.startswith(url) and message in camera.error
