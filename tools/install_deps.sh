@@ -10,6 +10,8 @@ packages=(
   libopencv-dev libopencv-contrib-dev
   libapriltag-dev
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev libavdevice-dev
+  libmpv-dev  # the projector of `calibproj capture`
+  xvfb  # the virtual operating room's projector display (tests, `calibproj demo --live`)
   nlohmann-json3-dev libcli11-dev
   ffmpeg
   opencv-doc  # OpenCV's sample images: tests/test_board.py checks calibproj intrinsics on them

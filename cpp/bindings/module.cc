@@ -37,4 +37,6 @@ PYBIND11_MODULE(_core, m) {
   calibproj::bindings::register_check(check);
   auto formats = m.def_submodule("formats", "Results files, metric scale and exports (as calibproj-native writes them)");
   calibproj::bindings::register_formats(formats);
+  auto capture = m.def_submodule("capture", "The room run live: the projector and the site file");
+  calibproj::bindings::register_capture(capture);
 }

@@ -18,6 +18,7 @@ void register_selfcal(pybind11::module_& m);
 void register_check(pybind11::module_& m);
 void register_formats(pybind11::module_& m);
 void register_uncertainty(pybind11::module_& m);
+void register_capture(pybind11::module_& m);
 
 // Defines m.<name>(...) solving with the given costs; register_ba uses the analytic
 // ones, the benchmark-only module calibproj._bench the AutoDiff ones.

@@ -40,7 +40,6 @@ void register_video(py::module_& m) {
              options.open_timeout_s = open_timeout_s;
              options.stall_timeout_s = stall_timeout_s;
              options.record_path = record_path;
-             options.stop = std::make_shared<std::atomic<bool>>(false);
              options.Check();
              return options;
            }),

@@ -194,6 +194,7 @@ def ingest(
     exposures: Mapping[str, float] | None = None,
     live: Mapping[str, Any] | None = None,
     observer: Callable[[str, int], None] | None = None,
+    finished: Callable[[CameraIngest], None] | None = None,
 ) -> IngestResult:
     """Synchronise and detect every camera's video; tracks and reports.
 
@@ -217,6 +218,8 @@ def ingest(
             say; the ingest of one ends once the end light code is in.
         observer: called from the cameras' threads as ``observer(name, frames_decoded)``
             now and then (every 25 frames, and at the first).
+        finished: called from a camera's thread with its ``CameraIngest`` as soon as it
+            is done (failed or not).
 
     Raises:
         ValueError: no videos, an unreadable sequence file, bad options. Per-camera
@@ -232,7 +235,7 @@ def ingest(
     aruco, apriltag = _detector_options(sequence.markers.system, detector_options or {})
     core_sequence = sequence.core()  # read by the core once, for every camera
     names = list(paths)
-    bars = _Progress(names, enabled=progress, observer=observer, live=live)
+    bars = _Progress(names, enabled=progress, observer=observer, live=live, finished=finished)
     exposures = dict(exposures or {})
     check_exposures(exposures, names)
 
@@ -292,6 +295,8 @@ class _CameraJob:
         else:
             self.bars.finish(name, complete=True)
             logger.info("camera %s: %d MSMs", name, len(report.raw["centres"]["array"]))
+        if self.bars.finished is not None:
+            self.bars.finished(report)
         return report
 
 
@@ -302,9 +307,11 @@ class _Progress:
     its C++ ingest within a fraction of a second (it calls back every 25 frames)."""
 
     def __init__(self, names: list[str], enabled: bool, observer: Callable[[str, int], None] | None = None,
-                 live: Mapping[str, Any] | None = None) -> None:
+                 live: Mapping[str, Any] | None = None,
+                 finished: Callable[[CameraIngest], None] | None = None) -> None:
         self.enabled = enabled
         self.observer = observer
+        self.finished = finished
         self.live = dict(live or {})  # their reads are stopped at once on cancel
         self.bars: dict[str, Any] = {}
         self.lock = threading.Lock()

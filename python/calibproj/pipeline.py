@@ -23,6 +23,7 @@ from typing import Any
 
 from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics, has_intrinsics_file, intrinsics_of_cameras, write_intrinsics_dir
+from calibproj.ingest import IngestResult
 from calibproj.ingest_inputs import check_videos
 from calibproj.ingest_options import IngestOptions
 from calibproj.io.output_folder import OutputFolder
@@ -32,14 +33,15 @@ from calibproj.provenance import provenance, write_provenance
 from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
 from calibproj.self_calibration import (RefineRequest, SelfCalibrationOptions, closed_form_start, convert_tracks,
                                         nominal_intrinsics, self_calibrate, write_self_calibration)
-from calibproj.results import CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, TRACKS_FILE
+from calibproj.results import (CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, RECORDINGS_DIR,
+                               TRACKS_FILE)
 from calibproj.tracks import Tracks
 from calibproj.io.jsonio import FormatError
 
 logger = logging.getLogger(__name__)
 
 def calibrate(
-    source: Tracks | str | os.PathLike,
+    source: Tracks | IngestResult | str | os.PathLike,
     intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None,
     *,
     sequence: Any = None,
@@ -59,12 +61,14 @@ def calibrate(
     self_calibration_options: SelfCalibrationOptions | None = None,
     nominal_fov_deg: float | None = None,
     merge: str | os.PathLike | None = None,
+    recordings: str | os.PathLike | None = None,
 ) -> Calibration:
     """Calibrate a camera network and, with ``out``, write its results folder.
 
     Args:
-        source: ``Tracks``, a ``tracks.json``, or a folder of camera videos
-            (``<camera>.mp4``; then ``sequence`` is required).
+        source: ``Tracks``, a ``tracks.json``, a folder of camera videos
+            (``<camera>.mp4``; then ``sequence`` is required), or the
+            ``calibproj.ingest.IngestResult`` of videos already ingested (a capture's).
         intrinsics: camera name -> ``Intrinsics``, or a folder of intrinsics files.
         sequence: the projection's ``sequence.json`` (or ``Sequence``): needed for
             videos and for ``scale="marker-size:..."``.
@@ -101,6 +105,8 @@ def calibrate(
             point ids are new) and ``sequence`` is that densified sequence. A camera the
             new projection gives nothing keeps its earlier observations. The intrinsics
             must be the ones the earlier results used. None (default): nothing merged.
+        recordings: a folder (the capture's recorded videos) moved into the results folder
+            as ``recordings/`` when the results are written; left where it is otherwise.
     """
     from calibproj.export import parse_formats
     from calibproj.scale import check_measurement, parse_scale, scale_factor, scaled
@@ -131,11 +137,12 @@ def calibrate(
         if videos is not None:  # the output is known to be writable: now the inputs, before the ingest
             check_videos(videos, sequence, intrinsics if nominal_fov_deg is None else None, earlier_cameras)
         intrinsics_source = intrinsics
-        given = source if videos is not None or isinstance(source, Tracks) else Tracks.read(source)
+        given = source if videos is not None or isinstance(source, (Tracks, IngestResult)) else Tracks.read(source)
         # Before the ingest: a bad or missing file fails its own camera only (the reason
         # names the file and the problem), a missing or empty folder the whole run.
         if nominal_fov_deg is None:
-            names = video_camera_names(videos) if videos is not None else list(given.camera_names)
+            names = (video_camera_names(videos) if videos is not None
+                     else list(given.cameras) if isinstance(given, IngestResult) else list(given.camera_names))
             intrinsics, unusable = intrinsics_of_cameras(
                 intrinsics_source, names + [name for name in earlier_cameras if name not in names])
         else:
@@ -179,6 +186,8 @@ def calibrate(
                     write_self_calibration(staging / SELF_CALIBRATION_FILE, *self_calibration)
                 write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,
                                ingest_result)
+                if recordings is not None:
+                    os.replace(recordings, staging / RECORDINGS_DIR)
             folder.commit()
             logger.info("results written to %s", folder.path)
         if scale_error is not None:
@@ -255,7 +264,7 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
 
 def _videos_folder(source: Tracks | str | os.PathLike) -> Path | None:
     """The videos folder ``source`` names, or None when it names tracks."""
-    if isinstance(source, Tracks):
+    if isinstance(source, (Tracks, IngestResult)):
         return None
     path = Path(source)
     return None if path.is_file() or path.suffix.lower() == ".json" else path
@@ -272,6 +281,8 @@ def video_camera_names(folder: Path) -> list[str]:
 
 def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, exposures, workers, progress):
     """(tracks, cameras that failed before registration, the ingest result or None)."""
+    if isinstance(source, IngestResult):
+        return source.tracks, source.failed, source
     path = _videos_folder(source)
     if path is None:
         return (source, {}, None) if isinstance(source, Tracks) else (Tracks.read(source), {}, None)

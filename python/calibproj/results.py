@@ -33,6 +33,7 @@ TRACKS_FILE = "tracks.json"
 DETECT_REPORT_FILE = "detect_report.json"
 INTRINSICS_DIR = "intrinsics"
 FRAMES_DIR = "frames"
+RECORDINGS_DIR = "recordings"  # the videos a capture recorded
 EVALUATION_FILE = "evaluation.json"
 CHECK_FILE = "check.json"  # of a folder `calibproj check --out` repaired
 UNCERTAINTY_FILE = "uncertainty.json"  # the poses' covariance and the expected 3D error (calibproj.uncertainty)

@@ -48,7 +48,7 @@ struct SourceOptions {
   std::string record_path;
   // Set from another thread: reading ends at once, as at the end of the stream, blocking
   // network reads included.
-  std::shared_ptr<std::atomic<bool>> stop;
+  std::shared_ptr<std::atomic<bool>> stop = std::make_shared<std::atomic<bool>>(false);
 
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;
