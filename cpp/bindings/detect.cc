@@ -14,6 +14,7 @@
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/detect/marker_family.h"
 #include "checks.h"
+#include "images.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -23,24 +24,6 @@ namespace calibproj::bindings {
 namespace {
 
 using detect::Quad;
-
-// A cv::Mat header over a 2-D uint8 numpy array (no copy; the array must outlive it).
-cv::Mat GrayView(const py::array& image) {
-  if (image.dtype().kind() != 'u' || image.itemsize() != 1) {
-    throw std::invalid_argument("expected an 8-bit (uint8) image, got dtype " +
-                                std::string(py::str(image.dtype())));
-  }
-  if (image.ndim() != 2) {
-    throw std::invalid_argument("expected a 2-D grayscale image, got " + std::to_string(image.ndim()) +
-                                " dimensions");
-  }
-  if (image.size() == 0) throw std::invalid_argument("image is empty");
-  if (image.strides(1) != 1 || image.strides(0) < image.shape(1)) {
-    throw std::invalid_argument("image rows must be contiguous (use numpy.ascontiguousarray)");
-  }
-  return cv::Mat(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
-                 const_cast<void*>(image.data()), static_cast<std::size_t>(image.strides(0)));
-}
 
 py::array_t<double> CornersArray(const std::vector<Quad>& corners) {
   py::array_t<double> out({static_cast<py::ssize_t>(corners.size()), py::ssize_t{4}, py::ssize_t{2}});

@@ -17,6 +17,7 @@
 #include "ingest_options.h"
 #include "json_convert.h"
 #include "calibproj/video/video_reader.h"
+#include "images.h"
 #include "registry.h"
 #include "sync_convert.h"
 
@@ -187,12 +188,7 @@ py::dict ResultDict(const ingest::CameraIngestResult& r, const ingest::SequenceD
   d["homography_rms_px"] = r.homography_rms_px;
   d["seconds_total"] = r.seconds_total;
   d["seconds_detection"] = r.seconds_detection;
-  py::array_t<uint8_t> thumbnail(
-      {static_cast<py::ssize_t>(r.thumbnail.rows), static_cast<py::ssize_t>(r.thumbnail.cols)});
-  for (int row = 0; row < r.thumbnail.rows; ++row) {
-    std::copy_n(r.thumbnail.ptr<uint8_t>(row), r.thumbnail.cols, thumbnail.mutable_data(row, 0));
-  }
-  d["thumbnail"] = thumbnail;
+  d["thumbnail"] = GrayArray(r.thumbnail);
   d["thumbnail_pattern"] = r.thumbnail_pattern;
   return d;
 }

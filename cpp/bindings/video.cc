@@ -7,12 +7,15 @@
 #include <atomic>
 #include <map>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "calibproj/video/luma_signal.h"
+#include "calibproj/video/stream_writer.h"
 #include "calibproj/video/video_reader.h"
+#include "images.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -55,6 +58,54 @@ void register_video(py::module_& m) {
       .def("request_stop", [](const video::SourceOptions& options) { options.stop->store(true); },
            "Ends reading at once (from any thread), blocking network reads included.")
       .def_property_readonly("stop_requested", [](const video::SourceOptions& options) { return options.stop->load(); });
+  py::class_<video::VideoReader>(m, "VideoReader",
+                                 "Frames of a video or a live source, in order, as grey images with their times.")
+      .def(py::init([](const std::string& path, const std::optional<video::SourceOptions>& source) {
+             py::gil_scoped_release release;
+             return std::make_unique<video::VideoReader>(path, source.value_or(video::SourceOptions{}));
+           }),
+           py::arg("path"), py::arg("source") = py::none(),
+           "Opens the video (or, with `source`, the live source); RuntimeError naming it when it cannot.")
+      .def_property_readonly("info", &video::VideoReader::info)
+      .def_property_readonly("end_reason", &video::VideoReader::end_reason,
+                             "why grab() gave None: '' at the end, 'stopped' or 'stalled: ...'")
+      .def(
+          "grab",
+          [](video::VideoReader& reader) -> py::object {
+            cv::Mat gray;
+            {
+              py::gil_scoped_release release;
+              if (!reader.Grab()) return py::none();
+              gray = reader.Gray();
+            }
+            return py::make_tuple(reader.timestamp(), GrayArray(gray));
+          },
+          "The next frame as (container time in seconds or NaN, grey uint8 image), None at the end.");
+  py::class_<video::StreamWriter>(m, "StreamWriter",
+                                  "Grey frames encoded with libx264 and sent live (MPEG-TS over UDP by default), "
+                                  "each at the time given.")
+      .def(py::init([](const std::string& url, int width, int height, const std::string& format,
+                       int key_frame_interval, int crf, const std::string& preset) {
+             video::StreamOptions options;
+             options.format = format;
+             options.key_frame_interval = key_frame_interval;
+             options.crf = crf;
+             options.preset = preset;
+             return std::make_unique<video::StreamWriter>(url, width, height, options);
+           }),
+           py::arg("url"), py::arg("width"), py::arg("height"), py::arg("format") = "mpegts",
+           py::arg("key_frame_interval") = 15, py::arg("crf") = 23, py::arg("preset") = "ultrafast")
+      .def(
+          "write",
+          [](video::StreamWriter& writer, const py::array& gray, double time_s) {
+            const cv::Mat view = GrayView(gray);
+            py::gil_scoped_release release;
+            writer.Write(view, time_s);
+          },
+          py::arg("gray"), py::arg("time_s"),
+          "Encodes and sends a frame shown at time_s (seconds, increasing); ValueError for a frame of "
+          "another size, RuntimeError naming the URL when sending fails.")
+      .def("close", &video::StreamWriter::Close, py::call_guard<py::gil_scoped_release>(), "Ends the stream.");
   m.def(
       "probe",
       [](const std::string& path) {

@@ -1,5 +1,7 @@
 #include "calibproj/capture/projector.h"
 
+#include "calibproj/video/ffmpeg_log.h"
+
 #include <mpv/client.h>
 
 #include <chrono>
@@ -15,11 +17,13 @@ using Clock = std::chrono::steady_clock;
 
 double SecondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
-// One player instance, destroyed (its window closed) on every way out.
+// One player instance, destroyed (its window closed) on every way out; FFmpeg's log,
+// which libmpv takes over, is calibproj's again afterwards.
 struct Player {
   mpv_handle* handle = mpv_create();
   ~Player() {
     if (handle != nullptr) mpv_terminate_destroy(handle);
+    video::ReclaimFfmpegLog();
   }
 };
 

@@ -35,6 +35,11 @@ void KeepFfmpegErrors() {
   });
 }
 
+void ReclaimFfmpegLog() {
+  KeepFfmpegErrors();
+  av_log_set_callback(KeepError);
+}
+
 std::string FfmpegSaid() {
   std::string said;
   said.swap(last_ffmpeg_error);

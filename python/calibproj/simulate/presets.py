@@ -19,11 +19,13 @@
 - ``or-real``: the demo room as real cameras and a real room record it: 2 % dropped
   frames and 1 ms timing jitter, 15 ms rolling shutters, automatic exposure on two
   cameras, harder compression on two, a tiled floor with stains, some room light.
+- ``live``: the room of the virtual operating room (``calibproj demo --live``): the
+  demo's geometry at 640x360 under a 960x540 projector, four cameras (one zoomed).
 - ``or-table``: the demo room with its operating table left in place (top at 0.9 m on
   a column) and an instrument cart: the projection lands on them too, they shade the
   floor behind them from the projector and hide parts of it from the cameras.
 
-The projector of every preset hangs at 3 m looking straight down; with fx 1400 its
+The projector of every preset but ``live`` hangs at 3 m looking straight down; with fx 1400 its
 1920x1080 image covers about 4.1 x 2.3 m of floor, so a marker of 24 projector pixels
 (scale 1 of the default layout) is 5 cm wide and one at scale 8 is 40 cm, as in the paper.
 """
@@ -203,6 +205,32 @@ def or_table(rng: np.random.Generator) -> dict[str, Any]:
     return document
 
 
+# The virtual operating room (``calibproj.simulate.virtual_room``): what 2 cores render,
+# encode, stream and ingest live at once. The demo's geometry at a quarter of the
+# pixels: a 960x540 projector (fx 700: the same 4.1 x 2.3 m of floor) and four 640x360
+# cameras, two far-field, one on a lamp and the ceiling camera zoomed on the table (6x),
+# each with its own frame rate, start, timing jitter and dropped frames.
+LIVE_PROJECTOR = {"position": [0.0, 0.0, 3.0], "look_at": [0.0, 0.0, 0.0], "resolution": [960, 540], "fx": 700.0}
+LIVE_TIMING = {"drop_rate": 0.01, "frame_jitter_s": 0.001}
+LIVE_CEILING_FX = 1850.0
+
+
+def live(rng: np.random.Generator) -> dict[str, Any]:
+    def at_360p(camera: dict) -> dict:
+        scale = 640.0 / 1920.0
+        return {**camera, "resolution": [640, 360], "fx": round(camera["fx"] * scale, 2),
+                "fy": round(camera["fy"] * scale, 2), "cx": round((camera["cx"] + 0.5) * scale - 0.5, 3),
+                "cy": round((camera["cy"] + 0.5) * scale - 0.5, 3), **LIVE_TIMING}
+
+    document = _room([at_360p(camera) for camera in _pick(["far1", "far4", "near1", "ceiling"])])
+    document["projector"] = copy.deepcopy(LIVE_PROJECTOR)
+    # Zoomed 6x over the far-field cameras onto about 1.0 x 0.55 m of the table: at the
+    # demo's zoom its view would hold fewer whole markers of a 960-pixel projector than a
+    # projection of seconds can place.
+    document["cameras"][-1].update(fx=LIVE_CEILING_FX, fy=LIVE_CEILING_FX)
+    return document
+
+
 PRESETS: dict[str, Callable[[np.random.Generator], dict[str, Any]]] = {
     "paper": paper,
     "or-full": or_full,
@@ -213,6 +241,7 @@ PRESETS: dict[str, Callable[[np.random.Generator], dict[str, Any]]] = {
     "demo": demo,
     "or-real": or_real,
     "or-table": or_table,
+    "live": live,
 }
 
 

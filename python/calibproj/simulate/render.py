@@ -256,7 +256,7 @@ def render_stills(
     atlas = layout.build(sequence.pattern_image(pattern))
     stills = {}
     for camera, rng in zip(scene.cameras, _noise_generators(seed, len(scene.cameras))):
-        sampler, response, noise = _camera_model(camera, views[camera.name], layout, scene, options, rng)
+        sampler, response, noise = camera_model(camera, views[camera.name], layout, scene, options, rng)
         stills[camera.name] = noise.quantise(response.encode(response.irradiance(sampler.sample(atlas))))
     return stills
 
@@ -436,7 +436,7 @@ def _noise_generators(seed: int, count: int) -> list[np.random.Generator]:
     return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(count)]
 
 
-def _camera_model(
+def camera_model(
     camera: Camera, view: FloorView, layout: AtlasLayout, scene: Scene, options: RenderOptions,
     rng: np.random.Generator,
 ) -> tuple[CameraSampler, CameraResponse, SensorNoise]:
@@ -503,7 +503,7 @@ def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clock
         try:
             for index, camera in enumerate(scene.cameras):
                 view = views.pop(camera.name)
-                model = _camera_model(camera, view, layout, scene, options, generators[index])
+                model = camera_model(camera, view, layout, scene, options, generators[index])
                 people = _people_in_view(scene, view, camera, sequence)
                 clock = clocks[camera.name]
                 timed = bool(clock.jitter_s or clock.dropped)
