@@ -52,6 +52,7 @@ EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "
 # No constructor by design (results of a call); the tiny video holds no light code.
 BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "_core.detect.MarkerFamilyInfo", "_core.ingest.ingest_camera",
                         "_core.ingest.ingest_camera[live]", "_core.check.CameraCheck",
+                        "_core.capture.Site", "_core.capture.SiteCamera", "_core.capture.play",
                         "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.Calibration",
                         "_core.formats.CameraPose", "_core.formats.CameraMetrics", "_core.formats.Plane",
                         "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
@@ -332,7 +333,12 @@ def write_files(folder: Path) -> dict[str, str]:
     data = video.read_bytes()
     (folder / "cut.mkv").write_bytes(data[: len(data) // 2])
     (folder / "folder.mp4").mkdir(exist_ok=True)
-    return {name: str(folder / name) for name in ("tiny.mkv", "empty.mp4", "garbage.mp4", "cut.mkv", "folder.mp4")}
+    (folder / "site.json").write_text(json.dumps({
+        "schema": "calibproj.site/1", "sequence": "sequence.json", "projector": {"display": ":4242"},
+        "cameras": {"a": {"source": "udp://127.0.0.1:9", "intrinsics": "a.json", "options": {"fifo_size": 1000}},
+                    "b": {"source": "tiny.mkv", "intrinsics": "b.json", "exposure_s": 0.01}}}))
+    return {name: str(folder / name)
+            for name in ("tiny.mkv", "empty.mp4", "garbage.mp4", "cut.mkv", "folder.mp4", "site.json")}
 
 
 def bad_paths(files: dict[str, str]) -> list[Mutation]:
@@ -505,6 +511,23 @@ class Baselines:
             "_core.video.SourceOptions": Spec([("live", True), ("format", ""), ("ffmpeg_options", {}),
                                               ("open_timeout_s", 0.5), ("stall_timeout_s", 0.5),
                                               ("record_path", "")]),
+            "_core.video.VideoReader": Spec([("path", f["tiny.mkv"]), ("source", None)]),
+            "_core.video.StreamWriter": Spec([("url", f["tiny.mkv"] + ".ts"), ("width", 64), ("height", 48),
+                                              ("format", "mpegts"), ("key_frame_interval", 15), ("crf", 23),
+                                              ("preset", "ultrafast")]),
+            "_core.video.StreamWriter.write": Spec([("gray", np.zeros((48, 64), dtype=np.uint8)), ("time_s", 0.5)]),
+            "_core.capture.Stop": Spec([]),
+            "_core.capture.ProjectorOptions": Spec([("display", ":4242"), ("screen", -1), ("video_output", "x11"),
+                                                   ("timeout_s", 1.0)]),
+            "_core.capture.PresentationLog": Spec([]),
+            "_core.capture.Site": Spec([]),
+            "_core.capture.SiteCamera": Spec([]),
+            "_core.capture.read_site": Spec([("path", f["site.json"])]),
+            # No display answers at :4242: the player fails at once, naming it.
+            "_core.capture.play": Spec([("video", f["tiny.mkv"]),
+                                        ("options", _core.capture.ProjectorOptions(display=":4242", video_output="x11",
+                                                                                   timeout_s=1.0)),
+                                        ("stop", None)]),
             "_core.video.frame_period": Spec([("times", [0.0, 0.04, 0.08, 0.16, 0.2])]),
             "_core.video.luma_signal": Spec([("path", f["tiny.mkv"]), ("gamma", 2.2), ("row_step", 2),
                                             ("use_timestamps", True), ("max_frame_gap_s", 2.0)]),
@@ -706,6 +729,15 @@ class Baselines:
             "_core.formats.ScaleFit": {"fitted": lambda: self.scale_fit()},
             "_core.video.VideoInfo": {"probed": lambda: _core.video.probe(self.files["tiny.mkv"])},
             "_core.video.SourceOptions": {"default": _core.video.SourceOptions},
+            "_core.video.VideoReader": {"opened": lambda: _core.video.VideoReader(self.files["tiny.mkv"])},
+            "_core.video.StreamWriter": {"open": lambda: _core.video.StreamWriter(self.files["tiny.mkv"] + ".ts", 64,
+                                                                                 48)},
+            "_core.capture.Stop": {"fresh": _core.capture.Stop},
+            "_core.capture.ProjectorOptions": {"default": _core.capture.ProjectorOptions},
+            "_core.capture.PresentationLog": {"empty": _core.capture.PresentationLog},
+            "_core.capture.Site": {"read": lambda: _core.capture.read_site(self.files["site.json"])},
+            "_core.capture.SiteCamera": {
+                "read": lambda: _core.capture.read_site(self.files["site.json"]).cameras[0]},
             "_core.detect.MarkerFamilyInfo": {
                 family: (lambda family=family: _core.detect.family_info(family))
                 for family in ("aruco:4X4_50", "apriltag:tagStandard41h12")},

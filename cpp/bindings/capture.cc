@@ -47,6 +47,7 @@ void register_capture(py::module_& m) {
       .def_readonly("video_output", &capture::ProjectorOptions::video_output, "mpv's video outputs, tried in turn")
       .def_readonly("timeout_s", &capture::ProjectorOptions::timeout_s);
   py::class_<capture::PresentationLog>(m, "PresentationLog", "When each frame of the projection was shown.")
+      .def(py::init<>(), "An empty log (nothing shown).")
       .def_readonly("video_time_s", &capture::PresentationLog::video_time_s, "the frame's time in the video")
       .def_readonly("shown_s", &capture::PresentationLog::shown_s, "seconds since the first frame was shown")
       .def_readonly("dropped_frames", &capture::PresentationLog::dropped_frames)

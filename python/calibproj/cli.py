@@ -40,6 +40,7 @@ COMMANDS = {
     "compare": "calibproj.commands.compare",
     "evaluate": "calibproj.commands.evaluate",
     "check": "calibproj.commands.check",
+    "capture": "calibproj.commands.capture",
     "demo": "calibproj.commands.demo",
     "study": "calibproj.commands.study",
 }

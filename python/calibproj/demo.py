@@ -23,6 +23,12 @@ from calibproj.io.output_folder import OutputFolder
 logger = logging.getLogger(__name__)
 
 DEMO_SCENE = "demo"
+LIVE_SCENE = "live"
+# The live demo's projection, for the virtual room's 960x540 projector: markers of 10,
+# 20 and 30 cm (scale 1 for the zoomed camera, 2 and 3 for the far-field ones at
+# 640x360), 16 arrays so that the zoomed camera places a few tens of points: 9.4 s.
+LIVE_SEQUENCE = {"arrays": 16, "scales": (1.0, 2.0, 3.0), "marker_px": 24.0, "projector": (960, 540),
+                 "code_degree": 4, "reference_frames": 8}
 # Files that mark a folder the demo wrote (what --force may replace).
 DEMO_SIGNATURE = ("sequence/sequence.json", "room/scene.json", "results/camera_poses.json")
 
@@ -38,6 +44,12 @@ class DemoOptions:
         model: registration model, ``coplanar`` or ``free``.
         seed: seed of the simulation (sensor noise).
         force: replace the folder of an earlier demo (the whole folder).
+        live: run the room live instead (the ``live`` room: four 640x360 cameras, one
+            zoomed, under a 960x540 projector): the virtual operating room
+            (``calibproj.simulate.virtual_room``) films its projector's display, and
+            ``calibproj capture`` plays the projection there, records the cameras' streams
+            and calibrates them. Its projection is its own (``LIVE_SEQUENCE``): ``arrays``
+            and ``scales`` are the rendered demo's.
     """
 
     markers: str = "aruco:4X4_50"
@@ -46,6 +58,7 @@ class DemoOptions:
     model: str = "coplanar"
     seed: int = 0
     force: bool = False
+    live: bool = False
 
 
 @dataclass
@@ -67,7 +80,8 @@ def run_demo(out: str | os.PathLike, options: DemoOptions | None = None, progres
     options = options or DemoOptions()
     folder = OutputFolder(out, force=options.force, signature=DEMO_SIGNATURE).open()
     with folder, folder.writing() as staging:
-        comparison, evaluation, calibration, seconds = _run(staging, options, progress, command)
+        run = _run_live if options.live else _run
+        comparison, evaluation, calibration, seconds = run(staging, options, progress, command)
     logger.info("demo written to %s", folder.path)
     return DemoResult(comparison, evaluation, calibration, folder.path / "results" / "report.html", seconds)
 
@@ -111,6 +125,36 @@ def _run(out: Path, options: DemoOptions, progress: bool,
     evaluation.save(results, path_as_recorded(out / "room" / "eval_tracks.json", results))
     write_report(results)
     return comparison, evaluation, calibration, seconds
+
+
+def _run_live(out: Path, options: DemoOptions, progress: bool,
+              command: list[str] | None) -> tuple[object, object, object, dict[str, float]]:
+    """The live demo: the virtual room filmed while ``capture`` projects (no evaluation
+    on independent points: nothing renders them live)."""
+    from calibproj.capture import capture
+    from calibproj.comparison import compare
+    from calibproj.registration import RegistrationOptions
+    from calibproj.sequence import generate
+    from calibproj.simulate.virtual_room import VirtualRoom, VirtualRoomOptions
+
+    seconds: dict[str, float] = {}
+    start = time.perf_counter()
+    sequence = generate(out / "sequence", markers=options.markers, progress=progress, **LIVE_SEQUENCE)
+    seconds["generate"] = time.perf_counter() - start
+    marker_side_m = None
+    with VirtualRoom(LIVE_SCENE, out / "room", VirtualRoomOptions(seed=options.seed)) as room:
+        site = room.write_site(out / "site.json", out / "sequence" / "sequence.json",
+                               out / "sequence" / "projection.mp4")
+        marker_side_m = marker_side_on_floor(out / "room" / "scene.json", sequence)
+        start = time.perf_counter()
+        calibration = capture(site, out / "results", recordings=out / "recordings", progress=progress,
+                              command=command, options=RegistrationOptions(model=options.model),
+                              scale=f"marker-size:{marker_side_m:.9f}", exports=["yaml", "colmap", "anipose"])
+        seconds["capture"] = time.perf_counter() - start
+        if room.errors:
+            raise RuntimeError(f"the virtual room failed: {'; '.join(room.errors)}")
+    comparison = compare(out / "results" / "camera_poses.json", out / "room" / "truth.json")
+    return comparison, None, calibration, seconds
 
 
 def marker_side_on_floor(scene_path: Path, sequence) -> float:

@@ -92,11 +92,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-    import sys
-
-    from calibproj.calibration import calibration_summary
-    from calibproj.commands.summary import expected_error, format_cameras, row_status, unit_words
     from calibproj.ingest_options import IngestOptions
     from calibproj.pipeline import calibrate
     from calibproj.registration import RegistrationOptions
@@ -134,6 +129,18 @@ def run(args: argparse.Namespace) -> int:
         self_calibration_options=dataclass_from_args(SelfCalibrationOptions, args),
         merge=args.merge,
     )
+    return print_results(calibration, args)
+
+
+def print_results(calibration, args: argparse.Namespace) -> int:
+    """The per-camera table (or ``--json``), the planes, the expected error and where
+    the results are; exit status 1 when a camera failed."""
+    import json
+    import sys
+
+    from calibproj.calibration import calibration_summary
+    from calibproj.commands.summary import expected_error, format_cameras, row_status, unit_words
+
     if args.json:
         rows = calibration_summary(calibration)
         for row in rows:
@@ -151,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.no_report and calibration.poses:
             print(f"report: {Path(args.out) / 'report.html'}")
     if calibration.failed:
-        print(f"calibproj calibrate: {len(calibration.failed)} camera(s) failed: {', '.join(calibration.failed)} "
-              f"(why: in the table above)", file=sys.stderr)
+        print(f"calibproj {args.command}: {len(calibration.failed)} camera(s) failed: "
+              f"{', '.join(calibration.failed)} (why: in the table above)", file=sys.stderr)
         return 1
     return 0

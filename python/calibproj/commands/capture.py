@@ -1,0 +1,76 @@
+"""Run the room: record every camera while the projector plays the projection, then
+calibrate from what arrived.
+
+    calibproj capture SITE.json --out RESULTS_DIR
+
+The site file names the room once (README, "Running a room"): each camera's source
+(rtsp://, http://, udp://, a device such as /dev/video0 with "format": "v4l2", or a
+file), its intrinsics file, the projector's display and screen, the projection. Every
+camera is opened and ingested live (synchronised and detected as its frames arrive)
+and recorded unchanged; once every camera delivers frames, the projection plays full
+screen on the projector; the poses are written seconds after it ends.
+
+RESULTS_DIR gets what `calibproj calibrate` writes, plus recordings/ (each camera's
+video, as its source sent it, and capture.json: what each camera delivered and when
+the projector showed each frame). A camera that cannot be opened, stalls or drops out
+is reported by name and the others are calibrated. If the run fails or is interrupted
+(Ctrl-C, SIGTERM), no results folder is written and the recordings stay in the
+recordings folder (RESULTS_DIR-recordings-<time> unless --recordings), which the
+error names: `calibproj calibrate` can calibrate them later.
+
+Exit status: 0 every camera calibrated; 1 a camera failed (the table says why) or the
+projector could not play; 2 a bad site file or option; 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from calibproj.commands.options import add_dataclass_arguments, dataclass_from_args
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from calibproj.registration import RegistrationOptions
+    from calibproj.self_calibration import SelfCalibrationOptions
+
+    parser.add_argument("site", metavar="SITE", help="the site file (calibproj.site/1: cameras, projector, projection)")
+    parser.add_argument("--out", required=True, metavar="DIR", help="results folder")
+    parser.add_argument("--force", action="store_true", help="replace an existing results folder (the whole folder)")
+    parser.add_argument("--recordings", metavar="DIR",
+                        help="where the cameras are recorded while the capture runs (default: "
+                             "RESULTS_DIR-recordings-<time> beside it); moved into RESULTS_DIR/recordings")
+    parser.add_argument("--scale", metavar="MEASUREMENT",
+                        help="metric scale from one measurement (as calibproj calibrate)")
+    parser.add_argument("--export", metavar="FORMATS",
+                        help="also write the calibration as yaml, colmap and/or anipose (comma-separated)")
+    parser.add_argument("--refine-intrinsics", action="append", metavar="[CAMERA=]ENTRIES",
+                        help="refine these lens entries from the projection (as calibproj calibrate)")
+    output = parser.add_argument_group("output and progress")
+    output.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
+    output.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
+    output.add_argument("--no-progress", action="store_true", help="no status lines while recording")
+    add_dataclass_arguments(parser, RegistrationOptions, "registration options")
+    add_dataclass_arguments(parser, SelfCalibrationOptions, "self-calibration options (with --refine-intrinsics)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from calibproj.capture import capture
+    from calibproj.commands.calibrate import print_results
+    from calibproj.registration import RegistrationOptions
+    from calibproj.self_calibration import SelfCalibrationOptions
+
+    calibration = capture(
+        args.site,
+        args.out,
+        force=args.force,
+        recordings=args.recordings,
+        progress=not args.no_progress,
+        command=getattr(args, "command_line", None),
+        options=dataclass_from_args(RegistrationOptions, args),
+        scale=args.scale,
+        exports=[args.export] if args.export else [],
+        report=not args.no_report,
+        refine_intrinsics=args.refine_intrinsics,
+        self_calibration_options=dataclass_from_args(SelfCalibrationOptions, args),
+    )
+    return print_results(calibration, args)
