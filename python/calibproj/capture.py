@@ -87,6 +87,8 @@ class _Capture:
             open_timeout_s=camera.options.open_timeout_s, stall_timeout_s=camera.options.stall_timeout_s,
             record_path=str(recordings / f"{camera.name}.mkv")) for camera in site.cameras}
         self.player_stop = _core.capture.Stop()
+        self.cancel = threading.Event()  # the ingest's: set, it stops without reporting failures
+        self.threads: list[threading.Event] = []  # set when each thread has ended
 
     def now(self) -> float:
         return time.monotonic() - self.started
@@ -116,9 +118,38 @@ class _Capture:
                 self.changed.wait(min(left, 0.2))
             return True
 
-    def stop(self, names: list[str] | None = None) -> None:
-        for name in names if names is not None else list(self.sources):
+    def stop(self, names: list[str]) -> None:
+        """Ends these cameras' reads: they fail, reported, and the others go on."""
+        for name in names:
             self.sources[name].request_stop()
+
+    def abort(self) -> None:
+        """Stops the player and every camera, and waits for their threads, so that
+        nothing runs or prints after the capture has failed or been interrupted."""
+        self.cancel.set()
+        self.player_stop.set()
+        for source in self.sources.values():
+            source.request_stop()
+        for done in self.threads:
+            done.wait(timeout=10.0)
+
+    def spawn(self, name: str, target: Any) -> threading.Thread:
+        """Starts a thread whose end ``abort`` waits for. Its own event, not
+        ``Thread.join``: an interrupt inside ``Thread.start`` leaves a running thread
+        that ``join`` takes for one not started, and a thread still in the core when the
+        interpreter exits takes the process down."""
+        done = threading.Event()
+
+        def run() -> None:
+            try:
+                target()
+            finally:
+                done.set()
+
+        thread = threading.Thread(target=run, name=name, daemon=True)
+        self.threads.append(done)
+        thread.start()
+        return thread
 
     def log_status(self) -> None:
         with self.lock:
@@ -194,8 +225,7 @@ def capture(
                          force=force, progress=progress, command=command, recordings=recordings,
                          **calibrate_options)
     except BaseException as error:
-        run.stop()
-        run.player_stop.set()
+        run.abort()
         if recordings.exists():
             _note_recordings(error, recordings)
         raise
@@ -213,14 +243,14 @@ def _record(run: _Capture, site: Any, log: CaptureLog, progress: bool) -> Any:
             result["ingest"] = ingest({c.name: c.source for c in site.cameras}, str(site.sequence),
                                       {c.name: c.intrinsics for c in site.cameras}, live=run.sources,
                                       exposures={c.name: c.exposure_s for c in site.cameras if c.exposure_s > 0},
-                                      progress=False, observer=run.observe, finished=run.finished)
+                                      progress=False, observer=run.observe, finished=run.finished,
+                                      cancel=run.cancel)
         except BaseException as error:  # noqa: BLE001 - handed to the main thread
             failure.append(error)
             with run.changed:
                 run.changed.notify_all()
 
-    worker = threading.Thread(target=ingest_all, name="capture-ingest", daemon=True)
-    worker.start()
+    worker = run.spawn("capture-ingest", ingest_all)
     logger.info("capture: opening %d camera(s)", len(run.status))
     ready = run.wait(lambda: failure or all(s.first_frame_s is not None or s.done for s in run.status.values()),
                      site.ready_s)
@@ -243,7 +273,9 @@ def _record(run: _Capture, site: Any, log: CaptureLog, progress: bool) -> Any:
     worker.join()
     if failure:
         raise failure[0]
-    logger.info("capture: every camera ingested %.1f s after the projection ended", time.monotonic() - ended)
+    log.projection["cameras_done_after_end_s"] = time.monotonic() - ended
+    logger.info("capture: every camera ingested %.1f s after the projection ended",
+                log.projection["cameras_done_after_end_s"])
     ingest_result = result["ingest"]
     for name, status in run.status.items():
         camera = ingest_result.cameras[name]
@@ -267,8 +299,7 @@ def _project(run: _Capture, site: Any, progress: bool) -> dict[str, Any]:
 
     logger.info("capture: projecting %s", site.projection)
     started = run.now()
-    player = threading.Thread(target=play, name="capture-projector", daemon=True)
-    player.start()
+    player = run.spawn("capture-projector", play)
     next_status = time.monotonic() + STATUS_INTERVAL_S
     while player.is_alive():
         player.join(0.2)

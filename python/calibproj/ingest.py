@@ -195,6 +195,7 @@ def ingest(
     live: Mapping[str, Any] | None = None,
     observer: Callable[[str, int], None] | None = None,
     finished: Callable[[CameraIngest], None] | None = None,
+    cancel: threading.Event | None = None,
 ) -> IngestResult:
     """Synchronise and detect every camera's video; tracks and reports.
 
@@ -220,6 +221,8 @@ def ingest(
             now and then (every 25 frames, and at the first).
         finished: called from a camera's thread with its ``CameraIngest`` as soon as it
             is done (failed or not).
+        cancel: set from another thread, it stops every camera (live sources at once)
+            and the ingest raises KeyboardInterrupt; no camera is reported as failed.
 
     Raises:
         ValueError: no videos, an unreadable sequence file, bad options. Per-camera
@@ -235,7 +238,7 @@ def ingest(
     aruco, apriltag = _detector_options(sequence.markers.system, detector_options or {})
     core_sequence = sequence.core()  # read by the core once, for every camera
     names = list(paths)
-    bars = _Progress(names, enabled=progress, observer=observer, live=live, finished=finished)
+    bars = _Progress(names, enabled=progress, observer=observer, live=live, finished=finished, cancel=cancel)
     exposures = dict(exposures or {})
     check_exposures(exposures, names)
 
@@ -308,7 +311,8 @@ class _Progress:
 
     def __init__(self, names: list[str], enabled: bool, observer: Callable[[str, int], None] | None = None,
                  live: Mapping[str, Any] | None = None,
-                 finished: Callable[[CameraIngest], None] | None = None) -> None:
+                 finished: Callable[[CameraIngest], None] | None = None,
+                 cancel: threading.Event | None = None) -> None:
         self.enabled = enabled
         self.observer = observer
         self.finished = finished
@@ -316,7 +320,7 @@ class _Progress:
         self.bars: dict[str, Any] = {}
         self.lock = threading.Lock()
         self.positions = {name: index for index, name in enumerate(names)}
-        self.cancelled = threading.Event()
+        self.cancelled = cancel if cancel is not None else threading.Event()
 
     def cancel(self) -> None:
         self.cancelled.set()

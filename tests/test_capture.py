@@ -1,0 +1,196 @@
+"""calibproj capture on the virtual operating room: the projection played on the
+room's display, four cameras (one zoomed) filming it live over loopback UDP, calibrated
+against the room's truth; a camera that never answers, a projector display that does
+not exist, malformed site files and SIGTERM each give one line, and the recordings are
+never lost."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibproj.cli import main
+from calibproj.comparison import compare
+from calibproj.demo import LIVE_SCENE, LIVE_SEQUENCE
+from calibproj.sequence import generate
+from calibproj.simulate.virtual_room import VirtualRoom
+
+from test_live_source import free_udp_port  # the tests folder is on sys.path under pytest
+
+# Measured on the rendered files of the same room and projection (tools/bench/capture.py):
+# rotation RMSE 0.02-0.04 deg, centre 0.02-0.03 % of the camera distance.
+MAX_ROTATION_RMSE_DEG = 0.15
+MAX_CENTRE_RMSE_PCT = 0.15
+
+pytestmark = pytest.mark.skipif(shutil.which("Xvfb") is None, reason="the virtual room needs Xvfb")
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory):
+    """The live room running for the module's tests, with its projection."""
+    base = tmp_path_factory.mktemp("capture")
+    generate(base / "sequence", **LIVE_SEQUENCE)
+    with VirtualRoom(LIVE_SCENE, base / "room") as live:
+        yield base, live
+
+
+def site_file(room, name: str, **changes) -> Path:
+    """The room's site file, with entries changed or cameras added."""
+    base, live = room
+    path = live.write_site(base / f"{name}.json", base / "sequence" / "sequence.json",
+                           base / "sequence" / "projection.mp4", timeouts={"ready_s": 15, "end_s": 8})
+    document = json.loads(path.read_text())
+    for key, value in changes.items():
+        if key == "cameras":
+            document["cameras"].update(value)
+        else:
+            document[key] = {**document.get(key, {}), **value} if isinstance(value, dict) else value
+    path.write_text(json.dumps(document))
+    return path
+
+
+def test_every_camera_is_calibrated_live_and_one_that_never_answers_is_named(room, capsys):
+    base, live = room
+    intrinsics = str(base / "room" / "intrinsics" / "far1.json")
+    dead = f"udp://127.0.0.1:{free_udp_port()}"
+    site = site_file(room, "site", cameras={"dead": {"source": dead, "intrinsics": intrinsics, "open_timeout_s": 2}})
+    out = base / "results"
+    status = main(["capture", str(site), "--out", str(out), "--no-report", "--no-progress"])
+    captured = capsys.readouterr()
+    assert status == 1, captured.err  # the dead camera failed; the others are calibrated
+    assert f"camera dead failed: {dead}: cannot open the live source (no answer within 2 s)" in captured.err
+    assert "1 camera(s) failed: dead" in captured.err
+    assert not live.errors
+
+    comparison = compare(out / "camera_poses.json", base / "room" / "truth.json")
+    assert comparison.registered == ["far1", "far4", "near1", "ceiling"] and not comparison.missing
+    assert comparison.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
+    assert comparison.translation_rmse_pct < MAX_CENTRE_RMSE_PCT
+
+    # The recordings are in the results, each the whole projection as the camera sent it.
+    log = json.loads((out / "recordings" / "capture.json").read_text())
+    assert log["schema"] == "calibproj.capture/1"
+    assert log["projection"]["cameras_done_after_end_s"] < 10.0
+    assert log["projection"]["frames_logged"] > 0.9 * 9.4 * 30
+    assert log["cameras"]["dead"]["error"].startswith(dead)
+    assert all(log["cameras"][name]["error"] is None for name in ("far1", "far4", "near1", "ceiling"))
+    assert not (out / "recordings" / "dead.mkv").exists()
+    # Calibrated again from the recordings: the frames decoded live, so the same poses.
+    again = base / "again"
+    status = main(["calibrate", str(out / "recordings"), "--sequence", str(base / "sequence" / "sequence.json"),
+                   "--intrinsics", str(base / "room" / "intrinsics"), "--out", str(again), "--no-report",
+                   "--no-progress"])
+    assert status == 0
+    live_poses = json.loads((out / "camera_poses.json").read_text())["cameras"]
+    recorded_poses = json.loads((again / "camera_poses.json").read_text())["cameras"]
+    assert set(recorded_poses) == set(live_poses)
+    for name, pose in live_poses.items():
+        np.testing.assert_allclose(recorded_poses[name]["R"], pose["R"], atol=1e-9)
+        np.testing.assert_allclose(recorded_poses[name]["t"], pose["t"], atol=1e-9)
+
+
+def test_a_projector_display_that_does_not_exist_keeps_the_recordings(room, capsys):
+    base, _ = room
+    site = site_file(room, "no_display", projector={"display": ":4243"})
+    out = base / "no_display_results"
+    recordings = base / "no_display_recordings"
+    status = main(["capture", str(site), "--out", str(out), "--recordings", str(recordings), "--no-progress"])
+    error = capsys.readouterr().err.strip().splitlines()[-1]
+    assert status == 1
+    assert error.startswith("calibproj capture: error: projector (display :4243): cannot play ")
+    assert f"the recordings are kept in {recordings}" in error
+    assert not out.exists()
+    assert sorted(p.name for p in recordings.iterdir()) == ["ceiling.mkv", "far1.mkv", "far4.mkv", "near1.mkv"]
+
+
+def test_sigterm_stops_everything_and_keeps_the_recordings(room):
+    base, _ = room
+    site = site_file(room, "sigterm")
+    out = base / "sigterm_results"
+    recordings = base / "sigterm_recordings"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    process = subprocess.Popen([sys.executable, "-m", "calibproj", "capture", str(site), "--out", str(out),
+                                "--recordings", str(recordings), "--no-progress", "-v"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    deadline = time.monotonic() + 60
+    while not any((recordings / f"{name}.mkv").exists() for name in ("far1", "near1")):
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.2)
+    time.sleep(5.0)  # into the projection
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "calibproj capture: interrupted"
+    assert f"the recordings are kept in {recordings}" in err
+    assert "Traceback" not in err
+    assert not out.exists()
+    for name in ("far1", "far4", "near1", "ceiling"):
+        assert (recordings / f"{name}.mkv").stat().st_size > 0
+
+
+@pytest.mark.parametrize("document, message", [
+    ({"schema": "calibproj.site/1"}, "sequence: missing"),
+    ({"schema": "calibproj.site/2", "cameras": {}}, "newer than this calibproj reads"),
+    ({"schema": "calibproj.site/1", "sequence": "s.json", "cameras": {}}, "cameras: expected an object of cameras"),
+    ({"schema": "calibproj.site/1", "sequence": "s.json", "cameras": {"a": {"source": "x"}}},
+     "cameras.a.intrinsics: missing"),
+    ({"schema": "calibproj.site/1", "sequence": "s.json",
+      "cameras": {"a": {"source": "x", "intrinsics": "a.json", "exposure_s": 3}}}, "cameras.a.exposure_s: must be"),
+    ({"schema": "calibproj.site/1", "sequence": "s.json",
+      "cameras": {"a": {"source": "x", "intrinsics": "a.json", "sorce": 1}}}, "cameras.a.sorce: unknown entry"),
+    ({"schema": "calibproj.site/1", "sequence": "s.json", "projector": {"screen": 99},
+      "cameras": {"a": {"source": "x", "intrinsics": "a.json"}}}, "projector.screen"),
+    ({"schema": "calibproj.site/1", "sequence": "s.json", "timeouts": {"ready_s": -1},
+      "cameras": {"a": {"source": "x", "intrinsics": "a.json"}}}, "timeouts.ready_s: must be in (0, 3600]"),
+])
+def test_a_bad_site_file_is_one_line_and_records_nothing(tmp_path, capsys, document, message):
+    site = tmp_path / "site.json"
+    site.write_text(json.dumps(document))
+    status = main(["capture", str(site), "--out", str(tmp_path / "results"), "--no-progress"])
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(lines) == 1
+    assert lines[0].startswith(f"calibproj capture: error: {site}: ") and message in lines[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["site.json"]
+
+
+def test_fuzzed_site_files_give_one_line(tmp_path, capsys):
+    """Random damage to a valid site file: values of the wrong type, entries removed,
+    bytes cut: every run ends with one line and exit status 2, nothing recorded."""
+    valid = {"schema": "calibproj.site/1", "sequence": "missing/sequence.json",
+             "projector": {"display": ":4244", "screen": 0, "video_output": "x11"},
+             "cameras": {"a": {"source": "udp://127.0.0.1:9", "intrinsics": "a.json", "format": "mpegts",
+                               "options": {"fifo_size": 100}, "exposure_s": 0.01, "open_timeout_s": 1}},
+             "timeouts": {"ready_s": 1, "end_s": 1}}
+    rng = np.random.default_rng(4)
+    odd_values = [None, True, -1, 0, 1e308, float("nan"), "", "x" * 5000, [], {}, [1, 2], {"a": 1}]
+    paths = [("sequence",), ("projector",), ("projector", "display"), ("projector", "screen"), ("cameras",),
+             ("cameras", "a"), ("cameras", "a", "source"), ("cameras", "a", "options"),
+             ("cameras", "a", "exposure_s"), ("timeouts", "end_s"), ("schema",)]
+    for trial in range(60):
+        document = json.loads(json.dumps(valid))
+        path = paths[rng.integers(len(paths))]
+        owner = document
+        for key in path[:-1]:
+            owner = owner[key]
+        if rng.random() < 0.3:
+            owner.pop(path[-1], None)
+        else:
+            owner[path[-1]] = odd_values[rng.integers(len(odd_values))]
+        text = json.dumps(document)
+        if rng.random() < 0.2:
+            text = text[: rng.integers(1, len(text))]
+        site = tmp_path / f"site{trial}.json"
+        site.write_text(text)
+        status = main(["capture", str(site), "--out", str(tmp_path / "results"), "--no-progress"])
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert status == 2 and len(lines) == 1 and lines[0].startswith("calibproj capture: error: "), (text, lines)
+    assert not any(p.is_dir() for p in tmp_path.iterdir())
