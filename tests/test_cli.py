@@ -84,7 +84,7 @@ def test_an_option_of_another_command_is_named_as_such(capsys: pytest.CaptureFix
     line = usage_error(capsys, ["check", "results", "--board", "chessboard:9x6"])
     assert line.endswith("(--board is an option of calibproj intrinsics)")
     line = usage_error(capsys, ["compare", "a", "b", "--pnp-threshold-px", "2"])
-    assert line.endswith("(--pnp-threshold-px is an option of calibproj calibrate)")
+    assert line.endswith("(--pnp-threshold-px is an option of calibproj calibrate and capture)")
 
 
 def test_calibrate_takes_the_ingest_options_of_its_videos() -> None:

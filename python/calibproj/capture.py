@@ -18,6 +18,10 @@ cameras and their sources, the projector, the projection), then
    seconds after the projection ends, and the results folder gets the recordings as
    ``recordings/`` and the player's log as ``capture.json``.
 
+``capture_check(site, results, out, sequence=...)`` does the same with a check
+projection and checks (and repairs) the stored calibration ``results`` instead of
+calibrating (``calibproj.check_and_repair.check``).
+
 Ctrl-C or SIGTERM stops the player and every source at once. Whatever happens, the
 recordings stay: in the results folder when it was written, else in the recordings
 folder (``<out>-recordings-<time>`` beside it unless given), which the error names.
@@ -171,6 +175,16 @@ class _Capture:
             logger.info("%s", line)
 
 
+@dataclass(frozen=True)
+class _Projection:
+    """What is projected and how the cameras' frames are read: the sequence and its
+    video, and the intrinsics (a folder, or camera -> file)."""
+
+    sequence: Path
+    video: Path
+    intrinsics: Path | Mapping[str, Path]
+
+
 def capture(
     site: str | os.PathLike,
     out: str | os.PathLike,
@@ -179,11 +193,13 @@ def capture(
     recordings: str | os.PathLike | None = None,
     progress: bool = True,
     command: list[str] | None = None,
+    sequence: str | os.PathLike | None = None,
+    projection: str | os.PathLike | None = None,
     **calibrate_options: Any,
 ) -> Calibration:
     """Records the site's cameras while its projector plays the projection, then
     calibrates them; writes the results folder ``out`` (as ``calibrate`` does, plus
-    ``recordings/`` and ``capture.json``).
+    ``recordings/`` with ``capture.json``).
 
     Args:
         site: the site file (``calibproj.site/1``; README, "Running a room").
@@ -193,6 +209,8 @@ def capture(
             ``out``. Moved into ``out/recordings`` with the results.
         progress: a status line per camera every few seconds while recording.
         command: the command line for ``provenance.json``.
+        sequence, projection: another projection than the site file's (its
+            ``sequence.json``, and its video: default ``projection.mp4`` beside it).
         calibrate_options: passed to ``calibproj.pipeline.calibrate`` (``options``,
             ``scale``, ``exports``, ``report``, ``refine_intrinsics``, ...).
 
@@ -203,27 +221,77 @@ def capture(
         RuntimeError: the projector cannot play (its display named); the recordings
             are kept and the message says where.
     """
-    from calibproj import _core
     from calibproj.pipeline import calibrate
 
-    try:
-        spec = _core.capture.read_site(Path(site))
-    except _core.formats.InputError as error:
-        raise FormatError(str(error)) from None
-    _check_inputs(spec)
-    out = Path(out)
-    OutputFolder(out, force=force, signature=CALIBRATION_FILES).open().abort()  # writable, before recording
+    spec = _read_site(site)
+    projection = _Projection(*_projected(spec, sequence, projection),
+                             {camera.name: Path(camera.intrinsics) for camera in spec.cameras})
+
+    def calibrated(ingest_result: Any, kept: Path) -> Calibration:
+        return calibrate(ingest_result, _intrinsics_of(projection.intrinsics), sequence=str(projection.sequence),
+                         out=out, force=force, progress=progress, command=command, recordings=kept,
+                         **calibrate_options)
+
+    return _captured(spec, projection, Path(out), force, recordings, progress, calibrated)
+
+
+def capture_check(
+    site: str | os.PathLike,
+    results: str | os.PathLike,
+    out: str | os.PathLike | None,
+    *,
+    sequence: str | os.PathLike,
+    projection: str | os.PathLike | None = None,
+    options: Any = None,
+    force: bool = False,
+    recordings: str | os.PathLike | None = None,
+    progress: bool = True,
+    command: list[str] | None = None,
+    exports: list[str] | tuple[str, ...] = (),
+    report: bool = True,
+) -> Any:
+    """Records the site's cameras while its projector plays a check projection, then
+    checks the stored calibration ``results`` and, with ``out``, writes the repaired
+    results folder there (as ``calibproj.check_and_repair.check`` does, plus
+    ``recordings/``); returns the ``CheckResult``.
+
+    ``sequence`` is the check projection's (``calibproj generate --check RESULTS``), its
+    video ``projection`` (default: ``projection.mp4`` beside it); the cameras' frames are
+    read with the stored results' intrinsics. Raises as ``capture`` does, and
+    ``UntrustedReference`` as ``check`` does (the recordings are then kept).
+    """
+    from calibproj.check_and_repair import check
+    from calibproj.results import INTRINSICS_DIR
+
+    spec = _read_site(site)
+    plan = _Projection(*_projected(spec, sequence, projection), Path(results) / INTRINSICS_DIR)
+
+    def checked(ingest_result: Any, kept: Path) -> Any:
+        return check(results, ingest_result, sequence=str(plan.sequence), out=out, options=options, force=force,
+                     exports=exports, report=report, progress=progress, command=command,
+                     recordings=kept if out is not None else None)
+
+    folder = Path(out) if out is not None else Path(results).parent / f"{Path(results).name}-check"
+    return _captured(spec, plan, folder, force if out is not None else True, recordings, progress, checked,
+                     claim_output=out is not None)
+
+
+def _captured(spec: Any, projection: _Projection, out: Path, force: bool, recordings: str | os.PathLike | None,
+              progress: bool, then: Any, claim_output: bool = True) -> Any:
+    """Records (steps 1-5 of the module's list), then ``then(ingest_result,
+    recordings)``; on any failure or interruption, stops everything and says where the
+    recordings are kept."""
+    _check_inputs(spec, projection)
+    if claim_output:
+        OutputFolder(out, force=force, signature=CALIBRATION_FILES).open().abort()  # writable, before recording
     recordings = Path(recordings) if recordings is not None else _default_recordings(out)
     recordings.mkdir(parents=True, exist_ok=False)
     run = _Capture(spec, recordings)
-    log = CaptureLog(site=str(site), recordings=str(recordings))
+    log = CaptureLog(site=str(spec.path), recordings=str(recordings))
     try:
-        ingest_result = _record(run, spec, log, progress)
+        ingest_result = _record(run, spec, projection, log, progress)
         log.write(recordings / CAPTURE_FILE)
-        intrinsics = {camera.name: camera.intrinsics for camera in spec.cameras}
-        return calibrate(ingest_result, _intrinsics_of(intrinsics), sequence=str(spec.sequence), out=out,
-                         force=force, progress=progress, command=command, recordings=recordings,
-                         **calibrate_options)
+        return then(ingest_result, recordings)
     except BaseException as error:
         run.abort()
         if recordings.exists():
@@ -231,7 +299,25 @@ def capture(
         raise
 
 
-def _record(run: _Capture, site: Any, log: CaptureLog, progress: bool) -> Any:
+def _projected(spec: Any, sequence: str | os.PathLike | None,
+               projection: str | os.PathLike | None) -> tuple[Path, Path]:
+    """The sequence and video to project: the site file's, or those given."""
+    if sequence is None:
+        return Path(spec.sequence), Path(projection) if projection is not None else Path(spec.projection)
+    sequence = Path(sequence)
+    return sequence, Path(projection) if projection is not None else sequence.parent / "projection.mp4"
+
+
+def _read_site(site: str | os.PathLike) -> Any:
+    from calibproj import _core
+
+    try:
+        return _core.capture.read_site(Path(site))
+    except _core.formats.InputError as error:
+        raise FormatError(str(error)) from None
+
+
+def _record(run: _Capture, site: Any, projection: _Projection, log: CaptureLog, progress: bool) -> Any:
     """Steps 2-5 of the module's list; the ingest result of every camera."""
     from calibproj.ingest import ingest
 
@@ -240,8 +326,8 @@ def _record(run: _Capture, site: Any, log: CaptureLog, progress: bool) -> Any:
 
     def ingest_all() -> None:
         try:
-            result["ingest"] = ingest({c.name: c.source for c in site.cameras}, str(site.sequence),
-                                      {c.name: c.intrinsics for c in site.cameras}, live=run.sources,
+            result["ingest"] = ingest({c.name: c.source for c in site.cameras}, str(projection.sequence),
+                                      projection.intrinsics, live=run.sources,
                                       exposures={c.name: c.exposure_s for c in site.cameras if c.exposure_s > 0},
                                       progress=False, observer=run.observe, finished=run.finished,
                                       cancel=run.cancel)
@@ -263,7 +349,7 @@ def _record(run: _Capture, site: Any, log: CaptureLog, progress: bool) -> Any:
     if all(s.done for s in run.status.values()):
         raise RuntimeError("capture: no camera delivers frames; nothing to calibrate "
                            f"({'; '.join(s.error or '' for s in run.status.values())})")
-    log.projection = _project(run, site, progress)
+    log.projection = _project(run, site, projection.video, progress)
     ended = time.monotonic()
     if not run.wait(lambda: failure or all(s.done for s in run.status.values()), site.end_s):
         late = [name for name, s in run.status.items() if not s.done]
@@ -284,7 +370,7 @@ def _record(run: _Capture, site: Any, log: CaptureLog, progress: bool) -> Any:
     return ingest_result
 
 
-def _project(run: _Capture, site: Any, progress: bool) -> dict[str, Any]:
+def _project(run: _Capture, site: Any, video: Path, progress: bool) -> dict[str, Any]:
     """Plays the projection in a thread (the main thread stays free for Ctrl-C) and
     returns the presentation log's summary."""
     from calibproj import _core
@@ -293,11 +379,11 @@ def _project(run: _Capture, site: Any, progress: bool) -> dict[str, Any]:
 
     def play() -> None:
         try:
-            outcome["log"] = _core.capture.play(str(site.projection), site.projector, run.player_stop)
+            outcome["log"] = _core.capture.play(str(video), site.projector, run.player_stop)
         except BaseException as error:  # noqa: BLE001 - handed to the main thread
             outcome["error"] = error
 
-    logger.info("capture: projecting %s", site.projection)
+    logger.info("capture: projecting %s", video)
     started = run.now()
     player = run.spawn("capture-projector", play)
     next_status = time.monotonic() + STATUS_INTERVAL_S
@@ -311,21 +397,21 @@ def _project(run: _Capture, site: Any, progress: bool) -> dict[str, Any]:
     log = outcome["log"]
     logger.info("capture: projection shown in %.1f s (%d frames logged, %d dropped or late)", log.duration_s,
                 len(log.shown_s), log.dropped_frames)
-    return {"video": str(site.projection), "started_s": started, "duration_s": log.duration_s,
+    return {"video": str(video), "started_s": started, "duration_s": log.duration_s,
             "frames_logged": len(log.shown_s), "dropped_frames": log.dropped_frames,
             "video_time_s": list(log.video_time_s), "shown_s": list(log.shown_s)}
 
 
-def _check_inputs(site: Any) -> None:
-    """FormatError naming what the site file names but is not there."""
+def _check_inputs(site: Any, projection: _Projection) -> None:
+    """FormatError naming what is to be projected but is not there."""
     from calibproj.sequence.sequence import Sequence
 
-    if not Path(site.projection).is_file():
-        raise FormatError(f"{site.path}: projection {site.projection}: no such file (calibproj generate writes it)")
-    Sequence.load(site.sequence)  # FormatError naming the file
+    if not projection.video.is_file():
+        raise FormatError(f"{site.path}: projection {projection.video}: no such file (calibproj generate writes it)")
+    Sequence.load(projection.sequence)  # FormatError naming the file
 
 
-def _intrinsics_of(paths: Mapping[str, Path]) -> dict[str, Any]:
+def _intrinsics_of(paths: Path | Mapping[str, Path]) -> dict[str, Any]:
     """The intrinsics that read; a camera whose file does not has failed in the ingest
     already, with the file's problem as its reason."""
     from calibproj.io.intrinsics import read_intrinsics

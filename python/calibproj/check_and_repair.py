@@ -33,6 +33,7 @@ from typing import Any
 
 from calibproj import _core
 from calibproj.calibration import Calibration
+from calibproj.ingest import IngestResult
 from calibproj.io.intrinsics import Intrinsics, intrinsics_from_core
 from calibproj.option_tables import options_class
 from calibproj.results import CHECK_FILE
@@ -127,6 +128,7 @@ def check(
     workers: int = 2,
     progress: bool = True,
     command: list[str] | None = None,
+    recordings: str | os.PathLike | None = None,
 ) -> CheckResult:
     """Check the calibration in the folder ``results`` with a check projection and, with
     ``out``, write the repaired results folder there.
@@ -135,12 +137,13 @@ def check(
         results: a results folder of ``calibrate`` (its intrinsics, points and poses).
         source: the check projection's camera videos (a folder, ``<camera>.mp4``; then
             ``sequence`` is its ``sequence.json``), or its tracks (``Tracks`` or a
-            ``tracks.json``), undistorted with the results' intrinsics.
+            ``tracks.json``), undistorted with the results' intrinsics, or the
+            ``IngestResult`` of videos already ingested with them (a capture's).
         out: where the repaired results folder goes (written only when the stored
             calibration can be trusted: see the module's docstring); None: check only.
         options: ``CheckOptions`` (defaults documented there).
         force: replace an existing ``out`` (the whole folder).
-        exports, report, workers, progress, command: as ``calibrate`` takes them.
+        exports, report, workers, progress, command, recordings: as ``calibrate`` takes them.
 
     Raises:
         UntrustedReference: with ``out``, when the stored calibration cannot be trusted
@@ -154,7 +157,7 @@ def check(
     from calibproj.provenance import provenance, write_provenance
     from calibproj.registration import RegistrationOptions
     from calibproj.io.intrinsics import intrinsics_of_cameras
-    from calibproj.results import CALIBRATION_FILES, INTRINSICS_DIR, TRACKS_FILE, load_results
+    from calibproj.results import CALIBRATION_FILES, INTRINSICS_DIR, RECORDINGS_DIR, TRACKS_FILE, load_results
 
     from calibproj.export import parse_formats
 
@@ -164,15 +167,18 @@ def check(
     intrinsics, unusable = intrinsics_of_cameras(folder_in / INTRINSICS_DIR, calibration.registered)
     stored_tracks = Tracks.read(folder_in / TRACKS_FILE)
     formats = parse_formats(",".join(exports)) if exports else []
-    from_videos = not (isinstance(source, Tracks) or Path(source).is_file())
+    ingested = isinstance(source, IngestResult)
+    from_videos = not (ingested or isinstance(source, Tracks) or Path(source).is_file())
     if from_videos and sequence is None:
         raise ValueError(f"{source}: checking from videos needs the check projection's sequence.json")
     # The output is claimed before the long ingest: a folder that cannot be written (or
     # exists, without force) is found at once.
     folder = OutputFolder(out, force=force, signature=CALIBRATION_FILES).open() if out is not None else None
     try:
-        ingest_result = None
-        if from_videos:
+        ingest_result = source if ingested else None
+        if ingested:
+            tracks = source.tracks
+        elif from_videos:
             # A single camera may be checked; the other mistakes are found before the ingest.
             check_videos(Path(source), sequence, folder_in / INTRINSICS_DIR, earlier=None)
             ingest_result = ingest(source, sequence, folder_in / INTRINSICS_DIR, workers=workers, progress=progress)
@@ -195,6 +201,8 @@ def check(
             write_check(staging / CHECK_FILE, result)
             write_results(staging, folder.path, fixed, fixed_tracks, fixed_intrinsics, formats, report,
                           ingest_result)
+            if recordings is not None:
+                os.replace(recordings, staging / RECORDINGS_DIR)
         folder.commit()
         log.info("repaired results written to %s", folder.path)
         return result

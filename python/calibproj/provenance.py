@@ -60,6 +60,11 @@ def file_identity(path: str | os.PathLike | None, folder: Path) -> dict[str, Any
     return entry
 
 
+def _video_entry(path: str | os.PathLike, folder: Path) -> dict[str, Any]:
+    """A video file by its identity; a live source (a URL) as it was given."""
+    return {"source": str(path)} if "://" in str(path) else file_identity(path, folder)
+
+
 def _input_entry(value: Any, folder: Path) -> dict[str, Any] | str | None:
     """A path as its identity; an object given in memory by its kind."""
     if value is None:
@@ -97,7 +102,8 @@ def provenance(
         model: the bundle adjustment's model.
         options: the registration options (a dataclass).
         scale: where the metric scale came from (measurement, factor), or None.
-        videos: camera -> video file, each identified by size and time (or hash).
+        videos: camera -> video file, each identified by size and time (or hash), or
+            the URL of a live source.
         merged: the earlier results (or tracks file) whose observations were added.
         checked: the stored results a check repaired (``calibproj check --out``).
     """
@@ -112,7 +118,7 @@ def provenance(
             "source": _input_entry(source, folder),
             "sequence": _input_entry(sequence, folder),
             "intrinsics": _input_entry(intrinsics, folder),
-            "videos": {name: file_identity(path, folder) for name, path in (videos or {}).items()},
+            "videos": {name: _video_entry(path, folder) for name, path in (videos or {}).items()},
             "merged": _input_entry(merged, folder) if merged is not None else None,
             **({"checked": _input_entry(checked, folder)} if checked is not None else {}),
         },

@@ -42,7 +42,11 @@ PacketRecorder::PacketRecorder(const std::string& path, const AVStream& source)
     avformat_free_context(output_);
     throw failed("cannot create the file", code);
   }
-  code = avformat_write_header(output_, nullptr);
+  // Raw frames (a V4L2 camera's YUYV) are stored as Matroska's VfW-compatible raw video.
+  AVDictionary* muxer_options = nullptr;
+  av_dict_set(&muxer_options, "allow_raw_vfw", "1", 0);
+  code = avformat_write_header(output_, &muxer_options);
+  av_dict_free(&muxer_options);
   if (code < 0) {
     avio_closep(&output_->pb);
     avformat_free_context(output_);

@@ -230,6 +230,7 @@ VideoReader::VideoReader(const std::string& path, const SourceOptions& source)
     throw std::runtime_error(path + ": FFmpeg's source does not know the option \"" + unused_key + "\"");
   }
   if (avformat_find_stream_info(d.format, nullptr) < 0) throw unreadable();
+  d.end_reason.clear();  // a probe cut short by the deadline that still found the stream is no end
   const AVCodec* codec = nullptr;
   d.stream = av_find_best_stream(d.format, AVMEDIA_TYPE_VIDEO, -1, -1, &codec, 0);
   if (d.stream < 0 || codec == nullptr) throw std::runtime_error(path + ": no video stream FFmpeg can decode");

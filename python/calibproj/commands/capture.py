@@ -2,6 +2,7 @@
 calibrate from what arrived.
 
     calibproj capture SITE.json --out RESULTS_DIR
+    calibproj capture SITE.json --check RESULTS_DIR --sequence CHECK/sequence.json --out REPAIRED_DIR
 
 The site file names the room once (README, "Running a room"): each camera's source
 (rtsp://, http://, udp://, a device such as /dev/video0 with "format": "v4l2", or a
@@ -17,6 +18,11 @@ is reported by name and the others are calibrated. If the run fails or is interr
 (Ctrl-C, SIGTERM), no results folder is written and the recordings stay in the
 recordings folder (RESULTS_DIR-recordings-<time> unless --recordings), which the
 error names: `calibproj calibrate` can calibrate them later.
+
+With --check RESULTS_DIR, the projection is the check projection of `calibproj generate
+--check RESULTS_DIR` (--sequence), the cameras' frames are read with the stored
+intrinsics, and the stored calibration is checked and repaired as `calibproj check`
+does (its table, its exit statuses 0, 3, 4).
 
 Exit status: 0 every camera calibrated; 1 a camera failed (the table says why) or the
 projector could not play; 2 a bad site file or option; 130 interrupted.
@@ -34,11 +40,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from calibproj.self_calibration import SelfCalibrationOptions
 
     parser.add_argument("site", metavar="SITE", help="the site file (calibproj.site/1: cameras, projector, projection)")
-    parser.add_argument("--out", required=True, metavar="DIR", help="results folder")
+    parser.add_argument("--out", metavar="DIR", help="results folder (needed unless --check)")
     parser.add_argument("--force", action="store_true", help="replace an existing results folder (the whole folder)")
     parser.add_argument("--recordings", metavar="DIR",
                         help="where the cameras are recorded while the capture runs (default: "
                              "RESULTS_DIR-recordings-<time> beside it); moved into RESULTS_DIR/recordings")
+    parser.add_argument("--check", metavar="RESULTS",
+                        help="check the calibration in RESULTS instead of calibrating (as calibproj check): "
+                             "--sequence is then the check projection of `calibproj generate --check RESULTS`; "
+                             "--out gets the repaired results (without --out: check only)")
+    parser.add_argument("--sequence", metavar="FILE",
+                        help="project this sequence.json instead of the site file's (its video: --projection)")
+    parser.add_argument("--projection", metavar="VIDEO",
+                        help="the video of --sequence (default: projection.mp4 beside it)")
     parser.add_argument("--scale", metavar="MEASUREMENT",
                         help="metric scale from one measurement (as calibproj calibrate)")
     parser.add_argument("--export", metavar="FORMATS",
@@ -59,6 +73,12 @@ def run(args: argparse.Namespace) -> int:
     from calibproj.registration import RegistrationOptions
     from calibproj.self_calibration import SelfCalibrationOptions
 
+    if args.check is not None:
+        return run_check(args)
+    if args.out is None:
+        raise ValueError("--out DIR is needed (the results folder) unless --check")
+    if args.projection is not None and args.sequence is None:
+        raise ValueError("--projection goes with --sequence (the site file names its own projection)")
     calibration = capture(
         args.site,
         args.out,
@@ -72,5 +92,29 @@ def run(args: argparse.Namespace) -> int:
         report=not args.no_report,
         refine_intrinsics=args.refine_intrinsics,
         self_calibration_options=dataclass_from_args(SelfCalibrationOptions, args),
+        sequence=args.sequence,
+        projection=args.projection,
     )
     return print_results(calibration, args)
+
+
+def run_check(args: argparse.Namespace) -> int:
+    """``--check RESULTS``: the check projection played and recorded, the stored
+    calibration checked (and repaired into --out), printed as calibproj check prints."""
+    from calibproj.capture import capture_check
+    from calibproj.check_and_repair import UntrustedReference
+    from calibproj.commands.check import print_check
+
+    if args.sequence is None:
+        raise ValueError("--check needs --sequence (the check projection's sequence.json)")
+    if args.scale or args.refine_intrinsics:
+        raise ValueError("--scale and --refine-intrinsics are for calibrating, not with --check")
+    try:
+        result = capture_check(args.site, args.check, args.out, sequence=args.sequence, projection=args.projection,
+                               force=args.force, recordings=args.recordings, progress=not args.no_progress,
+                               command=getattr(args, "command_line", None),
+                               exports=[args.export] if args.export else [], report=not args.no_report)
+        untrusted = None
+    except UntrustedReference as error:
+        result, untrusted = error.result, error
+    return print_check(result, untrusted, args)

@@ -68,6 +68,12 @@ def run(args: argparse.Namespace) -> int:
         untrusted = None
     except UntrustedReference as error:
         result, untrusted = error.result, error
+    return print_check(result, untrusted, args)
+
+
+def print_check(result, untrusted, args: argparse.Namespace) -> int:
+    """The verdicts (or ``--json``), the conclusion and where the repair is; the exit
+    status of the check."""
     if args.json:
         print(result.json(), end="")
     else:

@@ -29,6 +29,7 @@ import socket
 import subprocess
 import threading
 import time
+from collections import OrderedDict, deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -42,6 +43,10 @@ from calibproj.simulate.scene import Scene, load_scene, save_scene
 logger = logging.getLogger(__name__)
 
 X_SERVER = "Xvfb"
+# Grabs kept (a camera thread may run this many grabs late: 1 s at 60 grabs a second),
+# and atlases of them kept for the cameras that film the same moment.
+GRAB_HISTORY = 60
+ATLAS_CACHE = 8
 DISPLAY_START_TIMEOUT_S = 10.0
 
 
@@ -79,9 +84,14 @@ class VirtualRoom:
         self._xvfb: subprocess.Popen | None = None
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
-        self._latest: tuple[float, np.ndarray] | None = None  # (monotonic time, atlas)
-        self._latest_lock = threading.Lock()
+        # The display's last grabs (time it was grabbed, wall clock; grey image) and the
+        # atlases of the last few used.
+        self._grabs: deque[tuple[float, np.ndarray]] = deque(maxlen=GRAB_HISTORY)
+        self._atlases: OrderedDict[float, np.ndarray] = OrderedDict()
+        self._grabs_lock = threading.Lock()
+        self._layout_in_use: Any = None
         self._errors: list[str] = []
+        self._models: dict[str, tuple[Any, Any, Any]] = {}  # per camera: sampler, response, noise
 
     def __enter__(self) -> VirtualRoom:
         try:
@@ -105,9 +115,11 @@ class VirtualRoom:
         grabber = _core.video.VideoReader(self.display, _core.video.SourceOptions(
             format="x11grab", ffmpeg_options={"framerate": f"{self.options.grab_fps:g}",
                                               "video_size": f"{width}x{height}", "draw_mouse": "0"}))
-        cameras = self._camera_models()
-        self._spawn("room-grabber", self._grab, grabber, cameras["layout"])
-        started = time.monotonic()
+        layout = self._layout()
+        self._models = {camera.name: self._camera_model(camera, index, layout)
+                        for index, camera in enumerate(self.scene.cameras)}
+        self._spawn("room-grabber", self._grab, grabber)
+        started = time.time()
         for index, camera in enumerate(self.scene.cameras):
             url = f"udp://127.0.0.1:{_free_udp_port()}"
             self.urls[camera.name] = url
@@ -115,7 +127,7 @@ class VirtualRoom:
                                               key_frame_interval=self.options.key_frame_interval,
                                               crf=self.options.crf)
             rng = np.random.default_rng([self.options.seed, index])
-            self._spawn(f"room-{camera.name}", self._film, camera, cameras[camera.name], writer, started, rng)
+            self._spawn(f"room-{camera.name}", self._film, camera, writer, started, rng)
         logger.info("virtual room on display %s: %s", self.display,
                     ", ".join(f"{name} {url}" for name, url in self.urls.items()))
 
@@ -183,24 +195,48 @@ class VirtualRoom:
             raise RuntimeError(f"{X_SERVER} did not start a display within {DISPLAY_START_TIMEOUT_S:g} s")
         return f":{number.strip()}"
 
-    def _camera_models(self) -> dict[str, Any]:
-        """Per camera (sampler, response, noise) and the projector atlas layout, as the
-        offline renderer builds them."""
+    def change(self, changes: dict[str, Any]) -> None:
+        """Moves or re-zooms cameras while the room runs (``CameraChange`` by name), as a
+        bumped lamp or a re-zoomed PTZ camera: from their next frames on they film from
+        their new poses. ``truth.json`` is written again; the intrinsics files stay those
+        of the cameras as they were, as a user's would."""
+        from calibproj.simulate.truth import truth_document, write_truth
+
+        self.scene = self.scene.changed(changes)
+        for index, camera in enumerate(self.scene.cameras):
+            if camera.name in changes:
+                self._models[camera.name] = self._camera_model(camera, index, self._layout_in_use)
+        empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+        write_truth(self.folder / "truth.json", truth_document(self.scene, empty, None))
+
+    def _render_options(self) -> Any:
+        from calibproj.simulate.render import RenderOptions
+
+        return RenderOptions(supersample=self.options.supersample)
+
+    def _layout(self) -> Any:
+        """The projector atlas layout, deep enough for the blurriest camera sample (as
+        the offline renderer builds it)."""
         from calibproj.simulate.atlas import AtlasLayout
-        from calibproj.simulate.render import RenderOptions, camera_model
         from calibproj.simulate.warp import floor_view, pyramid_levels_needed
 
-        render = RenderOptions(supersample=self.options.supersample)
+        render = self._render_options()
         blur = self.scene.photometric.blur_px * render.supersample
-        views = {camera.name: floor_view(camera, self.scene.projector, self.scene.floor, render.supersample,
-                                         self.scene.boxes) for camera in self.scene.cameras}
-        levels = max(pyramid_levels_needed(view, blur) for view in views.values())
-        layout = AtlasLayout.for_projector(self.scene.projector.resolution, levels)
-        models: dict[str, Any] = {"layout": layout}
-        for index, camera in enumerate(self.scene.cameras):
-            rng = np.random.default_rng([self.options.seed, 1000 + index])
-            models[camera.name] = camera_model(camera, views[camera.name], layout, self.scene, render, rng)
-        return models
+        levels = max(pyramid_levels_needed(floor_view(camera, self.scene.projector, self.scene.floor,
+                                                      render.supersample, self.scene.boxes), blur)
+                     for camera in self.scene.cameras)
+        self._layout_in_use = AtlasLayout.for_projector(self.scene.projector.resolution, levels)
+        return self._layout_in_use
+
+    def _camera_model(self, camera: Any, index: int, layout: Any) -> tuple[Any, Any, Any]:
+        """(sampler, response, noise) of one camera, as the offline renderer builds them."""
+        from calibproj.simulate.render import camera_model
+        from calibproj.simulate.warp import floor_view
+
+        render = self._render_options()
+        view = floor_view(camera, self.scene.projector, self.scene.floor, render.supersample, self.scene.boxes)
+        rng = np.random.default_rng([self.options.seed, 1000 + index])
+        return camera_model(camera, view, layout, self.scene, render, rng)
 
     def _spawn(self, name: str, target: Any, *args: Any) -> None:
         def run() -> None:
@@ -216,20 +252,38 @@ class VirtualRoom:
 
     # ------------------------------------------------------------------ threads
 
-    def _grab(self, reader: Any, layout: Any) -> None:
-        """Keeps the atlas of the display's latest image."""
+    def _grab(self, reader: Any) -> None:
+        """Keeps the display's last images with the times x11grab took them."""
         while not self._stop.is_set():
             frame = reader.grab()
             if frame is None:
                 raise RuntimeError(f"display {self.display}: grabbing ended ({reader.end_reason or 'end'})")
-            atlas = layout.build(frame[1])
-            with self._latest_lock:
-                self._latest = (time.monotonic(), atlas)
+            with self._grabs_lock:
+                self._grabs.append(frame)
 
-    def _film(self, camera: Any, model: tuple[Any, Any, Any], writer: Any, started: float,
-              rng: np.random.Generator) -> None:
-        """One camera: from its start delay on, a frame per period of its own clock."""
-        sampler, response, noise = model
+    def _shown_at(self, wall_time: float) -> np.ndarray | None:
+        """The atlas of what the display showed at ``wall_time`` (its last grab before
+        then): a camera thread that runs late still films its own moment."""
+        with self._grabs_lock:
+            grabs = list(self._grabs)
+        earlier = [grab for grab in grabs if grab[0] <= wall_time]
+        if not earlier:
+            return None
+        taken, image = earlier[-1]
+        with self._grabs_lock:
+            atlas = self._atlases.get(taken)
+        if atlas is None:
+            atlas = self._layout_in_use.build(image)
+            with self._grabs_lock:
+                self._atlases[taken] = atlas
+                while len(self._atlases) > ATLAS_CACHE:
+                    self._atlases.popitem(last=False)
+        return atlas
+
+    def _film(self, camera: Any, writer: Any, started: float, rng: np.random.Generator) -> None:
+        """One camera: from its start delay on, a frame per period of its own clock (its
+        optics as they are now: ``change`` may swap them). Times are wall-clock seconds,
+        x11grab's clock."""
         period = 1.0 / camera.fps
         first = started + camera.start_offset_s
         frame = 0
@@ -239,13 +293,13 @@ class VirtualRoom:
             while True:
                 jitter = float(np.clip(rng.normal(0.0, spread), -3 * spread, 3 * spread)) if spread > 0 else 0.0
                 due = first + frame * period + jitter
-                if self._stop.wait(max(0.0, due - time.monotonic())):
+                if self._stop.wait(max(0.0, due - time.time())):
                     break
                 dropped = camera.drop_rate > 0 and rng.random() < camera.drop_rate
-                with self._latest_lock:
-                    latest = self._latest
-                if latest is not None and not dropped:
-                    light = sampler.sample(latest[1])
+                atlas = None if dropped else self._shown_at(due)
+                if atlas is not None:
+                    sampler, response, noise = self._models[camera.name]
+                    light = sampler.sample(atlas)
                     image = noise.quantise(response.encode(response.irradiance(light)))
                     writer.write(image, due - started)
                     sent += 1
