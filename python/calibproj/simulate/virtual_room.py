@@ -57,14 +57,14 @@ class VirtualRoomOptions:
     Attributes:
         grab_fps: how often the projector's display is grabbed (at least twice the
             projection's frame rate, so that every projector frame is seen).
-        crf: the cameras' x264 quality (23: a typical IP camera).
+        crf: the cameras' x264 quality (18, as the offline renderer encodes).
         key_frame_interval: frames between the cameras' key frames.
         seed: the sensor noise, jitter and drops.
         supersample: samples per camera pixel along each axis (1: the fastest).
     """
 
     grab_fps: float = 60.0
-    crf: int = 20
+    crf: int = 18
     key_frame_interval: int = 15
     seed: int = 0
     supersample: int = 1
