@@ -166,3 +166,48 @@ def test_unknown_source_options_and_formats_are_named(room):
         camera = ingest({CAMERA: url}, sequence, out / "intrinsics", live={CAMERA: source},
                         progress=False).cameras[CAMERA]
         assert camera.error.startswith(url) and message in camera.error
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_an_http_stream_and_a_file_being_written_are_sources_too(room, tmp_path):
+    """The other source kinds that run on loopback: an encoder serving MPEG-TS over HTTP
+    (FFmpeg's server answers one client), and a recorder's file read while it grows
+    (FFmpeg's file protocol with follow=1, ended by the stall timeout)."""
+    out, sequence, stream = room
+    url = f"http://127.0.0.1:{free_tcp_port()}/camera.ts"
+    server = subprocess.Popen(["ffmpeg", "-v", "error", "-re", "-i", str(stream), "-c", "copy", "-f", "mpegts",
+                               "-listen", "1", url])
+    try:
+        source = _core.video.SourceOptions(open_timeout_s=10.0, stall_timeout_s=3.0)
+        for _ in range(50):  # until the server listens
+            camera = ingest({CAMERA: url}, sequence, out / "intrinsics", live={CAMERA: source},
+                            progress=False).cameras[CAMERA]
+            if camera.error is None or "refused" not in camera.error.lower():
+                break
+            time.sleep(0.1)
+    finally:
+        server.kill()
+        server.wait()
+    assert camera.error is None, camera.error
+    original = ingest({CAMERA: stream}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
+    assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
+
+    growing = tmp_path / "recorder.ts"
+    writer = subprocess.Popen(["ffmpeg", "-v", "error", "-re", "-i", str(stream), "-c", "copy", "-f", "mpegts",
+                               "-flush_packets", "1", str(growing)])
+    try:
+        while not growing.exists() or growing.stat().st_size == 0:
+            time.sleep(0.05)
+        source = _core.video.SourceOptions(ffmpeg_options={"follow": "1"}, stall_timeout_s=3.0)
+        camera = ingest({CAMERA: f"file:{growing}"}, sequence, out / "intrinsics", live={CAMERA: source},
+                        progress=False).cameras[CAMERA]
+    finally:
+        writer.kill()
+        writer.wait()
+    assert camera.error is None, camera.error
+    assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
