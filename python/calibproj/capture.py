@@ -232,7 +232,8 @@ def capture(
                          out=out, force=force, progress=progress, command=command, recordings=kept,
                          **calibrate_options)
 
-    return _captured(spec, projection, Path(out), force, recordings, progress, calibrated)
+    out = Path(out)
+    return _captured(spec, projection, out, force, _recordings(recordings, out), progress, calibrated)
 
 
 def capture_check(
@@ -271,20 +272,20 @@ def capture_check(
                      exports=exports, report=report, progress=progress, command=command,
                      recordings=kept if out is not None else None)
 
-    folder = Path(out) if out is not None else Path(results).parent / f"{Path(results).name}-check"
-    return _captured(spec, plan, folder, force if out is not None else True, recordings, progress, checked,
-                     claim_output=out is not None)
+    beside = Path(out) if out is not None else Path(results).parent / f"{Path(results).name}-check"
+    return _captured(spec, plan, Path(out) if out is not None else None, force, _recordings(recordings, beside),
+                     progress, checked)
 
 
-def _captured(spec: Any, projection: _Projection, out: Path, force: bool, recordings: str | os.PathLike | None,
-              progress: bool, then: Any, claim_output: bool = True) -> Any:
-    """Records (steps 1-5 of the module's list), then ``then(ingest_result,
-    recordings)``; on any failure or interruption, stops everything and says where the
-    recordings are kept."""
+def _captured(spec: Any, projection: _Projection, out: Path | None, force: bool, recordings: Path,
+              progress: bool, then: Any) -> Any:
+    """Records (steps 1-5 of the module's list) into ``recordings``, then
+    ``then(ingest_result, recordings)``; on any failure or interruption, stops
+    everything and says where the recordings are kept. ``out``, the folder ``then``
+    writes (None: nothing), is checked first."""
     _check_inputs(spec, projection)
-    if claim_output:
+    if out is not None:
         OutputFolder(out, force=force, signature=CALIBRATION_FILES).open().abort()  # writable, before recording
-    recordings = Path(recordings) if recordings is not None else _default_recordings(out)
     recordings.mkdir(parents=True, exist_ok=False)
     run = _Capture(spec, recordings)
     log = CaptureLog(site=str(spec.path), recordings=str(recordings))
@@ -425,8 +426,11 @@ def _intrinsics_of(paths: Path | Mapping[str, Path]) -> dict[str, Any]:
     return found
 
 
-def _default_recordings(out: Path) -> Path:
-    return out.parent / f"{out.name}-recordings-{time.strftime('%Y%m%d-%H%M%S')}"
+def _recordings(given: str | os.PathLike | None, beside: Path) -> Path:
+    """The recordings folder: the one given, else ``<beside>-recordings-<time>``."""
+    if given is not None:
+        return Path(given)
+    return beside.parent / f"{beside.name}-recordings-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
 def _note_recordings(error: BaseException, recordings: Path) -> None:

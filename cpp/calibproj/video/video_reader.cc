@@ -15,7 +15,6 @@ extern "C" {
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <mutex>
 #include <cmath>
 #include <deque>
 #include <filesystem>

@@ -115,8 +115,9 @@ class VirtualRoom:
         grabber = _core.video.VideoReader(self.display, _core.video.SourceOptions(
             format="x11grab", ffmpeg_options={"framerate": f"{self.options.grab_fps:g}",
                                               "video_size": f"{width}x{height}", "draw_mouse": "0"}))
-        layout = self._layout()
-        self._models = {camera.name: self._camera_model(camera, index, layout)
+        views = {camera.name: self._view(camera) for camera in self.scene.cameras}
+        self._layout_in_use = self._layout(views.values())
+        self._models = {camera.name: self._camera_model(camera, index, views[camera.name])
                         for index, camera in enumerate(self.scene.cameras)}
         self._spawn("room-grabber", self._grab, grabber)
         started = time.time()
@@ -205,7 +206,7 @@ class VirtualRoom:
         self.scene = self.scene.changed(changes)
         for index, camera in enumerate(self.scene.cameras):
             if camera.name in changes:
-                self._models[camera.name] = self._camera_model(camera, index, self._layout_in_use)
+                self._models[camera.name] = self._camera_model(camera, index, self._view(camera))
         empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
         write_truth(self.folder / "truth.json", truth_document(self.scene, empty, None))
 
@@ -214,29 +215,28 @@ class VirtualRoom:
 
         return RenderOptions(supersample=self.options.supersample)
 
-    def _layout(self) -> Any:
+    def _view(self, camera: Any) -> Any:
+        """Where every sample of the camera looks in the projector image."""
+        from calibproj.simulate.warp import floor_view
+
+        return floor_view(camera, self.scene.projector, self.scene.floor, self.options.supersample, self.scene.boxes)
+
+    def _layout(self, views: Any) -> Any:
         """The projector atlas layout, deep enough for the blurriest camera sample (as
         the offline renderer builds it)."""
         from calibproj.simulate.atlas import AtlasLayout
-        from calibproj.simulate.warp import floor_view, pyramid_levels_needed
+        from calibproj.simulate.warp import pyramid_levels_needed
 
-        render = self._render_options()
-        blur = self.scene.photometric.blur_px * render.supersample
-        levels = max(pyramid_levels_needed(floor_view(camera, self.scene.projector, self.scene.floor,
-                                                      render.supersample, self.scene.boxes), blur)
-                     for camera in self.scene.cameras)
-        self._layout_in_use = AtlasLayout.for_projector(self.scene.projector.resolution, levels)
-        return self._layout_in_use
+        blur = self.scene.photometric.blur_px * self.options.supersample
+        levels = max(pyramid_levels_needed(view, blur) for view in views)
+        return AtlasLayout.for_projector(self.scene.projector.resolution, levels)
 
-    def _camera_model(self, camera: Any, index: int, layout: Any) -> tuple[Any, Any, Any]:
+    def _camera_model(self, camera: Any, index: int, view: Any) -> tuple[Any, Any, Any]:
         """(sampler, response, noise) of one camera, as the offline renderer builds them."""
         from calibproj.simulate.render import camera_model
-        from calibproj.simulate.warp import floor_view
 
-        render = self._render_options()
-        view = floor_view(camera, self.scene.projector, self.scene.floor, render.supersample, self.scene.boxes)
         rng = np.random.default_rng([self.options.seed, 1000 + index])
-        return camera_model(camera, view, layout, self.scene, render, rng)
+        return camera_model(camera, view, self._layout_in_use, self.scene, self._render_options(), rng)
 
     def _spawn(self, name: str, target: Any, *args: Any) -> None:
         def run() -> None:
