@@ -53,6 +53,7 @@ EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "
 BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "_core.detect.MarkerFamilyInfo", "_core.ingest.ingest_camera",
                         "_core.ingest.ingest_camera[live]", "_core.check.CameraCheck",
                         "_core.capture.Site", "_core.capture.SiteCamera", "_core.capture.play",
+                        "_core.capture.record",
                         "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.Calibration",
                         "_core.formats.CameraPose", "_core.formats.CameraMetrics", "_core.formats.Plane",
                         "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
@@ -337,8 +338,16 @@ def write_files(folder: Path) -> dict[str, str]:
         "schema": "calibproj.site/1", "sequence": "sequence.json", "projector": {"display": ":4242"},
         "cameras": {"a": {"source": "udp://127.0.0.1:9", "intrinsics": "a.json", "options": {"fifo_size": 1000}},
                     "b": {"source": "tiny.mkv", "intrinsics": "b.json", "exposure_s": 0.01}}}))
+    # A room that fails at once: no camera has intrinsics, nothing plays at :4242.
+    (folder / "site_fast.json").write_text(json.dumps({
+        "schema": "calibproj.site/1", "sequence": "sequence.json", "projector": {"display": ":4242", "timeout_s": 1},
+        "cameras": {"a": {"source": "udp://127.0.0.1:9", "intrinsics": "a.json", "open_timeout_s": 0.5},
+                    "b": {"source": "tiny.mkv", "intrinsics": "b.json"}},
+        "timeouts": {"ready_s": 1, "end_s": 1}}))
+    (folder / "recordings").mkdir(exist_ok=True)
     return {name: str(folder / name)
-            for name in ("tiny.mkv", "empty.mp4", "garbage.mp4", "cut.mkv", "folder.mp4", "site.json")}
+            for name in ("tiny.mkv", "empty.mp4", "garbage.mp4", "cut.mkv", "folder.mp4", "site.json",
+                         "site_fast.json", "recordings")}
 
 
 def bad_paths(files: dict[str, str]) -> list[Mutation]:
@@ -523,6 +532,15 @@ class Baselines:
             "_core.capture.Site": Spec([]),
             "_core.capture.SiteCamera": Spec([]),
             "_core.capture.read_site": Spec([("path", f["site.json"])]),
+            "_core.capture.CapturePlan": Spec(self.capture_plan_arguments()),
+            "_core.capture.CaptureRun": Spec([]),
+            "_core.capture.CameraOutcome": Spec([]),
+            "_core.capture.Delivery": Spec([]),
+            # Every camera fails at once (no intrinsics): "no camera delivers frames".
+            "_core.capture.record": Spec([("plan", _core.capture.CapturePlan(**dict(self.capture_plan_arguments()))),
+                                          ("abort", None), ("log", None)]),
+            "_core.capture.CaptureRun.ingest_result": Spec([("name", "a")]),
+            "_core.capture.CaptureRun.write_log": Spec([("path", f["recordings"] + "/capture.json")]),
             # No display answers at :4242: the player fails at once, naming it.
             "_core.capture.play": Spec([("video", f["tiny.mkv"]),
                                         ("options", _core.capture.ProjectorOptions(display=":4242", video_output="x11",
@@ -700,6 +718,13 @@ class Baselines:
                 ("points", s["points"]), ("observed", observed), ("volume", volume), ("width", 640.0),
                 ("height", 480.0), ("reference_points", s["points"]), ("reference_observed", observed)]
 
+    def capture_plan_arguments(self) -> list[tuple[str, Any]]:
+        f = self.files
+        return [("site", _core.capture.read_site(f["site_fast.json"])), ("sequence_file", "sequence.json"),
+                ("sequence", self.core_sequence), ("video", f["tiny.mkv"]), ("intrinsics_folder", ""),
+                ("recordings", f["recordings"]), ("aruco", _core.detect.ArucoOptions()),
+                ("apriltag", _core.detect.AprilTagOptions()), ("status_interval_s", 2.0)]
+
     def receivers(self) -> dict[str, dict[str, Callable[[], Any]]]:
         """Objects whose methods and properties are called, by class, in several states."""
         s = self.scene
@@ -735,6 +760,9 @@ class Baselines:
             "_core.capture.Stop": {"fresh": _core.capture.Stop},
             "_core.capture.ProjectorOptions": {"default": _core.capture.ProjectorOptions},
             "_core.capture.PresentationLog": {"empty": _core.capture.PresentationLog},
+            "_core.capture.CaptureRun": {"empty": _core.capture.CaptureRun},
+            "_core.capture.CameraOutcome": {"empty": _core.capture.CameraOutcome},
+            "_core.capture.Delivery": {"empty": _core.capture.Delivery},
             "_core.capture.Site": {"read": lambda: _core.capture.read_site(self.files["site.json"])},
             "_core.capture.SiteCamera": {
                 "read": lambda: _core.capture.read_site(self.files["site.json"]).cameras[0]},

@@ -1,5 +1,6 @@
 #include "calibrate_command.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -61,6 +62,8 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
 
 namespace {
 
+}  // namespace
+
 // The MSM geometry of sequence.json, checked against the tracks it should belong to.
 formats::ProjectedMarkers MarkersOf(const std::string& sequence, std::optional<int> markers_per_array) {
   formats::ProjectedMarkers markers = formats::ProjectedMarkers::FromSequence(formats::ReadSequence(sequence));
@@ -72,17 +75,10 @@ formats::ProjectedMarkers MarkersOf(const std::string& sequence, std::optional<i
   return markers;
 }
 
-void CheckScale(const formats::ScaleMeasurement& measurement, const std::vector<std::string>& cameras,
-                const formats::ProjectedMarkers* markers) {
-  try {
-    formats::CheckMeasurement(measurement, cameras, markers);
-  } catch (const std::invalid_argument& error) {
-    throw InputError(error.what());
-  }
-}
+namespace {
 
 registration::RegistrationResult Register(const Tracks& tracks, const std::map<std::string, CameraIntrinsics>& intrinsics,
-                                          const CalibrateArguments& arguments,
+                                          const registration::Options& options,
                                           const std::optional<formats::ProjectedMarkers>& markers) {
   std::vector<registration::Camera> cameras;
   for (const auto& name : tracks.cameras) {
@@ -95,7 +91,7 @@ registration::RegistrationResult Register(const Tracks& tracks, const std::map<s
   }
   if (cameras.empty()) return {};  // every camera failed before registration
   registration::Reconstruction reconstruction(cameras, static_cast<int>(tracks.point_ids.size()), tracks.camera_index,
-                                              tracks.point_index, tracks.xy, arguments.options);
+                                              tracks.point_index, tracks.xy, options);
   if (markers) {
     reconstruction.SetProjector(markers->PixelsOf(tracks.point_ids), markers->projector_width,
                                 markers->projector_height, markers->LargestSidesOf(tracks.point_ids));
@@ -118,42 +114,20 @@ void PrintSummary(const formats::Calibration& calibration, const std::string& ou
 
 }  // namespace
 
-int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
-  const std::vector<std::string> exports =
-      arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
-  std::optional<formats::ScaleMeasurement> measurement;
-  if (!arguments.scale.empty()) measurement = formats::ParseScale(arguments.scale);
-  if (measurement && measurement->kind == "marker-size" && arguments.sequence.empty()) {
-    throw InputError("--scale " + arguments.scale + ": marker-size needs --sequence (the projection's sequence.json)");
-  }
-  try {
-    arguments.options.Check();
-  } catch (const std::invalid_argument& error) {
-    throw InputError(error.what());
-  }
-  // Checked and locked before the inputs are read, as the Python command does.
-  OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
-  out.Open();
-  const Tracks recorded = ReadTracks(arguments.tracks);
-  const IntrinsicsDir folder = LoadIntrinsicsDir(arguments.intrinsics);
-  const auto& intrinsics = folder.cameras;
-  const Tracks given =
-      arguments.merge.empty() ? recorded : formats::WithEarlierObservations(arguments.merge, recorded, intrinsics);
-  Tracks tracks = given;
-  std::optional<formats::ProjectedMarkers> markers;
-  if (!arguments.sequence.empty()) markers = MarkersOf(arguments.sequence, tracks.markers_per_array);
-  if (measurement) {
-    CheckScale(*measurement, tracks.cameras, markers ? &*markers : nullptr);
-  }
-
-  std::vector<formats::NamedText> left_out;
+int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const registration::Options& options,
+                  const std::vector<std::string>& exports, const std::optional<formats::ScaleMeasurement>& measurement,
+                  const std::function<void(const fs::path& staging)>& extra) {
+  const auto& intrinsics = inputs.intrinsics.cameras;
+  const formats::ProjectedMarkers* markers = inputs.markers ? &*inputs.markers : nullptr;
+  Tracks tracks = inputs.given;
+  std::vector<formats::NamedText> left_out = inputs.left_out;
   std::vector<std::string> missing;
+  for (const auto& [camera, reason] : left_out) missing.push_back(camera);
   for (const auto& camera : tracks.cameras) {
-    if (intrinsics.count(camera)) continue;
+    if (intrinsics.count(camera) || std::find(missing.begin(), missing.end(), camera) != missing.end()) continue;
     // A camera whose file is bad fails alone, with the file and its problem.
-    const auto bad = folder.unusable.find(camera);
-    const std::string reason =
-        bad != folder.unusable.end() ? bad->second : formats::MissingIntrinsicsFile(arguments.intrinsics, camera);
+    const auto bad = inputs.intrinsics.unusable.find(camera);
+    const std::string reason = bad != inputs.intrinsics.unusable.end() ? bad->second : inputs.missing_reason(camera);
     missing.push_back(camera);
     left_out.emplace_back(camera, reason);
     std::cerr << "camera " << camera << ": " << reason << ", left out\n";
@@ -161,25 +135,73 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   if (!missing.empty()) tracks = tracks.WithoutCameras(missing);
 
   formats::Calibration calibration =
-      formats::FromRegistration(Register(tracks, intrinsics, arguments, markers), tracks.cameras, tracks.point_ids, left_out,
-                                registration::ChoiceName(arguments.options.model));
+      formats::FromRegistration(Register(tracks, intrinsics, options, inputs.markers), tracks.cameras,
+                                tracks.point_ids, left_out, registration::ChoiceName(options.model));
   std::string scale_error;
   if (measurement && !calibration.poses.empty()) {
     try {
-      const formats::ScaleFit fit =
-          formats::ScaleFactor(calibration, *measurement, markers ? &*markers : nullptr);
+      const formats::ScaleFit fit = formats::ScaleFactor(calibration, *measurement, markers);
       std::cerr << "scale from " << measurement->Label() << ": " << fit.metres_per_unit << " m per unit\n";
       calibration = formats::Scaled(calibration, fit.metres_per_unit);
     } catch (const std::invalid_argument& error) {
       scale_error = error.what();
     }
   }
-  SaveResults(out, calibration, intrinsics, given, tracks, exports);
-  PrintSummary(calibration, arguments.out);
+  SaveResults(out, calibration, intrinsics, inputs.given, tracks, exports, extra);
+  PrintSummary(calibration, out.path().string());
   if (!scale_error.empty()) {
-    throw InputError(scale_error + "; results written to " + arguments.out + " in arbitrary units");
+    throw InputError(scale_error + "; results written to " + out.path().string() + " in arbitrary units");
   }
   return calibration.failed.empty() ? 0 : 1;
+}
+
+std::optional<formats::ScaleMeasurement> ScaleOption(const std::string& scale, bool has_sequence) {
+  if (scale.empty()) return std::nullopt;
+  formats::ScaleMeasurement measurement = formats::ParseScale(scale);
+  if (measurement.kind == "marker-size" && !has_sequence) {
+    throw InputError("--scale " + scale + ": marker-size needs --sequence (the projection's sequence.json)");
+  }
+  return measurement;
+}
+
+void CheckScale(const std::optional<formats::ScaleMeasurement>& measurement, const Tracks& tracks,
+                const std::optional<formats::ProjectedMarkers>& markers) {
+  if (!measurement) return;
+  try {
+    formats::CheckMeasurement(*measurement, tracks.cameras, markers ? &*markers : nullptr);
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
+  }
+}
+
+void CheckOptions(const registration::Options& options) {
+  try {
+    options.Check();
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
+  }
+}
+
+int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
+  const std::vector<std::string> exports =
+      arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
+  const auto measurement = ScaleOption(arguments.scale, !arguments.sequence.empty());
+  CheckOptions(arguments.options);
+  // Checked and locked before the inputs are read, as the Python command does.
+  OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
+  out.Open();
+  const Tracks recorded = ReadTracks(arguments.tracks);
+  CalibrationInputs inputs;
+  inputs.intrinsics = LoadIntrinsicsDir(arguments.intrinsics);
+  inputs.given = arguments.merge.empty()
+                     ? recorded
+                     : formats::WithEarlierObservations(arguments.merge, recorded, inputs.intrinsics.cameras);
+  if (!arguments.sequence.empty()) inputs.markers = MarkersOf(arguments.sequence, inputs.given.markers_per_array);
+  CheckScale(measurement, inputs.given, inputs.markers);
+  inputs.missing_reason = [&](const std::string& camera) {
+    return formats::MissingIntrinsicsFile(arguments.intrinsics, camera);
+  };
+  return CalibrateInto(out, inputs, arguments.options, exports, measurement);
 }
 
 }  // namespace calibproj::app

@@ -5,11 +5,20 @@
 // `calibproj calibrate --tracks`.
 
 #include <CLI/CLI.hpp>
+#include <filesystem>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
+#include "calibproj/formats/calibration.h"
+#include "calibproj/formats/intrinsics_file.h"
+#include "calibproj/formats/scale.h"
+#include "calibproj/formats/tracks_file.h"
 #include "calibproj/registration/reconstruction.h"
 #include "interrupts.h"
+#include "output_folder.h"
 
 namespace calibproj::app {
 
@@ -31,5 +40,32 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
 // as `calibproj calibrate` (README, "Exit status").
 // The results folder is written as one transaction (output_folder.h).
 int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts);
+
+// What a calibration is made from (calibrate: files; capture: what the cameras sent).
+struct CalibrationInputs {
+  formats::Tracks given;                         // as tracks.json keeps them
+  formats::IntrinsicsDir intrinsics;
+  std::vector<formats::NamedText> left_out;      // cameras that failed before, and why
+  std::optional<formats::ProjectedMarkers> markers;
+  // Why a camera of the tracks has no intrinsics, when the folder does not say.
+  std::function<std::string(const std::string& camera)> missing_reason;
+};
+
+// Registers, refines, scales and writes the results into `out` (open) with what `extra`
+// writes into its staging folder; prints the summary. 0 every camera calibrated, 1 not.
+// InputError when the scale cannot be applied (the results are then written unscaled).
+int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const registration::Options& options,
+                  const std::vector<std::string>& exports, const std::optional<formats::ScaleMeasurement>& measurement,
+                  const std::function<void(const std::filesystem::path& staging)>& extra = {});
+
+// --scale MEASUREMENT parsed (none when empty); marker-size needs the projection's sequence.
+std::optional<formats::ScaleMeasurement> ScaleOption(const std::string& scale, bool has_sequence);
+// InputError when the measurement names cameras or markers the tracks do not have.
+void CheckScale(const std::optional<formats::ScaleMeasurement>& measurement, const formats::Tracks& tracks,
+                const std::optional<formats::ProjectedMarkers>& markers);
+// InputError naming the first bad registration option.
+void CheckOptions(const registration::Options& options);
+// The MSM geometry of sequence.json, checked against the tracks' markers per array.
+formats::ProjectedMarkers MarkersOf(const std::string& sequence, std::optional<int> markers_per_array);
 
 }  // namespace calibproj::app

@@ -64,36 +64,30 @@ std::map<std::string, formats::CameraIntrinsics> IntrinsicsOf(const fs::path& fo
 
 }  // namespace
 
-int RunCheck(const CheckArguments& arguments, Interrupts& interrupts) {
-  const std::vector<std::string> exports =
-      arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
-  try {
-    arguments.options.Check();
-  } catch (const std::invalid_argument& error) {
-    throw InputError(error.what());
-  }
-  // Claimed before the inputs are read, as the Python command does.
-  std::optional<OutputFolder> out;
-  if (!arguments.out.empty()) {
-    out.emplace(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
-    out->Open();
-  }
-  const fs::path results = arguments.results;
-  formats::Calibration calibration = formats::ReadCalibration(results);
+StoredResults ReadStored(const std::string& folder) {
+  const fs::path results = folder;
+  StoredResults stored;
+  stored.calibration = formats::ReadCalibration(results);
   // The stored covariance, which the repair carries over (a bad file only costs it).
   std::string warning;
-  calibration.uncertainty = uncertainty::StoredPoseUncertainty(results, calibration, &warning);
+  stored.calibration.uncertainty = uncertainty::StoredPoseUncertainty(results, stored.calibration, &warning);
   if (!warning.empty()) std::cerr << warning << "; the repaired results will have no uncertainty.json\n";
-  std::map<std::string, std::string> unusable;
-  const auto intrinsics = IntrinsicsOf(results / "intrinsics", calibration.poses, &unusable);
-  const formats::Tracks stored = formats::ReadTracks(results / "tracks.json");
-  const formats::Tracks tracks = formats::ReadTracks(arguments.tracks);
-  const check::CheckInputs inputs{&calibration, &intrinsics, unusable, &tracks, &stored, {}};
+  stored.intrinsics = IntrinsicsOf(results / "intrinsics", stored.calibration.poses, &stored.unusable);
+  stored.tracks = formats::ReadTracks(results / "tracks.json");
+  return stored;
+}
+
+int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, const std::string& source,
+                 const CheckArguments& arguments, std::optional<OutputFolder>& out) {
+  const std::vector<std::string> exports =
+      arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
+  const check::CheckInputs inputs{&stored.calibration, &stored.intrinsics, stored.unusable, &tracks, &stored.tracks,
+                                  {}};
   check::CalibrationCheck result;
   try {
     result = check::CheckCalibration(inputs, arguments.options);
   } catch (const std::invalid_argument& error) {
-    throw InputError(arguments.tracks + ": " + error.what());
+    throw InputError(source + ": " + error.what());
   }
   for (const auto& [name, verdict] : result.cameras) {
     if (verdict.status == "not seen" || verdict.status == "unknown") {
@@ -120,6 +114,28 @@ int RunCheck(const CheckArguments& arguments, Interrupts& interrupts) {
     if (repair) std::cout << "repaired results in " << arguments.out << "\n";
   }
   return check::CheckExitStatus(result, repair);
+}
+
+void CheckOptions(const check::CheckOptions& options) {
+  try {
+    options.Check();
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
+  }
+}
+
+int RunCheck(const CheckArguments& arguments, Interrupts& interrupts) {
+  if (!arguments.exports.empty()) formats::ParseExportFormats(arguments.exports);  // before anything is read
+  CheckOptions(arguments.options);
+  // Claimed before the inputs are read, as the Python command does.
+  std::optional<OutputFolder> out;
+  if (!arguments.out.empty()) {
+    out.emplace(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
+    out->Open();
+  }
+  const StoredResults stored = ReadStored(arguments.results);
+  const formats::Tracks tracks = formats::ReadTracks(arguments.tracks);
+  return CheckAgainst(stored, tracks, arguments.tracks, arguments, out);
 }
 
 }  // namespace calibproj::app

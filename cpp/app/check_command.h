@@ -4,11 +4,17 @@
 // check, verdicts and repair (check/calibration_check.h), as `calibproj check --tracks`.
 
 #include <CLI/CLI.hpp>
+#include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "calibproj/check/camera_check.h"
+#include "calibproj/formats/calibration.h"
+#include "calibproj/formats/intrinsics_file.h"
+#include "calibproj/formats/tracks_file.h"
 #include "interrupts.h"
+#include "output_folder.h"
 
 namespace calibproj::app {
 
@@ -26,5 +32,22 @@ std::shared_ptr<CheckArguments> AddCheckCommand(CLI::App& app, CLI::App** comman
 // 3 not confirmed (a camera not seen or unknown, a change without --out, fewer than two
 // cameras tested); 4 the stored calibration cannot be trusted (nothing written).
 int RunCheck(const CheckArguments& arguments, Interrupts& interrupts);
+
+// A stored results folder as a check reads it.
+struct StoredResults {
+  formats::Calibration calibration;  // with its stored uncertainty
+  std::map<std::string, formats::CameraIntrinsics> intrinsics;
+  std::map<std::string, std::string> unusable;  // cameras whose intrinsics file is bad
+  formats::Tracks tracks;
+};
+StoredResults ReadStored(const std::string& results);
+
+// The stored calibration checked against `tracks` (named `source` in messages) and,
+// with `out` (open), repaired into it; prints the table (or JSON); the exit status.
+int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, const std::string& source,
+                 const CheckArguments& arguments, std::optional<OutputFolder>& out);
+
+// InputError naming the first bad check option.
+void CheckOptions(const check::CheckOptions& options);
 
 }  // namespace calibproj::app

@@ -213,16 +213,6 @@ CameraIntrinsics IntrinsicsFor(const fs::path& folder, const std::string& name, 
   return ReadIntrinsics(path);
 }
 
-ingest::CameraModel CameraModelFrom(const CameraIntrinsics& in, const std::string& source) {
-  ingest::CameraModel camera;
-  for (int i = 0; i < 9; ++i) camera.lens.K(i / 3, i % 3) = in.K(i / 3, i % 3);
-  camera.lens.dist = in.dist;
-  if (in.has_resolution) camera.resolution = cv::Size(static_cast<int>(in.width), static_cast<int>(in.height));
-  camera.source = source;
-  camera.lens.Check();
-  return camera;
-}
-
 // Progress lines on stderr, a few per camera, never interleaved.
 class ProgressPrinter {
  public:
@@ -267,7 +257,7 @@ CameraOutcome IngestOne(const std::string& name, const fs::path& video, const De
   CameraOutcome outcome{name, video.string(), "", "", {}};
   try {
     const CameraIntrinsics intrinsics = IntrinsicsFor(arguments.intrinsics, name, &outcome.intrinsics);
-    const ingest::CameraModel camera = CameraModelFrom(intrinsics, outcome.intrinsics);
+    const ingest::CameraModel camera = formats::CameraModelOf(intrinsics, outcome.intrinsics);
     outcome.result = ingest::IngestCamera(video.string(), sequence, camera, setup.For(name), printer.For(name));
   } catch (const std::exception& error) {
     outcome.error = error.what();
@@ -298,25 +288,6 @@ std::vector<CameraOutcome> IngestAll(const std::map<std::string, fs::path>& vide
   for (size_t t = 0; t < threads; ++t) pool.emplace_back(work);
   for (auto& thread : pool) thread.join();
   return outcomes;
-}
-
-// Point id of an MSM: array * markers_per_array + marker (docs/conventions.md).
-Tracks TracksFrom(const std::vector<CameraOutcome>& outcomes, int markers_per_array) {
-  std::vector<std::string> names;
-  std::vector<int> camera;
-  std::vector<std::int64_t> ids;
-  std::vector<Eigen::Vector2d> xy;
-  for (const CameraOutcome& outcome : outcomes) {
-    const int index = static_cast<int>(names.size());
-    names.push_back(outcome.name);
-    if (!outcome.ok()) continue;  // kept without observations, so that calibration reports it
-    for (const detect::MergedCentre& centre : outcome.result.centres) {
-      camera.push_back(index);
-      ids.push_back(static_cast<std::int64_t>(centre.array) * markers_per_array + centre.marker);
-      xy.emplace_back(centre.centre.x, centre.centre.y);
-    }
-  }
-  return MakeTracks(names, camera, ids, xy, markers_per_array);
 }
 
 }  // namespace
@@ -374,7 +345,7 @@ int RunDetect(const DetectArguments& arguments, Interrupts& interrupts) {
 
   const nlohmann::ordered_json report = DetectReport(outcomes, arguments.sequence, sequence);
   output.Write([&](const fs::path& out) {
-    WriteTracks(out, TracksFrom(outcomes, sequence.markers_per_array));
+    WriteTracks(out, formats::TracksOf(outcomes, sequence.markers_per_array));
     AtomicWrite(formats::DetectReportPath(arguments.out), DumpSchemaJson("detect_report", 1, report));
   });
   output.Close();

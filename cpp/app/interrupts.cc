@@ -33,11 +33,20 @@ void Interrupts::SetCleanup(const std::unique_lock<std::mutex>& held, std::funct
   cleanup_ = std::move(cleanup);
 }
 
+void Interrupts::SetStopper(std::function<void()> stopper) {
+  const std::lock_guard<std::mutex> held(stopper_mutex_);
+  stopper_ = std::move(stopper);
+}
+
 void Interrupts::WaitForSignals() {
   for (;;) {
     int number = 0;
     if (sigwait(&signals_, &number) != 0) continue;
     if (stopping_) return;
+    {
+      const std::lock_guard<std::mutex> held(stopper_mutex_);
+      if (stopper_) stopper_();
+    }
     // Held until the exit: no section of the run starts after the cleanup.
     const std::lock_guard<std::mutex> held(mutex_);
     if (cleanup_) cleanup_();

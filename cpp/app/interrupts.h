@@ -34,6 +34,10 @@ class Interrupts {
   // a section, so that it always matches what is on disk.
   void SetCleanup(const std::unique_lock<std::mutex>& held, std::function<void()> cleanup);
 
+  // What an interruption stops before the cleanup (a capture's player and cameras, which
+  // it waits for, so that their recordings are complete); set outside any section.
+  void SetStopper(std::function<void()> stopper);
+
   static constexpr int kExitStatus = 130;  // 128 + SIGINT, as shells report it
 
  private:
@@ -44,6 +48,8 @@ class Interrupts {
   sigset_t previous_mask_;
   std::mutex mutex_;
   std::function<void()> cleanup_;
+  std::mutex stopper_mutex_;
+  std::function<void()> stopper_;
   std::atomic<bool> stopping_{false};
   std::thread waiter_;
 };

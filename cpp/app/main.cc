@@ -11,6 +11,7 @@
 #include <iostream>
 
 #include "calibrate_command.h"
+#include "capture_command.h"
 #include "check_command.h"
 #include "detect_command.h"
 #include "calibproj/formats/files.h"
@@ -37,6 +38,8 @@ int main(int argc, char** argv) {
   const auto detect_args = calibproj::app::AddDetectCommand(app, &detect);
   CLI::App* check = nullptr;
   const auto check_args = calibproj::app::AddCheckCommand(app, &check);
+  CLI::App* capture = nullptr;
+  const auto capture_args = calibproj::app::AddCaptureCommand(app, &capture);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {
@@ -45,6 +48,7 @@ int main(int argc, char** argv) {
   }
   const std::string command = calibrate->parsed() ? "calibrate" : detect->parsed() ? "detect"
                               : check->parsed()   ? "check"
+                              : capture->parsed() ? "capture"
                                                   : "";
   const std::string prefix = "calibproj-native " + command;
   calibproj::app::Interrupts interrupts(prefix);
@@ -52,6 +56,7 @@ int main(int argc, char** argv) {
     if (calibrate->parsed()) return calibproj::app::RunCalibrate(*calibrate_args, interrupts);
     if (detect->parsed()) return calibproj::app::RunDetect(*detect_args, interrupts);
     if (check->parsed()) return calibproj::app::RunCheck(*check_args, interrupts);
+    if (capture->parsed()) return calibproj::app::RunCapture(*capture_args, interrupts);
   } catch (const calibproj::app::OutputBusyError& error) {
     std::cerr << prefix << ": error: " << error.what() << "\n";
     return kExitFailure;

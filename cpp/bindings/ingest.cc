@@ -55,17 +55,6 @@ ingest::CameraModel CameraFromArrays(const DoubleArray& K, const DoubleArray& di
   return camera;
 }
 
-ingest::IngestOptions IngestOptionsFromKwargs(const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
-                                              const py::kwargs& kwargs) {
-  ingest::IngestOptions options;
-  options.detector = {aruco, apriltag};
-  for (const auto& item : kwargs) {
-    const std::string key = py::str(item.first);
-    if (!SetIngestOption(&options, key, item.second)) ThrowUnknownOption("ingest", key, IngestOptionTable());
-  }
-  return options;
-}
-
 template <typename T>
 py::array_t<T> Column(const std::vector<detect::ScaleRecord>& records, T (*get)(const detect::ScaleRecord&)) {
   py::array_t<T> out(static_cast<py::ssize_t>(records.size()));
@@ -144,7 +133,51 @@ py::list ScalesList(const std::vector<ingest::ScaleStats>& scales) {
   return out;
 }
 
-py::dict ResultDict(const ingest::CameraIngestResult& r, const ingest::SequenceDescription& sequence) {
+
+py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, const DoubleArray& corners,
+                         const DoubleArray& K, const DoubleArray& dist, int cells, double outward_fraction,
+                         int passes) {
+  RequireShape(image, {-1, -1}, "image");
+  if (image.size() == 0) throw std::invalid_argument("image is empty");
+  RequireShape(corners, {4, 2}, "corners");
+  const cv::Mat gray(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
+                     const_cast<uint8_t*>(image.data()));
+  const ingest::CameraModel camera = CameraFromArrays(K, dist, std::nullopt, "lens");
+  detect::Quad quad;
+  for (int k = 0; k < 4; ++k) quad[k] = cv::Point2d(corners.data()[2 * k], corners.data()[2 * k + 1]);
+  detect::UndistortedEdgeOptions options;
+  options.outward_fraction = outward_fraction;
+  options.passes = passes;
+  options.Check();
+  std::optional<detect::Quad> refined;
+  {
+    py::gil_scoped_release release;
+    const detect::LensTables tables(camera.lens, gray.size());
+    refined = detect::RefineUndistortedCorners(gray, cv::Point(0, 0), tables, cells, quad, options);
+  }
+  if (!refined) return py::none();
+  py::array_t<double> out({py::ssize_t{4}, py::ssize_t{2}});
+  for (int k = 0; k < 4; ++k) {
+    out.mutable_at(k, 0) = (*refined)[k].x;
+    out.mutable_at(k, 1) = (*refined)[k].y;
+  }
+  return out;
+}
+
+}  // namespace
+
+ingest::IngestOptions IngestOptionsFromKwargs(const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
+                                              const py::kwargs& kwargs) {
+  ingest::IngestOptions options;
+  options.detector = {aruco, apriltag};
+  for (const auto& item : kwargs) {
+    const std::string key = py::str(item.first);
+    if (!SetIngestOption(&options, key, item.second)) ThrowUnknownOption("ingest", key, IngestOptionTable());
+  }
+  return options;
+}
+
+py::dict IngestResultDict(const ingest::CameraIngestResult& r, const ingest::SequenceDescription& sequence) {
   py::dict d;
   // The camera's entry of detect_report.json, built where calibproj-native builds it
   // (JSON text: doubles written to 17 digits read back exactly).
@@ -192,38 +225,6 @@ py::dict ResultDict(const ingest::CameraIngestResult& r, const ingest::SequenceD
   d["thumbnail_pattern"] = r.thumbnail_pattern;
   return d;
 }
-
-py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, const DoubleArray& corners,
-                         const DoubleArray& K, const DoubleArray& dist, int cells, double outward_fraction,
-                         int passes) {
-  RequireShape(image, {-1, -1}, "image");
-  if (image.size() == 0) throw std::invalid_argument("image is empty");
-  RequireShape(corners, {4, 2}, "corners");
-  const cv::Mat gray(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
-                     const_cast<uint8_t*>(image.data()));
-  const ingest::CameraModel camera = CameraFromArrays(K, dist, std::nullopt, "lens");
-  detect::Quad quad;
-  for (int k = 0; k < 4; ++k) quad[k] = cv::Point2d(corners.data()[2 * k], corners.data()[2 * k + 1]);
-  detect::UndistortedEdgeOptions options;
-  options.outward_fraction = outward_fraction;
-  options.passes = passes;
-  options.Check();
-  std::optional<detect::Quad> refined;
-  {
-    py::gil_scoped_release release;
-    const detect::LensTables tables(camera.lens, gray.size());
-    refined = detect::RefineUndistortedCorners(gray, cv::Point(0, 0), tables, cells, quad, options);
-  }
-  if (!refined) return py::none();
-  py::array_t<double> out({py::ssize_t{4}, py::ssize_t{2}});
-  for (int k = 0; k < 4; ++k) {
-    out.mutable_at(k, 0) = (*refined)[k].x;
-    out.mutable_at(k, 1) = (*refined)[k].y;
-  }
-  return out;
-}
-
-}  // namespace
 
 py::array_t<double> MapWithTables(const DoubleArray& K, const DoubleArray& dist, std::pair<int, int> resolution,
                                   const DoubleArray& points, bool undistort) {
@@ -297,7 +298,7 @@ void register_ingest(py::module_& m) {
           py::gil_scoped_release release;
           result = ingest::IngestCamera(video, description, camera, options, callback, live.value_or(video::SourceOptions{}));
         }
-        return ResultDict(result, description);
+        return IngestResultDict(result, description);
       },
       py::arg("video"), py::arg("sequence"), py::arg("K"), py::arg("dist"), py::arg("resolution"),
       py::arg("source"), py::arg("aruco"), py::arg("apriltag"), py::arg("progress") = py::none(),

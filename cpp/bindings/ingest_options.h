@@ -7,7 +7,9 @@
 #include <map>
 #include <string>
 
+#include "calibproj/detect/marker_detector.h"
 #include "calibproj/ingest/camera_ingest.h"
+#include "calibproj/ingest/sequence_description.h"
 #include "calibproj/sync/synchronise.h"
 
 namespace calibproj::bindings {
@@ -26,6 +28,14 @@ void CheckSyncOptionValues(sync::SyncOptions& o);
 // made from the ingest's, which holds the sync's (but fixed_exposure, in seconds there).
 pybind11::list SyncOptionTable();
 pybind11::list IngestOptionTable();
+
+// The ingest options of keyword arguments named as option_table() names them, with these
+// detector options; ValueError for an unknown name.
+ingest::IngestOptions IngestOptionsFromKwargs(const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
+                                              const pybind11::kwargs& kwargs);
+
+// One camera's ingest as calibproj.ingest reads it (CameraIngest.raw).
+pybind11::dict IngestResultDict(const ingest::CameraIngestResult& result, const ingest::SequenceDescription& sequence);
 
 // Throws std::invalid_argument naming `key` and listing the names of `table`.
 [[noreturn]] void ThrowUnknownOption(const std::string& what, const std::string& key, const pybind11::list& table);

@@ -73,11 +73,13 @@ void register_video(py::module_& m) {
           "grab",
           [](video::VideoReader& reader) -> py::object {
             cv::Mat gray;
+            bool grabbed = false;
             {
               py::gil_scoped_release release;
-              if (!reader.Grab()) return py::none();
-              gray = reader.Gray();
+              grabbed = reader.Grab();
+              if (grabbed) gray = reader.Gray();
             }
+            if (!grabbed) return py::none();
             return py::make_tuple(reader.timestamp(), GrayArray(gray));
           },
           "The next frame as (container time in seconds or NaN, grey uint8 image), None at the end.");

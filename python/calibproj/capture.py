@@ -34,12 +34,12 @@ import os
 import threading
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from calibproj.calibration import Calibration
-from calibproj.io.jsonio import FormatError, write_json
+from calibproj.io.jsonio import FormatError
 from calibproj.io.output_folder import OutputFolder
 from calibproj.results import CALIBRATION_FILES
 
@@ -49,140 +49,15 @@ CAPTURE_FILE = "capture.json"
 STATUS_INTERVAL_S = 2.0  # a line per camera this often while recording
 
 
-@dataclass
-class _CameraStatus:
-    """What one camera's thread reports while the capture runs."""
-
-    frames: int = 0
-    first_frame_s: float | None = None  # since the capture started
-    last_frame_s: float | None = None
-    shown: tuple[int, float] | None = None  # frames and time at the last status line
-    done: bool = False
-    error: str | None = None
-
-
-@dataclass
-class CaptureLog:
-    """What happened during a capture (written as ``capture.json``)."""
-
-    site: str
-    recordings: str
-    cameras: dict[str, dict[str, Any]] = field(default_factory=dict)
-    projection: dict[str, Any] = field(default_factory=dict)
-
-    def write(self, path: Path) -> None:
-        write_json(path, "capture", 1, {"site": self.site, "recordings": self.recordings, "cameras": self.cameras,
-                                         "projection": self.projection})
-
-
-class _Capture:
-    """The capture's threads and their shared state."""
-
-    def __init__(self, site: Any, recordings: Path) -> None:
-        from calibproj import _core
-
-        self.site = site
-        self.started = time.monotonic()
-        self.lock = threading.Lock()
-        self.changed = threading.Condition(self.lock)
-        self.status = {camera.name: _CameraStatus() for camera in site.cameras}
-        self.sources = {camera.name: _core.video.SourceOptions(
-            live=True, format=camera.options.format, ffmpeg_options=dict(camera.options.ffmpeg_options),
-            open_timeout_s=camera.options.open_timeout_s, stall_timeout_s=camera.options.stall_timeout_s,
-            record_path=str(recordings / f"{camera.name}.mkv")) for camera in site.cameras}
-        self.player_stop = _core.capture.Stop()
-        self.cancel = threading.Event()  # the ingest's: set, it stops without reporting failures
-        self.threads: list[threading.Event] = []  # set when each thread has ended
-
-    def now(self) -> float:
-        return time.monotonic() - self.started
-
-    def observe(self, name: str, decoded: int) -> None:
-        with self.changed:
-            status = self.status[name]
-            if status.first_frame_s is None:
-                status.first_frame_s = self.now()
-            status.frames, status.last_frame_s = decoded, self.now()
-            self.changed.notify_all()
-
-    def finished(self, camera: Any) -> None:
-        with self.changed:
-            status = self.status[camera.name]
-            status.done, status.error = True, camera.error
-            self.changed.notify_all()
-
-    def wait(self, predicate, timeout_s: float) -> bool:
-        """Waits (in slices, so that Ctrl-C is seen) until predicate() under the lock."""
-        deadline = time.monotonic() + timeout_s
-        with self.changed:
-            while not predicate():
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self.changed.wait(min(left, 0.2))
-            return True
-
-    def stop(self, names: list[str]) -> None:
-        """Ends these cameras' reads: they fail, reported, and the others go on."""
-        for name in names:
-            self.sources[name].request_stop()
-
-    def abort(self) -> None:
-        """Stops the player and every camera, and waits for their threads, so that
-        nothing runs or prints after the capture has failed or been interrupted."""
-        self.cancel.set()
-        self.player_stop.set()
-        for source in self.sources.values():
-            source.request_stop()
-        for done in self.threads:
-            done.wait(timeout=10.0)
-
-    def spawn(self, name: str, target: Any) -> threading.Thread:
-        """Starts a thread whose end ``abort`` waits for. Its own event, not
-        ``Thread.join``: an interrupt inside ``Thread.start`` leaves a running thread
-        that ``join`` takes for one not started, and a thread still in the core when the
-        interpreter exits takes the process down."""
-        done = threading.Event()
-
-        def run() -> None:
-            try:
-                target()
-            finally:
-                done.set()
-
-        thread = threading.Thread(target=run, name=name, daemon=True)
-        self.threads.append(done)
-        thread.start()
-        return thread
-
-    def log_status(self) -> None:
-        with self.lock:
-            lines = []
-            for name, status in self.status.items():
-                if status.done:
-                    lines.append(f"camera {name}: done" if status.error is None else f"camera {name}: failed")
-                elif status.first_frame_s is None:
-                    lines.append(f"camera {name}: waiting for frames")
-                else:
-                    # The rate since the last line: the first frames arrive in a burst
-                    # (those read ahead at opening).
-                    frames, since = status.shown or (status.frames, status.last_frame_s)
-                    span = status.last_frame_s - since
-                    rate = f", {(status.frames - frames) / span:.1f} fps" if span > 0.5 else ""
-                    status.shown = (status.frames, status.last_frame_s)
-                    lines.append(f"camera {name}: {status.frames} frames{rate}")
-        for line in lines:
-            logger.info("%s", line)
-
-
 @dataclass(frozen=True)
 class _Projection:
     """What is projected and how the cameras' frames are read: the sequence and its
-    video, and the intrinsics (a folder, or camera -> file)."""
+    video, and the intrinsics (camera -> file; the site's files unless ``folder``)."""
 
     sequence: Path
     video: Path
-    intrinsics: Path | Mapping[str, Path]
+    intrinsics: Mapping[str, Path]
+    folder: Path | None = None  # a stored calibration's intrinsics/
 
 
 def capture(
@@ -265,7 +140,8 @@ def capture_check(
     from calibproj.results import INTRINSICS_DIR
 
     spec = _read_site(site)
-    plan = _Projection(*_projected(spec, sequence, projection), Path(results) / INTRINSICS_DIR)
+    folder = Path(results) / INTRINSICS_DIR
+    plan = _Projection(*_projected(spec, sequence, projection), {}, folder)
 
     def checked(ingest_result: Any, kept: Path) -> Any:
         return check(results, ingest_result, sequence=str(plan.sequence), out=out, options=options, force=force,
@@ -280,21 +156,17 @@ def capture_check(
 def _captured(spec: Any, projection: _Projection, out: Path | None, force: bool, recordings: Path,
               progress: bool, then: Any) -> Any:
     """Records (steps 1-5 of the module's list) into ``recordings``, then
-    ``then(ingest_result, recordings)``; on any failure or interruption, stops
-    everything and says where the recordings are kept. ``out``, the folder ``then``
-    writes (None: nothing), is checked first."""
+    ``then(ingest_result, recordings)``; on any failure or interruption, says where the
+    recordings are kept. ``out``, the folder ``then`` writes (None: nothing), is
+    checked first."""
     _check_inputs(spec, projection)
     if out is not None:
         OutputFolder(out, force=force, signature=CALIBRATION_FILES).open().abort()  # writable, before recording
     recordings.mkdir(parents=True, exist_ok=False)
-    run = _Capture(spec, recordings)
-    log = CaptureLog(site=str(spec.path), recordings=str(recordings))
     try:
-        ingest_result = _record(run, spec, projection, log, progress)
-        log.write(recordings / CAPTURE_FILE)
+        ingest_result = _record(spec, projection, recordings, progress)
         return then(ingest_result, recordings)
     except BaseException as error:
-        run.abort()
         if recordings.exists():
             _note_recordings(error, recordings)
         raise
@@ -318,89 +190,53 @@ def _read_site(site: str | os.PathLike) -> Any:
         raise FormatError(str(error)) from None
 
 
-def _record(run: _Capture, site: Any, projection: _Projection, log: CaptureLog, progress: bool) -> Any:
-    """Steps 2-5 of the module's list; the ingest result of every camera."""
-    from calibproj.ingest import ingest
-
-    result: dict[str, Any] = {}
-    failure: list[BaseException] = []
-
-    def ingest_all() -> None:
-        try:
-            result["ingest"] = ingest({c.name: c.source for c in site.cameras}, str(projection.sequence),
-                                      projection.intrinsics, live=run.sources,
-                                      exposures={c.name: c.exposure_s for c in site.cameras if c.exposure_s > 0},
-                                      progress=False, observer=run.observe, finished=run.finished,
-                                      cancel=run.cancel)
-        except BaseException as error:  # noqa: BLE001 - handed to the main thread
-            failure.append(error)
-            with run.changed:
-                run.changed.notify_all()
-
-    worker = run.spawn("capture-ingest", ingest_all)
-    logger.info("capture: opening %d camera(s)", len(run.status))
-    ready = run.wait(lambda: failure or all(s.first_frame_s is not None or s.done for s in run.status.values()),
-                     site.ready_s)
-    if failure:
-        raise failure[0]
-    if not ready:
-        late = [name for name, s in run.status.items() if s.first_frame_s is None and not s.done]
-        logger.error("capture: no frames within %g s from %s: left out", site.ready_s, ", ".join(late))
-        run.stop(late)
-    if all(s.done for s in run.status.values()):
-        raise RuntimeError("capture: no camera delivers frames; nothing to calibrate "
-                           f"({'; '.join(s.error or '' for s in run.status.values())})")
-    log.projection = _project(run, site, projection.video, progress)
-    ended = time.monotonic()
-    if not run.wait(lambda: failure or all(s.done for s in run.status.values()), site.end_s):
-        late = [name for name, s in run.status.items() if not s.done]
-        logger.error("capture: %s still without the end light code %g s after the projection: stopped",
-                     ", ".join(late), site.end_s)
-        run.stop(late)
-    worker.join()
-    if failure:
-        raise failure[0]
-    log.projection["cameras_done_after_end_s"] = time.monotonic() - ended
-    logger.info("capture: every camera ingested %.1f s after the projection ended",
-                log.projection["cameras_done_after_end_s"])
-    ingest_result = result["ingest"]
-    for name, status in run.status.items():
-        camera = ingest_result.cameras[name]
-        log.cameras[name] = {"source": camera.video, "recording": f"{name}.mkv", "frames": status.frames,
-                             "first_frame_s": status.first_frame_s, "error": camera.error}
-    return ingest_result
-
-
-def _project(run: _Capture, site: Any, video: Path, progress: bool) -> dict[str, Any]:
-    """Plays the projection in a thread (the main thread stays free for Ctrl-C) and
-    returns the presentation log's summary."""
+def _record(site: Any, projection: _Projection, recordings: Path, progress: bool) -> Any:
+    """Steps 2-5 of the module's list, run by the core (``_core.capture.record``) in a
+    thread, so that the main thread sees Ctrl-C and stops it at once; the ingest result
+    of every camera."""
     from calibproj import _core
+    from calibproj.ingest import captured_ingest, core_detector_options
+    from calibproj.ingest_options import IngestOptions
+    from calibproj.sequence.sequence import Sequence
 
+    sequence = Sequence.load(projection.sequence)
+    aruco, apriltag = core_detector_options(sequence.markers.system, {})
+    plan = _core.capture.CapturePlan(
+        site, str(projection.sequence), sequence.core(), str(projection.video), str(projection.folder or ""),
+        str(recordings), aruco, apriltag, status_interval_s=STATUS_INTERVAL_S if progress else 0.0,
+        **IngestOptions().to_kwargs())
+    abort = _core.capture.Stop()
     outcome: dict[str, Any] = {}
+    done = threading.Event()
 
-    def play() -> None:
+    def record() -> None:
         try:
-            outcome["log"] = _core.capture.play(str(video), site.projector, run.player_stop)
+            outcome["run"] = _core.capture.record(plan, abort, _log)
         except BaseException as error:  # noqa: BLE001 - handed to the main thread
             outcome["error"] = error
+        finally:
+            done.set()
 
-    logger.info("capture: projecting %s", video)
-    started = run.now()
-    player = run.spawn("capture-projector", play)
-    next_status = time.monotonic() + STATUS_INTERVAL_S
-    while player.is_alive():
-        player.join(0.2)
-        if progress and time.monotonic() >= next_status:
-            run.log_status()
-            next_status += STATUS_INTERVAL_S
+    # Its own event, not Thread.join: an interrupt inside Thread.start leaves a running
+    # thread that join takes for one not started, and a thread still in the core when
+    # the interpreter exits takes the process down.
+    try:
+        threading.Thread(target=record, name="capture", daemon=True).start()
+        while not done.wait(0.2):
+            pass
+    except BaseException:
+        abort.set()  # the player and every source stop at once
+        done.wait(timeout=30.0)
+        raise
     if "error" in outcome:
         raise outcome["error"]
-    log = outcome["log"]
-    logger.info("capture: projection shown in %.1f s (%d frames logged, %d dropped or late)", log.duration_s,
-                len(log.shown_s), log.dropped_frames)
-    return {"video": str(video), "started_s": started, "duration_s": log.duration_s,
-            "frames_logged": len(log.shown_s), "dropped_frames": log.dropped_frames,
-            "video_time_s": list(log.video_time_s), "shown_s": list(log.shown_s)}
+    run = outcome["run"]
+    run.write_log(recordings / CAPTURE_FILE)
+    return captured_ingest(run, sequence, str(projection.sequence))
+
+
+def _log(error: bool, line: str) -> None:
+    (logger.error if error else logger.info)("%s", line)
 
 
 def _check_inputs(site: Any, projection: _Projection) -> None:
@@ -412,7 +248,7 @@ def _check_inputs(site: Any, projection: _Projection) -> None:
     Sequence.load(projection.sequence)  # FormatError naming the file
 
 
-def _intrinsics_of(paths: Path | Mapping[str, Path]) -> dict[str, Any]:
+def _intrinsics_of(paths: Mapping[str, Path]) -> dict[str, Any]:
     """The intrinsics that read; a camera whose file does not has failed in the ingest
     already, with the file's problem as its reason."""
     from calibproj.io.intrinsics import read_intrinsics

@@ -194,7 +194,6 @@ def ingest(
     exposures: Mapping[str, float] | None = None,
     live: Mapping[str, Any] | None = None,
     observer: Callable[[str, int], None] | None = None,
-    finished: Callable[[CameraIngest], None] | None = None,
     cancel: threading.Event | None = None,
 ) -> IngestResult:
     """Synchronise and detect every camera's video; tracks and reports.
@@ -219,8 +218,6 @@ def ingest(
             say; the ingest of one ends once the end light code is in.
         observer: called from the cameras' threads as ``observer(name, frames_decoded)``
             now and then (every 25 frames, and at the first).
-        finished: called from a camera's thread with its ``CameraIngest`` as soon as it
-            is done (failed or not).
         cancel: set from another thread, it stops every camera (live sources at once)
             and the ingest raises KeyboardInterrupt; no camera is reported as failed.
 
@@ -235,10 +232,10 @@ def ingest(
     unknown = sorted(set(live) - set(paths))
     if unknown:
         raise ValueError(f"live sources given for camera(s) without a source: {', '.join(unknown)}")
-    aruco, apriltag = _detector_options(sequence.markers.system, detector_options or {})
+    aruco, apriltag = core_detector_options(sequence.markers.system, detector_options or {})
     core_sequence = sequence.core()  # read by the core once, for every camera
     names = list(paths)
-    bars = _Progress(names, enabled=progress, observer=observer, live=live, finished=finished, cancel=cancel)
+    bars = _Progress(names, enabled=progress, observer=observer, live=live, cancel=cancel)
     exposures = dict(exposures or {})
     check_exposures(exposures, names)
 
@@ -258,6 +255,23 @@ def ingest(
                 raise
     finally:
         bars.close()
+    return _result(cameras, sequence, sequence_source)
+
+
+def captured_ingest(run: Any, sequence: Any, sequence_source: str) -> IngestResult:
+    """The ingest of a capture (a ``_core.capture.CaptureRun``), as ``ingest`` gives it."""
+    cameras = {}
+    for camera in run.cameras:
+        report = CameraIngest(camera.name, camera.source, camera.intrinsics)
+        if camera.ok:
+            report.raw = run.ingest_result(camera.name)
+        else:
+            report.error = camera.error
+        cameras[camera.name] = report
+    return _result(cameras, sequence, sequence_source)
+
+
+def _result(cameras: dict[str, CameraIngest], sequence: Any, sequence_source: str) -> IngestResult:
     tracks = _tracks(cameras, sequence.centres.shape[1])
     return IngestResult(tracks, cameras, sequence_source, sequence.markers.spec,
                         [int(p.array) for p in sequence.patterns])
@@ -298,8 +312,6 @@ class _CameraJob:
         else:
             self.bars.finish(name, complete=True)
             logger.info("camera %s: %d MSMs", name, len(report.raw["centres"]["array"]))
-        if self.bars.finished is not None:
-            self.bars.finished(report)
         return report
 
 
@@ -311,11 +323,9 @@ class _Progress:
 
     def __init__(self, names: list[str], enabled: bool, observer: Callable[[str, int], None] | None = None,
                  live: Mapping[str, Any] | None = None,
-                 finished: Callable[[CameraIngest], None] | None = None,
                  cancel: threading.Event | None = None) -> None:
         self.enabled = enabled
         self.observer = observer
-        self.finished = finished
         self.live = dict(live or {})  # their reads are stopped at once on cancel
         self.bars: dict[str, Any] = {}
         self.lock = threading.Lock()
@@ -475,7 +485,9 @@ def _intrinsics_for(intrinsics: Any, name: str) -> tuple[Intrinsics | None, str]
         return None, str(error)
 
 
-def _detector_options(system: str, options: Mapping[str, Any]) -> tuple[Any, Any]:
+def core_detector_options(system: str, options: Mapping[str, Any]) -> tuple[Any, Any]:
+    """The core's (aruco, apriltag) detector options from options as
+    ``calibproj.detect_markers`` takes them."""
     from calibproj.markers import _build_options
 
     return _build_options(system, dict(options))

@@ -4,6 +4,37 @@
 
 namespace calibproj::formats {
 
+// Point id of an MSM: array * markers_per_array + marker (docs/conventions.md).
+Tracks TracksOf(const std::vector<CameraOutcome>& outcomes, int markers_per_array) {
+  std::vector<std::string> names;
+  std::vector<int> camera;
+  std::vector<std::int64_t> ids;
+  std::vector<Eigen::Vector2d> xy;
+  for (const CameraOutcome& outcome : outcomes) {
+    const int index = static_cast<int>(names.size());
+    names.push_back(outcome.name);
+    if (!outcome.ok()) continue;  // kept without observations, so that calibration reports it
+    for (const detect::MergedCentre& centre : outcome.result.centres) {
+      camera.push_back(index);
+      ids.push_back(static_cast<std::int64_t>(centre.array) * markers_per_array + centre.marker);
+      xy.emplace_back(centre.centre.x, centre.centre.y);
+    }
+  }
+  return MakeTracks(names, camera, ids, xy, markers_per_array);
+}
+
+ingest::CameraModel CameraModelOf(const CameraIntrinsics& intrinsics, const std::string& source) {
+  ingest::CameraModel camera;
+  for (int i = 0; i < 9; ++i) camera.lens.K(i / 3, i % 3) = intrinsics.K(i / 3, i % 3);
+  camera.lens.dist = intrinsics.dist;
+  if (intrinsics.has_resolution) {
+    camera.resolution = cv::Size(static_cast<int>(intrinsics.width), static_cast<int>(intrinsics.height));
+  }
+  camera.source = source;
+  camera.lens.Check();
+  return camera;
+}
+
 namespace {
 
 using nlohmann::ordered_json;

@@ -7,11 +7,18 @@
 #include <string>
 #include <vector>
 
+#include "calibproj/formats/intrinsics_file.h"
+#include "calibproj/formats/tracks_file.h"
 #include "calibproj/ingest/camera_ingest.h"
 
 namespace calibproj::formats {
 
 // What the ingest of one camera gave, or why it failed.
+// The camera model a camera's frames are read with, from its intrinsics file's
+// contents; `source` names the file in messages. std::invalid_argument for a lens the
+// ingest cannot use.
+ingest::CameraModel CameraModelOf(const CameraIntrinsics& intrinsics, const std::string& source);
+
 struct CameraOutcome {
   std::string name;        // the video's file stem
   std::string video;       // path of the video
@@ -21,6 +28,10 @@ struct CameraOutcome {
 
   bool ok() const { return error.empty(); }
 };
+
+// The tracks of the cameras' merged centres, every camera kept (a failed one without
+// observations, so that calibration reports it).
+Tracks TracksOf(const std::vector<CameraOutcome>& outcomes, int markers_per_array);
 
 // A calibrated camera's entry of detect_report.json after video, intrinsics and status:
 // sync, video_info, frames, patterns, detections, scales, MSMs kept, homography RMS,

@@ -84,10 +84,12 @@ class VirtualRoom:
         self._xvfb: subprocess.Popen | None = None
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
-        # The display's last grabs (time it was grabbed, wall clock; grey image) and the
-        # atlases of the last few used.
-        self._grabs: deque[tuple[float, np.ndarray]] = deque(maxlen=GRAB_HISTORY)
-        self._atlases: OrderedDict[float, np.ndarray] = OrderedDict()
+        # The display's last grabs (time it was grabbed, wall clock; what it showed, as
+        # a content number: a grab like the one before keeps its number) with their
+        # images, and the atlases of the last few contents used.
+        self._grabs: deque[tuple[float, int]] = deque(maxlen=GRAB_HISTORY)
+        self._images: dict[int, np.ndarray] = {}
+        self._atlases: OrderedDict[int, np.ndarray] = OrderedDict()
         self._grabs_lock = threading.Lock()
         self._layout_in_use: Any = None
         self._errors: list[str] = []
@@ -254,31 +256,39 @@ class VirtualRoom:
 
     def _grab(self, reader: Any) -> None:
         """Keeps the display's last images with the times x11grab took them."""
+        content, last = 0, None
         while not self._stop.is_set():
             frame = reader.grab()
             if frame is None:
                 raise RuntimeError(f"display {self.display}: grabbing ended ({reader.end_reason or 'end'})")
+            taken, image = frame
+            # The display holds each projector frame for several grabs (and the room's
+            # whole wait before the projection): the cameras render a new content only.
+            if last is None or not np.array_equal(image, last):
+                content, last = content + 1, image
             with self._grabs_lock:
-                self._grabs.append(frame)
+                self._grabs.append((taken, content))
+                self._images[content] = last
+                for old in [c for c in self._images if c < self._grabs[0][1]]:
+                    del self._images[old]
 
-    def _shown_at(self, wall_time: float) -> np.ndarray | None:
-        """The atlas of what the display showed at ``wall_time`` (its last grab before
-        then): a camera thread that runs late still films its own moment."""
+    def _shown_at(self, wall_time: float) -> tuple[int, np.ndarray] | None:
+        """What the display showed at ``wall_time`` (its last grab before then): its
+        content number and atlas. A camera thread that runs late still films its own
+        moment."""
         with self._grabs_lock:
-            grabs = list(self._grabs)
-        earlier = [grab for grab in grabs if grab[0] <= wall_time]
-        if not earlier:
-            return None
-        taken, image = earlier[-1]
-        with self._grabs_lock:
-            atlas = self._atlases.get(taken)
+            earlier = [content for taken, content in self._grabs if taken <= wall_time]
+            if not earlier:
+                return None
+            content = earlier[-1]
+            atlas, image = self._atlases.get(content), self._images[content]
         if atlas is None:
             atlas = self._layout_in_use.build(image)
             with self._grabs_lock:
-                self._atlases[taken] = atlas
+                self._atlases[content] = atlas
                 while len(self._atlases) > ATLAS_CACHE:
                     self._atlases.popitem(last=False)
-        return atlas
+        return content, atlas
 
     def _film(self, camera: Any, writer: Any, started: float, rng: np.random.Generator) -> None:
         """One camera: from its start delay on, a frame per period of its own clock (its
@@ -289,6 +299,7 @@ class VirtualRoom:
         frame = 0
         sent = 0
         spread = camera.frame_jitter_s
+        seen: tuple[int, Any, np.ndarray] | None = None  # content, models, the light they gave
         try:
             while True:
                 jitter = float(np.clip(rng.normal(0.0, spread), -3 * spread, 3 * spread)) if spread > 0 else 0.0
@@ -296,11 +307,14 @@ class VirtualRoom:
                 if self._stop.wait(max(0.0, due - time.time())):
                     break
                 dropped = camera.drop_rate > 0 and rng.random() < camera.drop_rate
-                atlas = None if dropped else self._shown_at(due)
-                if atlas is not None:
-                    sampler, response, noise = self._models[camera.name]
-                    light = sampler.sample(atlas)
-                    image = noise.quantise(response.encode(response.irradiance(light)))
+                shown = None if dropped else self._shown_at(due)
+                if shown is not None:
+                    content, atlas = shown
+                    models = self._models[camera.name]
+                    sampler, response, noise = models
+                    if seen is None or seen[0] != content or seen[1] is not models:
+                        seen = (content, models, sampler.sample(atlas))  # the same content: the same light
+                    image = noise.quantise(response.encode(response.irradiance(seen[2])))
                     writer.write(image, due - started)
                     sent += 1
                     self.sent[camera.name] = sent
