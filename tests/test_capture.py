@@ -27,6 +27,7 @@ from calibproj.simulate.scene import CameraChange
 from calibproj.simulate.virtual_room import VirtualRoom
 
 from test_live_source import free_udp_port  # the tests folder is on sys.path under pytest
+from test_native import NATIVE, run_native
 
 # Measured on the rendered files of the same room and projection (tools/bench/capture.py):
 # rotation RMSE 0.02-0.04 deg, centre 0.02-0.03 % of the camera distance.
@@ -136,6 +137,31 @@ def test_a_moved_camera_is_found_and_repaired_by_a_live_check(room, calibrated, 
         "capture.json", "ceiling.mkv", "far1.mkv", "far4.mkv", "near1.mkv"]
 
 
+def test_the_native_capture_calibrates_the_room_and_names_the_dead_camera(room):
+    """calibproj-native capture, the OR PC's tool, runs the same room through the same
+    core session: every live camera registered against the truth, the dead one named,
+    the results folder with its recordings and capture log."""
+    base, live = room
+    intrinsics = str(base / "room" / "intrinsics" / "far1.json")
+    dead = f"udp://127.0.0.1:{free_udp_port()}"
+    site = site_file(room, "native", cameras={"dead": {"source": dead, "intrinsics": intrinsics,
+                                                        "open_timeout_s": 2}})
+    out = base / "native_results"
+    done = run_native("capture", str(site), "--out", str(out), "--no-progress", "--export", "yaml")
+    assert done.returncode == 1, done.stderr  # a camera failed
+    assert f"dead: FAILED {dead}: cannot open the live source (no answer within 2 s)" in done.stdout
+    comparison = compare(out / "camera_poses.json", base / "room" / "truth.json")
+    assert comparison.registered == ["far1", "far4", "near1", "ceiling"], done.stdout + done.stderr
+    assert comparison.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
+    assert comparison.translation_rmse_pct < MAX_CENTRE_RMSE_PCT
+    assert (out / "calibration_opencv.yaml").is_file() and (out / "detect_report.json").is_file()
+    log = json.loads((out / "recordings" / "capture.json").read_text())
+    assert log["cameras"]["dead"]["frames"] == 0 and log["cameras"]["far4"]["frames"] > 400
+    assert log["projection"]["frames_logged"] > 200 and log["projection"]["cameras_done_after_end_s"] < 10
+    assert sorted(p.name for p in (out / "recordings").iterdir()) == [
+        "capture.json", "ceiling.mkv", "far1.mkv", "far4.mkv", "near1.mkv"]
+
+
 def test_a_projector_display_that_does_not_exist_keeps_the_recordings(room, capsys):
     base, _ = room
     site = site_file(room, "no_display", projector={"display": ":4243"})
@@ -150,14 +176,16 @@ def test_a_projector_display_that_does_not_exist_keeps_the_recordings(room, caps
     assert sorted(p.name for p in recordings.iterdir()) == ["ceiling.mkv", "far1.mkv", "far4.mkv", "near1.mkv"]
 
 
-def test_sigterm_stops_everything_and_keeps_the_recordings(room):
+@pytest.mark.parametrize("tool", ["calibproj", "calibproj-native"])
+def test_sigterm_stops_everything_and_keeps_the_recordings(room, tool):
     base, _ = room
-    site = site_file(room, "sigterm")
-    out = base / "sigterm_results"
-    recordings = base / "sigterm_recordings"
+    site = site_file(room, f"sigterm_{tool}")
+    out = base / f"sigterm_results_{tool}"
+    recordings = base / f"sigterm_recordings_{tool}"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    process = subprocess.Popen([sys.executable, "-m", "calibproj", "capture", str(site), "--out", str(out),
-                                "--recordings", str(recordings), "--no-progress", "-v"],
+    program = [sys.executable, "-m", "calibproj"] if tool == "calibproj" else [str(NATIVE)]
+    process = subprocess.Popen([*program, "capture", str(site), "--out", str(out), "--recordings", str(recordings),
+                                "--no-progress"],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     deadline = time.monotonic() + 60
     while not any((recordings / f"{name}.mkv").exists() for name in ("far1", "near1")):
@@ -167,7 +195,7 @@ def test_sigterm_stops_everything_and_keeps_the_recordings(room):
     process.send_signal(signal.SIGTERM)
     _, err = process.communicate(timeout=30)
     assert process.returncode == 130, err
-    assert err.strip().splitlines()[-1] == "calibproj capture: interrupted"
+    assert err.strip().splitlines()[-1] == f"{tool} capture: interrupted"
     assert f"the recordings are kept in {recordings}" in err
     assert "Traceback" not in err
     assert not out.exists()
@@ -197,6 +225,8 @@ def test_a_bad_site_file_is_one_line_and_records_nothing(tmp_path, capsys, docum
     lines = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(lines) == 1
     assert lines[0].startswith(f"calibproj capture: error: {site}: ") and message in lines[0]
+    native = run_native("capture", str(site), "--out", str(tmp_path / "results"), "--no-progress")
+    assert native.returncode == 2 and native.stderr.strip() == lines[0].replace("calibproj", "calibproj-native", 1)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["site.json"]
 
 
@@ -231,4 +261,7 @@ def test_fuzzed_site_files_give_one_line(tmp_path, capsys):
         status = main(["capture", str(site), "--out", str(tmp_path / "results"), "--no-progress"])
         lines = capsys.readouterr().err.strip().splitlines()
         assert status == 2 and len(lines) == 1 and lines[0].startswith("calibproj capture: error: "), (text, lines)
+        native = run_native("capture", str(site), "--out", str(tmp_path / "results"), "--no-progress")
+        assert native.returncode == 2 and native.stderr.count("\n") == 1, (text, native.stderr)
+        assert native.stderr.startswith("calibproj-native capture: error: "), (text, native.stderr)
     assert not any(p.is_dir() for p in tmp_path.iterdir())

@@ -383,8 +383,21 @@ def ingest_flags() -> set[str]:
                                      if field.name not in INGEST_OPTIONS_NOT_HERE}
 
 
-@pytest.mark.parametrize("command, python_only", [("detect", set()),
-                                                  ("calibrate", PYTHON_ONLY_CALIBRATE | ingest_flags())])
+def self_calibration_flags() -> set[str]:
+    from calibproj.self_calibration import SelfCalibrationOptions
+
+    return {"--" + field.name.replace("_", "-") for field in dataclasses.fields(SelfCalibrationOptions)}
+
+
+# What only the Python capture has (README, "Running a room"): its JSON summary, the
+# report and the self-calibration of intrinsics, as for calibrate.
+PYTHON_ONLY_CAPTURE = {"--json", "--no-report", "--refine-intrinsics"}
+
+
+@pytest.mark.parametrize("command, python_only", [
+    ("detect", set()),
+    ("calibrate", PYTHON_ONLY_CALIBRATE | ingest_flags()),
+    ("capture", PYTHON_ONLY_CAPTURE | self_calibration_flags())])
 def test_both_tools_take_the_same_options_but_those_listed(command: str, python_only: set[str]) -> None:
     """The gap between the two command lines is the listed one, no wider: an option added
     to one tool only fails here until it is added to the other or listed (README)."""
