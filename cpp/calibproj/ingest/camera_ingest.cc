@@ -3,6 +3,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <cstdio>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -138,6 +139,7 @@ class CameraIngest {
                                               start_, nominal_rate_, options_.sync, path_);
     ApplyReadout(&result_.sync);
     DropUncleanPatterns();
+    ThrowIfEveryPatternDropped();
     Summarise();
     result_.band_signals = std::move(band_signals_);
     result_.seconds_total = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
@@ -642,6 +644,20 @@ class CameraIngest {
     records.erase(std::remove_if(records.begin(), records.end(),
                                  [&](const detect::ScaleRecord& r) { return dropped[r.pattern]; }),
                   records.end());
+  }
+
+  // A camera whose every detected pattern was dropped has no observation, and the reason
+  // is its timing, not its view: said as such rather than left to "no observations".
+  void ThrowIfEveryPatternDropped() const {
+    const int submitted = static_cast<int>(std::count(status_.begin(), status_.end(), PatternStatus::kSubmitted));
+    if (submitted == 0 || result_.patterns_dropped < submitted) return;
+    const sync::FrameMap& map = result_.sync.window_map;
+    char figures[160];
+    std::snprintf(figures, sizeof figures, "offset known to +-%.2f frames, exposure %.2f frames",
+                  result_.sync.offset_uncertainty, map.exposure);
+    throw std::runtime_error(path_ + ": every pattern's frames were dropped (" + std::to_string(submitted) +
+                             " patterns): under the frame map the light codes give (" + figures +
+                             ") none is clean of its neighbours; are the camera's timestamps regular?");
   }
 
   // Drops detections that disagree with the homographies of all the others, and those

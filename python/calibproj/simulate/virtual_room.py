@@ -47,6 +47,8 @@ X_SERVER = "Xvfb"
 # and atlases of them kept for the cameras that film the same moment.
 GRAB_HISTORY = 60
 ATLAS_CACHE = 8
+# How long a camera waits for the grab that follows its frame's moment.
+GRAB_WAIT_S = 0.5
 DISPLAY_START_TIMEOUT_S = 10.0
 
 
@@ -91,6 +93,7 @@ class VirtualRoom:
         self._images: dict[int, np.ndarray] = {}
         self._atlases: OrderedDict[int, np.ndarray] = OrderedDict()
         self._grabs_lock = threading.Lock()
+        self._grabbed = threading.Condition(self._grabs_lock)  # notified at every grab
         self._layout_in_use: Any = None
         self._errors: list[str] = []
         self._models: dict[str, tuple[Any, Any, Any]] = {}  # per camera: sampler, response, noise
@@ -266,17 +269,22 @@ class VirtualRoom:
             # whole wait before the projection): the cameras render a new content only.
             if last is None or not np.array_equal(image, last):
                 content, last = content + 1, image
-            with self._grabs_lock:
+            with self._grabbed:
                 self._grabs.append((taken, content))
                 self._images[content] = last
                 for old in [c for c in self._images if c < self._grabs[0][1]]:
                     del self._images[old]
+                self._grabbed.notify_all()
 
     def _shown_at(self, wall_time: float) -> tuple[int, np.ndarray] | None:
         """What the display showed at ``wall_time`` (its last grab before then): its
         content number and atlas. A camera thread that runs late still films its own
         moment."""
-        with self._grabs_lock:
+        with self._grabbed:
+            # A grab at or after the moment first: until then the last one before it may be
+            # an older one that a busy grabber has not yet followed.
+            self._grabbed.wait_for(lambda: self._stop.is_set() or (self._grabs and self._grabs[-1][0] >= wall_time),
+                                   timeout=GRAB_WAIT_S)
             earlier = [content for taken, content in self._grabs if taken <= wall_time]
             if not earlier:
                 return None
