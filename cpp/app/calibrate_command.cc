@@ -174,19 +174,11 @@ void CheckScale(const std::optional<formats::ScaleMeasurement>& measurement, con
   }
 }
 
-void CheckOptions(const registration::Options& options) {
-  try {
-    options.Check();
-  } catch (const std::invalid_argument& error) {
-    throw InputError(error.what());
-  }
-}
-
 int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   const std::vector<std::string> exports =
       arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
   const auto measurement = ScaleOption(arguments.scale, !arguments.sequence.empty());
-  CheckOptions(arguments.options);
+  RequireValidOptions(arguments.options);
   // Checked and locked before the inputs are read, as the Python command does.
   OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
   out.Open();

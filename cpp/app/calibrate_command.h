@@ -63,8 +63,6 @@ std::optional<formats::ScaleMeasurement> ScaleOption(const std::string& scale, b
 // InputError when the measurement names cameras or markers the tracks do not have.
 void CheckScale(const std::optional<formats::ScaleMeasurement>& measurement, const formats::Tracks& tracks,
                 const std::optional<formats::ProjectedMarkers>& markers);
-// InputError naming the first bad registration option.
-void CheckOptions(const registration::Options& options);
 // The MSM geometry of sequence.json, checked against the tracks' markers per array.
 formats::ProjectedMarkers MarkersOf(const std::string& sequence, std::optional<int> markers_per_array);
 

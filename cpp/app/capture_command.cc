@@ -232,7 +232,7 @@ int RunCapture(const CaptureArguments& arguments, Interrupts& interrupts) {
   if (checking && !arguments.scale.empty()) throw InputError("--scale is for calibrating, not with --check");
   if (!arguments.exports.empty()) formats::ParseExportFormats(arguments.exports);
   ScaleOption(arguments.scale, true);
-  CheckOptions(arguments.options);
+  RequireValidOptions(arguments.options);
   const capture::Site site = capture::ReadSite(arguments.site);
   const Projection projection = Projected(site, arguments);
   // The output checked and locked before anything is recorded.

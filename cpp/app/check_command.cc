@@ -116,17 +116,9 @@ int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, con
   return check::CheckExitStatus(result, repair);
 }
 
-void CheckOptions(const check::CheckOptions& options) {
-  try {
-    options.Check();
-  } catch (const std::invalid_argument& error) {
-    throw InputError(error.what());
-  }
-}
-
 int RunCheck(const CheckArguments& arguments, Interrupts& interrupts) {
   if (!arguments.exports.empty()) formats::ParseExportFormats(arguments.exports);  // before anything is read
-  CheckOptions(arguments.options);
+  RequireValidOptions(arguments.options);
   // Claimed before the inputs are read, as the Python command does.
   std::optional<OutputFolder> out;
   if (!arguments.out.empty()) {

@@ -47,7 +47,4 @@ StoredResults ReadStored(const std::string& results);
 int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, const std::string& source,
                  const CheckArguments& arguments, std::optional<OutputFolder>& out);
 
-// InputError naming the first bad check option.
-void CheckOptions(const check::CheckOptions& options);
-
 }  // namespace calibproj::app

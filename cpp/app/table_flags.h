@@ -10,9 +10,21 @@
 #include <type_traits>
 #include <vector>
 
+#include "calibproj/formats/files.h"
 #include "calibproj/registration/option_table.h"
 
 namespace calibproj::app {
+
+// The options' own check (std::invalid_argument naming the first bad knob) as a bad
+// invocation: formats::InputError, exit status 2.
+template <typename Options>
+void RequireValidOptions(const Options& options) {
+  try {
+    options.Check();
+  } catch (const std::invalid_argument& error) {
+    throw formats::InputError(error.what());
+  }
+}
 
 // A visitor for Visit*Options that adds each knob to `command` in `group`.
 inline auto TableFlags(CLI::App* command, const std::string& group) {
