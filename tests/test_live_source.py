@@ -211,3 +211,26 @@ def test_an_http_stream_and_a_file_being_written_are_sources_too(room, tmp_path)
         writer.wait()
     assert camera.error is None, camera.error
     assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
+
+
+def test_an_rtsp_stream_pushed_by_an_encoder_is_a_source_too(room):
+    """RTSP on loopback: the camera's reader listens (FFmpeg's rtsp_flags=listen) and an
+    encoder pushes its stream to it (ANNOUNCE/RECORD, RTP interleaved over TCP), as
+    encoders configured to push do; the MSMs are the file's."""
+    out, sequence, stream = room
+    url = f"rtsp://127.0.0.1:{free_tcp_port()}/camera"
+
+    def push() -> None:
+        time.sleep(1.0)  # the reader listens first
+        subprocess.run(["ffmpeg", "-v", "quiet", "-re", "-i", str(stream), "-c", "copy", "-f", "rtsp",
+                        "-rtsp_transport", "tcp", url], check=False, timeout=60)
+
+    pusher = threading.Thread(target=push, daemon=True)
+    pusher.start()
+    source = _core.video.SourceOptions(format="rtsp", ffmpeg_options={"rtsp_flags": "listen"}, open_timeout_s=10.0,
+                                       stall_timeout_s=3.0)
+    camera = ingest({CAMERA: url}, sequence, out / "intrinsics", live={CAMERA: source}, progress=False).cameras[CAMERA]
+    pusher.join(timeout=30)
+    assert camera.error is None, camera.error
+    original = ingest({CAMERA: stream}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
+    assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
