@@ -162,6 +162,34 @@ def test_the_native_capture_calibrates_the_room_and_names_the_dead_camera(room):
         "capture.json", "ceiling.mkv", "far1.mkv", "far4.mkv", "near1.mkv"]
 
 
+def test_the_native_capture_checks_and_repairs_a_moved_camera(room):
+    """calibproj-native capture --check on the native results with near1 turned 0.5 deg:
+    found moved and repaired, as calibproj check does; the recordings in the repaired
+    folder."""
+    base, live = room
+    stored = base / "native_results"
+    if not (stored / "camera_poses.json").is_file():
+        pytest.skip("needs the native capture's results (the test above)")
+    # Native results keep no provenance.json: the sequence is named.
+    assert main(["generate", "--check", str(stored), "--sequence", str(base / "sequence" / "sequence.json"),
+                 "--out", str(base / "native_check")]) == 0
+    live.change({"near1": CameraChange(pan_deg=0.5)})
+    site = site_file(room, "native_check")
+    repaired = base / "native_repaired"
+    done = run_native("capture", str(site), "--check", str(stored), "--sequence",
+                      str(base / "native_check" / "sequence.json"), "--out", str(repaired), "--no-progress")
+    # Exit status 3, "not confirmed": the stored calibration's dead camera is unknown.
+    assert done.returncode == 3, done.stdout + done.stderr
+    verdicts = {name: verdict["status"]
+                for name, verdict in json.loads((repaired / "check.json").read_text())["cameras"].items()}
+    assert verdicts == {"far1": "unchanged", "far4": "unchanged", "near1": "moved", "ceiling": "unchanged",
+                        "dead": "unknown"}
+    comparison = compare(repaired / "camera_poses.json", base / "room" / "truth.json")
+    assert comparison.cameras["near1"].rotation_deg < MAX_ROTATION_RMSE_DEG
+    assert sorted(p.name for p in (repaired / "recordings").iterdir()) == [
+        "capture.json", "ceiling.mkv", "far1.mkv", "far4.mkv", "near1.mkv"]
+
+
 def test_a_projector_display_that_does_not_exist_keeps_the_recordings(room, capsys):
     base, _ = room
     site = site_file(room, "no_display", projector={"display": ":4243"})
