@@ -253,7 +253,10 @@ def test_ctrl_c_at_any_moment_of_the_start_gives_one_line(tmp_path: Path) -> Non
     import time
 
     for index, delay in enumerate((0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 0.8)):
-        process = subprocess.Popen([sys.executable, "-m", "calibproj", "generate", "--out", str(tmp_path / str(index))],
+        # A small projection: a run whose signal came before the interpreter could take
+        # it goes to its end (EXIT_OK), which should not take minutes.
+        process = subprocess.Popen([sys.executable, "-m", "calibproj", "generate", "--arrays", "2", "--scales", "1,2",
+                                    "--out", str(tmp_path / str(index))],
                                    stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         time.sleep(delay)
         process.send_signal(signal.SIGINT)

@@ -5,9 +5,11 @@ the projection, and calibrate from what arrived.
 cameras and their sources, the projector, the projection), then
 
 1. checks that ``out`` can be written, before anything is recorded;
-2. opens every camera's source and ingests it live (``calibproj.ingest`` with
-   ``live=``): each is synchronised and detected as its frames arrive, and recorded
-   unchanged into the recordings folder;
+2. runs the core's capture session (``calibproj._core.capture.record``,
+   ``cpp/calibproj/capture/session.h``, which ``calibproj-native capture`` runs too)
+   for steps 2-5: it opens every camera's source and ingests it live (the C++ ingest of
+   ``calibproj.ingest``): each is synchronised and detected as its frames arrive, and
+   recorded unchanged into the recordings folder;
 3. waits until every camera delivers frames (a camera that does not within the site's
    ``ready_s`` is stopped and reported; the others go on);
 4. plays the projection full screen on the projector's display (libmpv, with a log of

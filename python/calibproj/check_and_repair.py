@@ -201,9 +201,10 @@ def check(
             write_check(staging / CHECK_FILE, result)
             write_results(staging, folder.path, fixed, fixed_tracks, fixed_intrinsics, formats, report,
                           ingest_result)
-            if recordings is not None:
-                os.replace(recordings, staging / RECORDINGS_DIR)
         folder.commit()
+        if recordings is not None:
+            # After the commit: an interruption before it leaves them where they were.
+            os.replace(recordings, folder.path / RECORDINGS_DIR)
         log.info("repaired results written to %s", folder.path)
         return result
     finally:

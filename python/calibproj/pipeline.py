@@ -186,9 +186,10 @@ def calibrate(
                     write_self_calibration(staging / SELF_CALIBRATION_FILE, *self_calibration)
                 write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,
                                ingest_result)
-                if recordings is not None:
-                    os.replace(recordings, staging / RECORDINGS_DIR)
             folder.commit()
+            if recordings is not None:
+                # After the commit: an interruption before it leaves them where they were.
+                os.replace(recordings, folder.path / RECORDINGS_DIR)
             logger.info("results written to %s", folder.path)
         if scale_error is not None:
             raise ValueError(f"{scale_error}; results written to {out} in arbitrary units")
