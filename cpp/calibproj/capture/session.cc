@@ -212,20 +212,18 @@ class Session {
   void Play() {
     Say(false, "capture: projecting " + plan_.video.string());
     run_.projection_started_s = Now();
-    bool played = false;
-    std::exception_ptr failure;
-    player_ = std::thread([&] {
+    player_ = std::thread([this] {
       try {
         run_.projection = Projector(plan_.site.projector).Play(plan_.video.string(), player_stop_);
       } catch (...) {
-        failure = std::current_exception();
+        play_failure_ = std::current_exception();
       }
       std::lock_guard<std::mutex> lock(mutex_);
-      played = true;
+      played_ = true;
       changed_.notify_all();
     });
     const double interval = plan_.status_interval_s;
-    while (!WaitFor([&] { return played; }, interval > 0.0 ? interval : 3600.0)) {
+    while (!WaitFor([this] { return played_; }, interval > 0.0 ? interval : 3600.0)) {
       if (abort_->load()) {
         player_stop_->store(true);  // ends the playback at once
         break;
@@ -234,7 +232,7 @@ class Session {
     }
     player_.join();
     ThrowIfAborted();
-    if (failure) std::rethrow_exception(failure);
+    if (play_failure_) std::rethrow_exception(play_failure_);
     const PresentationLog& log = run_.projection;
     Say(false, "capture: projection shown in " + Fixed(log.duration_s, 1) + " s (" +
                    std::to_string(log.shown_s.size()) + " frames logged, " + std::to_string(log.dropped_frames) +
@@ -293,7 +291,9 @@ class Session {
   std::vector<CameraState> states_;  // under mutex_
   CaptureRun run_;
   std::vector<std::thread> threads_;
-  std::thread player_;
+  std::thread player_;  // members, not locals: the destructor may be the one joining it
+  bool played_ = false;  // under mutex_
+  std::exception_ptr play_failure_;
 };
 
 nlohmann::ordered_json OrNull(const std::optional<double>& value) {
