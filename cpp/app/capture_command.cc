@@ -205,11 +205,9 @@ int Checked(const Projection& projection, const capture::CaptureRun& run, std::o
   check.out = arguments.out;
   check.exports = arguments.exports;
   const formats::Tracks tracks = formats::TracksOf(run.cameras, projection.sequence.markers_per_array);
-  const int status = CheckAgainst(stored, tracks, projection.sequence_file.string(), check, out);
-  if (out && fs::is_directory(out->path()) && !fs::exists(out->path() / "recordings") &&
-      fs::exists(out->path() / "check.json")) {
-    fs::rename(recordings, out->path() / "recordings");
-  }
+  bool repaired = false;
+  const int status = CheckAgainst(stored, tracks, projection.sequence_file.string(), check, out, &repaired);
+  if (repaired) fs::rename(recordings, out->path() / "recordings");  // after the commit, as Calibrated
   return status;
 }
 

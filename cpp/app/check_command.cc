@@ -78,7 +78,7 @@ StoredResults ReadStored(const std::string& folder) {
 }
 
 int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, const std::string& source,
-                 const CheckArguments& arguments, std::optional<OutputFolder>& out) {
+                 const CheckArguments& arguments, std::optional<OutputFolder>& out, bool* repaired) {
   const std::vector<std::string> exports =
       arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
   const check::CheckInputs inputs{&stored.calibration, &stored.intrinsics, stored.unusable, &tracks, &stored.tracks,
@@ -95,6 +95,7 @@ int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, con
     }
   }
   const bool repair = out && result.trusted;
+  if (repaired != nullptr) *repaired = repair;
   if (repair) {
     const check::Repair repaired =
         check::Repaired(inputs, result, registration::Options{}.weak_rotation_sigma_deg);

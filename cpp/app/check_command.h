@@ -43,8 +43,9 @@ struct StoredResults {
 StoredResults ReadStored(const std::string& results);
 
 // The stored calibration checked against `tracks` (named `source` in messages) and,
-// with `out` (open), repaired into it; prints the table (or JSON); the exit status.
+// with `out` (open), repaired into it (`repaired` says whether it was); prints the
+// table (or JSON); the exit status.
 int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, const std::string& source,
-                 const CheckArguments& arguments, std::optional<OutputFolder>& out);
+                 const CheckArguments& arguments, std::optional<OutputFolder>& out, bool* repaired = nullptr);
 
 }  // namespace calibproj::app
