@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import subprocess
 
 import cv2
 import numpy as np
@@ -202,6 +203,26 @@ def test_loading_other_files_names_the_file(tmp_path):
         Sequence.load(tmp_path / "missing.json")
 
 
+def _h264_profile(video) -> str:
+    return subprocess.run(["ffprobe", "-v", "error", "-select_streams", "v:0", "-show_entries", "stream=profile",
+                           "-of", "csv=p=0", str(video)], check=True, capture_output=True, text=True).stdout.strip()
+
+
+def test_the_projection_is_lossless_and_crf_4_makes_one_any_h264_player_takes(tmp_path):
+    generate(tmp_path / "lossless", **SMALL)
+    sequence = generate(tmp_path / "lossy", crf=4, **SMALL)
+    assert _h264_profile(tmp_path / "lossless" / "projection.mp4") == "High 4:4:4 Predictive"
+    assert _h264_profile(tmp_path / "lossy" / "projection.mp4") == "High"
+    capture = cv2.VideoCapture(str(tmp_path / "lossy" / "projection.mp4"))
+    errors = []
+    for index in range(sequence.frame_count):
+        ok, frame = capture.read()
+        assert ok
+        errors.append(np.abs(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY).astype(int) - sequence.frame(index)).max())
+    # Lossy: edges off by a few levels, never enough to move a marker's decoding.
+    assert 1 < max(errors) <= 40
+
+
 def test_video_decodes_with_its_frame_count_and_fps(tmp_path):
     sequence = generate(tmp_path, png=True, **SMALL)
     capture = cv2.VideoCapture(str(tmp_path / "projection.mp4"))
@@ -214,8 +235,9 @@ def test_video_decodes_with_its_frame_count_and_fps(tmp_path):
             break
         grey = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         assert grey.shape == (270, 480)
-        # Compression keeps every grey level close to the rendered frame.
-        assert np.abs(grey.astype(int) - sequence.frame(frames)).max() <= 40
+        # Lossless by default: every grey level as rendered (within the range
+        # conversion's rounding).
+        assert np.abs(grey.astype(int) - sequence.frame(frames)).max() <= 1
         pattern = sequence.pattern_index_at(frames)
         if pattern is not None:
             assert detector.detect(grey)[0].tolist() == sequence.markers_shown(pattern).tolist()

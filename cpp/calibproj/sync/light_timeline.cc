@@ -36,31 +36,21 @@ LightTimeline::LightTimeline(std::vector<double> levels) : levels_(std::move(lev
     throw std::invalid_argument("light timeline: more than " + std::to_string(limits::kMaxFrames) + " frames");
   }
   cumulative_.assign(levels_.size() + 1, 0.0);
+  known_levels_.assign(levels_.size(), 0.0);
   for (std::size_t k = 0; k < levels_.size(); ++k) {
     const double level = levels_[k];
     if (!std::isnan(level) && (level < 0.0 || level > 1.0)) {
       throw std::invalid_argument("light timeline: level " + std::to_string(level) + " of frame " +
                                   std::to_string(k) + " is outside [0, 1]");
     }
-    cumulative_[k + 1] = cumulative_[k] + (std::isnan(level) ? 0.0 : level);
+    known_levels_[k] = std::isnan(level) ? 0.0 : level;
+    cumulative_[k + 1] = cumulative_[k] + known_levels_[k];
   }
 }
 
 double LightTimeline::Level(int frame) const {
   if (frame < 0 || frame >= frame_count()) return std::numeric_limits<double>::quiet_NaN();
   return levels_[frame];
-}
-
-double LightTimeline::Integral(double t) const {
-  const double clamped = std::clamp(t, 0.0, static_cast<double>(frame_count()));
-  const int frame = std::min(static_cast<int>(clamped), frame_count() - 1);
-  const double level = std::isnan(levels_[frame]) ? 0.0 : levels_[frame];
-  return cumulative_[frame] + (clamped - frame) * level;
-}
-
-double LightTimeline::Average(double t, double duration) const {
-  if (!(duration > 1e-9)) return LevelAt(t);
-  return (Integral(t + duration) - Integral(t)) / duration;
 }
 
 FrameWindow LightTimeline::KnownWindow(const LightCode& code, int context_before, int context_after) const {

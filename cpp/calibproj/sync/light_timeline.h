@@ -6,6 +6,7 @@
 // brightness the sequence does not fix (MSM patterns, anything outside the sequence)
 // are unknown and never enter a model of the camera signal.
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 #include <vector>
@@ -47,18 +48,28 @@ class LightTimeline {
   double LevelAt(double t) const { return Level(static_cast<int>(std::floor(t))); }
 
   // Mean level over [t, t + duration); the level at t when duration is 0. Only valid
-  // when every frame it touches is known.
-  double Average(double t, double duration) const;
+  // when every frame it touches is known. Inline: the code fits' grid searches call it
+  // millions of times per camera.
+  double Average(double t, double duration) const {
+    if (!(duration > 1e-9)) return LevelAt(t);
+    return (Integral(t + duration) - Integral(t)) / duration;
+  }
 
   // Frames of [code.first_frame - context, code.EndFrame() + context) that form one
   // run of known frames with the code (the window stops at the first unknown frame).
   FrameWindow KnownWindow(const LightCode& code, int context_before, int context_after) const;
 
  private:
-  double Integral(double t) const;  // integral of the level from 0 to t
+  // Integral of the level from 0 to t (unknown frames as 0).
+  double Integral(double t) const {
+    const double clamped = std::clamp(t, 0.0, static_cast<double>(frame_count()));
+    const int frame = std::min(static_cast<int>(clamped), frame_count() - 1);
+    return cumulative_[frame] + (clamped - frame) * known_levels_[frame];
+  }
 
   std::vector<double> levels_;
-  std::vector<double> cumulative_;  // cumulative_[k] = sum of levels_[0 .. k - 1] (unknown as 0)
+  std::vector<double> known_levels_;  // levels_ with unknown frames as 0
+  std::vector<double> cumulative_;    // cumulative_[k] = sum of known_levels_[0 .. k - 1]
 };
 
 }  // namespace calibproj::sync

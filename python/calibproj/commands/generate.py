@@ -72,7 +72,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="frames of each white or black block around the codes (default: %(default)s)")
     parser.add_argument("--png", action="store_true", help="also write every pattern as a PNG")
     parser.add_argument("--no-video", dest="video", action="store_false", help="write sequence.json only")
-    parser.add_argument("--crf", type=int, default=None, help="x264 quality, lower is better, 0 lossless (default: 4)")
+    parser.add_argument("--crf", type=int, default=None,
+                        help="x264 quality, lower is better (default: 0, lossless; 4 for a player without "
+                             "H.264's High 4:4:4 Predictive profile)")
     parser.add_argument("--preset", default=None, help="x264 preset (default: veryfast)")
     parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     parser.add_argument("--json", action="store_true", help="print a JSON summary")
