@@ -523,7 +523,7 @@ class Baselines:
             "_core.video.VideoReader": Spec([("path", f["tiny.mkv"]), ("source", None)]),
             "_core.video.StreamWriter": Spec([("url", f["tiny.mkv"] + ".ts"), ("width", 64), ("height", 48),
                                               ("format", "mpegts"), ("key_frame_interval", 15), ("crf", 23),
-                                              ("preset", "ultrafast")]),
+                                              ("preset", "ultrafast"), ("fps", 30.0)]),
             "_core.video.StreamWriter.write": Spec([("gray", np.zeros((48, 64), dtype=np.uint8)), ("time_s", 0.5)]),
             "_core.capture.Stop": Spec([]),
             "_core.capture.ProjectorOptions": Spec([("display", ":4242"), ("screen", -1), ("video_output", "x11"),

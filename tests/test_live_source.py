@@ -234,3 +234,40 @@ def test_an_rtsp_stream_pushed_by_an_encoder_is_a_source_too(room):
     assert camera.error is None, camera.error
     original = ingest({CAMERA: stream}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
     assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
+
+
+def _decoded_grey(path: Path) -> list[np.ndarray]:
+    reader, frames = _core.video.VideoReader(str(path)), []
+    while (frame := reader.grab()) is not None:
+        frames.append(frame[1].astype(float))
+    return frames
+
+
+def test_a_stream_encodes_at_the_quality_its_crf_asks(tmp_path):
+    """x264 scales each frame's complexity by its duration: a stream that did not give
+    it the camera's frame rate was encoded about 5 QP worse than its crf, which froze
+    the sensor noise of a still scene from frame to frame (so averaging frames gained
+    nothing) and moved the zoomed camera's centres. The same frames through the ffmpeg
+    program at the same crf are the reference."""
+    rng = np.random.default_rng(0)
+    scene = np.full((180, 320), 64.0)
+    scene[50:100, 100:200] = 220.0
+    frames = [np.clip(scene + rng.normal(0.0, 1.0, scene.shape), 0, 255).round().astype(np.uint8)
+              for _ in range(10)]
+    writer = _core.video.StreamWriter(str(tmp_path / "stream.ts"), 320, 180, crf=18, fps=30.0)
+    for index, frame in enumerate(frames):
+        writer.write(frame, index / 30.0)
+    writer.close()
+    subprocess.run(["ffmpeg", "-v", "error", "-nostdin", "-y", "-f", "rawvideo", "-pix_fmt", "gray", "-s", "320x180",
+                    "-r", "30", "-i", "-", "-c:v", "libx264", "-preset", "ultrafast", "-tune", "zerolatency",
+                    "-crf", "18", "-pix_fmt", "yuv420p", str(tmp_path / "reference.ts")],
+                   input=b"".join(frame.tobytes() for frame in frames), check=True)
+
+    def frame_to_frame(path: Path) -> float:
+        decoded = _decoded_grey(path)
+        assert len(decoded) == len(frames)
+        return float(np.mean([np.std(b - a) for a, b in zip(decoded[1:], decoded[2:])]))
+
+    reference = frame_to_frame(tmp_path / "reference.ts")
+    assert reference > 0.1  # the noise is not all frozen at this crf
+    assert frame_to_frame(tmp_path / "stream.ts") == pytest.approx(reference, rel=0.2)

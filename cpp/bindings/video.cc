@@ -87,16 +87,18 @@ void register_video(py::module_& m) {
                                   "Grey frames encoded with libx264 and sent live (MPEG-TS over UDP by default), "
                                   "each at the time given.")
       .def(py::init([](const std::string& url, int width, int height, const std::string& format,
-                       int key_frame_interval, int crf, const std::string& preset) {
+                       int key_frame_interval, int crf, const std::string& preset, double fps) {
              video::StreamOptions options;
              options.format = format;
              options.key_frame_interval = key_frame_interval;
              options.crf = crf;
              options.preset = preset;
+             options.fps = fps;
              return std::make_unique<video::StreamWriter>(url, width, height, options);
            }),
            py::arg("url"), py::arg("width"), py::arg("height"), py::arg("format") = "mpegts",
-           py::arg("key_frame_interval") = 15, py::arg("crf") = 23, py::arg("preset") = "ultrafast")
+           py::arg("key_frame_interval") = 15, py::arg("crf") = 23, py::arg("preset") = "ultrafast",
+           py::arg("fps") = 30.0)
       .def(
           "write",
           [](video::StreamWriter& writer, const py::array& gray, double time_s) {

@@ -47,7 +47,9 @@ from calibproj.simulate.virtual_room import VirtualRoom, VirtualRoomOptions
 
 def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seeds", type=int, default=3, help="rooms run, seeds 0.. (default 3)")
+    # Six: the pose RMSE of four cameras spreads 5x over seeds (files: 0.014-0.064 deg),
+    # so a ratio of means over three seeds moves by tenths from one run to the next.
+    parser.add_argument("--seeds", type=int, default=6, help="rooms run, seeds 0.. (default 6)")
     parser.add_argument("--work-dir", metavar="DIR", help="keep everything here (default: a temporary folder)")
     parser.add_argument("-v", "--verbose", action="store_true", help="the capture's log")
     return parser.parse_args()

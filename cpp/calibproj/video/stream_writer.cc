@@ -73,8 +73,10 @@ StreamWriter::StreamWriter(const std::string& url, int width, int height, const 
     throw std::invalid_argument("stream frames must be even sizes up to 8192, got " + std::to_string(width) + "x" +
                                 std::to_string(height));
   }
-  if (options.key_frame_interval < 1 || options.crf < 0 || options.crf > 51) {
-    throw std::invalid_argument("stream options: key_frame_interval must be at least 1 and crf in [0, 51]");
+  if (options.key_frame_interval < 1 || options.crf < 0 || options.crf > 51 || !(options.fps >= 1.0) ||
+      !(options.fps <= 1000.0)) {
+    throw std::invalid_argument(
+        "stream options: key_frame_interval must be at least 1, crf in [0, 51] and fps in [1, 1000]");
   }
   KeepFfmpegErrors();
   Encoder& e = *encoder_;
@@ -93,6 +95,7 @@ StreamWriter::StreamWriter(const std::string& url, int width, int height, const 
   e.codec->pix_fmt = AV_PIX_FMT_YUV420P;  // what cameras send (the grey image in the luma plane)
   e.codec->color_range = AVCOL_RANGE_MPEG;
   e.codec->time_base = kTimeBase;
+  e.codec->framerate = av_d2q(options.fps, 1000000);
   e.codec->gop_size = options.key_frame_interval;
   e.codec->max_b_frames = 0;
   e.codec->thread_count = 1;  // many cameras on few cores: one thread each

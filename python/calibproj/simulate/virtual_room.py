@@ -131,7 +131,7 @@ class VirtualRoom:
             self.urls[camera.name] = url
             writer = _core.video.StreamWriter(url + "?pkt_size=1316", *camera.resolution,
                                               key_frame_interval=self.options.key_frame_interval,
-                                              crf=self.options.crf)
+                                              crf=self.options.crf, fps=camera.fps)
             rng = np.random.default_rng([self.options.seed, index])
             self._spawn(f"room-{camera.name}", self._film, camera, writer, started, rng)
         logger.info("virtual room on display %s: %s", self.display,
