@@ -236,6 +236,30 @@ def test_an_rtsp_stream_pushed_by_an_encoder_is_a_source_too(room):
     assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
 
 
+def test_an_rtsp_server_is_a_source_too(room):
+    """RTSP as IP cameras serve it: the camera is the server (GStreamer's rtsp-server on
+    loopback, tests/rtsp_server.py) and the reader pulls (DESCRIBE/SETUP/PLAY, RTP
+    interleaved over TCP); the MSMs are the file's."""
+    out, sequence, stream = room
+    port = free_tcp_port()
+    server = subprocess.Popen(["/usr/bin/python3", str(Path(__file__).with_name("rtsp_server.py")), str(stream),
+                               str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = server.stdout.readline()
+        assert line.strip() == "ready", f"the RTSP server did not start: {line}{server.stderr.read()}"
+        source = _core.video.SourceOptions(ffmpeg_options={"rtsp_transport": "tcp"}, open_timeout_s=10.0,
+                                           stall_timeout_s=3.0)
+        camera = ingest({CAMERA: f"rtsp://127.0.0.1:{port}/camera"}, sequence, out / "intrinsics",
+                        live={CAMERA: source}, progress=False).cameras[CAMERA]
+    finally:
+        server.kill()
+        server.communicate()
+    assert camera.error is None, camera.error
+    original = ingest({CAMERA: stream}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
+    assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
+    np.testing.assert_allclose(camera.raw["centres"]["xy"], original.raw["centres"]["xy"], atol=1e-9)
+
+
 def _decoded_grey(path: Path) -> list[np.ndarray]:
     reader, frames = _core.video.VideoReader(str(path)), []
     while (frame := reader.grab()) is not None:

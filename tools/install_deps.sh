@@ -12,6 +12,8 @@ packages=(
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev libavdevice-dev
   libmpv-dev  # the projector of `calibproj capture`
   xvfb  # the virtual operating room's projector display (tests, `calibproj demo --live`)
+  # An RTSP camera on loopback for the tests (GStreamer's rtsp-server, run by python3).
+  python3-gi gir1.2-gst-rtsp-server-1.0 gstreamer1.0-plugins-good
   nlohmann-json3-dev libcli11-dev
   ffmpeg
   opencv-doc  # OpenCV's sample images: tests/test_board.py checks calibproj intrinsics on them
