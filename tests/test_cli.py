@@ -213,7 +213,36 @@ def test_exposures_apply_to_videos_only(tmp_path: Path, capsys: pytest.CaptureFi
 # -- exit status --------------------------------------------------------------------------------------
 
 
+def interrupt_inside(error: Exception) -> Exception:
+    """``error`` as Python raises it when a KeyboardInterrupt lands inside an import or
+    while a class is made."""
+    error.__cause__ = KeyboardInterrupt()
+    return error
+
+
+INTERRUPTS_IN_DISGUISE = [
+    interrupt_inside(RuntimeError("Error calling __set_name__ on 'Field' instance 'scales' in 'DemoOptions'")),
+    interrupt_inside(ImportError("initialization failed")),
+]
+
+
+@pytest.mark.parametrize("raised", INTERRUPTS_IN_DISGUISE)
+def test_an_interrupt_while_the_commands_are_imported_gives_one_line(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, raised: Exception) -> None:
+    """Found by probing Ctrl-C at 0.8 s: a dataclass being made turned it into a
+    RuntimeError, which printed a traceback."""
+    from calibproj import cli
+
+    def build_parser():
+        raise raised
+
+    monkeypatch.setattr(cli, "build_parser", build_parser)
+    assert main(["compare", "a.json", "b.json"]) == EXIT_INTERRUPTED
+    assert capsys.readouterr().err.strip().splitlines() == ["calibproj: interrupted"]
+
+
 @pytest.mark.parametrize("raised, status, line", [
+    *[(error, EXIT_INTERRUPTED, "interrupted") for error in INTERRUPTS_IN_DISGUISE],
     (ValueError("sequence.json: not a sequence"), EXIT_USAGE, "error: sequence.json: not a sequence"),
     (FileNotFoundError("a.json: no such file"), EXIT_USAGE, "error: a.json: no such file"),
     (RuntimeError("ffmpeg not found on PATH"), EXIT_FAILURE, "error: ffmpeg not found on PATH"),

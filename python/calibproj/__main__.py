@@ -13,6 +13,13 @@ def run() -> int:
     except KeyboardInterrupt:
         print("calibproj: interrupted", file=sys.stderr)
         return 130
+    except Exception as error:
+        from calibproj.interruption import caused_by_interrupt
+
+        if not caused_by_interrupt(error):
+            raise
+        print("calibproj: interrupted", file=sys.stderr)
+        return 130
     return main()
 
 

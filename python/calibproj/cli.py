@@ -28,6 +28,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from calibproj.commands.parser import SuggestingArgumentParser
+from calibproj.interruption import caused_by_interrupt
 from calibproj.version import __version__
 
 # name -> module; the order is the order of the workflow.
@@ -129,27 +130,15 @@ def _terminate_interrupts() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def _caused_by_interrupt(error: BaseException) -> bool:
-    """Whether a KeyboardInterrupt is among the causes of ``error``."""
-    seen: set[int] = set()
-    cause: BaseException | None = error
-    while cause is not None and id(cause) not in seen:
-        if isinstance(cause, KeyboardInterrupt):
-            return True
-        seen.add(id(cause))
-        cause = cause.__cause__ or cause.__context__
-    return False
-
-
 def main(argv: list[str] | None = None) -> int:
     try:
         return _run(argv)
     except KeyboardInterrupt:  # while the command line is read, before its command runs
         print("calibproj: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except ImportError as error:
-        # An extension module whose start was interrupted reports "initialization failed".
-        if not _caused_by_interrupt(error):
+    except Exception as error:
+        # The command modules' imports, interrupted (see calibproj.interruption).
+        if not caused_by_interrupt(error):
             raise
         print("calibproj: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -172,16 +161,16 @@ def _run(argv: list[str] | None) -> int:
     except KeyboardInterrupt:
         print(f"{prefix}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (CommandError, ValueError, OSError) as error:
-        print(f"{prefix}: error: {error}", file=sys.stderr)
-        return EXIT_USAGE
-    except RuntimeError as error:
-        print(f"{prefix}: error: {error}", file=sys.stderr)
-        return EXIT_FAILURE
     except Exception as error:
-        if _caused_by_interrupt(error):  # e.g. an extension module whose start was interrupted
+        if caused_by_interrupt(error):  # e.g. a module the command imports, interrupted
             print(f"{prefix}: interrupted", file=sys.stderr)
             return EXIT_INTERRUPTED
+        if isinstance(error, (CommandError, ValueError, OSError)):
+            print(f"{prefix}: error: {error}", file=sys.stderr)
+            return EXIT_USAGE
+        if isinstance(error, RuntimeError):
+            print(f"{prefix}: error: {error}", file=sys.stderr)
+            return EXIT_FAILURE
         traceback.print_exc()
         print(f"{prefix}: internal error: {type(error).__name__}: {error}", file=sys.stderr)
         return EXIT_FAILURE
