@@ -73,7 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--png", action="store_true", help="also write every pattern as a PNG")
     parser.add_argument("--no-video", dest="video", action="store_false", help="write sequence.json only")
     parser.add_argument("--crf", type=int, default=None,
-                        help="x264 quality, lower is better (default: 0, lossless; 4 for a player without "
+                        help="x264 quality, lower is better (default: 4; 0 is lossless, for players with "
                              "H.264's High 4:4:4 Predictive profile)")
     parser.add_argument("--preset", default=None, help="x264 preset (default: veryfast)")
     parser.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
