@@ -298,3 +298,23 @@ def test_a_stream_encodes_at_the_quality_its_crf_asks(tmp_path):
     reference = frame_to_frame(tmp_path / "reference.ts")
     assert reference > 0.1  # the noise is not all frozen at this crf
     assert frame_to_frame(tmp_path / "stream.ts") == pytest.approx(reference, rel=0.2)
+
+
+def test_a_recording_keeps_the_frame_rate_of_its_source(tmp_path):
+    """A 29.97 fps camera recorded into Matroska (millisecond timestamps: 33 and 34 ms
+    apart) was read back at 30 fps: 0.1 % off over a projection moved the frames picked
+    per pattern onto the pattern changes, and once every pattern was dropped where the
+    live ingest of the same packets had kept them all."""
+    rate = 30000 / 1001
+    writer = _core.video.StreamWriter(str(tmp_path / "camera.ts"), 64, 48, fps=rate)
+    for index in range(90):
+        writer.write(np.full((48, 64), 16 + index, dtype=np.uint8), index / rate)
+    writer.close()
+    recording = tmp_path / "camera.mkv"
+    reader = _core.video.VideoReader(str(tmp_path / "camera.ts"),
+                                     _core.video.SourceOptions(record_path=str(recording)))
+    while reader.grab() is not None:
+        pass
+    del reader
+    assert _core.video.probe(str(tmp_path / "camera.ts")).fps == pytest.approx(rate, rel=1e-9)
+    assert _core.video.probe(str(recording)).fps == pytest.approx(rate, rel=1e-9)

@@ -37,6 +37,12 @@ PacketRecorder::PacketRecorder(const std::string& path, const AVStream& source)
   code = avcodec_parameters_copy(stream->codecpar, source.codecpar);
   stream->codecpar->codec_tag = 0;  // the container's own tag for the codec
   stream->time_base = source.time_base;
+  // The source's frame rate (Matroska's default duration): read later, the recording
+  // has the nominal rate the live stream had. Matroska's millisecond timestamps alone
+  // made a 29.97 fps camera look like 30 fps; 0.1 % off over the projection moved the
+  // frames picked per pattern onto the pattern changes, and every pattern was dropped.
+  stream->avg_frame_rate = source.avg_frame_rate.num > 0 ? source.avg_frame_rate : source.r_frame_rate;
+  stream->r_frame_rate = source.r_frame_rate;
   if (code >= 0) code = avio_open(&output_->pb, path.c_str(), AVIO_FLAG_WRITE);
   if (code < 0) {
     avformat_free_context(output_);
