@@ -21,6 +21,7 @@ import json
 import math
 import os
 import selectors
+import stat
 import subprocess
 import sys
 import time
@@ -1126,3 +1127,5 @@ def test_bad_calls_neither_crash_nor_hang(tmp_path: Path) -> None:
     print(f"\nfuzzed {len(calls)} calls of {len(names)} callables in {elapsed:.1f} s: "
           + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     assert not bad, f"{len(bad)} of {len(calls)} bad calls failed:\n" + "\n".join(bad)
+    # "/dev/null" is among the bad paths: no writer may have replaced the device.
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)

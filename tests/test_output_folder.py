@@ -309,6 +309,28 @@ def test_a_file_the_core_cannot_write_is_an_os_error_naming_it(small: Path, tmp_
     assert error.value.errno in (errno.EEXIST, errno.ENOTDIR) and str(blocked) in str(error.value)
 
 
+def test_a_file_is_never_written_over_a_device_a_pipe_or_a_folder(small: Path, tmp_path: Path) -> None:
+    """Files are written whole and moved into place, which replaces whatever is at the
+    path: the core fuzz test's "/dev/null" turned the machine's /dev/null into a plain
+    file (as root). Both writers (Python's and the core's) now refuse, naming the path."""
+    from calibproj import _core
+    from calibproj.io.intrinsics import load_intrinsics_dir
+
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    intrinsics = load_intrinsics_dir(small / "intrinsics")
+    for target in (pipe, folder):
+        with pytest.raises(OSError, match=str(target)) as error:
+            jsonio.atomic_write_text(target, "text")
+        assert error.value.errno == errno.EEXIST
+        with pytest.raises(OSError, match=str(target)) as error:
+            _core.formats.write_intrinsics(target, next(iter(intrinsics.values())))
+        assert error.value.errno == errno.EEXIST
+    assert pipe.is_fifo() and folder.is_dir() and not any(folder.iterdir())
+
+
 def test_simulate_and_generate_write_their_folders_the_same_way(tmp_path: Path, capsys) -> None:
     sim = tmp_path / "sim"
     simulate = ["simulate", "--scene", "small", "--tracks-only", "--arrays", "4", "--eval-points", "20",

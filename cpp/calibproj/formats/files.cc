@@ -272,6 +272,14 @@ int CreateTemporaryBeside(const fs::path& path, fs::path* temporary) {
 }  // namespace
 
 void AtomicWrite(const fs::path& path, const std::string& text) {
+  // The file is replaced whole: a device, a pipe or a folder there would be replaced
+  // too (as root, "/dev/null" became a plain file).
+  std::error_code ignored;
+  const fs::file_status existing = fs::status(path, ignored);
+  if (fs::exists(existing) && !fs::is_regular_file(existing)) {
+    throw fs::filesystem_error("cannot write over what is not a regular file", path,
+                               std::make_error_code(std::errc::file_exists));
+  }
   if (path.has_parent_path()) fs::create_directories(path.parent_path());
   fs::path temporary;
   const int fd = CreateTemporaryBeside(path, &temporary);

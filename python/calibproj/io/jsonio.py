@@ -11,6 +11,7 @@ number beyond a double's range (``1e400``), no arrays and objects nested deeper 
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -40,9 +41,19 @@ def schema_tag(kind: str, major: int) -> str:
     return f"{SCHEMA_PREFIX}{kind}/{major}"
 
 
+def require_replaceable(path: str | os.PathLike) -> None:
+    """FileExistsError naming ``path`` when something other than a regular file is there:
+    a file written whole replaces what is at its path, and a device, a pipe or a folder
+    must not be (as root, "/dev/null" would become a plain file)."""
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise FileExistsError(errno.EEXIST, "not a regular file; nothing written over it", str(path))
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` so that readers see the old file or the whole new one."""
     path = Path(path)
+    require_replaceable(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from calibproj.io.jsonio import require_replaceable
+
 log = logging.getLogger(__name__)
 
 # x264 constant-rate factor. With the "stillimage" tuning, 4 keeps every grey level
@@ -58,6 +60,7 @@ class GreyVideoWriter:
         if not fps > 0:
             raise ValueError(f"fps must be positive, got {fps}")
         self.path = Path(path)
+        require_replaceable(self.path)
         self.size = (int(size[0]), int(size[1]))
         self.frames_written = 0
         self.timestamps_s = None if timestamps_s is None else np.asarray(timestamps_s, dtype=float)
