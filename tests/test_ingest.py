@@ -31,6 +31,9 @@ from calibproj.tracks import Tracks
 MIN_SIDE_PX = 20.0
 MAX_RMS_PX = 0.1
 MAX_ROI_DIFFERENCE_PX = 0.01
+# The edge fit converges to within its tolerance from the prediction as from the
+# detector's corners (measured on the demo room: 0.006-0.017 px RMS).
+MAX_VERIFIED_RMS_DIFFERENCE_PX = 0.02
 
 
 def msm_sequence(markers: str, arrays: int = 4):
@@ -59,13 +62,15 @@ def apriltag(tmp_path_factory):
 
 
 def roi_and_whole_frame(rendered):
-    """Ingests with regions of interest and with whole frames only. No whole frames are
-    explored for other surfaces (there are none): with four arrays they would be a third
-    of the patterns the regions are compared on."""
+    """Ingests with regions of interest (markers looked for at their predictions first,
+    key True, and by the detector alone, key "detector") and with whole frames only
+    (False). No whole frames are explored for other surfaces (there are none): with four
+    arrays they would be a third of the patterns the regions are compared on."""
     out, sequence, _ = rendered
-    return {roi: ingest(out / "videos", sequence, out / "intrinsics",
-                        options=IngestOptions(use_roi=roi, explore_interval=0), progress=False)
-            for roi in (True, False)}
+    runs = {True: {}, "detector": {"verify_predicted": False}, False: {"use_roi": False}}
+    return {key: ingest(out / "videos", sequence, out / "intrinsics",
+                        options=IngestOptions(explore_interval=0, **changes), progress=False)
+            for key, changes in runs.items()}
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +84,8 @@ def apriltag_results(apriltag):
 
 
 def centre_errors(result, truth, camera: str) -> tuple[np.ndarray, np.ndarray]:
-    """Errors of the merged centres (px) and the smallest detected side of each."""
+    """Errors of the merged centres (px) and the largest detected side of each (the
+    merge weighs the larger markers' centres most)."""
     points = truth["image_points"][camera]
     true_xy = dict(zip(points["ids"], points["undistorted"]))
     raw = result.cameras[camera].raw
@@ -91,7 +97,7 @@ def centre_errors(result, truth, camera: str) -> tuple[np.ndarray, np.ndarray]:
     for point_id, centre in zip(ids, xy):
         kept = (record_ids == point_id) & records["kept"]
         errors.append(np.linalg.norm(centre - true_xy[int(point_id)]))
-        sides.append(records["side_px"][kept].min())
+        sides.append(records["side_px"][kept].max())
     return np.array(errors), np.array(sides)
 
 
@@ -147,11 +153,35 @@ def check_roi_equals_whole_frame(results):
 
 
 def test_roi_detection_equals_whole_frame_detection_aruco(aruco_results):
-    check_roi_equals_whole_frame(aruco_results)
+    check_roi_equals_whole_frame({True: aruco_results["detector"], False: aruco_results[False]})
 
 
 def test_roi_detection_equals_whole_frame_detection_apriltag(apriltag_results):
-    check_roi_equals_whole_frame(apriltag_results)
+    check_roi_equals_whole_frame({True: apriltag_results["detector"], False: apriltag_results[False]})
+
+
+def check_verified_equals_detected(results):
+    """Markers looked for at their predicted corners: every marker the detector finds in
+    its region is found, and its centre comes from the same edge fit started elsewhere."""
+    for camera in results[True].cameras:
+        raws = [results[key].cameras[camera].raw for key in (True, "detector")]
+        verified, detected = (raw["records"] for raw in raws)
+        assert raws[0]["markers_verified"] >= 0.5 * verified["in_region"].sum() > 0, camera
+        assert raws[1]["markers_verified"] == 0, camera
+        keys = [list(zip(r["pattern"].tolist(), r["marker"].tolist())) for r in (verified, detected)]
+        assert set(keys[1]) <= set(keys[0]), camera
+        first = [keys[0].index(k) for k in keys[1]]
+        difference = np.linalg.norm(verified["centre"][first] - detected["centre"], axis=1)
+        wide = detected["side_px"] >= MIN_SIDE_PX
+        assert np.sqrt(np.mean(difference[wide] ** 2)) < MAX_VERIFIED_RMS_DIFFERENCE_PX, camera
+
+
+def test_markers_verified_at_their_predictions_equal_detected_ones_aruco(aruco_results):
+    check_verified_equals_detected(aruco_results)
+
+
+def test_markers_verified_at_their_predictions_equal_detected_ones_apriltag(apriltag_results):
+    check_verified_equals_detected(apriltag_results)
 
 
 def test_detections_come_from_clean_frames_only(aruco, aruco_results):

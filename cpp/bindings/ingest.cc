@@ -199,6 +199,7 @@ py::dict IngestResultDict(const ingest::CameraIngestResult& r, const ingest::Seq
   d["patterns_dropped"] = r.patterns_dropped;
   d["patterns_missing"] = r.patterns_missing;
   d["detections_rejected"] = r.detections_rejected;
+  d["markers_verified"] = r.markers_verified;
   d["detections_inconsistent"] = r.detections_inconsistent;
   d["consistency_problem"] = r.consistency_problem.empty() ? py::object(py::none()) : py::cast(r.consistency_problem);
   d["scales"] = ScalesList(r.scales);

@@ -152,7 +152,12 @@ bool ProjectorHomography::Fit() {
   if (Spread(image) < options_.min_spread * diagonal) return false;
   std::vector<int> all(projector.size());
   std::iota(all.begin(), all.end(), 0);
-  const SurfaceFit dominant = FitSurface(projector, image, all, FitOptions(options_));
+  // The dominant surface's inliers by its refined model: RANSAC's own model, from four
+  // points, can leave a cluster of the floor's points beyond the threshold, which would
+  // then be taken for a surface of their own (measured: one array of a near camera).
+  SurfaceFitOptions dominant_options = FitOptions(options_);
+  dominant_options.within_ransac_inliers = false;
+  const SurfaceFit dominant = FitSurface(projector, image, all, dominant_options);
   if (dominant.inliers.empty() || dominant.rms_px > options_.max_rms_px) return false;
   const FurtherSurfaces further = FitFurtherSurfaces(projector, image, Without(all, dominant.inliers), options_);
   // Another surface's points are not outliers of the dominant one: the share is of all

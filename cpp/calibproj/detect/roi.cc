@@ -60,11 +60,11 @@ double ShortestSide(const std::vector<cv::Point2d>& outline) {
   return shortest;
 }
 
+}  // namespace
+
 double AllowedOffset(double side_px, const RoiOptions& options) {
   return std::max(options.max_offset_px, options.max_offset_fraction * side_px);
 }
-
-}  // namespace
 
 void RoiOptions::Check() const {
   Require(padding_fraction >= 0.0, "padding_fraction must be non-negative");
@@ -167,6 +167,9 @@ PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& 
     prediction.module_px = a.side_px / markers.grid_cells;
     prediction.centre =
         DistortPixels(lens, {ApplyHomography(homography.SurfaceAt(markers.centres[i]), markers.centres[i])})[0];
+    const double quad_side = markers.side_px * markers.quad_cells / markers.grid_cells;
+    const auto quad = SquareOutline(homography, lens, markers.centres[i], quad_side, 1);
+    prediction.corners = {quad[0], quad[1], quad[2], quad[3]};
     if (options.target_module_px > 0.0) {
       const int factor = static_cast<int>(std::floor(prediction.module_px / options.target_module_px));
       prediction.downscale = std::clamp(factor, 1, options.max_downscale);
@@ -209,34 +212,26 @@ Detections DetectDownscaled(const MarkerDetector& detector, const cv::Mat& gray,
   return found;
 }
 
-Detections DetectInRegions(const MarkerDetector& detector, const PatternPlan& plan,
-                           const std::vector<RegionImage>& regions, const RoiOptions& options) {
-  if (regions.size() != plan.markers.size()) throw std::invalid_argument("one region image per planned marker");
+std::optional<Quad> DetectInRegion(const MarkerDetector& detector, const MarkerPrediction& marker,
+                                   const RegionImage& region, const RoiOptions& options) {
   // The marker's size in a region is known: the detector is tuned for it.
   const DetectionTuning tuning{options.threshold_window_px, options.min_white_black_diff};
-  Detections out;
-  for (std::size_t i = 0; i < regions.size(); ++i) {
-    const MarkerPrediction& marker = plan.markers[i];
-    const Detections found = DetectDownscaled(detector, regions[i].gray, marker.downscale, tuning);
-    const cv::Point2d origin(regions[i].origin.x, regions[i].origin.y);
-    double best = AllowedOffset(marker.side_px, options);
-    int chosen = -1;
-    for (std::size_t k = 0; k < found.size(); ++k) {
-      if (found.ids[k] != marker.id) continue;
-      const double offset = cv::norm(DiagonalIntersection(found.corners[k]) + origin - marker.centre);
-      if (offset <= best) {
-        best = offset;
-        chosen = static_cast<int>(k);
-      }
+  const Detections found = DetectDownscaled(detector, region.gray, marker.downscale, tuning);
+  const cv::Point2d origin(region.origin.x, region.origin.y);
+  double best = AllowedOffset(marker.side_px, options);
+  int chosen = -1;
+  for (std::size_t k = 0; k < found.size(); ++k) {
+    if (found.ids[k] != marker.id) continue;
+    const double offset = cv::norm(DiagonalIntersection(found.corners[k]) + origin - marker.centre);
+    if (offset <= best) {
+      best = offset;
+      chosen = static_cast<int>(k);
     }
-    if (chosen < 0) continue;
-    Quad quad = found.corners[chosen];
-    for (auto& corner : quad) corner += origin;
-    out.ids.push_back(marker.id);
-    out.corners.push_back(quad);
   }
-  SortById(&out);
-  return out;
+  if (chosen < 0) return std::nullopt;
+  Quad quad = found.corners[chosen];
+  for (auto& corner : quad) corner += origin;
+  return quad;
 }
 
 Detections FilterDetections(const Detections& found, const std::vector<int>& ids, const PatternPlan* plan,

@@ -12,6 +12,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <optional>
 #include <vector>
 
 #include "calibproj/detect/detections.h"
@@ -72,6 +73,7 @@ struct MarkerPrediction {
   double module_px = 0.0; // side_px over the marker's cells
   cv::Rect region;        // padded, aligned, inside the image
   int downscale = 1;      // detected in its region shrunk by this factor
+  Quad corners;           // the detector's quad, distorted image pixels, OpenCV order
 };
 
 struct PatternPlan {
@@ -93,6 +95,7 @@ struct PatternMarkers {
   std::vector<cv::Point2d> centres;
   double side_px = 0.0;
   int grid_cells = 1;
+  int quad_cells = 1;  // cells across the square the detectors return, centred in the grid
 };
 
 // The scales of the MSMs of a pattern's array, for leaving a marker to larger scales.
@@ -122,12 +125,14 @@ struct RegionImage {
 Detections DetectDownscaled(const MarkerDetector& detector, const cv::Mat& gray, int factor,
                             const DetectionTuning& tuning = {});
 
-// Detections of planned markers in their regions (regions[i] holds markers[i] of the
-// plan; each shrunk by its marker's downscale factor for detection), in whole-frame
-// coordinates: for each marker the detection of its id closest to the prediction, if
-// within the allowed offset.
-Detections DetectInRegions(const MarkerDetector& detector, const PatternPlan& plan,
-                           const std::vector<RegionImage>& regions, const RoiOptions& options);
+// The detection of one planned marker in its region (shrunk by the marker's downscale
+// factor for detection), in whole-frame coordinates: the detection of its id closest
+// to the prediction, if within the allowed offset.
+std::optional<Quad> DetectInRegion(const MarkerDetector& detector, const MarkerPrediction& marker,
+                                   const RegionImage& region, const RoiOptions& options);
+
+// How far from its predicted centre a marker of `side_px` may be found.
+double AllowedOffset(double side_px, const RoiOptions& options);
 
 // Keeps the detections of a whole frame that a pattern can show: ids in `ids`, seen
 // once, and, when a plan is given, close to their prediction.

@@ -85,7 +85,10 @@ class CameraIngest {
         pipeline_(family_, options_.detector, options_.roi,
                   CornerOptions{std::make_shared<const detect::LensTables>(
                                     camera.lens, cv::Size(reader_.info().width, reader_.info().height)),
-                                geometry_.quad_cells, options_.refine_undistorted, options_.edges},
+                                geometry_.quad_cells, options_.refine_undistorted, options_.edges,
+                                options_.refine_undistorted && options_.verify_predicted,
+                                options_.verification,
+                                ProjectedBits(family_, sequence.markers_per_array, sequence.inverted)},
                   options_.detection_threads, options_.max_pending_jobs),
         status_(sequence.patterns.size(), PatternStatus::kNotSeen),
         used_frames_(sequence.patterns.size()) {
@@ -385,7 +388,7 @@ class CameraIngest {
     homography_.Update();
     pending_ = PendingPattern{};
     pending_.pattern = index;
-    const detect::PatternMarkers markers = sequence_.Markers(index, geometry_.grid_cells);
+    const detect::PatternMarkers markers = sequence_.Markers(index, geometry_.grid_cells, geometry_.quad_cells);
     ScaleStats& stats = result_.scales[sequence_.patterns[index].scale_index];
     DetectionJob& job = pending_.job;
     job.pattern = index;
@@ -564,6 +567,7 @@ class CameraIngest {
     for (const DetectionOutput& output : outputs) {
       result_.seconds_detection += output.seconds;
       result_.detections_rejected += output.rejected;
+      result_.markers_verified += output.verified;
       const PatternSpec& pattern = sequence_.patterns[output.pattern];
       for (const detect::MarkerPrediction& marker : output.searched) {
         const auto& ids = output.detections.ids;
@@ -816,6 +820,7 @@ void IngestOptions::Check() const {
   Require(explore_interval >= 0, "explore_interval must be non-negative (0: never)");
   Require(explore_scales >= 1, "explore_scales must be at least 1");
   edges.Check();
+  verification.Check();
   consistency.Check();
   Require(edge_gap_share > 0.0 && edge_gap_share <= 1.0, "edge_gap_share must be in (0, 1]");
   VisitIngestOptions(*this, limits::OptionChecker{"ingest options: "});

@@ -17,6 +17,7 @@
 #include "calibproj/detect/floor_consistency.h"
 #include "calibproj/detect/lens.h"
 #include "calibproj/detect/marker_detector.h"
+#include "calibproj/detect/marker_verification.h"
 #include "calibproj/detect/msm_merge.h"
 #include "calibproj/detect/projector_homography.h"
 #include "calibproj/detect/resolution_limit.h"
@@ -77,6 +78,12 @@ struct IngestOptions {
   // refinement, then cv::undistortPoints of the four corners.
   bool refine_undistorted = true;
   detect::UndistortedEdgeOptions edges;
+  // With refine_undistorted, a marker planned in a region is first looked for at its
+  // predicted corners: the edge fit starts there and the expected id's cells are read
+  // through the fitted corners (marker_verification.h); the detector searches only the
+  // regions where that fails. false: the detector searches every region.
+  bool verify_predicted = true;
+  detect::VerificationOptions verification;
   // Edge profiles reach out of a marker at most this share of the gap to the next
   // marker of its pattern (and at most edges.outward_fraction of a module).
   double edge_gap_share = 0.4;
@@ -165,6 +172,7 @@ struct CameraIngestResult {
   int patterns_dropped = 0;    // frames not clean under the final frame map
   int patterns_missing = 0;    // not recorded (before the video starts or after it ends)
   int detections_rejected = 0; // unexpected id, duplicate, or off the prediction
+  int markers_verified = 0;    // found at their predicted corners, without the detector
   int detections_inconsistent = 0;  // off the homographies of the others, or over a surface edge
   std::string consistency_problem;  // set when no detection could be trusted
   std::vector<ScaleStats> scales;

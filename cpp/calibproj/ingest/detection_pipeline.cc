@@ -2,8 +2,11 @@
 
 #include <time.h>
 
+#include <algorithm>
 #include <stdexcept>
 #include <utility>
+
+#include "calibproj/detect/marker_centre.h"
 
 namespace calibproj::ingest {
 
@@ -136,19 +139,83 @@ DetectionOutput DetectionPipeline::Run(const detect::MarkerDetector& detector, c
     const bool predicted = job.has_plan && !job.explore;
     output.detections =
         detect::FilterDetections(found, job.ids, predicted ? &job.plan : nullptr, roi_options_, &output.rejected);
-  } else {
-    output.detections = detect::DetectInRegions(detector, job.plan, job.regions, roi_options_);
-  }
-  for (std::size_t k = 0; k < output.detections.size(); ++k) {
-    // The region the marker was found in: the whole frame, or its own region.
-    std::size_t region = 0;
-    if (!job.whole_frame) {
-      while (job.plan.markers[region].id != output.detections.ids[k]) ++region;
+    for (const detect::Quad& corners : output.detections.corners) {
+      output.undistorted.push_back(Undistorted(corners, job.regions.at(0), job.outward_fraction));
     }
-    output.undistorted.push_back(Undistorted(output.detections.corners[k], job.regions[region], job.outward_fraction));
+  } else {
+    if (job.regions.size() != job.plan.markers.size()) throw std::invalid_argument("one region image per planned marker");
+    // In id order, as the detectors' results are sorted.
+    std::vector<std::size_t> order(job.plan.markers.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t a, std::size_t b) { return job.plan.markers[a].id < job.plan.markers[b].id; });
+    for (const std::size_t i : order) {
+      detect::Quad distorted, undistorted;
+      bool verified = false;
+      if (!DetectPlanned(detector, job.plan.markers[i], job.regions[i], job.outward_fraction, &distorted,
+                         &undistorted, &verified)) {
+        continue;
+      }
+      output.verified += verified ? 1 : 0;
+      output.detections.ids.push_back(job.plan.markers[i].id);
+      output.detections.corners.push_back(distorted);
+      output.undistorted.push_back(undistorted);
+    }
   }
   output.seconds = ThreadSeconds() - started;
   return output;
+}
+
+bool DetectionPipeline::DetectPlanned(const detect::MarkerDetector& detector, const detect::MarkerPrediction& marker,
+                                      const detect::RegionImage& region, double outward_fraction,
+                                      detect::Quad* distorted, detect::Quad* undistorted, bool* verified) const {
+  if (const std::optional<detect::Quad> found = AtPrediction(marker, region, outward_fraction)) {
+    *verified = true;
+    *undistorted = *found;
+    const auto points = corner_options_.lens->Distort({found->begin(), found->end()});
+    *distorted = {points[0], points[1], points[2], points[3]};
+    return true;
+  }
+  const std::optional<detect::Quad> quad = detect::DetectInRegion(detector, marker, region, roi_options_);
+  if (!quad) return false;
+  *distorted = *quad;
+  *undistorted = Undistorted(*quad, region, outward_fraction);
+  return true;
+}
+
+std::optional<detect::Quad> DetectionPipeline::AtPrediction(const detect::MarkerPrediction& marker,
+                                                            const detect::RegionImage& region,
+                                                            double outward_fraction) const {
+  const CornerOptions& o = corner_options_;
+  if (!o.verify_predicted || !o.refine_undistorted || !o.bits || marker.id < 0 ||
+      marker.id >= static_cast<int>(o.bits->size())) {
+    return std::nullopt;
+  }
+  detect::UndistortedEdgeOptions edges = o.edges;
+  edges.outward_fraction = outward_fraction;
+  const std::optional<detect::Quad> refined =
+      detect::RefineUndistortedCorners(region.gray, region.origin, *o.lens, o.cells, marker.corners, edges);
+  if (!refined) return std::nullopt;
+  // As far from the prediction as a detector's find may be.
+  const cv::Point2d centre = o.lens->Distort({detect::DiagonalIntersection(*refined)})[0];
+  if (!(cv::norm(centre - marker.centre) <= detect::AllowedOffset(marker.side_px, roi_options_))) return std::nullopt;
+  if (!detect::ShowsMarker(region.gray, region.origin, *o.lens, *refined, (*o.bits)[marker.id], o.cells,
+                           o.verification)) {
+    return std::nullopt;
+  }
+  return refined;
+}
+
+std::shared_ptr<const std::vector<cv::Mat>> ProjectedBits(const detect::MarkerFamily& family, int count,
+                                                          bool inverted) {
+  auto bits = std::make_shared<std::vector<cv::Mat>>();
+  const int ids = std::min(count, detect::MarkerIdCount(family));
+  for (int id = 0; id < ids; ++id) {
+    cv::Mat cells = detect::MarkerBits(family, id).clone();
+    if (inverted) cells = (cells == 0) / 255;
+    bits->push_back(cells);
+  }
+  return bits;
 }
 
 }  // namespace calibproj::ingest

@@ -12,12 +12,14 @@
 #include <exception>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 #include <vector>
 
 #include "calibproj/detect/lens.h"
 #include "calibproj/detect/marker_detector.h"
+#include "calibproj/detect/marker_verification.h"
 #include "calibproj/detect/roi.h"
 #include "calibproj/detect/undistorted_edges.h"
 
@@ -48,6 +50,7 @@ struct DetectionOutput {
   // Per detection, its corners in undistorted pixels (refined, or merely undistorted).
   std::vector<detect::Quad> undistorted;
   int rejected = 0;               // detections dropped (unexpected id, duplicate, off prediction)
+  int verified = 0;               // markers found at their predicted corners
   std::vector<detect::MarkerPrediction> searched;  // the planned markers, when there was a plan
   double seconds = 0.0;           // CPU time of the detection
 };
@@ -60,7 +63,19 @@ struct CornerOptions {
   // undistorts the detector's corners.
   bool refine_undistorted = true;
   detect::UndistortedEdgeOptions edges;
+  // Markers planned in regions looked for at their predicted corners first
+  // (marker_verification.h; needs refine_undistorted), the detector searching only the
+  // regions where that fails.
+  bool verify_predicted = false;
+  detect::VerificationOptions verification;
+  // The cells of marker id i as projected (inverted when the sequence inverts its
+  // markers), for every id a pattern may show; ids beyond are left to the detector.
+  std::shared_ptr<const std::vector<cv::Mat>> bits;
 };
+
+// The projected cells of the ids 0 .. count - 1 of `family`.
+std::shared_ptr<const std::vector<cv::Mat>> ProjectedBits(const detect::MarkerFamily& family, int count,
+                                                          bool inverted);
 
 class DetectionPipeline {
  public:
@@ -88,6 +103,13 @@ class DetectionPipeline {
 
   detect::Quad Undistorted(const detect::Quad& corners, const detect::RegionImage& region,
                            double outward_fraction) const;
+  // The detection of planned marker `marker` in `region`: at its predicted corners
+  // when they verify (*verified set), else by the detector; false when it is not found.
+  bool DetectPlanned(const detect::MarkerDetector& detector, const detect::MarkerPrediction& marker,
+                     const detect::RegionImage& region, double outward_fraction, detect::Quad* distorted,
+                     detect::Quad* undistorted, bool* verified) const;
+  std::optional<detect::Quad> AtPrediction(const detect::MarkerPrediction& marker, const detect::RegionImage& region,
+                                           double outward_fraction) const;
 
   detect::RoiOptions roi_options_;
   CornerOptions corner_options_;

@@ -105,6 +105,17 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "corners from straight edge lines fitted in undistorted pixels, starting from the detector's "
         "unrefined corners (false: the detector's own refinement, then the four corners undistorted); "
         "straight edges of large markers bend under lens distortion.");
+  visit("verify_predicted", o.verify_predicted,
+        "with refine_undistorted, a marker planned in a region is first looked for at its predicted "
+        "corners (edge fit from there, then the expected id's cells read through the fitted corners); "
+        "the detector searches only where that fails (false: the detector searches every region).");
+  visit("verify_min_contrast", o.verification.min_contrast,
+        "grey levels at least between the mean white and black cells of a marker looked for at its "
+        "prediction; every cell must lie on its side of their middle.");
+  visit("verify_samples", o.verification.samples,
+        "each cell is read as the mean of this many by this many points ...");
+  visit("verify_cell_share", o.verification.cell_share,
+        "... spread over this middle share of its side.");
   visit("edge_search_fraction", o.edges.search_fraction,
         "how far each intensity profile across an edge reaches into the marker, as a share of one module.");
   visit("edge_outward_fraction", o.edges.outward_fraction,

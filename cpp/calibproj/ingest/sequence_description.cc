@@ -92,11 +92,12 @@ sync::LightTimeline SequenceDescription::LightLevels() const {
   return sync::LightTimeline(std::move(levels));
 }
 
-detect::PatternMarkers SequenceDescription::Markers(int index, int grid_cells) const {
+detect::PatternMarkers SequenceDescription::Markers(int index, int grid_cells, int quad_cells) const {
   const PatternSpec& pattern = patterns.at(index);
   detect::PatternMarkers out;
   out.side_px = pattern.marker_side_px;
   out.grid_cells = grid_cells;
+  out.quad_cells = quad_cells > 0 ? quad_cells : grid_cells;
   for (int marker = 0; marker < markers_per_array; ++marker) {
     if (std::find(pattern.omitted.begin(), pattern.omitted.end(), marker) != pattern.omitted.end()) continue;
     out.ids.push_back(marker);
