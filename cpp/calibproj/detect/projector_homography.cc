@@ -49,6 +49,33 @@ std::vector<int> Without(const std::vector<int>& from, const std::vector<int>& r
   return rest;
 }
 
+// Scale of H at p: the square root of its Jacobian's determinant (0 where it folds).
+double LocalScale(const cv::Matx33d& H, const cv::Point2d& p) {
+  const double w = H(2, 0) * p.x + H(2, 1) * p.y + H(2, 2);
+  const cv::Point2d mapped = ApplyHomography(H, p);
+  const double a = (H(0, 0) - mapped.x * H(2, 0)) / w, b = (H(0, 1) - mapped.x * H(2, 1)) / w;
+  const double c = (H(1, 0) - mapped.y * H(2, 0)) / w, d = (H(1, 1) - mapped.y * H(2, 1)) / w;
+  const double determinant = std::abs(a * d - b * c);
+  return std::isfinite(determinant) ? std::sqrt(determinant) : 0.0;
+}
+
+std::vector<int> Union(const std::vector<int>& a, const std::vector<int>& b) {
+  std::vector<int> both;
+  std::set_union(a.begin(), a.end(), b.begin(), b.end(), std::back_inserter(both));
+  return both;
+}
+
+// The points among `chosen` (ascending) that H maps within threshold_px of their image.
+std::vector<int> Explained(const cv::Matx33d& H, const std::vector<cv::Point2d>& projector,
+                           const std::vector<cv::Point2d>& image, const std::vector<int>& chosen, double threshold_px) {
+  std::vector<int> explained;
+  for (int i : chosen) {
+    const cv::Point2d d = ApplyHomography(H, projector[i]) - image[i];
+    if (d.dot(d) <= threshold_px * threshold_px) explained.push_back(i);
+  }
+  return explained;
+}
+
 // True unless the image points lie along a line (one row of markers on a table's edge
 // fits many homographies): their spread across is at least a tenth of that along.
 bool Extended(const std::vector<cv::Point2d>& image, const std::vector<int>& chosen) {
@@ -97,6 +124,7 @@ void HomographyOptions::Check() const {
   Require(ransac_threshold_px > 0.0, "ransac_threshold_px must be positive");
   Require(min_inlier_share > 0.0 && min_inlier_share <= 1.0, "min_inlier_share must be in (0, 1]");
   Require(max_rms_px > 0.0, "max_rms_px must be positive");
+  Require(max_scale_ratio >= 1.0, "max_scale_ratio must be at least 1");
   Require(max_surfaces >= 1 && max_surfaces <= 100, "max_surfaces must be in [1, 100]");
 }
 
@@ -105,10 +133,26 @@ ProjectorHomography::ProjectorHomography(cv::Size image_size, HomographyOptions 
   options_.Check();
 }
 
-void ProjectorHomography::Add(const cv::Point2d& projector, const cv::Point2d& image) {
+void ProjectorHomography::Add(const cv::Point2d& projector, const cv::Point2d& image, double scale) {
   ImageSum& point = points_[{projector.x, projector.y}];
   point.sum += image;
   ++point.count;
+  if (scale > 0.0 && std::isfinite(scale)) {
+    point.scale_sum += scale;
+    ++point.scales;
+  }
+}
+
+bool ProjectorHomography::ScaleAgrees(const cv::Matx33d& H, const std::vector<cv::Point2d>& projector,
+                                      const std::vector<double>& scales, const std::vector<int>& chosen) const {
+  std::vector<double> ratios;
+  for (int i : chosen) {
+    if (scales[i] > 0.0) ratios.push_back(LocalScale(H, projector[i]) / scales[i]);
+  }
+  if (ratios.empty()) return true;
+  std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
+  const double median = ratios[ratios.size() / 2];
+  return median * options_.max_scale_ratio >= 1.0 && median <= options_.max_scale_ratio;
 }
 
 bool ProjectorHomography::Update() {
@@ -144,21 +188,24 @@ bool ProjectorHomography::CrossesSurfaces(const cv::Point2d& centre, double side
 
 bool ProjectorHomography::Fit() {
   std::vector<cv::Point2d> projector, image;
+  std::vector<double> scales;  // 0: unknown
   for (const auto& [key, point] : points_) {
     projector.emplace_back(key.first, key.second);
     image.push_back(point.sum * (1.0 / point.count));
+    scales.push_back(point.scales > 0 ? point.scale_sum / point.scales : 0.0);
   }
   const double diagonal = std::hypot(image_size_.width, image_size_.height);
   if (Spread(image) < options_.min_spread * diagonal) return false;
   std::vector<int> all(projector.size());
   std::iota(all.begin(), all.end(), 0);
-  // The dominant surface's inliers by its refined model: RANSAC's own model, from four
-  // points, can leave a cluster of the floor's points beyond the threshold, which would
-  // then be taken for a surface of their own (measured: one array of a near camera).
-  SurfaceFitOptions dominant_options = FitOptions(options_);
-  dominant_options.within_ransac_inliers = false;
-  const SurfaceFit dominant = FitSurface(projector, image, all, dominant_options);
+  SurfaceFit dominant = FitSurface(projector, image, all, FitOptions(options_));
   if (dominant.inliers.empty() || dominant.rms_px > options_.max_rms_px) return false;
+  if (!ScaleAgrees(dominant.H, projector, scales, dominant.inliers)) return false;
+  // Points the dominant surface's refined model explains are its own too: RANSAC's model,
+  // from four points, can leave a cluster of the floor's points beyond the threshold,
+  // which would then be taken for a surface of their own (measured: one array of a near
+  // camera). Its fit and RMS stay those of RANSAC's inliers.
+  dominant.inliers = Union(dominant.inliers, Explained(dominant.H, projector, image, all, options_.ransac_threshold_px));
   const FurtherSurfaces further = FitFurtherSurfaces(projector, image, Without(all, dominant.inliers), options_);
   // Another surface's points are not outliers of the dominant one: the share is of all
   // the points some surface explains.

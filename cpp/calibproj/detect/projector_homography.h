@@ -29,6 +29,11 @@ struct HomographyOptions {
   double ransac_threshold_px = 2.0;
   double min_inlier_share = 0.8;
   double max_rms_px = 1.0;
+  // A fit whose scale at its points (the square root of its Jacobian's determinant,
+  // median over the points) differs from the markers' own (image side over projector
+  // side) by more than this factor either way is not taken: MSMs found along one line
+  // (a zoomed camera's first finds) fit degenerate homographies exactly.
+  double max_scale_ratio = 2.0;
   // Surfaces fitted at most (the dominant one and max_surfaces - 1 more); a further
   // surface needs min_points correspondences of its own.
   int max_surfaces = 3;
@@ -44,7 +49,9 @@ class ProjectorHomography {
   // Adds one correspondence: a marker centre in projector pixels and in undistorted
   // image pixels. The scales of one MSM share their projector centre; they count as
   // one point (at the mean of their image positions).
-  void Add(const cv::Point2d& projector, const cv::Point2d& image);
+  // `scale`: the marker's image side over its projector side (0: unknown), which checks
+  // the fits.
+  void Add(const cv::Point2d& projector, const cv::Point2d& image, double scale = 0.0);
 
   // Refits from every correspondence when enough new ones arrived since the last fit;
   // returns valid().
@@ -80,9 +87,15 @@ class ProjectorHomography {
 
   cv::Size image_size_;
   HomographyOptions options_;
+  // Whether H's scale at the points `chosen` agrees with the markers' (max_scale_ratio).
+  bool ScaleAgrees(const cv::Matx33d& H, const std::vector<cv::Point2d>& projector, const std::vector<double>& scales,
+                   const std::vector<int>& chosen) const;
+
   struct ImageSum {
     cv::Point2d sum;
     int count = 0;
+    double scale_sum = 0.0;  // of the known scales
+    int scales = 0;
   };
   std::map<std::pair<double, double>, ImageSum> points_;
   int fitted_count_ = 0;

@@ -600,7 +600,10 @@ class CameraIngest {
         result_.records.push_back(record);
         // A marker over a surface edge has a displaced centre: it would bend the fits.
         const cv::Point2d& projector = sequence_.centres[pattern.array * sequence_.markers_per_array + record.marker];
-        if (!homography_.CrossesSurfaces(projector, pattern.marker_side_px)) homography_.Add(projector, centre);
+        if (!homography_.CrossesSurfaces(projector, pattern.marker_side_px)) {
+          homography_.Add(projector, centre, record.side_px / (pattern.marker_side_px * geometry_.quad_cells /
+                                                               geometry_.grid_cells));
+        }
       }
     }
   }

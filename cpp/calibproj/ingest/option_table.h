@@ -196,6 +196,10 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "share of inliers the fit needs.");
   visit("homography_max_rms_px", o.homography.max_rms_px,
         "inlier RMS the fit must stay under.");
+  visit("homography_max_scale_ratio", o.homography.max_scale_ratio,
+        "a fit whose scale at its points differs from the markers' own (image side over projector side, "
+        "median over the points) by more than this factor either way is not taken: MSMs found along one "
+        "line fit degenerate homographies exactly.");
   visit("consistency_px", o.consistency.threshold_px,
         "every detection is checked against one homography of the floor (RANSAC over all of the camera's "
         "detections); those farther than this from its prediction (a wrong id, a frame of another "
