@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <numeric>
 #include <set>
 #include <stdexcept>
@@ -82,29 +83,49 @@ std::vector<double> LocalDeviations(const std::vector<int>& members, const std::
                                     const std::vector<cv::Point2d>& image, const std::vector<cv::Point2d>& residual,
                                     int neighbours) {
   std::vector<double> deviation(members.size(), -1.0);
-  // Scales of one marker share its projector centre and count once: at most this many
-  // detections per marker are looked through.
-  constexpr int kScalesPerMarker = 12;
-  const int wanted = std::min<int>(static_cast<int>(members.size()), (neighbours + 1) * kScalesPerMarker);
-  if (static_cast<int>(members.size()) <= neighbours) return deviation;
-  cv::Mat points(static_cast<int>(members.size()), 2, CV_32F);
+  // The scales of one marker share its projector centre and count once: the neighbours
+  // are markers, found from each marker's mean image position.
+  std::map<std::pair<double, double>, int> marker_at;
+  std::vector<std::vector<std::size_t>> detections;  // per marker, indices into members
+  std::vector<cv::Point2d> sums;
   for (std::size_t k = 0; k < members.size(); ++k) {
-    points.at<float>(static_cast<int>(k), 0) = static_cast<float>(image[members[k]].x);
-    points.at<float>(static_cast<int>(k), 1) = static_cast<float>(image[members[k]].y);
-  }
-  const cv::Mat nearest = NearestNeighbours(points, wanted);
-  for (std::size_t k = 0; k < members.size(); ++k) {
-    std::vector<cv::Point2d> around, markers = {projector[members[k]]};
-    for (int j = 0; j < wanted && static_cast<int>(around.size()) < neighbours; ++j) {
-      const int other = nearest.at<int>(static_cast<int>(k), j);
-      if (other < 0 || std::find(markers.begin(), markers.end(), projector[members[other]]) != markers.end()) {
-        continue;
-      }
-      markers.push_back(projector[members[other]]);
-      around.push_back(residual[members[other]]);
+    const cv::Point2d& p = projector[members[k]];
+    const auto [it, added] = marker_at.try_emplace({p.x, p.y}, static_cast<int>(detections.size()));
+    if (added) {
+      detections.emplace_back();
+      sums.emplace_back(0.0, 0.0);
     }
-    if (static_cast<int>(around.size()) == neighbours) {
-      deviation[k] = cv::norm(residual[members[k]] - CoordinateMedian(around));
+    detections[it->second].push_back(k);
+    sums[it->second] += image[members[k]];
+  }
+  const int markers = static_cast<int>(detections.size());
+  if (markers <= neighbours) return deviation;
+  cv::Mat points(markers, 2, CV_32F);
+  for (int m = 0; m < markers; ++m) {
+    const cv::Point2d mean = sums[m] * (1.0 / static_cast<double>(detections[m].size()));
+    points.at<float>(m, 0) = static_cast<float>(mean.x);
+    points.at<float>(m, 1) = static_cast<float>(mean.y);
+  }
+  const cv::Mat nearest = NearestNeighbours(points, neighbours + 1);
+  for (int m = 0; m < markers; ++m) {
+    for (const std::size_t k : detections[m]) {
+      const cv::Point2d& here = image[members[k]];
+      std::vector<cv::Point2d> around;
+      for (int j = 0; j <= neighbours && static_cast<int>(around.size()) < neighbours; ++j) {
+        const int other = nearest.at<int>(m, j);
+        if (other < 0 || other == m) continue;
+        // That marker's detection nearest to this one.
+        std::size_t closest = detections[other].front();
+        for (const std::size_t candidate : detections[other]) {
+          if (cv::norm(image[members[candidate]] - here) < cv::norm(image[members[closest]] - here)) {
+            closest = candidate;
+          }
+        }
+        around.push_back(residual[members[closest]]);
+      }
+      if (static_cast<int>(around.size()) == neighbours) {
+        deviation[k] = cv::norm(residual[members[k]] - CoordinateMedian(around));
+      }
     }
   }
   return deviation;
