@@ -577,6 +577,9 @@ class Baselines:
             "_core.ingest.refine_undistorted_corners": Spec([
                 ("image", self.image), ("corners", marker_corners), ("K", self.K), ("dist", self.dist),
                 ("cells", 6), ("outward_fraction", 0.45), ("passes", 6)]),
+            "_core.ingest.shows_marker": Spec([
+                ("image", self.image), ("corners", marker_corners), ("K", self.K), ("dist", self.dist),
+                ("spec", "aruco:4X4_50"), ("id", 3), ("inverted", False)]),
             **self.format_specs(),
             "_core.ingest.ingest_camera": Spec(
                 [("video", f["tiny.mkv"]), ("sequence", self.core_sequence), ("K", self.K), ("dist", self.dist),

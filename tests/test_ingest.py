@@ -8,6 +8,7 @@ import json
 import shutil
 import subprocess
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -328,6 +329,22 @@ def test_edges_fitted_in_undistorted_pixels_keep_large_markers_exact():
         error = np.linalg.norm(marker_centres(ours[None])[0] - centre)
         naive = np.linalg.norm(marker_centres(WIDE.undistort_points(refined_in_image[0])[None])[0] - centre)
         assert error < 0.03 and naive > 0.3, (centre, error, naive)
+
+
+def test_a_marker_is_verified_only_where_and_as_it_is_drawn():
+    """The check that accepts a marker at its predicted corners: the right id on its
+    refined corners passes; another id, the other polarity or corners one module off do
+    not."""
+    raw_detector = MarkerDetector("aruco:4X4_50", inverted=True, corner_refinement="none")
+    image = distorted_marker(np.array([800.0, 420.0]), 16.0)
+    _, raw = raw_detector.detect(image)
+    corners = _core.ingest.refine_undistorted_corners(image, raw[0], WIDE.K, WIDE.dist, 6)
+    verify = partial(_core.ingest.shows_marker, image, K=WIDE.K, dist=WIDE.dist, spec="aruco:4X4_50")
+    assert verify(corners, id=3, inverted=True)
+    assert not verify(corners, id=4, inverted=True)
+    assert not verify(corners, id=3, inverted=False)
+    module = (corners[1] - corners[0]) / 6
+    assert not verify(corners + module, id=3, inverted=True)
 
 
 def test_lens_tables_match_the_exact_mapping():

@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "calibproj/detect/marker_family.h"
+#include "calibproj/detect/marker_verification.h"
 #include "calibproj/formats/detect_report.h"
 #include "calibproj/formats/sequence_file.h"
 #include "calibproj/ingest/camera_ingest.h"
@@ -164,6 +166,25 @@ py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, 
   return out;
 }
 
+bool ShowsMarker(const py::array_t<uint8_t, py::array::c_style>& image, const DoubleArray& corners, const DoubleArray& K,
+                 const DoubleArray& dist, const std::string& spec, int id, bool inverted) {
+  RequireShape(image, {-1, -1}, "image");
+  if (image.size() == 0) throw std::invalid_argument("image is empty");
+  RequireShape(corners, {4, 2}, "corners");
+  const cv::Mat gray(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
+                     const_cast<uint8_t*>(image.data()));
+  const ingest::CameraModel camera = CameraFromArrays(K, dist, std::nullopt, "lens");
+  const detect::MarkerFamily family = detect::ParseMarkerFamily(spec);
+  cv::Mat bits = detect::MarkerBits(family, id);
+  if (inverted) bits = (bits == 0) / 255;
+  detect::Quad quad;
+  for (int k = 0; k < 4; ++k) quad[k] = cv::Point2d(corners.data()[2 * k], corners.data()[2 * k + 1]);
+  py::gil_scoped_release release;
+  const detect::LensTables tables(camera.lens, gray.size());
+  return detect::ShowsMarker(gray, cv::Point(0, 0), tables, quad, bits, detect::GetMarkerGeometry(family).quad_cells,
+                             detect::VerificationOptions{});
+}
+
 }  // namespace
 
 ingest::IngestOptions IngestOptionsFromKwargs(const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
@@ -253,6 +274,11 @@ void register_ingest(py::module_& m) {
         "Undistorted corners (4, 2) of a marker `cells` modules wide detected at `corners` (distorted "
         "pixels) in a grey image, from straight edge lines fitted in undistorted pixels; None when an "
         "edge cannot be fitted.");
+  m.def("shows_marker", &ShowsMarker, py::arg("image"), py::arg("corners"), py::arg("K"), py::arg("dist"),
+        py::arg("spec"), py::arg("id"), py::arg("inverted") = false,
+        "Whether a grey image shows marker `id` of family `spec` on the quad whose undistorted corners "
+        "are `corners` (4, 2): every cell read through them on its expected side (the check that "
+        "accepts a marker at its predicted place without the detector).");
   m.def("valid_known_exposure", &ingest::ValidKnownExposure, py::arg("seconds"),
         "Whether a camera's known exposure time (--exposure CAMERA=SECONDS) is one: 0 < seconds <= 1.");
   m.def("option_table", &IngestOptionTable,

@@ -42,12 +42,13 @@ bool ShowsMarker(const cv::Mat& gray, const cv::Point& origin, const LensTables&
   if (bits.empty() || bits.type() != CV_8UC1 || bits.rows != bits.cols) {
     throw std::invalid_argument("marker verification: bits must be a square 8-bit grid");
   }
-  if (gray.empty() || gray.type() != CV_8UC1) throw std::invalid_argument("marker verification: expected an 8-bit image");
+  if (gray.empty() || gray.type() != CV_8UC1) {
+    throw std::invalid_argument("marker verification: expected an 8-bit image");
+  }
   const int grid = bits.rows;
   if (quad_cells < 1 || quad_cells > grid) throw std::invalid_argument("marker verification: quad_cells out of range");
-  const double q = quad_cells;
-  const cv::Point2f square[4] = {{0.0f, 0.0f}, {static_cast<float>(q), 0.0f}, {static_cast<float>(q), static_cast<float>(q)},
-                                 {0.0f, static_cast<float>(q)}};
+  const float side = static_cast<float>(quad_cells);
+  const cv::Point2f square[4] = {{0.0f, 0.0f}, {side, 0.0f}, {side, side}, {0.0f, side}};
   cv::Point2f quad[4];
   for (int k = 0; k < 4; ++k) quad[k] = cv::Point2f(undistorted[k]);
   const cv::Matx33d H = cv::getPerspectiveTransform(square, quad);

@@ -205,7 +205,8 @@ bool ProjectorHomography::Fit() {
   // from four points, can leave a cluster of the floor's points beyond the threshold,
   // which would then be taken for a surface of their own (measured: one array of a near
   // camera). Its fit and RMS stay those of RANSAC's inliers.
-  dominant.inliers = Union(dominant.inliers, Explained(dominant.H, projector, image, all, options_.ransac_threshold_px));
+  dominant.inliers =
+      Union(dominant.inliers, Explained(dominant.H, projector, image, all, options_.ransac_threshold_px));
   const FurtherSurfaces further = FitFurtherSurfaces(projector, image, Without(all, dominant.inliers), options_);
   // Another surface's points are not outliers of the dominant one: the share is of all
   // the points some surface explains.

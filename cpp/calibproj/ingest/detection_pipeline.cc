@@ -143,7 +143,9 @@ DetectionOutput DetectionPipeline::Run(const detect::MarkerDetector& detector, c
       output.undistorted.push_back(Undistorted(corners, job.regions.at(0), job.outward_fraction));
     }
   } else {
-    if (job.regions.size() != job.plan.markers.size()) throw std::invalid_argument("one region image per planned marker");
+    if (job.regions.size() != job.plan.markers.size()) {
+      throw std::invalid_argument("one region image per planned marker");
+    }
     // In id order, as the detectors' results are sorted.
     std::vector<std::size_t> order(job.plan.markers.size());
     for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
