@@ -10,7 +10,6 @@
 #include <string>
 #include <vector>
 
-#include "calibproj/detect/marker_family.h"
 #include "calibproj/detect/marker_verification.h"
 #include "calibproj/formats/detect_report.h"
 #include "calibproj/formats/sequence_file.h"
@@ -136,17 +135,27 @@ py::list ScalesList(const std::vector<ingest::ScaleStats>& scales) {
 }
 
 
+// A grey image array as an OpenCV image sharing its pixels.
+cv::Mat GrayView(const py::array_t<uint8_t, py::array::c_style>& image) {
+  RequireShape(image, {-1, -1}, "image");
+  if (image.size() == 0) throw std::invalid_argument("image is empty");
+  return cv::Mat(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
+                 const_cast<uint8_t*>(image.data()));
+}
+
+detect::Quad QuadFromArray(const DoubleArray& corners) {
+  RequireShape(corners, {4, 2}, "corners");
+  detect::Quad quad;
+  for (int k = 0; k < 4; ++k) quad[k] = cv::Point2d(corners.data()[2 * k], corners.data()[2 * k + 1]);
+  return quad;
+}
+
 py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, const DoubleArray& corners,
                          const DoubleArray& K, const DoubleArray& dist, int cells, double outward_fraction,
                          int passes) {
-  RequireShape(image, {-1, -1}, "image");
-  if (image.size() == 0) throw std::invalid_argument("image is empty");
-  RequireShape(corners, {4, 2}, "corners");
-  const cv::Mat gray(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
-                     const_cast<uint8_t*>(image.data()));
+  const cv::Mat gray = GrayView(image);
+  const detect::Quad quad = QuadFromArray(corners);
   const ingest::CameraModel camera = CameraFromArrays(K, dist, std::nullopt, "lens");
-  detect::Quad quad;
-  for (int k = 0; k < 4; ++k) quad[k] = cv::Point2d(corners.data()[2 * k], corners.data()[2 * k + 1]);
   detect::UndistortedEdgeOptions options;
   options.outward_fraction = outward_fraction;
   options.passes = passes;
@@ -168,17 +177,11 @@ py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, 
 
 bool ShowsMarker(const py::array_t<uint8_t, py::array::c_style>& image, const DoubleArray& corners, const DoubleArray& K,
                  const DoubleArray& dist, const std::string& spec, int id, bool inverted) {
-  RequireShape(image, {-1, -1}, "image");
-  if (image.size() == 0) throw std::invalid_argument("image is empty");
-  RequireShape(corners, {4, 2}, "corners");
-  const cv::Mat gray(static_cast<int>(image.shape(0)), static_cast<int>(image.shape(1)), CV_8UC1,
-                     const_cast<uint8_t*>(image.data()));
+  const cv::Mat gray = GrayView(image);
+  const detect::Quad quad = QuadFromArray(corners);
   const ingest::CameraModel camera = CameraFromArrays(K, dist, std::nullopt, "lens");
   const detect::MarkerFamily family = detect::ParseMarkerFamily(spec);
-  cv::Mat bits = detect::MarkerBits(family, id);
-  if (inverted) bits = (bits == 0) / 255;
-  detect::Quad quad;
-  for (int k = 0; k < 4; ++k) quad[k] = cv::Point2d(corners.data()[2 * k], corners.data()[2 * k + 1]);
+  const cv::Mat bits = detect::ProjectedCells(family, id, inverted);
   py::gil_scoped_release release;
   const detect::LensTables tables(camera.lens, gray.size());
   return detect::ShowsMarker(gray, cv::Point(0, 0), tables, quad, bits, detect::GetMarkerGeometry(family).quad_cells,

@@ -31,6 +31,11 @@ bool Level(const cv::Mat& gray, const cv::Point2d& p, double* level) {
 
 }  // namespace
 
+cv::Mat ProjectedCells(const MarkerFamily& family, int id, bool inverted) {
+  const cv::Mat bits = MarkerBits(family, id);
+  return inverted ? cv::Mat((bits == 0) / 255) : bits.clone();
+}
+
 void VerificationOptions::Check() const {
   Require(min_contrast >= 0.0 && std::isfinite(min_contrast), "min_contrast must be non-negative");
   Require(samples >= 1 && samples <= 16, "samples must be in [1, 16]");

@@ -15,6 +15,7 @@
 
 #include "calibproj/detect/detections.h"
 #include "calibproj/detect/lens.h"
+#include "calibproj/detect/marker_family.h"
 
 namespace calibproj::detect {
 
@@ -31,6 +32,10 @@ struct VerificationOptions {
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;
 };
+
+// Marker `id`'s cells as the projection shows them (MarkerBits, white on black when
+// `inverted`), continuous in memory.
+cv::Mat ProjectedCells(const MarkerFamily& family, int id, bool inverted);
 
 // The marker drawn as `bits` (grid x grid CV_8U cells, 0 black, non-zero white, as it
 // is projected: inverted already when the sequence inverts its markers) whose

@@ -94,6 +94,7 @@ ordered_json CameraResultSummary(const ingest::CameraIngestResult& r, const inge
   entry["patterns"] = {{"whole_frame", r.patterns_whole_frame}, {"in_regions", r.patterns_in_regions},
                        {"dropped", r.patterns_dropped}, {"missing", r.patterns_missing}};
   entry["detections_rejected"] = r.detections_rejected;
+  entry["markers_verified"] = r.markers_verified;
   entry["detections_inconsistent"] = r.detections_inconsistent;
   entry["consistency_problem"] =
       r.consistency_problem.empty() ? ordered_json(nullptr) : ordered_json(r.consistency_problem);

@@ -212,11 +212,7 @@ std::shared_ptr<const std::vector<cv::Mat>> ProjectedBits(const detect::MarkerFa
                                                           bool inverted) {
   auto bits = std::make_shared<std::vector<cv::Mat>>();
   const int ids = std::min(count, detect::MarkerIdCount(family));
-  for (int id = 0; id < ids; ++id) {
-    cv::Mat cells = detect::MarkerBits(family, id).clone();
-    if (inverted) cells = (cells == 0) / 255;
-    bits->push_back(cells);
-  }
+  for (int id = 0; id < ids; ++id) bits->push_back(detect::ProjectedCells(family, id, inverted));
   return bits;
 }
 
