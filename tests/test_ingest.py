@@ -27,8 +27,8 @@ from calibproj.simulate.render import simulate_videos
 from calibproj.simulate.scene import load_scene
 from calibproj.tracks import Tracks
 
-# Centres of markers at least this wide (detected side, pixels) must be within
-# MAX_RMS_PX of the truth; smaller ones are left to the detector's own tests.
+# Merged centres of MSMs with a marker at least this wide (detected side, pixels) must
+# be within MAX_RMS_PX of the truth; smaller ones are left to the detector's own tests.
 MIN_SIDE_PX = 20.0
 MAX_RMS_PX = 0.1
 MAX_ROI_DIFFERENCE_PX = 0.01
@@ -85,8 +85,8 @@ def apriltag_results(apriltag):
 
 
 def centre_errors(result, truth, camera: str) -> tuple[np.ndarray, np.ndarray]:
-    """Errors of the merged centres (px) and the largest detected side of each (the
-    merge weighs the larger markers' centres most)."""
+    """Errors of the merged centres (px) and the largest detected side of each: an MSM
+    seen large is held to MAX_RMS_PX whatever smaller scales of it are decoded too."""
     points = truth["image_points"][camera]
     true_xy = dict(zip(points["ids"], points["undistorted"]))
     raw = result.cameras[camera].raw
