@@ -481,7 +481,7 @@ def test_an_uneven_floor_is_not_taken_for_the_zoomed_cameras_tilt() -> None:
 def test_the_relief_grid_has_the_cells_asked_for(caplog) -> None:
     sim, markers = demo_with_projector(noise_px=0.05, relief=FloorRelief(rms_m=0.003, seed=1))
     nodes = {}
-    for cells in (4, 12):
+    for cells in (8, 24):
         caplog.clear()
         with caplog.at_level(logging.INFO, logger="calibproj.registration"):
             options = RegistrationOptions(error_correlation=0.0, relief_cells=cells)
@@ -489,10 +489,11 @@ def test_the_relief_grid_has_the_cells_asked_for(caplog) -> None:
         found = re.search(r"over its (\d+) nodes", caplog.text)
         assert found, caplog.text
         nodes[cells] = int(found.group(1))
-    # (cells + 1) nodes along the longer extent, fewer along the other.
-    assert 5 < nodes[4] <= 25 and 13 * 2 < nodes[12] <= 13 * 13, nodes
+    # The test of unevenness is on a grid half as fine: (cells / 2 + 1) nodes along the
+    # longer extent, fewer along the other.
+    assert 5 < nodes[8] <= 25 and 13 * 2 < nodes[24] <= 13 * 13, nodes
     with pytest.raises(ValueError, match="relief_cells"):
-        RegistrationOptions(relief_cells=17)
+        RegistrationOptions(relief_cells=33)
 
 
 def test_a_flat_floor_keeps_the_flat_model_and_its_sigma(caplog) -> None:

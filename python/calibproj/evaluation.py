@@ -31,7 +31,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +71,11 @@ class EvaluationOptions:
             them out wherever two other cameras see a point, so that a weak camera's pose
             error does not move the points the others are judged on, and the weak camera
             is judged on points it did not place (a stricter test of it).
+        held_out: cameras whose observations do not place the points wherever two
+            other cameras see them, weak or not: each is judged on points placed
+            without it (a zoomed camera's few precise views would otherwise pull the
+            points towards its own pose). ``evaluate_held_out`` holds out each camera
+            in turn.
     """
 
     initialisation: str = "pair"
@@ -79,6 +84,7 @@ class EvaluationOptions:
     max_iterations: int = 100
     num_threads: int = 1
     weak_cameras_place_points: bool = True
+    held_out: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.initialisation not in INITIALISATIONS:
@@ -87,6 +93,8 @@ class EvaluationOptions:
             raise ValueError(f"loss must be one of {LOSSES}, got {self.loss!r}")
         if self.max_iterations < 0 or self.num_threads < 1:
             raise ValueError("max_iterations must be >= 0 and num_threads >= 1")
+        if isinstance(self.held_out, str) or not all(isinstance(name, str) for name in self.held_out):
+            raise ValueError(f"held_out must be a tuple of camera names, got {self.held_out!r}")
 
 
 @dataclass(frozen=True)
@@ -203,6 +211,25 @@ def evaluate(
     return evaluation
 
 
+def evaluate_held_out(
+    results: Calibration | str | os.PathLike,
+    tracks: Tracks | str | os.PathLike,
+    intrinsics: Mapping[str, Intrinsics] | str | os.PathLike | None = None,
+    options: EvaluationOptions | None = None,
+) -> dict[str, CameraEvaluation]:
+    """Each registered camera judged on evaluation points placed without it (the others'
+    observations, wherever two of them see a point): one ``evaluate`` per camera with it
+    held out; camera name -> its ``CameraEvaluation`` from its own run."""
+    options = options or EvaluationOptions()
+    calibration = load_results(results)
+    judged = {}
+    for name in calibration.poses:
+        evaluation = evaluate(results, tracks, intrinsics, replace(options, held_out=(name,)))
+        if name in evaluation.cameras:
+            judged[name] = evaluation.cameras[name]
+    return judged
+
+
 def _undistorted_as_refined(results: Path, tracks: Tracks, intrinsics: Mapping[str, Intrinsics]) -> Tracks:
     """Evaluation tracks are undistorted with the intrinsics the user has; a calibration
     that refined them (``self_calibration.json``) keeps the refined ones in its folder,
@@ -243,9 +270,7 @@ def _triangulate_and_refine(
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), {}, _by_name(usable, behind)
     camera_index, point_index, xy = kept.bundle_arrays()
     points = points[np.searchsorted(tracks.point_ids, kept.point_ids)]
-    anchor = np.ones(len(xy), dtype=bool)
-    if not options.weak_cameras_place_points:
-        anchor = _anchor_observations(calibration, usable, camera_index, point_index, kept.num_points)
+    anchor = _anchor_observations(calibration, usable, camera_index, point_index, kept.num_points, options)
     cameras = np.unique(camera_index[anchor])  # a weak camera may have no anchor left
     renumbered = np.searchsorted(cameras, camera_index[anchor])
     points = _refine(R[cameras], t[cameras], K[cameras], renumbered, point_index[anchor], xy[anchor], points,
@@ -259,14 +284,17 @@ def _triangulate_and_refine(
 
 
 def _anchor_observations(calibration: Calibration, usable: list[str], camera_index: np.ndarray,
-                         point_index: np.ndarray, num_points: int) -> np.ndarray:
-    """The observations that place the evaluation points: those of the cameras the
-    calibration reports as weak are left out wherever two others see the point, so that a
-    weak camera's pose error does not move the points every other camera is judged on
-    (it is still judged on them itself)."""
-    weak = np.array([calibration.metrics[name].weak if name in calibration.metrics else False for name in usable],
-                    dtype=bool)
-    strong = ~weak[camera_index]
+                         point_index: np.ndarray, num_points: int, options: EvaluationOptions) -> np.ndarray:
+    """The observations that place the evaluation points: those of the held-out cameras
+    (with ``weak_cameras_place_points`` off, the ones the calibration reports as weak
+    too) are left out wherever two others see the point, so that their pose error does
+    not move the points every other camera is judged on (they are still judged on them)."""
+    def left_out(name: str) -> bool:
+        if name in options.held_out:
+            return True
+        return not options.weak_cameras_place_points and name in calibration.metrics and calibration.metrics[name].weak
+
+    strong = ~np.array([left_out(name) for name in usable], dtype=bool)[camera_index]
     strong_views = np.bincount(point_index[strong], minlength=num_points)
     return strong | (strong_views[point_index] < MIN_VIEWS)
 

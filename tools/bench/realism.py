@@ -39,7 +39,7 @@ import numpy as np
 
 from calibproj.comparison import compare, rotation_errors_to_reference
 from calibproj.demo import marker_side_on_floor
-from calibproj.evaluation import EvaluationOptions, evaluate
+from calibproj.evaluation import EvaluationOptions, evaluate, evaluate_held_out
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
 from calibproj.sequence import Sequence, generate
@@ -136,7 +136,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     results = room / "results"
     calibrate_room = functools.partial(
         calibrate_scaled, intrinsics=room / "intrinsics", scale=f"marker-size:{marker_side_m:.9f}",
-        options=RegistrationOptions(model=args.model, use_projector=not args.no_projector),
+        options=RegistrationOptions(model=args.model, use_projector=not args.no_projector, **args.registration_option),
         exposures=locked_exposures(scene) if args.locked_exposures else None, label=f"{condition} seed {seed}")
     calibration = calibrate_first(calibrate_room, room, sequence_path, results, reused=args.reuse_detections)
     extra_s = 0.0
@@ -174,10 +174,13 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         passed = [strict.cameras[name].mean_px is not None and strict.cameras[name].mean_px < 0.5
                   for name in strong if name in strict.cameras]
         row["success_strong"] = float(np.mean(passed)) if passed else math.nan
-        # Every camera on points placed without it (the weak ones included), and each
+        # Every camera on points placed without it (weak or not: a zoomed camera's precise
+        # views would pull the points it is judged on towards its own pose), and each
         # camera's rotation error in units of its reported sigma (the reference has none).
-        alone = [strict.cameras[name].mean_px is not None and strict.cameras[name].mean_px < 0.5
-                 for name in comparison.cameras if name in strict.cameras]
+        held_out = evaluate_held_out(results, room / "eval_tracks.json")
+        row["alone_px"] = {name: held_out[name].mean_px for name in comparison.cameras if name in held_out}
+        alone = [held_out[name].mean_px is not None and held_out[name].mean_px < 0.5
+                 for name in comparison.cameras if name in held_out]
         row["success_alone"] = float(np.mean(alone)) if alone else math.nan
         # The sigma is relative to the reference camera (sigma 0): so is this error.
         relative = errors_to_reference(calibration, scene)
@@ -308,9 +311,12 @@ def worst_ratio(row: dict) -> float:
 
 
 def zoomed(row: dict) -> str:
-    """The camera with the largest rotation sigma: its error and sigma (deg)."""
+    """The camera with the largest rotation sigma: its error and sigma (deg), and its
+    mean error on evaluation points placed without it (px)."""
     name = max(row["sigma_deg"], key=lambda n: row["sigma_deg"][n] or 0.0)
-    return f"{name} {row['rot_deg'][name]:.4f}/{row['sigma_deg'][name]:.4f} deg"
+    alone = row["alone_px"].get(name)
+    return (f"{name} {row['rot_deg'][name]:.4f}/{row['sigma_deg'][name]:.4f} deg "
+            f"{'-' if alone is None else f'{alone:.3f}'} px alone")
 
 
 def format_row(row: dict) -> str:
@@ -331,6 +337,20 @@ def format_row(row: dict) -> str:
             f"{format_sync(row['sync_frames'])}  "
             f"readout {readout} ms  wrong {row['wrong']}"
             + (f"  weak: {weak}" if weak else "") + (f"  failed: {failed}" if failed else ""))
+
+
+def registration_changes(items: list[str]) -> dict:
+    """``NAME=VALUE`` items as RegistrationOptions fields, each value read as its default's type."""
+    defaults = RegistrationOptions()
+    changes = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        if not hasattr(defaults, name) or not value:
+            raise ValueError(f"--registration-option {item!r}: expected NAME=VALUE with NAME a RegistrationOptions field")
+        kind = type(getattr(defaults, name))
+        changes[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+    RegistrationOptions(**changes)  # its own checks, before any rendering
+    return changes
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -363,8 +383,15 @@ def main(argv: list[str] | None = None) -> int:
                              "plans for its weak cameras and calibrate again with --merge")
     parser.add_argument("--densify-seconds", type=float, default=DensifyOptions.max_seconds,
                         help="longest extra projection (default %(default)s)")
+    parser.add_argument("--registration-option", metavar="NAME=VALUE", action="append", default=[],
+                        help="a RegistrationOptions field set for every calibration, e.g. relief_cells=16 "
+                             "(repeatable; default none)")
     parser.add_argument("--json", type=Path, default=None, help="also write every row to this JSON file")
     args = parser.parse_args(argv)
+    try:
+        args.registration_option = registration_changes(args.registration_option)
+    except ValueError as error:
+        parser.error(str(error))
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     names = [name.strip() for name in args.conditions.split(",") if name.strip()]
     unknown = sorted(set(names) - set(CONDITIONS))

@@ -66,7 +66,7 @@ struct Options {
   double error_correlation = 0.0;
   // COPLANAR with Data::relief_weight > 0: cells of the main plane's relief grid across
   // the larger extent of its points (relief_cost.h), at most kMaxReliefCells.
-  int relief_cells = 12;
+  int relief_cells = 24;
 
   // Throws std::invalid_argument naming the first inconsistent option.
   void Check() const;
@@ -116,7 +116,7 @@ struct Data {
   LensJacobianMatrix lens_jacobians;
 };
 
-constexpr int kMaxReliefCells = 16;
+constexpr int kMaxReliefCells = 32;
 
 // Planes that can have a projector map (the main plane first; further ones have none).
 constexpr int kMaxProjectorSurfaces = 16;

@@ -70,6 +70,11 @@ constexpr double kAmbiguityEvidence = 25.0;
 // Standard normal quantile of the relief test (ReliefTest): 99.9 %, so that a flat
 // floor is taken for an uneven one in one calibration of a thousand.
 constexpr double kReliefTestZ = 3.09;
+// The relief test's grid is this many times coarser than the estimate's: whether the
+// floor is uneven at all shows at that scale, and a finer grid's many nodes that few
+// points pin would raise the test's bar (a chi-square over every node) without adding
+// to its power.
+constexpr int kReliefTestCoarsening = 2;
 
 // Robust standard deviation of 2D residuals from the median of their norms
 // (for isotropic Gaussian noise, median |r| = sigma * sqrt(2 ln 2)).
@@ -994,7 +999,8 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   ba_options.compute_covariance = covariance;
   if (covariance) AddLenses(cameras, &data);
   ba_options.error_correlation = options_.error_correlation;
-  ba_options.relief_cells = options_.relief_cells;
+  ba_options.relief_cells = testing_relief_ ? std::max(1, options_.relief_cells / kReliefTestCoarsening)
+                                            : options_.relief_cells;
   if (cameras.size() < 2 && options_.model == ba::Model::kFree) return result;
   // Without a covariance (the poses not all determined) the solution stands all the same.
   const ba::Result solved = ba::BundleAdjust(data, ba_options);
@@ -1240,7 +1246,9 @@ ReliefTest Reconstruction::TestRelief() {
   ReliefTest test;
   if (options_.model != ba::Model::kCoplanar || options_.floor_relief <= 0.0) return test;
   relief_on_ = true;
+  testing_relief_ = true;
   const AdjustResult uneven = Adjust(true);
+  testing_relief_ = false;
   if (uneven.relief_nodes == 0) return test;
   relief_on_ = false;
   const AdjustResult flat = Adjust(true);

@@ -73,7 +73,7 @@ struct Options {
   double floor_relief = 0.001;
   // COPLANAR with a relief: the relief grid's cells across the larger extent of the
   // main plane's centres (its nodes are bilinear between them).
-  int relief_cells = 12;
+  int relief_cells = 24;
 
   void Check() const;
 };
@@ -356,6 +356,7 @@ class Reconstruction {
   std::vector<double> camera_sigma_px_;  // NaN until estimated
   std::vector<double> ambiguity_deg_;
   bool relief_on_ = true;  // until TestRelief finds the floor flat
+  bool testing_relief_ = false;  // TestRelief's uneven solve: the coarser test grid
 };
 
 }  // namespace calibproj::registration
