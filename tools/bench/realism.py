@@ -11,7 +11,9 @@ and observations assigned to a wrong point (farther than --wrong-px from that po
 true image position). Rotation RMSE and success are also given over the cameras not
 reported weak (rotation known worse than the registration's weak_rotation_sigma_deg),
 the success on evaluation points that the weak cameras did not place; weak cameras are
-listed with their sigma.
+listed with their sigma. "Each on points placed without it" holds every camera out of
+placing the points it is judged on in turn (``evaluate_held_out``), and the camera with
+the largest sigma (the zoomed one) is given with its error held out in px.
 The last line, over the cameras not reported weak:
 ``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
 sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
