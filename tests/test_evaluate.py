@@ -183,6 +183,8 @@ def test_a_camera_without_usable_intrinsics_fails_alone(results, tmp_path, capsy
          "no such intrinsics directory"),
         (["{root}/results", "--tracks", "{root}/sim/eval_tracks.json", "--initialisation", "best"],
          "initialisation must be one of"),
+        (["{root}/results", "--tracks", "{root}/sim/eval_tracks.json", "--held-out", "nobody"],
+         "held_out names no registered camera: nobody"),
     ],
 )
 def test_cli_bad_invocations_exit_with_one_line(results, capsys, arguments: list[str], message: str) -> None:
@@ -237,3 +239,5 @@ def test_each_camera_held_out_is_judged_on_points_placed_without_it(paper) -> No
         assert camera.mean_px >= exact.cameras[name].mean_px - 1e-9, name
     with pytest.raises(ValueError, match="held_out"):
         EvaluationOptions(held_out="far3")
+    with pytest.raises(ValueError, match="held_out names no registered camera: far9"):
+        evaluate(calibration, sim.eval_tracks, sim.intrinsics, EvaluationOptions(held_out=("far9",)))

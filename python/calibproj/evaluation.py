@@ -195,6 +195,10 @@ def evaluate(
     calibration = load_results(results)
     source = intrinsics_source(results, intrinsics)
     tracks = tracks if isinstance(tracks, Tracks) else Tracks.read(tracks)
+    unknown = sorted(set(options.held_out) - set(calibration.poses))
+    if unknown:
+        raise ValueError(f"held_out names no registered camera: {', '.join(unknown)} "
+                         f"(registered: {', '.join(calibration.poses) or 'none'})")
     wanted = [name for name in calibration.poses if name in tracks.camera_names]
     # A bad or missing intrinsics file fails its own camera, the reason naming the file.
     intrinsics, unusable = intrinsics_of_cameras(source, wanted)
