@@ -226,6 +226,7 @@ def evaluate_held_out(
     held out; camera name -> its ``CameraEvaluation`` from its own run."""
     options = options or EvaluationOptions()
     calibration = load_results(results)
+    tracks = tracks if isinstance(tracks, Tracks) else Tracks.read(tracks)  # read once for every camera
     judged = {}
     for name in calibration.poses:
         evaluation = evaluate(results, tracks, intrinsics, replace(options, held_out=(name,)))
