@@ -104,6 +104,49 @@ def test_native_scales_and_exports_as_python_does(simulation: Path, tmp_path: Pa
     assert "results in" in native.stdout and "(unit: m)" in native.stdout
 
 
+def test_native_refines_intrinsics_as_python_does(simulation: Path, tmp_path: Path) -> None:
+    """Both tools run the core's self-calibration: the same entries refined and held, for
+    the same reasons, and the same lenses (to rounding: a camera left out of the lens
+    problem changes its sums' order). The focal lengths are given 5 % off."""
+    from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir, write_intrinsics_dir
+    from calibproj.self_calibration import convert_tracks
+    from calibproj.tracks import Tracks
+
+    truth = load_intrinsics_dir(simulation / "intrinsics")
+    given = {name: Intrinsics(name, i.resolution, np.diag([1.05, 1.05, 1.0]) @ i.K, i.dist) for name, i in truth.items()}
+    write_intrinsics_dir(tmp_path / "given", given)
+    convert_tracks(Tracks.read(simulation / "tracks.json"), truth, given).write(tmp_path / "tracks.json")
+    common = ["--tracks", str(tmp_path / "tracks.json"), "--intrinsics", str(tmp_path / "given"),
+              "--refine-intrinsics", "focal,k1,k2", "--refine-intrinsics", "far1=none", "--rounds", "1"]
+    python = run_python("calibrate", *common, "--out", str(tmp_path / "python"), "--no-report")
+    assert python.returncode == 0, python.stderr
+    native = run_native("calibrate", *common, "--out", str(tmp_path / "native"))
+    assert native.returncode == 0, native.stderr
+    assert sorted(set(files_below(tmp_path / "python")) - set(files_below(tmp_path / "native"))) == ["provenance.json"]
+    reports = [json.loads((tmp_path / tool / "self_calibration.json").read_text()) for tool in ("python", "native")]
+    assert reports[0]["options"] == reports[1]["options"] and reports[0]["options"]["rounds"] == 1
+    assert "far1" not in reports[1]["cameras"] and len(reports[1]["cameras"]) == 9
+    for name, report in reports[0]["cameras"].items():
+        other = reports[1]["cameras"][name]
+        assert (report["refined"], report["held"]) == (other["refined"], other["held"]), name
+        for entry, value in report["result"].items():
+            assert other["result"][entry] == pytest.approx(value, rel=1e-9, abs=1e-12), (name, entry)
+    refined = load_intrinsics_dir(tmp_path / "native" / "intrinsics")
+    focal_refined = [name for name, report in reports[1]["cameras"].items() if "focal" in report["refined"]]
+    assert focal_refined and all(refined[name].K[0, 0] != given[name].K[0, 0] for name in focal_refined)
+
+
+def test_native_refuses_a_bad_refinement_request_in_one_line(simulation: Path, tmp_path: Path) -> None:
+    common = ["--tracks", str(simulation / "tracks.json"), "--intrinsics", str(simulation / "intrinsics")]
+    for request, message in (("focal,k9", "unknown entry 'k9'"), ("nobody=focal", "no camera named 'nobody'")):
+        native = run_native("calibrate", *common, "--out", str(tmp_path / "out"), "--refine-intrinsics", request)
+        assert native.returncode == 2 and message in native.stderr and len(native.stderr.strip().splitlines()) == 1
+        assert not (tmp_path / "out" / "camera_poses.json").exists()
+    native = run_native("calibrate", *common, "--out", str(tmp_path / "out"), "--refine-intrinsics", "focal",
+                        "--rounds", "0")
+    assert native.returncode == 2 and "rounds must be a positive number" in native.stderr
+
+
 def test_intrinsics_without_an_image_size_are_kept_in_the_results(simulation: Path, tmp_path: Path) -> None:
     """The reference code's JSON gives no image size: both tools calibrate with it and
     keep it in results/intrinsics with resolution null (both used to fail at the end)."""
@@ -362,14 +405,9 @@ def test_both_check_commands_take_the_same_options() -> None:
 
 
 # What only the Python calibrate has (README, "OR PCs"): videos ingested by the command
-# itself (--exposure), its progress bars, report, workers and JSON summary, and the
-# self-calibration of intrinsics with its knobs, not yet in the core.
-PYTHON_ONLY_CALIBRATE = {
-    "--exposure", "--json", "--no-progress", "--no-report", "--workers",
-    "--refine-intrinsics", "--rounds", "--nominal-fov", "--min-coverage", "--min-chi2-drop", "--max-focal-sigma",
-    "--max-principal-point-sigma-px", "--max-distortion-sigma-px", "--distortion-sigma-noise-ratio",
-    "--first-loss-scale-px", "--outlier-gate-px", "--outlier-gate-sigma-factor", "--lens-solver-iterations",
-    "--max-sampled-points", "--closed-form-min-change"}
+# itself (--exposure, and --nominal-fov, which takes a camera's image size from its
+# video), its progress bars, report, workers and JSON summary.
+PYTHON_ONLY_CALIBRATE = {"--exposure", "--json", "--no-progress", "--no-report", "--workers", "--nominal-fov"}
 
 
 

@@ -19,6 +19,7 @@
 #include "calibproj/registration/incremental.h"
 #include "calibproj/registration/option_table.h"
 #include "calibproj/registration/result.h"
+#include "calibproj/selfcal/option_table.h"
 #include "calibproj/formats/tracks_file.h"
 
 namespace calibproj::app {
@@ -56,6 +57,15 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   // One flag per registration knob, from the table the Python options are made from,
   // so that both commands take the same command lines with the same defaults.
   registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));
+  cmd->add_option("--refine-intrinsics", args->refine_intrinsics,
+                  "refine these lens entries from the projection itself, starting from the intrinsics given: focal, "
+                  "pp, k1, k2, k3, tangential, or none; for every camera (focal,k1,k2) or one (ceiling=none); "
+                  "repeatable. Entries the data do not determine keep their given values and are reported (see "
+                  "self_calibration.json)")
+      ->type_name("[CAMERA=]ENTRIES")
+      ->allow_extra_args(false);
+  selfcal::VisitSelfCalibrationOptions(args->self_calibration,
+                                       TableFlags(cmd, "self-calibration options (with --refine-intrinsics)"));
   *command = cmd;
   return args;
 }
@@ -77,9 +87,29 @@ formats::ProjectedMarkers MarkersOf(const std::string& sequence, std::optional<i
 
 namespace {
 
+// The refined lenses and how they err: the poses' covariance takes them in.
+void SetLenses(registration::Reconstruction& reconstruction, const Tracks& tracks,
+               const std::map<std::string, CameraIntrinsics>& intrinsics, const selfcal::JointLensCovariance& lenses) {
+  std::vector<std::string> names;
+  std::vector<int> indices;
+  for (const auto& name : lenses.cameras) {
+    const auto position = std::find(tracks.cameras.begin(), tracks.cameras.end(), name);
+    if (!intrinsics.count(name) || position == tracks.cameras.end()) continue;
+    const CameraIntrinsics& in = intrinsics.at(name);
+    registration::LensUncertainty lens;
+    selfcal::LensOf(in.K, in.dist.data(), static_cast<int>(in.dist.size()), lens.lens, &lens.shape);
+    lens.covariance = lenses.Among({name});
+    indices.push_back(static_cast<int>(position - tracks.cameras.begin()));
+    names.push_back(name);
+    reconstruction.SetLensUncertainty(indices.back(), lens);
+  }
+  reconstruction.SetLensCrossCovariances(indices, lenses.Among(names));
+}
+
 registration::RegistrationResult Register(const Tracks& tracks, const std::map<std::string, CameraIntrinsics>& intrinsics,
                                           const registration::Options& options,
-                                          const std::optional<formats::ProjectedMarkers>& markers) {
+                                          const std::optional<formats::ProjectedMarkers>& markers,
+                                          const selfcal::JointLensCovariance* lenses = nullptr) {
   std::vector<registration::Camera> cameras;
   for (const auto& name : tracks.cameras) {
     const CameraIntrinsics& in = intrinsics.at(name);
@@ -96,6 +126,7 @@ registration::RegistrationResult Register(const Tracks& tracks, const std::map<s
     reconstruction.SetProjector(markers->PixelsOf(tracks.point_ids), markers->projector_width,
                                 markers->projector_height, markers->LargestSidesOf(tracks.point_ids));
   }
+  if (lenses != nullptr) SetLenses(reconstruction, tracks, intrinsics, *lenses);
   registration::Run(
       reconstruction, [](const std::string& message) { std::cerr << message << "\n"; }, tracks.cameras);
   return registration::Summarize(reconstruction);
@@ -114,11 +145,75 @@ void PrintSummary(const formats::Calibration& calibration, const std::string& ou
 
 }  // namespace
 
+namespace {
+
+// A refinement's outcome: the calibration registered again with the refined lenses, the
+// tracks (all of them, and those registered) re-expressed with them.
+struct RefinedLenses {
+  formats::Calibration calibration;
+  Tracks given, tracks;
+  std::map<std::string, CameraIntrinsics> intrinsics;
+  selfcal::SelfCalibration result;
+};
+
+// Self-calibration as `calibproj calibrate --refine-intrinsics` runs it: from the
+// closed-form start (registered again when it moved a focal length), rounds of lens
+// refinement each followed by a registration that takes the lenses' covariance in; a
+// camera whose focal length was held is weak (its pose rests on a focal length nobody
+// checked).
+RefinedLenses RefineLenses(const formats::Calibration& first, const Tracks& given, const Tracks& tracks,
+                           const std::map<std::string, CameraIntrinsics>& intrinsics,
+                           const std::vector<formats::NamedText>& left_out, const registration::Options& options,
+                           const std::optional<formats::ProjectedMarkers>& markers, const LensRefinement& refinement) {
+  const auto log = [](const std::string& line) { std::cerr << line << "\n"; };
+  const auto calibrate = [&](const Tracks& registered, const std::map<std::string, CameraIntrinsics>& lenses,
+                             const selfcal::JointLensCovariance* covariance) {
+    return formats::FromRegistration(Register(registered, lenses, options, markers, covariance), registered.cameras,
+                                     registered.point_ids, left_out, registration::ChoiceName(options.model));
+  };
+  RefinedLenses out{first, given, tracks, intrinsics, {}};
+  const auto start = selfcal::ClosedFormStart(given, intrinsics, first, refinement.request, refinement.options, log);
+  const bool moved = std::any_of(start.begin(), start.end(), [&](const auto& item) {
+    const CameraIntrinsics& was = intrinsics.at(item.first);
+    return item.second.K != was.K || item.second.dist != was.dist;
+  });
+  if (moved) {
+    out.given = selfcal::ConvertTracks(given, intrinsics, start);
+    out.tracks = selfcal::ConvertTracks(tracks, intrinsics, start);
+    out.intrinsics = start;
+    out.calibration = calibrate(out.tracks, start, nullptr);
+  }
+  for (int round = 0; round < refinement.options.rounds; ++round) {  // each from the registration the last one made
+    selfcal::SelfCalibration result =
+        selfcal::SelfCalibrate(out.given, out.intrinsics, out.calibration, refinement.request, refinement.options,
+                               options.num_threads, &intrinsics, round > 0 ? &out.result.reports : nullptr, log);
+    out.given = selfcal::ConvertTracks(out.given, out.intrinsics, result.intrinsics);
+    out.tracks = selfcal::ConvertTracks(out.tracks, out.intrinsics, result.intrinsics);
+    out.intrinsics = result.intrinsics;
+    out.result = std::move(result);
+    out.calibration = calibrate(out.tracks, out.intrinsics, &out.result.lens_covariance);
+  }
+  for (const auto& report : out.result.reports) {
+    const auto held = std::find_if(report.held.begin(), report.held.end(), [](const auto& h) { return h.first == "focal"; });
+    if (held == report.held.end() || out.calibration.PoseOf(report.camera) == nullptr) continue;
+    for (auto& [name, metrics] : out.calibration.metrics) {
+      if (name != report.camera || metrics.weak) continue;
+      metrics.weak = true;
+      std::cerr << "camera " << name << " is weak: its focal length was not refined (" << held->second << ")\n";
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
 int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const registration::Options& options,
                   const std::vector<std::string>& exports, const std::optional<formats::ScaleMeasurement>& measurement,
-                  const std::function<void(const fs::path& staging)>& extra) {
-  const auto& intrinsics = inputs.intrinsics.cameras;
+                  const std::function<void(const fs::path& staging)>& extra,
+                  const std::optional<LensRefinement>& refinement) {
+  std::map<std::string, CameraIntrinsics> intrinsics = inputs.intrinsics.cameras;
   const formats::ProjectedMarkers* markers = inputs.markers ? &*inputs.markers : nullptr;
+  Tracks given = inputs.given;
   Tracks tracks = inputs.given;
   std::vector<formats::NamedText> left_out = inputs.left_out;
   std::vector<std::string> missing;
@@ -137,6 +232,16 @@ int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const regi
   formats::Calibration calibration =
       formats::FromRegistration(Register(tracks, intrinsics, options, inputs.markers), tracks.cameras,
                                 tracks.point_ids, left_out, registration::ChoiceName(options.model));
+  std::optional<selfcal::SelfCalibration> self_calibration;
+  if (refinement && !calibration.poses.empty()) {
+    RefinedLenses refined =
+        RefineLenses(calibration, given, tracks, intrinsics, left_out, options, inputs.markers, *refinement);
+    calibration = std::move(refined.calibration);
+    given = std::move(refined.given);
+    tracks = std::move(refined.tracks);
+    intrinsics = std::move(refined.intrinsics);
+    self_calibration = std::move(refined.result);
+  }
   std::string scale_error;
   if (measurement && !calibration.poses.empty()) {
     try {
@@ -147,7 +252,15 @@ int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const regi
       scale_error = error.what();
     }
   }
-  SaveResults(out, calibration, intrinsics, inputs.given, tracks, exports, extra);
+  const auto write_extra = [&](const fs::path& staging) {
+    if (self_calibration) {
+      formats::AtomicWrite(staging / selfcal::kSelfCalibrationFile,
+                           selfcal::SelfCalibrationJson(*self_calibration, inputs.intrinsics.cameras,
+                                                        refinement->options));
+    }
+    if (extra) extra(staging);
+  };
+  SaveResults(out, calibration, intrinsics, given, tracks, exports, write_extra);
   PrintSummary(calibration, out.path().string());
   if (!scale_error.empty()) {
     throw InputError(scale_error + "; results written to " + out.path().string() + " in arbitrary units");
@@ -179,6 +292,15 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
       arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
   const auto measurement = ScaleOption(arguments.scale, !arguments.sequence.empty());
   RequireValidOptions(arguments.options);
+  std::optional<LensRefinement> refinement;
+  if (!arguments.refine_intrinsics.empty()) {
+    RequireValidOptions(arguments.self_calibration);
+    try {
+      refinement = LensRefinement{selfcal::RefineRequest::Parse(arguments.refine_intrinsics), arguments.self_calibration};
+    } catch (const std::invalid_argument& error) {
+      throw InputError(error.what());
+    }
+  }
   // Checked and locked before the inputs are read, as the Python command does.
   OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
   out.Open();
@@ -190,10 +312,17 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
                      : formats::WithEarlierObservations(arguments.merge, recorded, inputs.intrinsics.cameras);
   if (!arguments.sequence.empty()) inputs.markers = MarkersOf(arguments.sequence, inputs.given.markers_per_array);
   CheckScale(measurement, inputs.given, inputs.markers);
+  if (refinement) {
+    try {
+      refinement->request.CheckCameras(inputs.given.cameras);
+    } catch (const std::invalid_argument& error) {
+      throw InputError(error.what());
+    }
+  }
   inputs.missing_reason = [&](const std::string& camera) {
     return formats::MissingIntrinsicsFile(arguments.intrinsics, camera);
   };
-  return CalibrateInto(out, inputs, arguments.options, exports, measurement);
+  return CalibrateInto(out, inputs, arguments.options, exports, measurement, {}, refinement);
 }
 
 }  // namespace calibproj::app

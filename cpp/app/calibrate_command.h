@@ -17,6 +17,7 @@
 #include "calibproj/formats/scale.h"
 #include "calibproj/formats/tracks_file.h"
 #include "calibproj/registration/reconstruction.h"
+#include "calibproj/selfcal/refinement.h"
 #include "interrupts.h"
 #include "output_folder.h"
 
@@ -30,6 +31,14 @@ struct CalibrateArguments {
   std::string merge;     // earlier results folder or tracks.json whose observations are added
   bool force = false;
   registration::Options options;
+  std::vector<std::string> refine_intrinsics;  // [CAMERA=]ENTRIES items; empty: the intrinsics as given
+  selfcal::SelfCalibrationOptions self_calibration;
+};
+
+// What to refine of the intrinsics, and how (calibrate --refine-intrinsics).
+struct LensRefinement {
+  selfcal::RefineRequest request;
+  selfcal::SelfCalibrationOptions options;
 };
 
 // Adds the subcommand and its options to the app; the returned arguments are filled
@@ -51,12 +60,15 @@ struct CalibrationInputs {
   std::function<std::string(const std::string& camera)> missing_reason;
 };
 
-// Registers, refines, scales and writes the results into `out` (open) with what `extra`
-// writes into its staging folder; prints the summary. 0 every camera calibrated, 1 not.
-// InputError when the scale cannot be applied (the results are then written unscaled).
+// Registers, refines (the lenses too with `refinement`: self_calibration.json, and
+// intrinsics/ and tracks.json follow the refined lenses), scales and writes the results
+// into `out` (open) with what `extra` writes into its staging folder; prints the
+// summary. 0 every camera calibrated, 1 not. InputError when the scale cannot be applied
+// (the results are then written unscaled).
 int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const registration::Options& options,
                   const std::vector<std::string>& exports, const std::optional<formats::ScaleMeasurement>& measurement,
-                  const std::function<void(const std::filesystem::path& staging)>& extra = {});
+                  const std::function<void(const std::filesystem::path& staging)>& extra = {},
+                  const std::optional<LensRefinement>& refinement = std::nullopt);
 
 // --scale MEASUREMENT parsed (none when empty); marker-size needs the projection's sequence.
 std::optional<formats::ScaleMeasurement> ScaleOption(const std::string& scale, bool has_sequence);

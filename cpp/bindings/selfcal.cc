@@ -3,16 +3,27 @@
 #include <pybind11/eigen.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
 
 #include <cmath>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include <filesystem>
+#include <map>
+
+#include "calibproj/formats/files.h"
+#include "calibproj/selfcal/option_table.h"
+#include "calibproj/selfcal/planar_autocalibration.h"
 #include "calibproj/selfcal/planar_cost.h"
+#include "calibproj/selfcal/refinement.h"
 #include "calibproj/selfcal/self_calibration.h"
 #include "checks.h"
 #include "convert.h"
+#include "ingest_options.h"
+#include "knob_setter.h"
+#include "python_objects.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -77,11 +88,192 @@ void RegisterResult(py::module_& m) {
            "(8, 8) the covariance of camera a's lens with camera b's (ValueError out of range)");
 }
 
+py::list SelfCalibrationOptionTable() {
+  return KnobTable<selfcal::SelfCalibrationOptions>(
+      [](auto& o, auto&& visit) { selfcal::VisitSelfCalibrationOptions(o, visit); });
+}
+
+selfcal::SelfCalibrationOptions SelfCalibrationOptionsFrom(const py::dict& values) {
+  selfcal::SelfCalibrationOptions options;
+  for (const auto& item : values) {
+    const std::string key = py::str(item.first);
+    KnobSetter setter{key, item.second, "self-calibration option '" + key + "'"};
+    selfcal::VisitSelfCalibrationOptions(options, setter);
+    if (!setter.found) ThrowUnknownOption("self-calibration", key, SelfCalibrationOptionTable());
+  }
+  options.Check();
+  return options;
+}
+
+// The core's log lines to Python's logging (calibproj.self_calibration's logger).
+std::function<void(const std::string&)> LogTo(const py::object& logger) {
+  return [logger](const std::string& line) {
+    py::gil_scoped_acquire acquire;
+    logger.attr("info")(line);
+  };
+}
+
+py::dict LensDict(const std::optional<Eigen::Matrix<double, selfcal::kLensSize, 1>>& lens) {
+  static const char* const names[selfcal::kLensSize] = {"focal", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
+  py::dict out;
+  if (lens) {
+    for (int k = 0; k < selfcal::kLensSize; ++k) out[names[k]] = (*lens)(k);
+  }
+  return out;
+}
+
+void RegisterRefinement(py::module_& m) {
+  using selfcal::LensReport;
+  using selfcal::RefineRequest;
+  py::class_<RefineRequest>(m, "RefineRequest", "Which lens entries to refine, per camera ('*': every camera not named).")
+      .def_static("parse", &RefineRequest::Parse, py::arg("items"),
+                  "From 'focal,k1,k2' (every camera) and/or 'CAMERA=focal,k1' items; 'CAMERA=none' holds that\n"
+                  "camera. ValueError naming the bad item.")
+      .def("of", &RefineRequest::Of, py::arg("camera"), "the entries asked for this camera")
+      .def("cameras_named", &RefineRequest::CamerasNamed)
+      .def("check_cameras", &RefineRequest::CheckCameras, py::arg("camera_names"),
+           "ValueError when the request names a camera that is not among camera_names");
+  py::class_<LensReport>(m, "LensReport", "What the self-calibration did to one camera.")
+      .def_readonly("camera", &LensReport::camera)
+      .def_readonly("requested", &LensReport::requested)
+      .def_readonly("refined", &LensReport::refined, "entries changed from the given values")
+      .def_property_readonly(
+          "held",
+          [](const LensReport& r) {
+            py::dict out;
+            for (const auto& [entry, why] : r.held) out[py::str(entry)] = why;
+            return out;
+          },
+          "entry -> why its given value was kept")
+      .def_readonly("focal_sigma", &LensReport::focal_sigma, "px")
+      .def_readonly("principal_point_sigma_px", &LensReport::principal_point_sigma_px)
+      .def_readonly("distortion_sigma_px", &LensReport::distortion_sigma_px, "worst over the image")
+      .def_readonly("noise_px", &LensReport::noise_px, "RMS of one residual coordinate")
+      .def_readonly("coverage", &LensReport::coverage,
+                    "how far towards the image corners the observations reach (0-1)")
+      .def_readonly("left_out", &LensReport::left_out,
+                    "its focal length not determined, its observations left out of the solve")
+      .def_readonly("observations", &LensReport::observations)
+      .def_property_readonly("given", [](const LensReport& r) { return LensDict(r.given); }, "lens entries given")
+      .def_property_readonly("result", [](const LensReport& r) { return LensDict(r.result); }, "lens entries found");
+  using selfcal::JointLensCovariance;
+  py::class_<JointLensCovariance>(m, "LensCovariance",
+                                  "How the refined lenses err together: their joint covariance over\n"
+                                  "[f, cx, cy, k1, k2, p1, p2, k3], in pixels of each camera's measured noise.")
+      .def(py::init<>())
+      .def_property_readonly("cameras", [](const JointLensCovariance& c) { return py::tuple(py::cast(c.cameras)); })
+      .def_readonly("matrix", &JointLensCovariance::matrix, "(8n, 8n), the k-th camera in rows and columns 8k..8k+7")
+      .def("among", &JointLensCovariance::Among, py::arg("names"),
+           "(8n, 8n) the joint covariance of these cameras' lenses, in their order")
+      .def(
+          "of", [](const JointLensCovariance& c, const std::string& name) { return c.Among({name}); },
+          py::arg("name"), "(8, 8) the covariance of this camera's lens");
+  using selfcal::SelfCalibration;
+  py::class_<SelfCalibration>(m, "SelfCalibration",
+                              "Refined intrinsics (every camera of the input), a report per camera asked for, and\n"
+                              "the joint covariance of the lenses refined.")
+      .def_readonly("intrinsics", &SelfCalibration::intrinsics, "camera -> formats.CameraIntrinsics")
+      .def_property_readonly(
+          "reports",
+          [](const SelfCalibration& s) {
+            py::dict out;
+            for (const auto& report : s.reports) out[py::str(report.camera)] = py::cast(report);
+            return out;
+          },
+          "camera -> LensReport, in the order of the tracks")
+      .def_readonly("lens_covariance", &SelfCalibration::lens_covariance);
+}
+
+selfcal::SelfCalibration SelfCalibrateFromPython(const py::object& tracks, const py::dict& intrinsics,
+                                                 const py::object& calibration, const selfcal::RefineRequest& request,
+                                                 const py::dict& options, int num_threads, const py::object& given,
+                                                 const py::object& earlier, const py::object& logger) {
+  const formats::Tracks core_tracks = *TracksFromPython(tracks);
+  const auto core_intrinsics = IntrinsicsFromPython(intrinsics);
+  const formats::Calibration core_calibration = CalibrationFromPython(calibration);
+  const auto settings = SelfCalibrationOptionsFrom(options);
+  std::optional<selfcal::IntrinsicsMap> core_given;
+  if (!given.is_none()) core_given = IntrinsicsFromPython(given.cast<py::dict>());
+  std::vector<selfcal::LensReport> reports;
+  if (!earlier.is_none()) reports = earlier.attr("reports").attr("values")().cast<std::vector<selfcal::LensReport>>();
+  const auto log = LogTo(logger);  // made (and destroyed) with the GIL held
+  py::gil_scoped_release release;
+  return selfcal::SelfCalibrate(core_tracks, core_intrinsics, core_calibration, request, settings, num_threads,
+                                core_given ? &*core_given : nullptr, earlier.is_none() ? nullptr : &reports, log);
+}
+
 }  // namespace
 
 void register_selfcal(py::module_& m) {
   m.attr("lens_size") = selfcal::kLensSize;
   RegisterResult(m);
+  RegisterRefinement(m);
+  m.def("option_table", &SelfCalibrationOptionTable,
+        "Per self-calibration knob, in order: {name, default, help}; SelfCalibrationOptions is made from it.");
+  m.def(
+      "check_options", [](const py::kwargs& kwargs) { SelfCalibrationOptionsFrom(kwargs); },
+      "ValueError naming the first knob that is not a positive number, or an unknown one.");
+  m.def("refine_lenses", &SelfCalibrateFromPython, py::arg("tracks"), py::arg("intrinsics"), py::arg("calibration"),
+        py::arg("request"), py::kw_only(), py::arg("options"), py::arg("num_threads") = 1,
+        py::arg("given") = py::none(), py::arg("earlier") = py::none(), py::arg("logger"),
+        R"doc(The requested lens entries of the registered cameras of calibration, refined (a SelfCalibration).
+
+tracks are undistorted with intrinsics ({name: Intrinsics}), where the refinement starts; an entry
+held keeps its value in given (default: intrinsics). A later round passes the first round's result
+as intrinsics, the user's values as given and the first round's SelfCalibration as earlier: the
+entries it chose are refined again without choosing anew. options: {knob: value}
+(option_table()). Each camera's line goes to logger.info. Releases the GIL.)doc");
+  m.def(
+      "closed_form_start",
+      [](const py::object& tracks, const py::dict& intrinsics, const py::object& calibration,
+         const selfcal::RefineRequest& request, const py::dict& options, const py::object& logger) {
+        const formats::Tracks core_tracks = *TracksFromPython(tracks);
+        return selfcal::ClosedFormStart(core_tracks, IntrinsicsFromPython(intrinsics),
+                                        CalibrationFromPython(calibration), request,
+                                        SelfCalibrationOptionsFrom(options), LogTo(logger));
+      },
+      py::arg("tracks"), py::arg("intrinsics"), py::arg("calibration"), py::arg("request"), py::kw_only(),
+      py::arg("options"), py::arg("logger"),
+      "{name: formats.CameraIntrinsics} to start the refinement from: the given ones, but for a camera whose\n"
+      "focal length is to be refined and disagrees by more than closed_form_min_change with the closed-form\n"
+      "planar autocalibration, that one.");
+  m.def(
+      "refused_cameras",
+      [](const selfcal::RefineRequest& request, const py::dict& intrinsics, const std::vector<std::string>& names) {
+        return selfcal::RefusedCameras(request, IntrinsicsFromPython(intrinsics), names);
+      },
+      py::arg("request"), py::arg("intrinsics"), py::arg("camera_names"),
+      "[(camera, reason)] of the cameras whose lens cannot be refined (ValueError for a camera the request\n"
+      "names that is not among camera_names).");
+  m.def(
+      "convert_tracks",
+      [](const py::object& tracks, const py::dict& given, const py::dict& refined) {
+        return selfcal::ConvertTracks(*TracksFromPython(tracks), IntrinsicsFromPython(given),
+                                      IntrinsicsFromPython(refined));
+      },
+      py::arg("tracks"), py::arg("given"), py::arg("refined"),
+      "Tracks (formats.Tracks) undistorted with given re-expressed as undistorted with refined.");
+  m.def(
+      "write_self_calibration",
+      [](const std::filesystem::path& path, const selfcal::SelfCalibration& result, const py::dict& given,
+         const py::dict& options) {
+        formats::AtomicWrite(path, selfcal::SelfCalibrationJson(result, IntrinsicsFromPython(given),
+                                                                SelfCalibrationOptionsFrom(options)));
+      },
+      py::arg("path"), py::arg("result"), py::arg("given"), py::arg("options"),
+      "self_calibration.json: per camera what was refined or held and why, the uncertainties, and the\n"
+      "intrinsics given; written atomically.");
+  m.def(
+      "focal_lengths",
+      [](const std::vector<std::pair<std::string, Eigen::Matrix3d>>& homographies,
+         const std::map<std::string, double>& known) {
+        const selfcal::PlanarAutocalibration found = selfcal::FocalLengths(homographies, known);
+        return py::make_tuple(found.focal, found.residual, found.circular_point);
+      },
+      py::arg("homographies"), py::arg("known"),
+      "(focal, residual, circular_point): planar autocalibration of the cameras' floor homographies\n"
+      "([(name, H)], floor -> pixels centred on the principal point) with the focal lengths of `known`\n"
+      "given. ValueError when they cannot determine the others.");
   m.def("self_calibrate", &SelfCalibratePy, py::arg("camera_index"), py::arg("point_index"), py::arg("observed"),
         py::arg("lenses"), py::arg("shapes"), py::arg("refine"), py::arg("poses"), py::arg("points"), py::kw_only(),
         py::arg("loss") = "none", py::arg("loss_scale") = 1.0, py::arg("max_iterations") = 100,

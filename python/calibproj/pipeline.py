@@ -112,7 +112,7 @@ def calibrate(
     from calibproj.scale import check_measurement, parse_scale, scale_factor, scaled
 
     formats = parse_formats(",".join(exports)) if exports else []
-    request = RefineRequest.parse(refine_intrinsics) if refine_intrinsics else None
+    request = _refine_request(refine_intrinsics) if refine_intrinsics else None
     if request is not None and ingest_options is None:
         ingest_options = IngestOptions(consistency_local_neighbours=0)
     measurement = parse_scale(scale) if scale else None
@@ -199,6 +199,11 @@ def calibrate(
     return calibration
 
 
+def _refine_request(items: str | Sequence[str]) -> RefineRequest:
+    """The request of ``"focal,k1"`` or of several ``"[CAMERA=]entries"`` items."""
+    return RefineRequest.parse([items] if isinstance(items, str) else list(items))
+
+
 def _check_nominal_fov(fov_deg: float | None, request: RefineRequest | None, videos: Path | None,
                        intrinsics: Any) -> None:
     """ValueError unless a nominal field of view, if given, can be used."""
@@ -249,10 +254,10 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
         tracks = convert_tracks(tracks, given, intrinsics)
         calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector)
     for _ in range(options.rounds):  # each round starts from the registration the last one made
-        result = self_calibrate(tracks, intrinsics, calibration, request, options, num_threads=threads, given=given,
-                                earlier=result.reports if result is not None else None)
-        tracks = convert_tracks(tracks, intrinsics, result.intrinsics)
-        intrinsics = result.intrinsics
+        refined, result = self_calibrate(tracks, intrinsics, calibration, request, options, num_threads=threads,
+                                         given=given, earlier=result)
+        tracks = convert_tracks(tracks, intrinsics, refined)
+        intrinsics = refined
         calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector,
                                lens_covariance=result.lens_covariance)
     for name, report in result.reports.items():

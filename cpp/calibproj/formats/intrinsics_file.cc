@@ -190,7 +190,7 @@ CameraIntrinsics ReadIntrinsics(const fs::path& path, const std::string& name) {
   }
 }
 
-void WriteIntrinsics(const fs::path& path, const CameraIntrinsics& intrinsics, const nlohmann::ordered_json& extra) {
+nlohmann::ordered_json IntrinsicsBody(const CameraIntrinsics& intrinsics) {
   nlohmann::ordered_json K = nlohmann::ordered_json::array();
   for (int r = 0; r < 3; ++r) K.push_back({intrinsics.K(r, 0), intrinsics.K(r, 1), intrinsics.K(r, 2)});
   nlohmann::ordered_json body = {
@@ -200,6 +200,11 @@ void WriteIntrinsics(const fs::path& path, const CameraIntrinsics& intrinsics, c
                                                : nlohmann::ordered_json(nullptr)},
       {"K", K},
       {"dist", intrinsics.dist}};
+  return body;
+}
+
+void WriteIntrinsics(const fs::path& path, const CameraIntrinsics& intrinsics, const nlohmann::ordered_json& extra) {
+  nlohmann::ordered_json body = IntrinsicsBody(intrinsics);
   for (const auto& [key, value] : extra.items()) {
     if (!body.contains(key)) body[key] = value;
   }

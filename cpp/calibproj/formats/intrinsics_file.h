@@ -34,6 +34,10 @@ CameraIntrinsics ReadIntrinsics(const std::filesystem::path& path, const std::st
 void WriteIntrinsics(const std::filesystem::path& path, const CameraIntrinsics& intrinsics,
                      const nlohmann::ordered_json& extra = nlohmann::ordered_json::object());
 
+// The body of our format ({camera, resolution, K, dist}; resolution null when not known)
+// as WriteIntrinsics writes it.
+nlohmann::ordered_json IntrinsicsBody(const CameraIntrinsics& intrinsics);
+
 // The body of our format ({resolution, K, dist}, resolution null when not known);
 // std::invalid_argument with the problem.
 CameraIntrinsics IntrinsicsFromDocument(const nlohmann::json& document, const std::string& name);
