@@ -10,9 +10,13 @@ per file, then
 
   native-parity: identical=K/N
 
+With --refine-intrinsics both tools self-calibrate: `calibproj calibrate --tracks` on
+the executable's tracks with the same options is the reference then (the demo itself
+calibrated without it).
+
 Run:
   calibproj demo --out DEMO
-  python tools/bench/native_parity.py DEMO [--native PATH]
+  python tools/bench/native_parity.py DEMO [--native PATH] [--refine-intrinsics focal,k1,k2]
 """
 
 from __future__ import annotations
@@ -31,6 +35,9 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("demo", help="folder written by `calibproj demo --out DEMO`")
     parser.add_argument("--native", help="calibproj-native executable (default: next to this Python, else PATH)")
     parser.add_argument("--workers", type=int, default=2, help="cameras processed at once by detect (default 2)")
+    parser.add_argument("--refine-intrinsics", action="append", default=[], metavar="[CAMERA=]ENTRIES",
+                        help="both tools refine these lens entries (repeatable; default: none, the demo's results "
+                             "are the reference)")
     return parser.parse_args()
 
 
@@ -62,8 +69,13 @@ def main() -> None:
         tracks = Path(scratch) / "tracks.json"
         run([native, "detect", str(demo / "room" / "videos"), "--sequence", str(sequence), "--intrinsics",
              str(intrinsics), "--out", str(tracks), "--workers", str(args.workers), "--no-progress"])
-        run([native, "calibrate", "--tracks", str(tracks), "--intrinsics", str(intrinsics), "--out", str(out),
-             "--model", model, "--sequence", str(sequence), "--scale", scale, "--export", "yaml,colmap,anipose"])
+        options = ["--tracks", str(tracks), "--intrinsics", str(intrinsics), "--model", model, "--sequence",
+                   str(sequence), "--scale", scale, "--export", "yaml,colmap,anipose"]
+        options += [flag for entries in args.refine_intrinsics for flag in ("--refine-intrinsics", entries)]
+        run([native, "calibrate", *options, "--out", str(out)])
+        if args.refine_intrinsics:  # the demo calibrated without: Python on the same tracks is the reference
+            results = Path(scratch) / "python"
+            run([sys.executable, "-m", "calibproj", "calibrate", *options, "--out", str(results), "--no-report"])
         written = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
         identical = 0
         for name in written:

@@ -238,32 +238,40 @@ Result SelfCalibrate(const Data& data, const Options& options) {
   ceres::Problem::Options problem_options;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
+  // Each camera's pose and lens side by side in one buffer: within an elimination group
+  // Ceres orders the blocks by address, so two separate allocations would order the
+  // reduced camera system by where the heap put them, and the solution's rounding with it.
+  constexpr int kCameraBlock = 6 + kLensSize;
+  const int num_cameras = static_cast<int>(result.poses.rows());
+  std::vector<double> cameras(static_cast<size_t>(num_cameras) * kCameraBlock);
+  const auto pose_of = [&](int c) { return cameras.data() + static_cast<size_t>(c) * kCameraBlock; };
+  const auto lens_of = [&](int c) { return pose_of(c) + 6; };
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
   for (int p = 0; p < result.points.rows(); ++p) {
     problem.AddParameterBlock(result.points.row(p).data(), 2);
     ordering->AddElementToGroup(result.points.row(p).data(), 0);
   }
-  for (int c = 0; c < result.poses.rows(); ++c) {
-    problem.AddParameterBlock(result.poses.row(c).data(), 6);
-    ordering->AddElementToGroup(result.poses.row(c).data(), 1);
-    double* lens = result.lenses.row(c).data();
+  for (int c = 0; c < num_cameras; ++c) {
+    Eigen::Map<Eigen::Matrix<double, 6, 1>>(pose_of(c)) = result.poses.row(c).transpose();
+    Eigen::Map<Eigen::Matrix<double, kLensSize, 1>>(lens_of(c)) = result.lenses.row(c).transpose();
+    problem.AddParameterBlock(pose_of(c), 6);
+    ordering->AddElementToGroup(pose_of(c), 1);
     std::vector<int> held;
     for (int k = 0; k < kLensSize; ++k) {
       if (std::find(data.refine[c].begin(), data.refine[c].end(), k) == data.refine[c].end()) held.push_back(k);
     }
-    problem.AddParameterBlock(lens, kLensSize);
-    ordering->AddElementToGroup(lens, 1);
+    problem.AddParameterBlock(lens_of(c), kLensSize);
+    ordering->AddElementToGroup(lens_of(c), 1);
     if (held.size() == static_cast<size_t>(kLensSize)) {
-      problem.SetParameterBlockConstant(lens);
+      problem.SetParameterBlockConstant(lens_of(c));
     } else if (!held.empty()) {
-      problem.SetManifold(lens, new ceres::SubsetManifold(kLensSize, held));
+      problem.SetManifold(lens_of(c), new ceres::SubsetManifold(kLensSize, held));
     }
   }
   for (int i = 0; i < data.camera_index.size(); ++i) {
     const int c = data.camera_index(i);
     problem.AddResidualBlock(new PlanarLensCost(data.shapes[c], data.observed.row(i).transpose()), loss.get(),
-                             result.poses.row(c).data(), result.points.row(data.point_index(i)).data(),
-                             result.lenses.row(c).data());
+                             pose_of(c), result.points.row(data.point_index(i)).data(), lens_of(c));
   }
   for (int g = 0; g < 2; ++g) problem.SetParameterBlockConstant(result.points.row(result.gauge_points(g)).data());
 
@@ -278,6 +286,10 @@ Result SelfCalibrate(const Data& data, const Options& options) {
   solver.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;
   ceres::Solve(solver, &problem, &summary);
+  for (int c = 0; c < num_cameras; ++c) {
+    result.poses.row(c) = Eigen::Map<const Eigen::Matrix<double, 6, 1>>(pose_of(c)).transpose();
+    result.lenses.row(c) = Eigen::Map<const Eigen::Matrix<double, kLensSize, 1>>(lens_of(c)).transpose();
+  }
 
   result.initial_cost = summary.initial_cost;
   result.final_cost = summary.final_cost;
