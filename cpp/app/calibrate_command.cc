@@ -57,17 +57,43 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   // One flag per registration knob, from the table the Python options are made from,
   // so that both commands take the same command lines with the same defaults.
   registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));
-  cmd->add_option("--refine-intrinsics", args->refine_intrinsics,
-                  "refine these lens entries from the projection itself, starting from the intrinsics given: focal, "
-                  "pp, k1, k2, k3, tangential, or none; for every camera (focal,k1,k2) or one (ceiling=none); "
-                  "repeatable. Entries the data do not determine keep their given values and are reported (see "
-                  "self_calibration.json)")
-      ->type_name("[CAMERA=]ENTRIES")
-      ->allow_extra_args(false);
-  selfcal::VisitSelfCalibrationOptions(args->self_calibration,
-                                       TableFlags(cmd, "self-calibration options (with --refine-intrinsics)"));
+  AddRefinementFlags(cmd, &args->refine_intrinsics, &args->self_calibration);
   *command = cmd;
   return args;
+}
+
+void AddRefinementFlags(CLI::App* command, std::vector<std::string>* refine_intrinsics,
+                        selfcal::SelfCalibrationOptions* options) {
+  command
+      ->add_option("--refine-intrinsics", *refine_intrinsics,
+                   "refine these lens entries from the projection itself, starting from the intrinsics given: focal, "
+                   "pp, k1, k2, k3, tangential, or none; for every camera (focal,k1,k2) or one (ceiling=none); "
+                   "repeatable. Entries the data do not determine keep their given values and are reported (see "
+                   "self_calibration.json)")
+      ->type_name("[CAMERA=]ENTRIES")
+      ->allow_extra_args(false);
+  selfcal::VisitSelfCalibrationOptions(*options,
+                                       TableFlags(command, "self-calibration options (with --refine-intrinsics)"));
+}
+
+std::optional<LensRefinement> RefinementOption(const std::vector<std::string>& refine_intrinsics,
+                                               const selfcal::SelfCalibrationOptions& options) {
+  if (refine_intrinsics.empty()) return std::nullopt;
+  RequireValidOptions(options);
+  try {
+    return LensRefinement{selfcal::RefineRequest::Parse(refine_intrinsics), options};
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
+  }
+}
+
+void CheckRefinement(const std::optional<LensRefinement>& refinement, const std::vector<std::string>& cameras) {
+  if (!refinement) return;
+  try {
+    refinement->request.CheckCameras(cameras);
+  } catch (const std::invalid_argument& error) {
+    throw InputError(error.what());
+  }
 }
 
 namespace {
@@ -292,15 +318,8 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
       arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
   const auto measurement = ScaleOption(arguments.scale, !arguments.sequence.empty());
   RequireValidOptions(arguments.options);
-  std::optional<LensRefinement> refinement;
-  if (!arguments.refine_intrinsics.empty()) {
-    RequireValidOptions(arguments.self_calibration);
-    try {
-      refinement = LensRefinement{selfcal::RefineRequest::Parse(arguments.refine_intrinsics), arguments.self_calibration};
-    } catch (const std::invalid_argument& error) {
-      throw InputError(error.what());
-    }
-  }
+  const std::optional<LensRefinement> refinement =
+      RefinementOption(arguments.refine_intrinsics, arguments.self_calibration);
   // Checked and locked before the inputs are read, as the Python command does.
   OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
   out.Open();
@@ -312,13 +331,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
                      : formats::WithEarlierObservations(arguments.merge, recorded, inputs.intrinsics.cameras);
   if (!arguments.sequence.empty()) inputs.markers = MarkersOf(arguments.sequence, inputs.given.markers_per_array);
   CheckScale(measurement, inputs.given, inputs.markers);
-  if (refinement) {
-    try {
-      refinement->request.CheckCameras(inputs.given.cameras);
-    } catch (const std::invalid_argument& error) {
-      throw InputError(error.what());
-    }
-  }
+  CheckRefinement(refinement, inputs.given.cameras);
   inputs.missing_reason = [&](const std::string& camera) {
     return formats::MissingIntrinsicsFile(arguments.intrinsics, camera);
   };

@@ -41,6 +41,16 @@ struct LensRefinement {
   selfcal::SelfCalibrationOptions options;
 };
 
+// --refine-intrinsics and the self-calibration's knobs (its option table) on `command`.
+void AddRefinementFlags(CLI::App* command, std::vector<std::string>* refine_intrinsics,
+                        selfcal::SelfCalibrationOptions* options);
+// The refinement the flags ask for (none without --refine-intrinsics); InputError for a
+// bad request or knob.
+std::optional<LensRefinement> RefinementOption(const std::vector<std::string>& refine_intrinsics,
+                                               const selfcal::SelfCalibrationOptions& options);
+// InputError when the refinement names a camera that is not among `cameras`.
+void CheckRefinement(const std::optional<LensRefinement>& refinement, const std::vector<std::string>& cameras);
+
 // Adds the subcommand and its options to the app; the returned arguments are filled
 // when the command line is parsed.
 std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App** command);

@@ -56,6 +56,7 @@ std::shared_ptr<CaptureArguments> AddCaptureCommand(CLI::App& app, CLI::App** co
       ->type_name("FORMATS");
   cmd->add_flag("--no-progress", args->no_progress, "no status lines while recording");
   registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));
+  AddRefinementFlags(cmd, &args->refine_intrinsics, &args->self_calibration);
   *command = cmd;
   return args;
 }
@@ -189,10 +190,13 @@ int Calibrated(const capture::Site& site, const Projection& projection, const ca
   CheckScale(measurement, inputs.given, inputs.markers);
   const std::vector<std::string> exports =
       arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
+  const auto refinement = RefinementOption(arguments.refine_intrinsics, arguments.self_calibration);
+  CheckRefinement(refinement, inputs.given.cameras);
   const auto report = formats::DetectReport(run.cameras, projection.sequence_file.string(), projection.sequence);
-  const int status = CalibrateInto(out, inputs, arguments.options, exports, measurement, [&](const fs::path& staging) {
+  const auto write_report = [&](const fs::path& staging) {
     formats::AtomicWrite(staging / "detect_report.json", formats::DumpSchemaJson("detect_report", 1, report));
-  });
+  };
+  const int status = CalibrateInto(out, inputs, arguments.options, exports, measurement, write_report, refinement);
   // After the commit: an interruption before it leaves the recordings where they were.
   fs::rename(recordings, out.path() / "recordings");
   return status;
@@ -227,7 +231,10 @@ int RunCapture(const CaptureArguments& arguments, Interrupts& interrupts) {
   if (checking && arguments.sequence.empty()) {
     throw InputError("--check needs --sequence (the check projection's sequence.json)");
   }
-  if (checking && !arguments.scale.empty()) throw InputError("--scale is for calibrating, not with --check");
+  if (checking && (!arguments.scale.empty() || !arguments.refine_intrinsics.empty())) {
+    throw InputError("--scale and --refine-intrinsics are for calibrating, not with --check");
+  }
+  RefinementOption(arguments.refine_intrinsics, arguments.self_calibration);  // checked before recording
   if (!arguments.exports.empty()) formats::ParseExportFormats(arguments.exports);
   ScaleOption(arguments.scale, true);
   RequireValidOptions(arguments.options);

@@ -7,8 +7,10 @@
 #include <CLI/CLI.hpp>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "calibproj/registration/reconstruction.h"
+#include "calibproj/selfcal/refinement.h"
 #include "interrupts.h"
 
 namespace calibproj::app {
@@ -21,6 +23,8 @@ struct CaptureArguments {
   bool force = false;
   bool no_progress = false;
   registration::Options options;
+  std::vector<std::string> refine_intrinsics;  // as calibrate's
+  selfcal::SelfCalibrationOptions self_calibration;
 };
 
 std::shared_ptr<CaptureArguments> AddCaptureCommand(CLI::App& app, CLI::App** command);
