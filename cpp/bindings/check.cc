@@ -16,7 +16,6 @@
 #include "calibproj/formats/files.h"
 #include "checks.h"
 #include "convert.h"
-#include "ingest_options.h"
 #include "knob_setter.h"
 #include "python_objects.h"
 #include "registry.h"
@@ -32,15 +31,8 @@ py::list CheckOptionTable() {
 }
 
 check::CheckOptions CheckOptionsFromKwargs(const py::kwargs& kwargs) {
-  check::CheckOptions options;
-  for (const auto& item : kwargs) {
-    const std::string key = py::str(item.first);
-    KnobSetter setter{key, item.second, "check option '" + key + "'"};
-    check::VisitCheckOptions(options, setter);
-    if (!setter.found) ThrowUnknownOption("check", key, CheckOptionTable());
-  }
-  options.Check();
-  return options;
+  return OptionsFromKeywords<check::CheckOptions>(kwargs, "check",
+                                                  [](auto& o, auto&& visit) { check::VisitCheckOptions(o, visit); });
 }
 
 Eigen::Matrix3Xd Columns3(const RowMatrix& rows, const char* what) {

@@ -4,6 +4,8 @@
 
 #include <pybind11/pybind11.h>
 
+#include <stdexcept>
+
 #include <string>
 #include <type_traits>
 
@@ -44,6 +46,27 @@ pybind11::list KnobTable(Visit&& visit) {
     table.append(entry);
   });
   return table;
+}
+
+// Options of a table (`visit(options, visitor)` walks it) from keyword values, checked by
+// the options' own Check(); an unknown name raises std::invalid_argument naming `what`
+// ("check", "self-calibration") and the knobs there are.
+template <typename Options, typename Visit>
+Options OptionsFromKeywords(const pybind11::dict& values, const std::string& what, Visit&& visit) {
+  Options options;
+  for (const auto& item : values) {
+    const std::string key = pybind11::str(item.first);
+    KnobSetter setter{key, item.second, what + " option '" + key + "'"};
+    visit(options, setter);
+    if (!setter.found) {
+      std::string names;
+      const pybind11::list table = KnobTable<Options>(visit);
+      for (const auto& entry : table) names += (names.empty() ? "" : ", ") + entry["name"].cast<std::string>();
+      throw std::invalid_argument(what + ": unknown option '" + key + "' (choose from " + names + ")");
+    }
+  }
+  options.Check();
+  return options;
 }
 
 }  // namespace calibproj::bindings

@@ -21,7 +21,6 @@
 #include "calibproj/selfcal/self_calibration.h"
 #include "checks.h"
 #include "convert.h"
-#include "ingest_options.h"
 #include "knob_setter.h"
 #include "python_objects.h"
 #include "registry.h"
@@ -94,15 +93,8 @@ py::list SelfCalibrationOptionTable() {
 }
 
 selfcal::SelfCalibrationOptions SelfCalibrationOptionsFrom(const py::dict& values) {
-  selfcal::SelfCalibrationOptions options;
-  for (const auto& item : values) {
-    const std::string key = py::str(item.first);
-    KnobSetter setter{key, item.second, "self-calibration option '" + key + "'"};
-    selfcal::VisitSelfCalibrationOptions(options, setter);
-    if (!setter.found) ThrowUnknownOption("self-calibration", key, SelfCalibrationOptionTable());
-  }
-  options.Check();
-  return options;
+  return OptionsFromKeywords<selfcal::SelfCalibrationOptions>(
+      values, "self-calibration", [](auto& o, auto&& visit) { selfcal::VisitSelfCalibrationOptions(o, visit); });
 }
 
 // The core's log lines to Python's logging (calibproj.self_calibration's logger).
