@@ -65,11 +65,7 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
 void AddRefinementFlags(CLI::App* command, std::vector<std::string>* refine_intrinsics,
                         selfcal::SelfCalibrationOptions* options) {
   command
-      ->add_option("--refine-intrinsics", *refine_intrinsics,
-                   "refine these lens entries from the projection itself, starting from the intrinsics given: focal, "
-                   "pp, k1, k2, k3, tangential, or none; for every camera (focal,k1,k2) or one (ceiling=none); "
-                   "repeatable. Entries the data do not determine keep their given values and are reported (see "
-                   "self_calibration.json)")
+      ->add_option("--refine-intrinsics", *refine_intrinsics, selfcal::kRefineIntrinsicsHelp)
       ->type_name("[CAMERA=]ENTRIES")
       ->allow_extra_args(false);
   selfcal::VisitSelfCalibrationOptions(*options,

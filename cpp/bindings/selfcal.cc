@@ -200,6 +200,7 @@ void register_selfcal(py::module_& m) {
   m.attr("lens_size") = selfcal::kLensSize;
   RegisterResult(m);
   RegisterRefinement(m);
+  m.attr("refine_intrinsics_help") = selfcal::kRefineIntrinsicsHelp;
   m.def("option_table", &SelfCalibrationOptionTable,
         "Per self-calibration knob, in order: {name, default, help}; SelfCalibrationOptions is made from it.");
   m.def(

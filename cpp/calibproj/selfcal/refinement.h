@@ -59,6 +59,12 @@ struct SelfCalibrationOptions {
   void Check() const;  // std::invalid_argument naming the first knob that is not a positive number
 };
 
+// The help of --refine-intrinsics, the flag of both tools' calibrate and capture.
+constexpr const char* kRefineIntrinsicsHelp =
+    "refine these lens entries from the projection itself, starting from the intrinsics given: focal, pp, k1, k2, "
+    "k3, tangential, or none; for every camera (focal,k1,k2) or one (ceiling=none); repeatable. Entries the data do "
+    "not determine keep their given values and are reported (see self_calibration.json)";
+
 // Which lens entries to refine, per camera ("*": every camera not named).
 struct RefineRequest {
   static constexpr const char* kAllCameras = "*";

@@ -33,8 +33,8 @@ import argparse
 from pathlib import Path
 
 from calibproj.commands.options import (add_dataclass_arguments, add_detector_option_argument,
-                                        add_exposure_argument, dataclass_changed_from_args, dataclass_from_args,
-                                        parse_detector_options, parse_exposures)
+                                        add_exposure_argument, add_refine_argument, dataclass_changed_from_args,
+                                        dataclass_from_args, parse_detector_options, parse_exposures)
 
 
 # Ingest options that calibrate does not take: the registration has an option of that name.
@@ -70,11 +70,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                       help="add the observations of an earlier calibration (its results folder or tracks.json): "
                            "the new videos record a projection planned by `calibproj generate --densify RESULTS`, "
                            "and --sequence is that densified sequence.json; same intrinsics as RESULTS")
-    more.add_argument("--refine-intrinsics", action="append", metavar="[CAMERA=]ENTRIES",
-                      help="refine these lens entries from the projection itself, starting from the "
-                           "intrinsics given: focal, pp, k1, k2, k3, tangential, or none; for every camera "
-                           "(focal,k1,k2) or one (ceiling=none); repeatable. Entries the data do not "
-                           "determine keep their given values and are reported (see self_calibration.json)")
+    add_refine_argument(more)
     more.add_argument("--nominal-fov", type=float, metavar="DEG",
                       help="with videos and --refine-intrinsics: a camera without an intrinsics file starts "
                            "from a pinhole with this horizontal field of view (centred, no distortion)")

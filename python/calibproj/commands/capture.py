@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import argparse
 
-from calibproj.commands.options import add_dataclass_arguments, dataclass_from_args
+from calibproj.commands.options import add_dataclass_arguments, add_refine_argument, dataclass_from_args
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,8 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="metric scale from one measurement (as calibproj calibrate)")
     parser.add_argument("--export", metavar="FORMATS",
                         help="also write the calibration as yaml, colmap and/or anipose (comma-separated)")
-    parser.add_argument("--refine-intrinsics", action="append", metavar="[CAMERA=]ENTRIES",
-                        help="refine these lens entries from the projection (as calibproj calibrate)")
+    add_refine_argument(parser)
     output = parser.add_argument_group("output and progress")
     output.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
     output.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")

@@ -25,6 +25,14 @@ def attribute_docs(cls: type) -> dict[str, str]:
     return docs
 
 
+def add_refine_argument(parser: Any) -> None:
+    """``--refine-intrinsics``, as ``calibproj-native`` takes it (the help is the core's)."""
+    from calibproj import _core
+
+    parser.add_argument("--refine-intrinsics", action="append", metavar="[CAMERA=]ENTRIES",
+                        help=_core.selfcal.refine_intrinsics_help)
+
+
 def add_dataclass_arguments(parser: argparse.ArgumentParser, cls: type, title: str,
                             exclude: tuple[str, ...] = ()) -> None:
     """One ``--field-name`` flag per field of the dataclass ``cls`` (but the fields
