@@ -18,6 +18,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
+import logging
 import math
 import os
 import selectors
@@ -58,7 +59,8 @@ BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "
                         "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.Calibration",
                         "_core.formats.CameraPose", "_core.formats.CameraMetrics", "_core.formats.Plane",
                         "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
-                        "_core.selfcal.Result"}
+                        "_core.selfcal.Result", "_core.selfcal.RefineRequest", "_core.selfcal.LensReport",
+                        "_core.selfcal.SelfCalibration"}
 
 # Keyword options of registration.Reconstruction (cpp/bindings/registration.cc).
 REGISTRATION_OPTIONS = {
@@ -554,6 +556,7 @@ class Baselines:
             "_core.ingest.valid_known_exposure": Spec([("seconds", 0.01)]),
             "_core.registration.option_table": Spec([]),
             "_core.check.option_table": Spec([]),
+            "_core.selfcal.option_table": Spec([]),
             "_core.check.CameraCheck": Spec([]),
             "_core.check.check_options": Spec([], {"tolerance_px": 0.5, "min_points": 6}),
             "_core.check.check_camera": Spec(self.camera_check_args(), options={
@@ -641,7 +644,39 @@ class Baselines:
         uncertain = dataclasses.replace(calibration, uncertainty=self.pose_uncertainty)
         _core.uncertainty.write(folder / "results", uncertain, intrinsics)
         volume = np.array([[0.05, 0.05, 0.5], [0.1, 0.2, 0.0]])
+        # The self-calibration of the two cameras (its calls and results, and their receivers).
+        request = _core.selfcal.RefineRequest.parse(["focal,k1"])
+        selfcal_options = {entry["name"]: entry["default"] for entry in _core.selfcal.option_table()}
+        refine_args = [("tracks", tracks), ("intrinsics", intrinsics), ("calibration", calibration),
+                       ("request", request)]
+        refine_kwargs = {"options": selfcal_options, "num_threads": 1, "given": intrinsics, "earlier": None,
+                         "logger": logging.getLogger("fuzz")}
+        self.refinement = lambda: _core.selfcal.refine_lenses(*(value for _, value in refine_args), **refine_kwargs)
+        self.request = request
         return {
+            "_core.selfcal.refine_lenses": Spec(refine_args, refine_kwargs),
+            "_core.selfcal.closed_form_start": Spec(refine_args, {"options": selfcal_options,
+                                                                 "logger": logging.getLogger("fuzz")}),
+            "_core.selfcal.convert_tracks": Spec([("tracks", tracks), ("given", intrinsics), ("refined", {
+                "a": Intrinsics("a", (64, 48), self.K * np.array([[1.1], [1.1], [1.0]]), self.dist)})]),
+            "_core.selfcal.refused_cameras": Spec([("request", request), ("intrinsics", intrinsics),
+                                                   ("camera_names", ["a", "b"])]),
+            "_core.selfcal.write_self_calibration": Spec([("path", folder / "self_calibration.json"),
+                                                          ("result", self.refinement()),
+                                                          ("given", intrinsics), ("options", selfcal_options)]),
+            "_core.selfcal.focal_lengths": Spec([("homographies", [(f"c{k}", np.array(
+                [[800.0, 10.0 * k, 5.0], [3.0, 700.0 + 40 * k, -20.0], [0.001 * k, 0.002, 1.0]])) for k in range(5)]),
+                ("known", {"c0": 900.0})]),
+            "_core.selfcal.check_options": Spec([], options=selfcal_options),
+            "_core.selfcal.RefineRequest.parse": Spec([("items", ["focal,k1,k2", "a=none"])]),
+            "_core.selfcal.RefineRequest": Spec([]),
+            "_core.selfcal.RefineRequest.of": Spec([("camera", "a")]),
+            "_core.selfcal.RefineRequest.check_cameras": Spec([("camera_names", ["a", "b"])]),
+            "_core.selfcal.LensReport": Spec([]),
+            "_core.selfcal.SelfCalibration": Spec([]),
+            "_core.selfcal.LensCovariance": Spec([]),
+            "_core.selfcal.LensCovariance.among": Spec([("names", ["a", "b"])]),
+            "_core.selfcal.LensCovariance.of": Spec([("name", "a")]),
             "_core.uncertainty.PoseUncertainty": Spec(uncertainty_args),
             "_core.uncertainty.PoseUncertainty.named": Spec([("names", ["x", "y"])]),
             "_core.uncertainty.triangulation": Spec([("calibration", uncertain), ("intrinsics", intrinsics),
@@ -747,6 +782,12 @@ class Baselines:
             "_core.check.CameraCheck": {"checked": lambda: _core.check.check_camera(
                 *(value for _, value in self.camera_check_args()))},
             "_core.check.CalibrationCheck": {"checked": lambda: self.check_call()},
+            "_core.selfcal.RefineRequest": {"parsed": lambda: self.request},
+            "_core.selfcal.SelfCalibration": {"refined": lambda: self.refinement()},
+            "_core.selfcal.LensReport": {
+                name: (lambda name=name: self.refinement().reports[name]) for name in ("a", "b")},
+            "_core.selfcal.LensCovariance": {"empty": _core.selfcal.LensCovariance,
+                                             "refined": lambda: self.refinement().lens_covariance},
             "_core.selfcal.Result": {"solved": lambda: self.self_calibration(True),
                                      "without covariance": lambda: self.self_calibration(False)},
             "_core.check.CameraVerdict": {

@@ -6,12 +6,12 @@
 #include <pybind11/stl/filesystem.h>
 
 #include <cmath>
+#include <filesystem>
+#include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
-
-#include <filesystem>
-#include <map>
 
 #include "calibproj/formats/files.h"
 #include "calibproj/selfcal/option_table.h"
@@ -99,6 +99,9 @@ selfcal::SelfCalibrationOptions SelfCalibrationOptionsFrom(const py::dict& value
 
 // The core's log lines to Python's logging (calibproj.self_calibration's logger).
 std::function<void(const std::string&)> LogTo(const py::object& logger) {
+  if (!py::hasattr(logger, "info") || !PyCallable_Check(logger.attr("info").ptr())) {
+    throw py::type_error("logger: expected a logging.Logger (an object with a callable info)");
+  }
   return [logger](const std::string& line) {
     py::gil_scoped_acquire acquire;
     logger.attr("info")(line);
@@ -178,20 +181,21 @@ void RegisterRefinement(py::module_& m) {
 
 selfcal::SelfCalibration SelfCalibrateFromPython(const py::object& tracks, const py::dict& intrinsics,
                                                  const py::object& calibration, const selfcal::RefineRequest& request,
-                                                 const py::dict& options, int num_threads, const py::object& given,
-                                                 const py::object& earlier, const py::object& logger) {
-  const formats::Tracks core_tracks = *TracksFromPython(tracks);
+                                                 const py::dict& options, int num_threads,
+                                                 const std::optional<py::dict>& given,
+                                                 const std::optional<selfcal::SelfCalibration>& earlier,
+                                                 const py::object& logger) {
+  const std::optional<formats::Tracks> core_tracks = TracksFromPython(tracks);
+  if (!core_tracks) throw py::type_error("tracks: expected Tracks, got None");
   const auto core_intrinsics = IntrinsicsFromPython(intrinsics);
   const formats::Calibration core_calibration = CalibrationFromPython(calibration);
   const auto settings = SelfCalibrationOptionsFrom(options);
   std::optional<selfcal::IntrinsicsMap> core_given;
-  if (!given.is_none()) core_given = IntrinsicsFromPython(given.cast<py::dict>());
-  std::vector<selfcal::LensReport> reports;
-  if (!earlier.is_none()) reports = earlier.attr("reports").attr("values")().cast<std::vector<selfcal::LensReport>>();
+  if (given) core_given = IntrinsicsFromPython(*given);
   const auto log = LogTo(logger);  // made (and destroyed) with the GIL held
   py::gil_scoped_release release;
-  return selfcal::SelfCalibrate(core_tracks, core_intrinsics, core_calibration, request, settings, num_threads,
-                                core_given ? &*core_given : nullptr, earlier.is_none() ? nullptr : &reports, log);
+  return selfcal::SelfCalibrate(*core_tracks, core_intrinsics, core_calibration, request, settings, num_threads,
+                                core_given ? &*core_given : nullptr, earlier ? &earlier->reports : nullptr, log);
 }
 
 }  // namespace
@@ -220,8 +224,9 @@ entries it chose are refined again without choosing anew. options: {knob: value}
       "closed_form_start",
       [](const py::object& tracks, const py::dict& intrinsics, const py::object& calibration,
          const selfcal::RefineRequest& request, const py::dict& options, const py::object& logger) {
-        const formats::Tracks core_tracks = *TracksFromPython(tracks);
-        return selfcal::ClosedFormStart(core_tracks, IntrinsicsFromPython(intrinsics),
+        const std::optional<formats::Tracks> core_tracks = TracksFromPython(tracks);
+        if (!core_tracks) throw py::type_error("tracks: expected Tracks, got None");
+        return selfcal::ClosedFormStart(*core_tracks, IntrinsicsFromPython(intrinsics),
                                         CalibrationFromPython(calibration), request,
                                         SelfCalibrationOptionsFrom(options), LogTo(logger));
       },
@@ -241,8 +246,9 @@ entries it chose are refined again without choosing anew. options: {knob: value}
   m.def(
       "convert_tracks",
       [](const py::object& tracks, const py::dict& given, const py::dict& refined) {
-        return selfcal::ConvertTracks(*TracksFromPython(tracks), IntrinsicsFromPython(given),
-                                      IntrinsicsFromPython(refined));
+        const std::optional<formats::Tracks> core_tracks = TracksFromPython(tracks);
+        if (!core_tracks) throw py::type_error("tracks: expected Tracks, got None");
+        return selfcal::ConvertTracks(*core_tracks, IntrinsicsFromPython(given), IntrinsicsFromPython(refined));
       },
       py::arg("tracks"), py::arg("given"), py::arg("refined"),
       "Tracks (formats.Tracks) undistorted with given re-expressed as undistorted with refined.");

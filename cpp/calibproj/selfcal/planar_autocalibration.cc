@@ -74,6 +74,12 @@ Eigen::MatrixXd Jacobian(const Eigen::Vector4d& x, const Homographies& H, const 
 }  // namespace
 
 PlanarAutocalibration FocalLengths(const Homographies& homographies, const std::map<std::string, double>& known) {
+  for (const auto& [name, focal] : known) {
+    // Its square enters the equations: it must stay finite.
+    if (!(std::isfinite(focal) && focal > 0.0 && focal < 1e100)) {
+      throw std::invalid_argument("camera " + name + ": a known focal length must be a positive number below 1e100");
+    }
+  }
   Homographies H;
   int unknown = 0;
   for (const auto& [name, homography] : homographies) {
@@ -91,6 +97,9 @@ PlanarAutocalibration FocalLengths(const Homographies& homographies, const std::
   for (int iteration = 0; iteration < kGaussNewtonIterations; ++iteration) {
     const Eigen::VectorXd r = Residuals(x, H, known);
     const Eigen::MatrixXd J = Jacobian(x, H, known);
+    if (!r.allFinite() || !J.allFinite()) {
+      throw std::invalid_argument("planar autocalibration: the circular points' equations are not finite");
+    }
     const Eigen::Vector4d step = J.jacobiSvd(Eigen::ComputeThinU | Eigen::ComputeThinV).solve(-r);
     x += step;
     if (step.norm() < 1e-12 * std::max(1.0, x.norm())) break;
