@@ -232,13 +232,11 @@ def with_lens_error(tracks, camera: str, width: float, height: float, amplitude_
     """``tracks`` with a smooth error in ``camera``'s pixels that its lens model does not
     have (``amplitude_px`` at the left and right edges, growing with the square of the
     distance from the centre line): the same in every recording."""
-    from dataclasses import replace
-
     xy = tracks.xy.copy()
     rows = tracks.camera_index == tracks.camera_names.index(camera)
     across = (xy[rows, 0] - width / 2.0) / (width / 2.0)
     xy[rows, 1] += amplitude_px * across**2
-    return replace(tracks, xy=xy)
+    return tracks.with_xy(xy)
 
 
 def test_a_lens_model_error_in_one_part_of_the_image_is_not_taken_for_a_move(room) -> None:

@@ -433,8 +433,7 @@ def test_errors_a_camera_shares_widen_its_sigma_to_hold_the_truth() -> None:
         own = tracks.camera_index == c
         u, v = 2.0 * xy[own, 0] / width - 1.0, 2.0 * xy[own, 1] / height - 1.0
         xy[own] += np.column_stack([u * u, u * v, v * v, u, v]) @ rng.normal(scale=0.02, size=(5, 2))
-    shifted = Tracks(tracks.camera_names, tracks.point_ids, tracks.camera_index, tracks.point_index, xy,
-                     tracks.markers_per_array)
+    shifted = tracks.with_xy(xy)
 
     def error_over_sigma(options: RegistrationOptions) -> tuple[dict[str, float], Calibration]:
         calibration = RegistrationDriver(shifted, sim.intrinsics, options, projector=markers).run()

@@ -61,6 +61,11 @@ def test_filtering():
     assert long_tracks.point_ids.tolist() == [0, 65] and len(long_tracks) == 5
     with pytest.raises(ValueError, match="unknown camera"):
         tracks.drop_cameras(["z"])
+    selected = tracks.select(tracks.observation_ids() != 65, ["c", "a", "e"])
+    assert selected.camera_names == ("c", "a", "e")
+    assert selected.counts_per_camera() == {"a": 2, "c": 1, "e": 0}
+    with pytest.raises(ValueError, match="the mask has 2 entries for 7 observations"):
+        tracks.select([True, False])
 
 
 def test_round_trip(tmp_path):
@@ -106,18 +111,33 @@ def test_invalid_observations():
         Tracks.empty(["a", "a"])
 
 
-def test_a_pixel_that_is_not_finite_is_not_written(tmp_path):
+def test_a_pixel_that_is_not_finite_cannot_enter_tracks():
     """Found by probing: a NaN set into the xy array of a Tracks was written as a `NaN`
-    token, making a tracks.json that no reader (ours included) takes. The writer refuses
-    it, naming the file, which stays as it was."""
+    token, making a tracks.json that no reader (ours included) takes. The arrays are
+    read-only views of the core's tracks, and building tracks refuses such a pixel."""
     tracks = Tracks.from_observations(["a", "b"], [0, 1, 0, 1], [3, 3, 4, 4], np.arange(8.0).reshape(4, 2))
-    path = tmp_path / "tracks.json"
-    tracks.write(path)
-    before = path.read_bytes()
-    tracks.xy[2, 1] = np.nan
-    with pytest.raises(ValueError, match=rf"^{re.escape(str(path))}: cannot write tracks: observation 2 \(camera 'b'\) is not finite$"):
-        tracks.write(path)
-    assert path.read_bytes() == before
+    for field in ("xy", "point_ids", "camera_index", "point_index"):
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(tracks, field)[0] = 1
+    xy = np.arange(8.0).reshape(4, 2)
+    xy[2, 1] = np.nan
+    with pytest.raises(ValueError, match="observations must be finite"):
+        Tracks.from_observations(["a", "b"], [0, 1, 0, 1], [3, 3, 4, 4], xy)
+
+
+def test_views_outlive_their_tracks():
+    xy = Tracks.from_observations(["a"], [0, 0], [5, 2], [[1.0, 2.0], [3.0, 4.0]]).xy
+    assert xy.tolist() == [[3.0, 4.0], [1.0, 2.0]]
+
+
+def test_tracks_pickle_for_worker_processes():
+    import pickle
+
+    tracks = small_tracks()
+    copy = pickle.loads(pickle.dumps(tracks))
+    assert copy.camera_names == tracks.camera_names and copy.markers_per_array == 32
+    for field in ("point_ids", "camera_index", "point_index", "xy"):
+        np.testing.assert_array_equal(getattr(copy, field), getattr(tracks, field))
 
 
 @pytest.mark.parametrize(("document", "message"), [

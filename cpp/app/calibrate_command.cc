@@ -181,8 +181,8 @@ struct RefinedLenses {
 // Self-calibration as `calibproj calibrate --refine-intrinsics` runs it: from the
 // closed-form start (registered again when it moved a focal length), rounds of lens
 // refinement each followed by a registration that takes the lenses' covariance in; a
-// camera whose focal length was held is weak (its pose rests on a focal length nobody
-// checked).
+// camera whose focal length was held, or whose residuals keep a smooth pattern, is weak
+// (selfcal::WeakReason).
 RefinedLenses RefineLenses(const formats::Calibration& first, const Tracks& given, const Tracks& tracks,
                            const std::map<std::string, CameraIntrinsics>& intrinsics,
                            const std::vector<formats::NamedText>& left_out, const registration::Options& options,
@@ -216,12 +216,12 @@ RefinedLenses RefineLenses(const formats::Calibration& first, const Tracks& give
     out.calibration = calibrate(out.tracks, out.intrinsics, &out.result.lens_covariance);
   }
   for (const auto& report : out.result.reports) {
-    const auto held = std::find_if(report.held.begin(), report.held.end(), [](const auto& h) { return h.first == "focal"; });
-    if (held == report.held.end() || out.calibration.PoseOf(report.camera) == nullptr) continue;
+    const std::optional<std::string> reason = selfcal::WeakReason(report);
+    if (!reason || out.calibration.PoseOf(report.camera) == nullptr) continue;
     for (auto& [name, metrics] : out.calibration.metrics) {
       if (name != report.camera || metrics.weak) continue;
       metrics.weak = true;
-      std::cerr << "camera " << name << " is weak: its focal length was not refined (" << held->second << ")\n";
+      std::cerr << "camera " << name << " is weak: " << *reason << "\n";
     }
   }
   return out;

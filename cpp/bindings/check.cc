@@ -14,6 +14,7 @@
 #include "calibproj/check/camera_check.h"
 #include "calibproj/check/option_table.h"
 #include "calibproj/formats/files.h"
+#include "calibproj/formats/tracks.h"
 #include "checks.h"
 #include "convert.h"
 #include "knob_setter.h"
@@ -88,32 +89,26 @@ double PredictedShiftSigmaPy(const RowMatrix& K, const RowMatrix& R, const Eigen
 }
 
 check::CalibrationCheck CheckCalibrationPy(const py::object& calibration, const py::dict& intrinsics,
-                                            const py::object& tracks, const py::object& stored_tracks,
+                                            const formats::Tracks& tracks, const formats::Tracks* stored_tracks,
                                             const std::map<std::string, std::string>& unusable,
                                             const std::map<std::string, std::string>& not_seen,
                                             const py::kwargs& kwargs) {
   const check::CheckOptions options = CheckOptionsFromKwargs(kwargs);
   const formats::Calibration stored = CalibrationFromPython(calibration);
   const auto cameras = IntrinsicsFromPython(intrinsics);
-  const std::optional<formats::Tracks> now = TracksFromPython(tracks);
-  if (!now) throw py::type_error("tracks: expected Tracks, got None");
-  const std::optional<formats::Tracks> before = TracksFromPython(stored_tracks);
-  check::CheckInputs inputs{&stored, &cameras, unusable, &*now, before ? &*before : nullptr, not_seen};
+  check::CheckInputs inputs{&stored, &cameras, unusable, &tracks, stored_tracks, not_seen};
   py::gil_scoped_release release;
   return check::CheckCalibration(inputs, options);
 }
 
 // The calibration as the cameras are now: (Calibration, {camera: CameraIntrinsics},
 // Tracks), the core's bound types.
-py::tuple RepairedPy(const py::object& calibration, const py::dict& intrinsics, const py::object& tracks,
-                     const py::object& stored_tracks, const check::CalibrationCheck& result,
+py::tuple RepairedPy(const py::object& calibration, const py::dict& intrinsics, const formats::Tracks& tracks,
+                     const formats::Tracks& stored_tracks, const check::CalibrationCheck& result,
                      double weak_rotation_sigma_deg) {
   const formats::Calibration stored = CalibrationFromPython(calibration);
   const auto cameras = IntrinsicsFromPython(intrinsics);
-  const std::optional<formats::Tracks> now = TracksFromPython(tracks);
-  const std::optional<formats::Tracks> before = TracksFromPython(stored_tracks);
-  if (!now || !before) throw py::type_error("tracks and stored_tracks: expected Tracks");
-  const check::CheckInputs inputs{&stored, &cameras, {}, &*now, &*before, {}};
+  const check::CheckInputs inputs{&stored, &cameras, {}, &tracks, &stored_tracks, {}};
   const check::Repair repair = check::Repaired(inputs, result, weak_rotation_sigma_deg);
   return py::make_tuple(repair.calibration, repair.intrinsics, repair.tracks);
 }

@@ -261,18 +261,6 @@ std::map<std::string, formats::CameraIntrinsics> IntrinsicsFrom(const py::dict& 
   return out;
 }
 
-std::optional<formats::Tracks> TracksFrom(const py::object& t) {
-  if (t.is_none()) return std::nullopt;
-  formats::Tracks tracks;
-  tracks.cameras = t.attr("camera_names").cast<std::vector<std::string>>();
-  tracks.point_ids = t.attr("point_ids").cast<std::vector<std::int64_t>>();
-  tracks.camera_index = t.attr("camera_index").attr("astype")("int32").cast<Eigen::VectorXi>();
-  tracks.point_index = t.attr("point_index").attr("astype")("int32").cast<Eigen::VectorXi>();
-  tracks.xy = RowsOf<ba::PixelMatrix>(t.attr("xy").cast<RowMatrix>(), 2, "xy");
-  tracks.markers_per_array = OptionalOf<int>(t.attr("markers_per_array"));
-  return tracks;
-}
-
 }  // namespace
 
 formats::Calibration CalibrationFromPython(const py::object& calibration) {
@@ -281,10 +269,6 @@ formats::Calibration CalibrationFromPython(const py::object& calibration) {
 
 std::map<std::string, formats::CameraIntrinsics> IntrinsicsFromPython(const py::dict& cameras) {
   return Converted("intrinsics", [&] { return IntrinsicsFrom(cameras); });
-}
-
-std::optional<formats::Tracks> TracksFromPython(const py::object& tracks) {
-  return Converted("tracks", [&] { return TracksFrom(tracks); });
 }
 
 // The core's calibration types as bound classes (read-only).
@@ -303,20 +287,6 @@ static void RegisterCalibrationTypes(py::module_& m) {
           "(width, height), or None when the file gives none")
       .def_readonly("K", &CameraIntrinsics::K)
       .def_readonly("dist", &CameraIntrinsics::dist);
-  using formats::Tracks;
-  py::class_<Tracks>(m, "Tracks", "Observations as the core holds them (calibproj.tracks.Tracks.from_core reads them)")
-      .def_property_readonly("camera_names", [](const Tracks& t) { return py::tuple(py::cast(t.cameras)); })
-      .def_property_readonly(
-          "point_ids",
-          [](const Tracks& t) { return py::array_t<std::int64_t>(t.point_ids.size(), t.point_ids.data()); })
-      .def_property_readonly(
-          "camera_index",
-          [](const Tracks& t) { return py::array_t<std::int32_t>(t.camera_index.size(), t.camera_index.data()); })
-      .def_property_readonly(
-          "point_index",
-          [](const Tracks& t) { return py::array_t<std::int32_t>(t.point_index.size(), t.point_index.data()); })
-      .def_property_readonly("xy", [](const Tracks& t) { return Eigen::MatrixXd(t.xy); }, "(N, 2) pixels")
-      .def_readonly("markers_per_array", &Tracks::markers_per_array);
   using formats::CameraMetrics;
   using formats::CameraPose;
   using formats::Plane;
@@ -368,6 +338,7 @@ void register_formats(py::module_& m) {
       PyErr_SetObject(PyExc_OSError, os_error(e.code().value(), e.code().message(), e.path1().string()).ptr());
     }
   });
+  register_tracks(m);
   RegisterCalibrationTypes(m);
   RegisterProjectedMarkers(m);
   RegisterScaleTypes(m);
@@ -434,24 +405,10 @@ void register_formats(py::module_& m) {
       "The document of a sequence.json that the core accepts (the one reader of the format); InputError "
       "naming the file and the problem");
   m.def(
-      "read_tracks", [](const std::filesystem::path& path) { return formats::ReadTracks(path); },
-      py::arg("path"), "The Tracks of a tracks.json; InputError naming the file and the problem");
-  m.def(
-      "write_tracks",
-      [](const std::filesystem::path& out, const py::object& tracks) {
-        const auto given = Converted("tracks", [&] { return TracksFrom(tracks); });
-        if (!given) throw py::type_error("tracks: expected a Tracks, got None");
-        formats::WriteTracks(out, *given);
-      },
-      py::arg("out"), py::arg("tracks"), "tracks.json of a Tracks, written atomically");
-  m.def(
       "with_earlier_observations",
-      [](const std::filesystem::path& earlier, const py::object& tracks, const py::dict& intrinsics) {
-        const auto given = Converted("tracks", [&] { return TracksFrom(tracks); });
-        if (!given) throw py::type_error("tracks: expected a Tracks, got None");
-        given->Check();
+      [](const std::filesystem::path& earlier, const formats::Tracks& tracks, const py::dict& intrinsics) {
         const auto cameras = Converted("intrinsics", [&] { return IntrinsicsFrom(intrinsics); });
-        return formats::WithEarlierObservations(earlier, *given, cameras);
+        return formats::WithEarlierObservations(earlier, tracks, cameras);
       },
       py::arg("earlier"), py::arg("tracks"), py::arg("intrinsics"),
       "The Tracks `tracks` with the observations of an earlier results folder (or tracks.json) "
@@ -494,13 +451,12 @@ void register_formats(py::module_& m) {
   m.def(
       "export",
       [](const py::object& calibration, const std::string& format, const std::filesystem::path& directory,
-         const py::dict& intrinsics, const py::object& tracks) {
-        const auto given = Converted("tracks", [&] { return TracksFrom(tracks); });
+         const py::dict& intrinsics, const formats::Tracks* tracks) {
         std::vector<std::string> warnings;
         const auto files = formats::Export(Converted("calibration", [&] { return CalibrationFrom(calibration); }),
                                            format, directory,
                                            Converted("intrinsics", [&] { return IntrinsicsFrom(intrinsics); }),
-                                           given ? &*given : nullptr, &warnings);
+                                           tracks, &warnings);
         return py::make_tuple(files, warnings);
       },
       py::arg("calibration"), py::arg("format"), py::arg("directory"), py::arg("intrinsics"), py::arg("tracks"),

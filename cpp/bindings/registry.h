@@ -17,6 +17,8 @@ void register_ingest(pybind11::module_& m);
 void register_selfcal(pybind11::module_& m);
 void register_check(pybind11::module_& m);
 void register_formats(pybind11::module_& m);
+// The Tracks class, in the formats submodule.
+void register_tracks(pybind11::module_& m);
 void register_uncertainty(pybind11::module_& m);
 void register_capture(pybind11::module_& m);
 

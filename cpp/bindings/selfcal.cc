@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "calibproj/formats/files.h"
+#include "calibproj/formats/tracks.h"
 #include "calibproj/selfcal/option_table.h"
 #include "calibproj/selfcal/planar_autocalibration.h"
 #include "calibproj/selfcal/planar_cost.h"
@@ -149,6 +150,14 @@ void RegisterRefinement(py::module_& m) {
       .def_readonly("left_out", &LensReport::left_out,
                     "its focal length not determined, its observations left out of the solve")
       .def_readonly("observations", &LensReport::observations)
+      .def_readonly("systematic_px", &LensReport::systematic_px,
+                    "RMS of the smooth pattern (a quadratic field over the image) left in its residuals")
+      .def_readonly("systematic_chi2", &LensReport::systematic_chi2,
+                    "the chi-square that pattern explains, in units of the camera's noise")
+      .def_readonly("misfit", &LensReport::misfit, "why that pattern makes its intrinsics untrustworthy, or None")
+      .def_property_readonly("weak_reason", &selfcal::WeakReason,
+                             "why its pose is weak after the self-calibration (focal length held, or a misfit), "
+                             "or None")
       .def_property_readonly("given", [](const LensReport& r) { return LensDict(r.given); }, "lens entries given")
       .def_property_readonly("result", [](const LensReport& r) { return LensDict(r.result); }, "lens entries found");
   using selfcal::JointLensCovariance;
@@ -179,14 +188,12 @@ void RegisterRefinement(py::module_& m) {
       .def_readonly("lens_covariance", &SelfCalibration::lens_covariance);
 }
 
-selfcal::SelfCalibration SelfCalibrateFromPython(const py::object& tracks, const py::dict& intrinsics,
+selfcal::SelfCalibration SelfCalibrateFromPython(const formats::Tracks& tracks, const py::dict& intrinsics,
                                                  const py::object& calibration, const selfcal::RefineRequest& request,
                                                  const py::dict& options, int num_threads,
                                                  const std::optional<py::dict>& given,
                                                  const std::optional<selfcal::SelfCalibration>& earlier,
                                                  const py::object& logger) {
-  const std::optional<formats::Tracks> core_tracks = TracksFromPython(tracks);
-  if (!core_tracks) throw py::type_error("tracks: expected Tracks, got None");
   const auto core_intrinsics = IntrinsicsFromPython(intrinsics);
   const formats::Calibration core_calibration = CalibrationFromPython(calibration);
   const auto settings = SelfCalibrationOptionsFrom(options);
@@ -194,7 +201,7 @@ selfcal::SelfCalibration SelfCalibrateFromPython(const py::object& tracks, const
   if (given) core_given = IntrinsicsFromPython(*given);
   const auto log = LogTo(logger);  // made (and destroyed) with the GIL held
   py::gil_scoped_release release;
-  return selfcal::SelfCalibrate(*core_tracks, core_intrinsics, core_calibration, request, settings, num_threads,
+  return selfcal::SelfCalibrate(tracks, core_intrinsics, core_calibration, request, settings, num_threads,
                                 core_given ? &*core_given : nullptr, earlier ? &earlier->reports : nullptr, log);
 }
 
@@ -222,11 +229,9 @@ entries it chose are refined again without choosing anew. options: {knob: value}
 (option_table()). Each camera's line goes to logger.info. Releases the GIL.)doc");
   m.def(
       "closed_form_start",
-      [](const py::object& tracks, const py::dict& intrinsics, const py::object& calibration,
+      [](const formats::Tracks& tracks, const py::dict& intrinsics, const py::object& calibration,
          const selfcal::RefineRequest& request, const py::dict& options, const py::object& logger) {
-        const std::optional<formats::Tracks> core_tracks = TracksFromPython(tracks);
-        if (!core_tracks) throw py::type_error("tracks: expected Tracks, got None");
-        return selfcal::ClosedFormStart(*core_tracks, IntrinsicsFromPython(intrinsics),
+        return selfcal::ClosedFormStart(tracks, IntrinsicsFromPython(intrinsics),
                                         CalibrationFromPython(calibration), request,
                                         SelfCalibrationOptionsFrom(options), LogTo(logger));
       },
@@ -245,10 +250,8 @@ entries it chose are refined again without choosing anew. options: {knob: value}
       "names that is not among camera_names).");
   m.def(
       "convert_tracks",
-      [](const py::object& tracks, const py::dict& given, const py::dict& refined) {
-        const std::optional<formats::Tracks> core_tracks = TracksFromPython(tracks);
-        if (!core_tracks) throw py::type_error("tracks: expected Tracks, got None");
-        return selfcal::ConvertTracks(*core_tracks, IntrinsicsFromPython(given), IntrinsicsFromPython(refined));
+      [](const formats::Tracks& tracks, const py::dict& given, const py::dict& refined) {
+        return selfcal::ConvertTracks(tracks, IntrinsicsFromPython(given), IntrinsicsFromPython(refined));
       },
       py::arg("tracks"), py::arg("given"), py::arg("refined"),
       "Tracks (formats.Tracks) undistorted with given re-expressed as undistorted with refined.");

@@ -148,10 +148,7 @@ class Calibration:
 
         if not Path(directory).is_dir():
             raise FormatError(f"{directory}: no such results folder")
-        try:
-            return cls.from_core(_core.formats.read_calibration(Path(directory)))
-        except _core.formats.InputError as error:
-            raise FormatError(str(error)) from None
+        return cls.from_core(_core.formats.read_calibration(Path(directory)))
 
     @classmethod
     def from_core(cls, core: Any) -> Calibration:

@@ -186,10 +186,7 @@ def _projected(spec: Any, sequence: str | os.PathLike | None,
 def _read_site(site: str | os.PathLike) -> Any:
     from calibproj import _core
 
-    try:
-        return _core.capture.read_site(Path(site))
-    except _core.formats.InputError as error:
-        raise FormatError(str(error)) from None
+    return _core.capture.read_site(Path(site))
 
 
 def _record(site: Any, projection: _Projection, recordings: Path, progress: bool) -> Any:

@@ -97,7 +97,7 @@ def repaired(calibration: Calibration, intrinsics: dict[str, Intrinsics], stored
     core, cameras, observations = _core.check.repaired(calibration, intrinsics, tracks, stored_tracks, result,
                                                        weak_rotation_sigma_deg)
     return (Calibration.from_core(core), {name: intrinsics_from_core(camera) for name, camera in cameras.items()},
-            Tracks.from_core(observations))
+            observations)
 
 
 def write_check(path: str | os.PathLike, result: CheckResult) -> None:

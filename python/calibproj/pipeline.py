@@ -261,10 +261,10 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
         calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector,
                                lens_covariance=result.lens_covariance)
     for name, report in result.reports.items():
-        # Its pose rests on a focal length nobody checked: it must not steer comparisons.
-        if "focal" in report.held and name in calibration.poses and not calibration.metrics[name].weak:
+        # Its pose rests on intrinsics nobody checked: it must not steer comparisons.
+        if report.weak_reason and name in calibration.poses and not calibration.metrics[name].weak:
             calibration.metrics[name].weak = True
-            logger.warning("camera %s is weak: its focal length was not refined (%s)", name, report.held["focal"])
+            logger.warning("camera %s is weak: %s", name, report.weak_reason)
     return calibration, tracks, intrinsics, (result, given, options)
 
 
@@ -315,10 +315,7 @@ def _with_earlier(merge: str | os.PathLike, tracks: Tracks, intrinsics: Mapping[
     failed: one the new projection gave nothing keeps its earlier observations."""
     from calibproj import _core
 
-    try:
-        merged = Tracks.from_core(_core.formats.with_earlier_observations(Path(merge), tracks, dict(intrinsics)))
-    except _core.formats.InputError as error:
-        raise FormatError(str(error)) from None
+    merged = _core.formats.with_earlier_observations(Path(merge), tracks, dict(intrinsics))
     counts = merged.counts_per_camera()
     still_failed = {}
     for name, reason in ingest_failed.items():

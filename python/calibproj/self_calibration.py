@@ -112,7 +112,7 @@ def nominal_intrinsics(name: str, resolution: tuple[int, int], fov_deg: float) -
 def convert_tracks(tracks: Tracks, given: Mapping[str, Intrinsics], refined: Mapping[str, Intrinsics]) -> Tracks:
     """Tracks undistorted with ``given`` re-expressed as undistorted with ``refined`` (a
     camera whose intrinsics are the same in both is left as it is)."""
-    return Tracks.from_core(_core.selfcal.convert_tracks(tracks, dict(given), dict(refined)))
+    return _core.selfcal.convert_tracks(tracks, dict(given), dict(refined))
 
 
 def _from_core(cameras: Mapping[str, Any]) -> dict[str, Intrinsics]:

@@ -95,7 +95,4 @@ def _calibration_with_uncertainty(results: Calibration | str | os.PathLike) -> C
     if not path.is_file():
         raise FormatError(f"{path}: no such file; the calibration has no pose covariance (calibrate it again "
                           "with this version of calibproj)")
-    try:
-        return replace(calibration, uncertainty=_core.uncertainty.read_pose_uncertainty(Path(results)))
-    except _core.formats.InputError as error:
-        raise FormatError(str(error)) from None
+    return replace(calibration, uncertainty=_core.uncertainty.read_pose_uncertainty(Path(results)))

@@ -1,10 +1,7 @@
 #include "calibproj/formats/tracks_file.h"
 
 #include <algorithm>
-#include <iterator>
-#include <cmath>
 #include <limits>
-#include <numeric>
 
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/json_values.h"
@@ -12,110 +9,6 @@
 namespace calibproj::formats {
 
 namespace fs = std::filesystem;
-
-Tracks MakeTracks(std::vector<std::string> cameras, const std::vector<int>& camera,
-                  const std::vector<std::int64_t>& ids, const std::vector<Eigen::Vector2d>& xy,
-                  std::optional<int> markers_per_array) {
-  std::vector<size_t> order(ids.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return std::tie(camera[a], ids[a]) < std::tie(camera[b], ids[b]);
-  });
-  Tracks tracks;
-  tracks.cameras = std::move(cameras);
-  tracks.markers_per_array = markers_per_array;
-  tracks.point_ids = ids;
-  std::sort(tracks.point_ids.begin(), tracks.point_ids.end());
-  tracks.point_ids.erase(std::unique(tracks.point_ids.begin(), tracks.point_ids.end()), tracks.point_ids.end());
-  const int n = static_cast<int>(order.size());
-  tracks.camera_index.resize(n);
-  tracks.point_index.resize(n);
-  tracks.xy.resize(n, 2);
-  for (int k = 0; k < n; ++k) {
-    const size_t i = order[k];
-    if (k > 0 && camera[i] == camera[order[k - 1]] && ids[i] == ids[order[k - 1]]) {
-      throw std::invalid_argument("camera " + PythonRepr(tracks.cameras[camera[i]]) + " observes point " +
-                                  std::to_string(ids[i]) + " twice");
-    }
-    tracks.camera_index(k) = camera[i];
-    tracks.point_index(k) = static_cast<int>(
-        std::lower_bound(tracks.point_ids.begin(), tracks.point_ids.end(), ids[i]) - tracks.point_ids.begin());
-    tracks.xy.row(k) = xy[i].transpose();
-  }
-  return tracks;
-}
-
-void Tracks::Check() const {
-  const Eigen::Index count = camera_index.size();
-  if (point_index.size() != count || xy.rows() != count) {
-    throw std::invalid_argument("tracks: camera_index, point_index and xy differ in length");
-  }
-  for (Eigen::Index i = 0; i < count; ++i) {
-    if (camera_index[i] < 0 || camera_index[i] >= static_cast<int>(cameras.size()) || point_index[i] < 0 ||
-        point_index[i] >= static_cast<int>(point_ids.size())) {
-      throw std::invalid_argument("tracks: observation " + std::to_string(i) + " has no camera or point");
-    }
-    // JSON has no NaN or infinity: such a pixel would make a file no reader takes.
-    if (!xy.row(i).allFinite()) {
-      throw std::invalid_argument("tracks: observation " + std::to_string(i) + " (camera '" +
-                                  cameras[camera_index[i]] + "') is not finite");
-    }
-  }
-}
-
-Tracks Tracks::WithoutCameras(const std::vector<std::string>& names) const {
-  std::vector<std::string> kept;
-  std::vector<int> remap(cameras.size(), -1);
-  for (size_t c = 0; c < cameras.size(); ++c) {
-    if (std::find(names.begin(), names.end(), cameras[c]) == names.end()) {
-      remap[c] = static_cast<int>(kept.size());
-      kept.push_back(cameras[c]);
-    }
-  }
-  std::vector<int> camera;
-  std::vector<std::int64_t> ids;
-  std::vector<Eigen::Vector2d> pixels;
-  for (int i = 0; i < camera_index.size(); ++i) {
-    if (remap[camera_index(i)] < 0) continue;
-    camera.push_back(remap[camera_index(i)]);
-    ids.push_back(point_ids[point_index(i)]);
-    pixels.push_back(xy.row(i).transpose());
-  }
-  return MakeTracks(kept, camera, ids, pixels, markers_per_array);
-}
-
-Tracks MergeTracks(const Tracks& first, const Tracks& second) {
-  if (first.markers_per_array != second.markers_per_array) {
-    const auto text = [](const std::optional<int>& value) { return value ? std::to_string(*value) : "none"; };
-    throw std::invalid_argument("the tracks have " + text(first.markers_per_array) + " and " +
-                                text(second.markers_per_array) + " markers per array: not of one sequence");
-  }
-  std::vector<std::int64_t> shared;
-  std::set_intersection(first.point_ids.begin(), first.point_ids.end(), second.point_ids.begin(),
-                        second.point_ids.end(), std::back_inserter(shared));
-  if (!shared.empty()) {
-    throw std::invalid_argument(std::to_string(shared.size()) + " point id(s) in both, e.g. " +
-                                std::to_string(shared.front()) +
-                                ": the second projection must show only arrays the first did not (calibproj generate "
-                                "--densify)");
-  }
-  std::vector<std::string> cameras = first.cameras;
-  for (const auto& name : second.cameras) {
-    if (std::find(cameras.begin(), cameras.end(), name) == cameras.end()) cameras.push_back(name);
-  }
-  std::vector<int> camera;
-  std::vector<std::int64_t> ids;
-  std::vector<Eigen::Vector2d> pixels;
-  for (const Tracks* part : {&first, &second}) {
-    for (int i = 0; i < part->camera_index.size(); ++i) {
-      const auto& name = part->cameras[part->camera_index(i)];
-      camera.push_back(static_cast<int>(std::find(cameras.begin(), cameras.end(), name) - cameras.begin()));
-      ids.push_back(part->point_ids[part->point_index(i)]);
-      pixels.push_back(part->xy.row(i).transpose());
-    }
-  }
-  return MakeTracks(cameras, camera, ids, pixels, first.markers_per_array);
-}
 
 namespace {
 
@@ -185,12 +78,7 @@ Tracks TracksFromDocument(const nlohmann::json& document) {
   for (size_t c = 0; c < names.size(); ++c) {
     CameraObservations(*observations, names[c], static_cast<int>(c), &cameras, &ids, &pixels);
   }
-  // Observations are keyed by name: a second camera of one name would get the first's.
-  std::vector<std::string> sorted = names;
-  std::sort(sorted.begin(), sorted.end());
-  if (std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end()) {
-    throw std::invalid_argument("duplicate camera names in " + PythonList(names));
-  }
+  // Observations are keyed by name: MakeTracks refuses a second camera of one name.
   Tracks tracks = MakeTracks(names, cameras, ids, pixels, std::nullopt);
   tracks.markers_per_array = MarkersPerArray(document);
   return tracks;

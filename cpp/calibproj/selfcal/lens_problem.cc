@@ -3,6 +3,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 
+#include <Eigen/QR>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -196,9 +198,7 @@ Problem::Problem(const formats::Tracks& tracks, const IntrinsicsMap& intrinsics,
     given.row(c) = LensBlockOf(given_intrinsics.at(name)).transpose();
     shapes.push_back({in.K(1, 1) / in.K(0, 0), in.K(0, 1) / in.K(0, 0)});
     image_sizes.emplace_back(in.ImageWidth(), in.ImageHeight());
-    const bool is_refused =
-        std::any_of(refused.begin(), refused.end(), [&](const auto& item) { return item.first == name; });
-    requested.push_back(is_refused ? std::vector<std::string>{} : request.Of(name));
+    requested.push_back(HasKey(refused, name) ? std::vector<std::string>{} : request.Of(name));
   }
   points = FloorPoints(cameras, camera_index, point_index, xy, point_ids, intrinsics, calibration);
   refine.assign(num_cameras, {});
@@ -321,6 +321,30 @@ double Problem::Coverage(int camera) const {
   std::vector<double> radius;
   for (const int i : RowsOfCamera(camera_index, camera)) radius.push_back((observed.row(i).transpose() - centre).norm());
   return radius.empty() ? 0.0 : Percentile(radius, 95.0) / corner;
+}
+
+std::optional<SystematicResidual> Problem::Systematic(int camera, const Result& solution) const {
+  constexpr int kTerms = 6;  // 1, u, v, u^2, uv, v^2 per axis
+  std::vector<int> rows;
+  for (const int i : RowsOfCamera(camera_index, camera)) {
+    if (solution.residuals.row(i).allFinite()) rows.push_back(i);
+  }
+  const int n = static_cast<int>(rows.size());
+  if (n < 4 * kTerms) return std::nullopt;
+  const auto [width, height] = image_sizes[camera];
+  Eigen::MatrixXd basis(n, kTerms);
+  Eigen::MatrixXd residuals(n, 2);
+  for (int k = 0; k < n; ++k) {
+    // Coordinates in [-1, 1] across the image keep the basis well conditioned.
+    const double u = 2.0 * observed(rows[k], 0) / width - 1.0, v = 2.0 * observed(rows[k], 1) / height - 1.0;
+    basis.row(k) << 1.0, u, v, u * u, u * v, v * v;
+    residuals.row(k) = solution.residuals.row(rows[k]);
+  }
+  const Eigen::MatrixXd field = basis * basis.colPivHouseholderQr().solve(residuals);
+  const double left = (residuals - field).squaredNorm();
+  const double variance = left / std::max(1, 2 * n - 2 * kTerms);
+  if (!(variance > 0.0)) return std::nullopt;
+  return SystematicResidual{std::sqrt(field.squaredNorm() / n), (residuals.squaredNorm() - left) / variance};
 }
 
 std::vector<Eigen::Vector2d> Problem::Seen(int camera, int count) const {

@@ -7,6 +7,7 @@
 #include <opencv2/core.hpp>
 
 #include <Eigen/Core>
+#include <optional>
 #include <set>
 #include <string>
 #include <utility>
@@ -41,6 +42,16 @@ bool Contains(const std::vector<std::string>& names, const std::string& name);
 detect::LensModel LensModelOf(const formats::CameraIntrinsics& in);
 std::vector<cv::Point2d> PointsOf(const ba::PixelMatrix& xy, const std::vector<int>& rows);
 std::vector<int> RowsOfCamera(const Eigen::VectorXi& camera_index, int camera);
+
+// The smooth part of a camera's residuals: a quadratic field over the image fitted to
+// them. A lens entry held at a wrong value (a principal point given tens of pixels off)
+// or a lens model that does not fit the lens leaves such a pattern, which the refined
+// entries and the pose cannot take up; noise does not (the chi-square it explains is
+// then about the field's 12 parameters).
+struct SystematicResidual {
+  double field_px = 0.0;   // RMS length of the fitted field over the camera's observations
+  double chi2_drop = 0.0;  // the residuals' sum of squares it explains, in units of the noise it leaves
+};
 
 // The arrays of selfcal::SelfCalibrate and which entries move.
 class Problem {
@@ -94,6 +105,9 @@ class Problem {
   // How far the camera's observations reach from the principal point towards the
   // farthest image corner (95th percentile of their radius over the corner's).
   double Coverage(int camera) const;
+  // The smooth part of camera c's residuals in `solution`; nothing when it has too few
+  // observations to tell a pattern from noise.
+  std::optional<SystematicResidual> Systematic(int camera, const Result& solution) const;
   // Normalised coordinates (pinhole) of up to `count` of the camera's observations.
   std::vector<Eigen::Vector2d> Seen(int camera, int count) const;
   // Per camera, the entries refined with the stage's requested ones added (not for

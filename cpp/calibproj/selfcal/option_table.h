@@ -45,6 +45,14 @@ void VisitSelfCalibrationOptions(Options& o, Visitor&& visit) {
   visit("min_coverage", o.min_coverage,
         "k3 and pp are freed only for a camera whose observations reach at least this share of the way from the "
         "principal point to the farthest image corner (95th percentile)");
+  visit("max_systematic_px", o.max_systematic_px,
+        "a camera whose residuals, after the refinement, keep a smooth pattern (a quadratic field over the image) "
+        "of more than this many pixels RMS that explains at least min_systematic_chi2 is flagged weak: a lens "
+        "entry held at a wrong value (a principal point given tens of pixels off) or a lens model that does not "
+        "fit leaves one, and bends the focal length refined with it while its 1-sigma stays small");
+  visit("min_systematic_chi2", o.min_systematic_chi2,
+        "see max_systematic_px: the chi-square (in units of the camera's noise) the pattern must explain; noise "
+        "alone explains about its 12 parameters");
 }
 
 }  // namespace calibproj::selfcal

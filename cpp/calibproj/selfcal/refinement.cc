@@ -97,7 +97,26 @@ std::string LensLine(const LensReport& report) {
                      FormatNumber("%.4f", given(kK1)) + " -> " + FormatNumber("%.4f", result(kK1)) + ", noise " +
                      FormatNumber("%.3f", report.noise_px.value_or(0.0)) + " px";
   for (const auto& [group, why] : report.held) line += "; " + group + " held: " + why;
+  if (report.misfit) line += "; " + *report.misfit;
   return line;
+}
+
+// The smooth pattern left in a camera's residuals, into its report; a misfit when it is
+// both large and significant.
+void JudgeSystematic(const std::optional<SystematicResidual>& measured, const SelfCalibrationOptions& options,
+                     LensReport* report) {
+  report->systematic_px = report->systematic_chi2 = std::nullopt;
+  report->misfit.reset();
+  if (!measured) return;
+  const SystematicResidual& systematic = *measured;
+  report->systematic_px = systematic.field_px;
+  report->systematic_chi2 = systematic.chi2_drop;
+  if (systematic.field_px > options.max_systematic_px && systematic.chi2_drop >= options.min_systematic_chi2) {
+    report->misfit = "its residuals keep a smooth pattern of " + FormatNumber("%.2f", systematic.field_px) +
+                     " px that its lens does not explain (chi-square " + FormatNumber("%.0f", systematic.chi2_drop) +
+                     " for 12 parameters): an entry held at a wrong value, such as the principal point, or a lens "
+                     "model that does not fit; its intrinsics are not to be trusted";
+  }
 }
 
 // The reports by camera name, in insertion order.
@@ -302,10 +321,7 @@ class Refinement {
 // Every camera's intrinsics after the refinement, the reports completed.
 IntrinsicsMap RefinedIntrinsics(Problem& problem, const std::optional<Result>& solution,
                                 const IntrinsicsMap& intrinsics, const IntrinsicsMap& given, Reports& reports,
-                                const OrderedTexts& refused, const Log& log) {
-  const auto is_refused = [&](const std::string& name) {
-    return std::any_of(refused.begin(), refused.end(), [&](const auto& item) { return item.first == name; });
-  };
+                                const OrderedTexts& refused, const SelfCalibrationOptions& options, const Log& log) {
   if (!solution) {  // every other camera left out: nothing to refine these against
     for (size_t c = 0; c < problem.cameras.size(); ++c) {
       if (LensReport* report = reports.Find(problem.cameras[c])) {
@@ -323,7 +339,7 @@ IntrinsicsMap RefinedIntrinsics(Problem& problem, const std::optional<Result>& s
   for (size_t c = 0; c < problem.cameras.size(); ++c) {
     const std::string& name = problem.cameras[c];
     LensReport* report = reports.Find(name);
-    if (report == nullptr || is_refused(name)) continue;
+    if (report == nullptr || HasKey(refused, name)) continue;
     const Lens lens = solution && !problem.refine[c].empty() ? Lens(solution->lenses.row(c).transpose())
                                                              : Lens(problem.given.row(c).transpose());
     refined[name] = WithLens(given.at(name), lens);
@@ -334,6 +350,7 @@ IntrinsicsMap RefinedIntrinsics(Problem& problem, const std::optional<Result>& s
     report->result = lens;
     report->noise_px = solution ? std::optional<double>(solution->noise_px(c)) : std::nullopt;
     report->observations = problem.CountOf(static_cast<int>(c));
+    JudgeSystematic(solution ? problem.Systematic(static_cast<int>(c), *solution) : std::nullopt, options, report);
     log(LensLine(*report));
   }
   for (const auto& [name, observations] : problem.dropped) {
@@ -458,12 +475,24 @@ void LensReport::HoldIfNot(const std::string& entry, const std::string& why) {
   if (!IsHeld(entry)) held.emplace_back(entry, why);
 }
 
-bool LensReport::IsHeld(const std::string& entry) const {
-  return std::any_of(held.begin(), held.end(), [&](const auto& item) { return item.first == entry; });
+bool LensReport::IsHeld(const std::string& entry) const { return HasKey(held, entry); }
+
+bool HasKey(const OrderedTexts& items, const std::string& key) {
+  return std::any_of(items.begin(), items.end(), [&](const auto& item) { return item.first == key; });
+}
+
+std::optional<std::string> WeakReason(const LensReport& report) {
+  for (const auto& [entry, why] : report.held) {
+    if (entry == kFocalGroup) return "its focal length was not refined (" + why + ")";
+  }
+  return report.misfit;
 }
 
 nlohmann::ordered_json LensReport::ToJson() const {
   const auto optional = [](const std::optional<double>& value) {
+    return value ? nlohmann::ordered_json(*value) : nlohmann::ordered_json(nullptr);
+  };
+  const auto text = [](const std::optional<std::string>& value) {
     return value ? nlohmann::ordered_json(*value) : nlohmann::ordered_json(nullptr);
   };
   const auto lens = [](const std::optional<Lens>& value) {
@@ -485,6 +514,10 @@ nlohmann::ordered_json LensReport::ToJson() const {
           {"noise_px", optional(noise_px)},
           {"coverage", optional(coverage)},
           {"left_out", left_out},
+          {"systematic_px", optional(systematic_px)},
+          {"systematic_chi2", optional(systematic_chi2)},
+          {"misfit", text(misfit)},
+          {"weak_reason", text(WeakReason(*this))},
           {"observations", observations},
           {"given", lens(given)},
           {"result", lens(result)}};
@@ -580,15 +613,13 @@ SelfCalibration SelfCalibrate(const formats::Tracks& tracks, const IntrinsicsMap
   if (solution && problem.HoldAtGiven()) {  // a later round held an entry the first one had moved
     solution = problem.Solve(ba::Loss::kNone, 1.0, solve);
   }
-  out.intrinsics = RefinedIntrinsics(problem, solution, intrinsics, given, reports, refused, log);
+  out.intrinsics = RefinedIntrinsics(problem, solution, intrinsics, given, reports, refused, options, log);
   out.reports = reports.all;
   if (solution) {  // the joint covariance of every lens the solution refined
     std::vector<int> chosen;
     for (size_t c = 0; c < problem.cameras.size(); ++c) {
       const std::string& name = problem.cameras[c];
-      const bool is_refused =
-          std::any_of(refused.begin(), refused.end(), [&](const auto& item) { return item.first == name; });
-      if (!problem.refine[c].empty() && reports.Find(name) != nullptr && !is_refused) {
+      if (!problem.refine[c].empty() && reports.Find(name) != nullptr && !HasKey(refused, name)) {
         chosen.push_back(static_cast<int>(c));
         out.lens_covariance.cameras.push_back(name);
       }

@@ -41,6 +41,9 @@ using IntrinsicsMap = std::map<std::string, formats::CameraIntrinsics>;
 // An insertion-ordered map of texts (what the reports and their JSON keep in order).
 using OrderedTexts = std::vector<std::pair<std::string, std::string>>;
 
+// Whether `items` holds an entry for `key`.
+bool HasKey(const OrderedTexts& items, const std::string& key);
+
 struct SelfCalibrationOptions {
   double max_focal_sigma = 0.01;
   double max_principal_point_sigma_px = 1.0;
@@ -55,6 +58,8 @@ struct SelfCalibrationOptions {
   double closed_form_min_change = 0.1;
   int rounds = 2;
   double min_coverage = 0.5;
+  double max_systematic_px = 0.1;
+  double min_systematic_chi2 = 100.0;
 
   void Check() const;  // std::invalid_argument naming the first knob that is not a positive number
 };
@@ -96,6 +101,10 @@ struct LensReport {
   std::optional<double> noise_px;             // RMS of one residual coordinate
   std::optional<double> coverage;  // how far towards the image corners the observations reach (0-1)
   bool left_out = false;           // its focal length not determined, its observations left out of the solve
+  // The smooth pattern its residuals keep (SystematicResidual): RMS px, and the
+  // chi-square it explains; `misfit` says why that makes its lens untrustworthy.
+  std::optional<double> systematic_px, systematic_chi2;
+  std::optional<std::string> misfit;
   int observations = 0;
   std::optional<Eigen::Matrix<double, kLensSize, 1>> given, result;  // lens blocks
 
@@ -104,6 +113,11 @@ struct LensReport {
   bool IsHeld(const std::string& entry) const;
   nlohmann::ordered_json ToJson() const;
 };
+
+// Why a camera's pose is weak after the self-calibration, or nothing: its focal length
+// was held (the pose rests on a focal length nobody checked), or its residuals keep a
+// smooth pattern its lens does not explain (LensReport::misfit).
+std::optional<std::string> WeakReason(const LensReport& report);
 
 // How the refined lenses of `cameras` err, together: their joint covariance (8n, 8n)
 // over the lens block, the k-th camera in rows and columns 8k to 8k + 7, zero outside

@@ -227,10 +227,7 @@ def read_intrinsics(path: str | os.PathLike, name: str | None = None) -> Intrins
     ``calibproj-native`` reads it); the name defaults to the file stem."""
     from calibproj import _core
 
-    try:
-        core = _core.formats.read_intrinsics(Path(path), name or "")
-    except _core.formats.InputError as error:
-        raise FormatError(str(error)) from None
+    core = _core.formats.read_intrinsics(Path(path), name or "")
     return intrinsics_from_core(core)
 
 

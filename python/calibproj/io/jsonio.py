@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from calibproj import _core
+
 SCHEMA_PREFIX = "calibproj."
 # Arrays and objects nested deeper than this are refused, as by calibproj-native
 # (cpp/app/files.h, kMaxJsonDepth): no calibproj file comes near.
@@ -33,8 +35,9 @@ _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
 _NOT_BRACKETS = bytes(sorted(set(range(256)) - set(b"[]{}")))
 
 
-class FormatError(ValueError):
-    """A file that is not what it claims to be, with the file named in the message."""
+# A file that is not what it claims to be, with the file named in the message: the
+# core's error, so that one except clause takes what either language's readers raise.
+FormatError = _core.formats.InputError
 
 
 def schema_tag(kind: str, major: int) -> str:

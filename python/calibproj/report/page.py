@@ -394,25 +394,21 @@ def _status_item(calibration: Calibration, view: CameraView) -> str:
 
 
 def _warnings(views: list[CameraView], self_calibration: dict | None = None) -> str:
-    """What the headline does not say: a focal length asked for but held."""
-    held_focal = _held_focal(self_calibration)
-    lines = [f"<p class=\"warning\">Camera {html.escape(view.name)} is WEAK: its focal length was not refined "
-             f"({html.escape(held_focal[view.name])}); its pose rests on the focal length given.</p>"
-             for view in views if view.registered and view.name in held_focal]
+    """What the headline does not say: intrinsics the self-calibration could not vouch for."""
+    reasons = _weak_lenses(self_calibration)
+    lines = [f"<p class=\"warning\">Camera {html.escape(view.name)} is WEAK: {html.escape(reasons[view.name])}; "
+             "its pose rests on intrinsics nobody checked.</p>"
+             for view in views if view.registered and view.name in reasons]
     return f'<div class="warnings">{"".join(lines)}</div>' if lines else ""
 
 
-def _held_focal(document: dict | None) -> dict[str, str]:
-    """Cameras of ``self_calibration.json`` whose focal length was asked for but held, with why."""
+def _weak_lenses(document: dict | None) -> dict[str, str]:
+    """Cameras of ``self_calibration.json`` made weak by it, with why (``weak_reason``)."""
     cameras = (document or {}).get("cameras")
     if not isinstance(cameras, dict):
         return {}
-    out = {}
-    for name, camera in cameras.items():
-        held = camera.get("held") if isinstance(camera, dict) else None
-        if isinstance(held, dict) and "focal" in held:
-            out[str(name)] = str(held["focal"])
-    return out
+    return {str(name): camera["weak_reason"] for name, camera in cameras.items()
+            if isinstance(camera, dict) and isinstance(camera.get("weak_reason"), str)}
 
 
 def _summary(calibration: Calibration, views: list[CameraView], provenance: dict | None) -> str:
@@ -592,7 +588,8 @@ def self_calibration_table(document: dict) -> str:
     with its uncertainty, and what kept its given value, with why."""
     rows = ["<tr><th class=\"name\">camera</th><th>focal given &rarr; found [px]</th><th>&sigma; focal</th>"
             "<th>k1 given &rarr; found</th><th>&sigma; distortion [px]</th><th>coverage</th><th>noise [px]</th>"
-            "<th class=\"name\">refined</th><th class=\"name\">kept as given</th></tr>"]
+            "<th>pattern left [px]</th>"
+            "<th class=\"name\">refined</th><th class=\"name\">kept as given; warnings</th></tr>"]
     cameras = document.get("cameras") if isinstance(document.get("cameras"), dict) else {}
     for name, camera in cameras.items():
         camera = camera if isinstance(camera, dict) else {}
@@ -604,6 +601,10 @@ def self_calibration_table(document: dict) -> str:
                     and found["focal"] else "")
         held = camera.get("held") if isinstance(camera.get("held"), dict) else {}
         refined = camera.get("refined") if isinstance(camera.get("refined"), list) else []
+        misfit = camera.get("misfit") if isinstance(camera.get("misfit"), str) else None
+        pattern_class = ' class="weak"' if misfit else ""
+        kept = "<br>".join([*(html.escape(f"{k}: {v}") for k, v in held.items()),
+                            *([html.escape(misfit)] if misfit else [])]) or "-"
         rows.append(
             f'<tr><td class="name">{html.escape(str(name))}</td>'
             f"<td>{_number(given.get('focal'), 1)} &rarr; {_number(found.get('focal'), 1)}</td>"
@@ -611,13 +612,16 @@ def self_calibration_table(document: dict) -> str:
             f"<td>{_number(given.get('k1'), 4)} &rarr; {_number(found.get('k1'), 4)}</td>"
             f"<td>{_number(camera.get('distortion_sigma_px'), 3)}</td>"
             f"<td>{_percent(camera.get('coverage'))}</td><td>{_number(camera.get('noise_px'), 3)}</td>"
+            f"<td{pattern_class}>{_number(camera.get('systematic_px'), 3)}</td>"
             f'<td class="name">{html.escape(", ".join(map(str, refined)) or "-")}</td>'
-            f'<td class="name">{"<br>".join(html.escape(f"{k}: {v}") for k, v in held.items()) or "-"}</td></tr>')
+            f'<td class="name">{kept}</td></tr>')
     intro = ("<p>Each camera's lens was refined with the poses from the floor points it shares with the "
              "others, starting from the intrinsics given. An entry kept as given either did not improve "
              "the fit, or the data do not determine it (its 1 &sigma; is given). Coverage: how far towards "
              "the image corners the camera saw the floor; beyond that the refined distortion is an "
-             "extrapolation.</p>")
+             "extrapolation. Pattern left: the smooth part of the camera's residuals (a quadratic field over "
+             "the image); a large one means an entry kept at a wrong value or a lens model that does not "
+             "fit, and the camera is flagged weak.</p>")
     return intro + _scroll("<table>" + "".join(rows) + "</table>")
 
 
