@@ -225,7 +225,7 @@ def test_no_refined_lens_is_reported_as_a_misfit_when_the_model_holds(or_room) -
     document = json.loads((folder / "refined" / FILE_NAME).read_text())
     for name, report in document["cameras"].items():
         assert report["misfit"] is None, name
-        assert report["systematic_px"] is None or report["systematic_px"] < 0.05, name
+        assert report["systematic_px"] is None or report["systematic_px"] < 0.03, name
 
 
 def test_a_principal_point_given_off_flags_every_camera_whose_focal_it_bends(or_room) -> None:

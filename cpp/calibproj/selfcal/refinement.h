@@ -58,8 +58,8 @@ struct SelfCalibrationOptions {
   double closed_form_min_change = 0.1;
   int rounds = 2;
   double min_coverage = 0.5;
-  double max_systematic_px = 0.1;
-  double min_systematic_chi2 = 100.0;
+  double max_systematic_px = 0.03;
+  double min_systematic_chi2 = 30.0;
 
   void Check() const;  // std::invalid_argument naming the first knob that is not a positive number
 };
