@@ -15,7 +15,6 @@
 #include <variant>
 #include <vector>
 
-#include "calibproj/formats/files.h"
 #include "calibproj/formats/tracks_file.h"
 #include "registry.h"
 
@@ -38,7 +37,9 @@ py::array ReadOnlyView(const T* data, std::vector<py::ssize_t> shape, const py::
   return view;
 }
 
-std::vector<std::int64_t> Flat(const IdArray& ids) { return std::vector<std::int64_t>(ids.data(), ids.data() + ids.size()); }
+std::vector<std::int64_t> Flat(const IdArray& ids) {
+  return std::vector<std::int64_t>(ids.data(), ids.data() + ids.size());
+}
 
 // Pixels (x, y) of any shape, read row by row.
 ba::PixelMatrix PixelRows(const PixelArray& xy) {

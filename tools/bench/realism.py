@@ -17,6 +17,10 @@ the largest sigma (the zoomed one) is given with its error held out in px.
 The last line, over the cameras not reported weak:
 ``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
 sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
+With --refine-intrinsics every run also self-calibrates from the true intrinsics: each
+row lists the cameras flagged a misfit (a smooth pattern left in their residuals) and the
+refined focal lengths' worst error against the truth in sigmas over the others, and a
+last line ``realism: lenses: runs_with_misfit=K/N worst_trusted_focal_sigmas=..``.
 
     python tools/bench/realism.py                       # every condition, 3 seeds
     python tools/bench/realism.py --conditions clean,drops-2 --seeds 1 --arrays 12
@@ -42,6 +46,7 @@ import numpy as np
 from calibproj.comparison import compare, rotation_errors_to_reference
 from calibproj.demo import marker_side_on_floor
 from calibproj.evaluation import EvaluationOptions, evaluate, evaluate_held_out
+from calibproj.io.intrinsics import load_intrinsics_dir
 from calibproj.pipeline import calibrate
 from calibproj.registration import RegistrationOptions
 from calibproj.sequence import Sequence, generate
@@ -139,7 +144,8 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     calibrate_room = functools.partial(
         calibrate_scaled, intrinsics=room / "intrinsics", scale=f"marker-size:{marker_side_m:.9f}",
         options=RegistrationOptions(model=args.model, use_projector=not args.no_projector, **args.registration_option),
-        exposures=locked_exposures(scene) if args.locked_exposures else None, label=f"{condition} seed {seed}")
+        exposures=locked_exposures(scene) if args.locked_exposures else None, label=f"{condition} seed {seed}",
+        refine_intrinsics=args.refine_intrinsics)
     calibration = calibrate_first(calibrate_room, room, sequence_path, results, reused=args.reuse_detections)
     extra_s = 0.0
     if args.densify:
@@ -192,7 +198,36 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     row["sync_frames"] = max_sync_error(report, truth)
     row["readout_ms"] = max_readout_error(report, truth)
     row["wrong"] = wrong_assignments(room / "results" / "tracks.json", truth, args.wrong_px)
+    if args.refine_intrinsics:
+        row["lenses"] = lens_errors(results / "self_calibration.json", room / "intrinsics")
     return row
+
+
+def lens_errors(self_calibration: Path, truth: Path) -> dict[str, dict]:
+    """Per camera of a self-calibration: the smooth pattern left in its residuals (px),
+    whether it was flagged a misfit, and for a refined focal length its error against
+    the rendering's true one in units of its reported sigma."""
+    document = json.loads(self_calibration.read_text())
+    true_focal = {name: camera.K[0, 0] for name, camera in load_intrinsics_dir(truth).items()}
+    out = {}
+    for name, camera in document["cameras"].items():
+        refined = "focal" in camera["refined"] and camera["focal_sigma"]
+        error = camera["result"]["focal"] - true_focal[name]
+        out[name] = {"pattern_px": camera["systematic_px"], "misfit": camera["misfit"] is not None,
+                     "focal_sigmas": error / camera["focal_sigma"] if refined else None}
+    return out
+
+
+def format_lenses(lenses: dict[str, dict]) -> str:
+    """The self-calibration's figures of a row: flagged cameras, the largest pattern of
+    the others, and the refined focal lengths' worst error in sigmas (flagged or not)."""
+    flagged = ", ".join(f"{name} ({lens['pattern_px']:.3f} px)" for name, lens in lenses.items() if lens["misfit"])
+    patterns = [lens["pattern_px"] for lens in lenses.values() if not lens["misfit"] and lens["pattern_px"] is not None]
+    trusted = [abs(lens["focal_sigmas"]) for lens in lenses.values()
+               if lens["focal_sigmas"] is not None and not lens["misfit"]]
+    largest, worst = max(patterns, default=math.nan), max(trusted, default=math.nan)
+    return (f"  lenses: misfit {flagged or 'none'}, largest pattern otherwise {largest:.3f} px, trusted focal "
+            f"within {worst:.1f} sigma")
 
 
 def calibrate_first(calibrate_room, room: Path, sequence_path: Path, results: Path, reused: bool):
@@ -211,12 +246,13 @@ def calibrate_first(calibrate_room, room: Path, sequence_path: Path, results: Pa
 
 
 def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics: Path, scale: str,
-                     options: RegistrationOptions, exposures, label: str, merge: Path | None = None):
+                     options: RegistrationOptions, exposures, label: str, merge: Path | None = None,
+                     refine_intrinsics: list[str] | None = None):
     """calibrate() into ``results`` with a metric scale; results in arbitrary units
     (logged) when the scale cannot be measured."""
     try:
         return calibrate(videos, intrinsics, sequence=sequence, out=results, options=options, exposures=exposures,
-                         scale=scale, force=True, progress=False, merge=merge)
+                         scale=scale, force=True, progress=False, merge=merge, refine_intrinsics=refine_intrinsics)
     except ValueError as error:
         logging.warning("%s: %s", label, error)
         from calibproj.calibration import Calibration
@@ -338,7 +374,8 @@ def format_row(row: dict) -> str:
             f"zoomed {zoomed(row)}  "
             f"{format_sync(row['sync_frames'])}  "
             f"readout {readout} ms  wrong {row['wrong']}"
-            + (f"  weak: {weak}" if weak else "") + (f"  failed: {failed}" if failed else ""))
+            + (f"  weak: {weak}" if weak else "") + (f"  failed: {failed}" if failed else "")
+            + (format_lenses(row["lenses"]) if "lenses" in row else ""))
 
 
 def registration_changes(items: list[str]) -> dict:
@@ -388,6 +425,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--registration-option", metavar="NAME=VALUE", action="append", default=[],
                         help="a RegistrationOptions field set for every calibration, e.g. relief_cells=16 "
                              "(repeatable; default none)")
+    parser.add_argument("--refine-intrinsics", metavar="[CAMERA=]ENTRIES", action="append", default=None,
+                        help="self-calibrate every run from the true intrinsics (as calibrate's flag); each row "
+                             "then lists the cameras flagged a misfit and the refined focal lengths' worst error "
+                             "in sigmas over the others")
     parser.add_argument("--json", type=Path, default=None, help="also write every row to this JSON file")
     args = parser.parse_args(argv)
     try:
@@ -435,6 +476,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"realism: worst_rot_deg={worst_rot:.4f} worst_eval_success={worst_success:.3f} "
           f"registered={registered}/{total} worst_sync_frames={worst_sync:.3f} sync_beyond_frames={beyond:.3f} "
           f"worst_readout_ms={worst_readout:.2f} worst_readout_sigmas={worst_readout_sigmas:.1f} wrong={wrong}")
+    if args.refine_intrinsics:
+        lenses = [list(row.get("lenses", {}).values()) for row in rows]
+        flagged = sum(any(lens["misfit"] for lens in run) for run in lenses)
+        trusted = [abs(lens["focal_sigmas"]) for run in lenses for lens in run
+                   if lens["focal_sigmas"] is not None and not lens["misfit"]]
+        print(f"realism: lenses: runs_with_misfit={flagged}/{len(rows)} "
+              f"worst_trusted_focal_sigmas={max(trusted, default=math.nan):.1f}")
     return 0
 
 
