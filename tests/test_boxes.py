@@ -143,8 +143,8 @@ def test_the_table_top_is_found_at_its_height(table_room) -> None:
     far1 = simulation.scene.camera("far1")
     metric = scaled(calibration, scale_factor(calibration, parse_scale(f"camera-height:far1={far1.center[2]}"), None))
     top = metric.planes[0]
-    assert top["normal"][2] > 0.9999
-    assert abs(top["offset"] - 0.9) < 0.002
+    assert top.normal[2] > 0.9999
+    assert abs(top.offset - 0.9) < 0.002
     # Its points seen twice (one seen once lies wherever its ray meets the floor), brought
     # onto the truth's frame, lie within a millimetre of the true top.
     names = metric.registered
@@ -169,7 +169,7 @@ def test_the_table_is_in_the_results_and_the_report(tmp_path, capsys) -> None:
     assert code == 0
     assert "plane 1 besides the floor: 0.90" in capsys.readouterr().out
     loaded = Calibration.load(tmp_path / "out")
-    assert len(loaded.planes) == 1 and abs(loaded.planes[0]["offset"] - 0.9) < 0.002
+    assert len(loaded.planes) == 1 and abs(loaded.planes[0].offset - 0.9) < 0.002
     assert "plane 1 besides the floor" in (tmp_path / "out" / "report.html").read_text()
 
 

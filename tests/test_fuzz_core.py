@@ -498,6 +498,9 @@ class Baselines:
                 [("cameras", []), ("joint", np.zeros((0, 0)))]),
             "_core.registration.Reconstruction.projector_prediction": Spec([("point", 0)]),
             "_core.registration.Reconstruction.run": Spec([("log", lambda message: None)]),
+            "_core.registration.Reconstruction.calibration": Spec(
+                [("camera_names", [f"c{k}" for k in range(len(s["K"]))]), ("point_ids", np.arange(len(s["points"]))),
+                 ("left_out", [("x", "no intrinsics file")]), ("model", "coplanar")]),
             "_core.registration.view_score": Spec([("pixels", s["observed"][:30]), ("width", 640.0),
                                                   ("height", 480.0), ("levels", 3)]),
             "_core.detect.family_specs": Spec([]),
@@ -601,7 +604,7 @@ class Baselines:
 
     def format_specs(self) -> dict[str, Spec]:
         """The results files, the metric scale and the exports (_core.formats)."""
-        from calibproj.calibration import CameraMetrics, Calibration
+        from calibproj.calibration import CameraMetrics, Calibration, Plane
         from calibproj.io.intrinsics import Intrinsics, write_intrinsics
         from calibproj.scale import ProjectedMarkers, parse_scale
         from calibproj.tracks import Tracks
@@ -611,8 +614,10 @@ class Baselines:
         poses = {"a": (np.eye(3), np.array([0.0, 0.0, 2.0])), "b": (np.eye(3), np.array([1.0, 0.0, 2.0]))}
         metrics = {name: CameraMetrics(0.3, 0.1, 18, 18, 18, 100, rotation_sigma_deg=0.01, centre_sigma=0.001)
                    for name in poses}
-        calibration = Calibration(poses, {}, metrics, points, np.arange(18), registration_order=["a", "b"],
-                                  planes=[{"normal": [0.0, 0.0, 1.0], "offset": 0.5, "points": 0}])
+        calibration_args = [("poses", poses), ("failed", {}), ("metrics", metrics), ("points", points),
+                            ("point_ids", np.arange(18))]
+        calibration = Calibration(*(value for _, value in calibration_args), registration_order=["a", "b"],
+                                  planes=[Plane([0.0, 0.0, 1.0], 0.5, 0)])
         markers = ProjectedMarkers(centres, 4.0, (60, 30))
         intrinsics = {name: Intrinsics(name, (64, 48), self.K, self.dist) for name in poses}
         observed = np.tile(centres.reshape(-1, 2), (2, 1))
@@ -641,7 +646,7 @@ class Baselines:
         uncertainty_args = [("cameras", ["a", "b"]), ("reference", "a"), ("covariance", covariance),
                             ("noise_px", [0.2, 0.3]), ("lens_block", [-1, 0])]
         self.pose_uncertainty = _core.uncertainty.PoseUncertainty(*(value for _, value in uncertainty_args))
-        uncertain = dataclasses.replace(calibration, uncertainty=self.pose_uncertainty)
+        uncertain = calibration.replace(uncertainty=self.pose_uncertainty)
         _core.uncertainty.write(folder / "results", uncertain, intrinsics)
         volume = np.array([[0.05, 0.05, 0.5], [0.1, 0.2, 0.0]])
         # The self-calibration of the two cameras (its calls and results, and their receivers).
@@ -689,10 +694,24 @@ class Baselines:
             "_core.uncertainty.stored_pose_uncertainty": Spec([("directory", folder / "results"),
                                                                ("calibration", calibration)]),
             "_core.formats.read_calibration": Spec([("directory", folder / "results")]),
-            "_core.formats.Calibration": Spec([]),
+            "_core.formats.Calibration": Spec(calibration_args, {"registration_order": ["a", "b"],
+                                                                 "uncertainty": self.pose_uncertainty}),
+            "_core.formats.Calibration.nothing_registered": Spec([("failed", {"a": "no intrinsics file"}),
+                                                                  ("model", "free")]),
+            "_core.formats.Calibration.load": Spec([("directory", folder / "results")]),
+            "_core.formats.Calibration.save": Spec([("directory", folder / "saved")]),
+            "_core.formats.Calibration.replace": Spec([], {"unit": "m", "points": points[:3],
+                                                           "point_ids": [4, 5, 6]}),
+            "_core.formats.Calibration.status": Spec([("name", "b")]),
+            "_core.formats.Calibration.pose": Spec([("name", "a")]),
+            "_core.formats.Calibration.center": Spec([("name", "b")]),
+            "_core.selfcal.mark_untrusted_lenses_weak": Spec([("result", self.refinement()),
+                                                             ("calibration", copy.copy(calibration))]),
             "_core.formats.CameraPose": Spec([]),
-            "_core.formats.CameraMetrics": Spec([]),
-            "_core.formats.Plane": Spec([]),
+            "_core.formats.CameraMetrics": Spec([("mean_px", 0.3), ("std_px", None), ("observations", 18),
+                                                 ("inliers", 17), ("track2_observations", 16), ("view_score", 90)],
+                                                {"failure": None, "rotation_sigma_deg": 0.01, "weak": True}),
+            "_core.formats.Plane": Spec([("normal", [0.0, 0.6, 0.8]), ("offset", 0.5), ("points", 3)]),
             "_core.formats.CameraIntrinsics": Spec([]),
             "_core.formats.Tracks": Spec([]),
             "_core.check.CalibrationCheck": Spec([]),
@@ -835,9 +854,9 @@ class Baselines:
             "_core.formats.ProjectedMarkers": {
                 "sized": lambda: _core.formats.ProjectedMarkers(np.zeros((2, 3, 2)), 4.0, (60, 30), np.ones((2, 3))),
                 "unsized": lambda: _core.formats.ProjectedMarkers(np.zeros((1, 2, 2)), 1.0, (8, 8))},
-            "_core.formats.CameraPose": {"read": lambda: _core.formats.read_calibration(self.results_folder).poses[0]},
+            "_core.formats.CameraPose": {"read": lambda: _core.formats.read_calibration(self.results_folder).pose("a")},
             "_core.formats.CameraMetrics": {
-                "read": lambda: _core.formats.read_calibration(self.results_folder).metrics[0][1]},
+                "read": lambda: _core.formats.read_calibration(self.results_folder).metrics["a"]},
             "_core.formats.Plane": {"read": lambda: _core.formats.read_calibration(self.results_folder).planes[0]},
             "_core.formats.CameraIntrinsics": {
                 "read": lambda: _core.formats.read_intrinsics(self.results_folder / "a.json", "a")},

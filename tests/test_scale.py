@@ -161,11 +161,11 @@ def test_measurements_that_cannot_apply_name_the_problem(paper) -> None:
         scale_factor(calibration, "marker-size:0.05")
     with pytest.raises(ValueError, match="no marker 100/0 in the sequence"):
         check_measurement(parse_scale("marker-size:100/0=0.05"), sim.tracks.camera_names, markers)
-    failed = dataclasses.replace(calibration, poses={k: v for k, v in calibration.poses.items() if k != "far2"},
+    failed = calibration.replace(poses={k: v for k, v in calibration.poses.items() if k != "far2"},
                                  failed={"far2": "too few points"})
     with pytest.raises(ValueError, match=r"camera 'far2' failed to register \(too few points\)"):
         scale_factor(failed, "distance:far1,far2=3")
-    sparse = dataclasses.replace(calibration, points=calibration.points[:5], point_ids=calibration.point_ids[:5])
+    sparse = calibration.replace(points=calibration.points[:5], point_ids=calibration.point_ids[:5])
     with pytest.raises(ValueError, match="measure a marker that the cameras saw"):
         scale_factor(sparse, "marker-size:0.05", markers)
 

@@ -3,7 +3,6 @@ of re-noised solutions; uncertainty.json as calibrate writes it; the API's error
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -87,7 +86,7 @@ def test_predicted_triangulation_error_matches_re_noised_calibrations() -> None:
         assert 0.75 < ratio < 1.25, (k, ratio)
         assert np.linalg.norm(runs[:, k].mean(axis=0) - targets[k]) < 0.3 * predicted.sigma[k]
     # The poses' share, and within it the cross terms between cameras, are not negligible.
-    blocks_only = dataclasses.replace(calibration, uncertainty=_core.uncertainty.PoseUncertainty(
+    blocks_only = calibration.replace(uncertainty=_core.uncertainty.PoseUncertainty(
         names, names[0], _block_diagonal(calibration.uncertainty.covariance), [SIGMA_PX] * len(names)))
     without_cross = triangulation_uncertainty(blocks_only, targets, intrinsics=intrinsics)
     assert np.max(np.abs(without_cross.sigma / predicted.sigma - 1.0)) > 0.1

@@ -215,14 +215,8 @@ RefinedLenses RefineLenses(const formats::Calibration& first, const Tracks& give
     out.result = std::move(result);
     out.calibration = calibrate(out.tracks, out.intrinsics, &out.result.lens_covariance);
   }
-  for (const auto& report : out.result.reports) {
-    const std::optional<std::string> reason = selfcal::WeakReason(report);
-    if (!reason || out.calibration.PoseOf(report.camera) == nullptr) continue;
-    for (auto& [name, metrics] : out.calibration.metrics) {
-      if (name != report.camera || metrics.weak) continue;
-      metrics.weak = true;
-      std::cerr << "camera " << name << " is weak: " << *reason << "\n";
-    }
+  for (const auto& [name, reason] : selfcal::MarkUntrustedLensesWeak(out.result, out.calibration)) {
+    std::cerr << "camera " << name << " is weak: " << reason << "\n";
   }
   return out;
 }

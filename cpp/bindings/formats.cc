@@ -48,61 +48,11 @@ auto Converted(const std::string& what, Convert&& convert) {
   }
 }
 
-template <typename T>
-std::optional<T> OptionalOf(const py::handle& value) {
-  return value.is_none() ? std::nullopt : std::optional<T>(value.cast<T>());
-}
-
-formats::CameraMetrics MetricsFrom(const py::handle& m) {
-  formats::CameraMetrics metrics;
-  metrics.mean_px = OptionalOf<double>(m.attr("mean_px"));
-  metrics.std_px = OptionalOf<double>(m.attr("std_px"));
-  metrics.observations = m.attr("observations").cast<std::int64_t>();
-  metrics.inliers = m.attr("inliers").cast<std::int64_t>();
-  metrics.track2_observations = m.attr("track2_observations").cast<std::int64_t>();
-  metrics.view_score = m.attr("view_score").cast<std::int64_t>();
-  metrics.failure = OptionalOf<std::string>(m.attr("failure"));
-  metrics.rotation_sigma_deg = OptionalOf<double>(m.attr("rotation_sigma_deg"));
-  metrics.centre_sigma = OptionalOf<double>(m.attr("centre_sigma"));
-  metrics.weak = m.attr("weak").cast<bool>();
-  return metrics;
-}
-
-// From a calibproj.calibration.Calibration.
-Calibration CalibrationFrom(const py::object& c) {
-  Calibration calibration;
-  for (const auto& [name, pose] : c.attr("poses").cast<py::dict>()) {
-    const auto R_t = pose.cast<py::tuple>();
-    calibration.poses.push_back({name.cast<std::string>(), R_t[0].cast<Eigen::Matrix3d>(),
-                                 R_t[1].cast<Eigen::Vector3d>()});
-  }
-  for (const auto& [name, reason] : c.attr("failed").cast<py::dict>()) {
-    calibration.failed.emplace_back(name.cast<std::string>(), reason.cast<std::string>());
-  }
-  for (const auto& [name, metrics] : c.attr("metrics").cast<py::dict>()) {
-    calibration.metrics.emplace_back(name.cast<std::string>(), MetricsFrom(metrics));
-  }
-  calibration.points = RowsOf<formats::PointRows>(c.attr("points").cast<RowMatrix>(), 3, "points");
-  calibration.point_ids = c.attr("point_ids").cast<std::vector<std::int64_t>>();
-  calibration.unit = c.attr("unit").cast<std::string>();
-  calibration.model = c.attr("model").cast<std::string>();
-  calibration.registration_order = c.attr("registration_order").cast<std::vector<std::string>>();
-  calibration.floor_rms = c.attr("floor_rms").cast<double>();
-  for (const auto& plane : c.attr("planes").cast<py::list>()) {
-    calibration.planes.push_back({plane["normal"].cast<Eigen::Vector3d>(), plane["offset"].cast<double>(),
-                                  plane["points"].cast<std::int64_t>()});
-  }
-  if (py::hasattr(c, "uncertainty") && !c.attr("uncertainty").is_none()) {
-    calibration.uncertainty = c.attr("uncertainty").cast<registration::PoseUncertainty>();
-  }
-  return calibration;
-}
-
 // A bound ScaleMeasurement (TypeError for anything else).
 const formats::ScaleMeasurement& MeasurementFrom(const py::object& m) {
   if (!py::isinstance<formats::ScaleMeasurement>(m)) {
     throw py::type_error("measurement: expected a ScaleMeasurement, got " +
-                         std::string(py::str(py::type::handle_of(m).attr("__name__"))));
+                         std::string(Py_TYPE(m.ptr())->tp_name));
   }
   return m.cast<const formats::ScaleMeasurement&>();
 }
@@ -142,7 +92,7 @@ void RegisterScaleTypes(py::module_& m) {
 std::optional<formats::ProjectedMarkers> MarkersFrom(const py::object& m) {
   if (m.is_none()) return std::nullopt;
   if (!py::isinstance<formats::ProjectedMarkers>(m)) {
-    throw py::type_error("markers: expected a ProjectedMarkers, got " + std::string(py::str(py::type::handle_of(m).attr("__name__"))));
+    throw py::type_error("markers: expected a ProjectedMarkers, got " + std::string(Py_TYPE(m.ptr())->tp_name));
   }
   return m.cast<formats::ProjectedMarkers>();
 }
@@ -263,16 +213,12 @@ std::map<std::string, formats::CameraIntrinsics> IntrinsicsFrom(const py::dict& 
 
 }  // namespace
 
-formats::Calibration CalibrationFromPython(const py::object& calibration) {
-  return Converted("calibration", [&] { return CalibrationFrom(calibration); });
-}
-
 std::map<std::string, formats::CameraIntrinsics> IntrinsicsFromPython(const py::dict& cameras) {
   return Converted("intrinsics", [&] { return IntrinsicsFrom(cameras); });
 }
 
-// The core's calibration types as bound classes (read-only).
-static void RegisterCalibrationTypes(py::module_& m) {
+// The core's camera intrinsics as a bound class (read-only).
+static void RegisterIntrinsicsType(py::module_& m) {
   using formats::CameraIntrinsics;
   py::class_<CameraIntrinsics>(m, "CameraIntrinsics",
                                "A camera's intrinsics as the core holds them (calibproj.io.intrinsics."
@@ -287,44 +233,6 @@ static void RegisterCalibrationTypes(py::module_& m) {
           "(width, height), or None when the file gives none")
       .def_readonly("K", &CameraIntrinsics::K)
       .def_readonly("dist", &CameraIntrinsics::dist);
-  using formats::CameraMetrics;
-  using formats::CameraPose;
-  using formats::Plane;
-  py::class_<CameraPose>(m, "CameraPose", "A registered camera's pose in the floor frame: x_cam = R X + t.")
-      .def_readonly("name", &CameraPose::name)
-      .def_readonly("R", &CameraPose::R)
-      .def_readonly("t", &CameraPose::t);
-  py::class_<CameraMetrics>(m, "CameraMetrics", "A camera's figures in metrics.json (undistorted pixels).")
-      .def_readonly("mean_px", &CameraMetrics::mean_px)
-      .def_readonly("std_px", &CameraMetrics::std_px)
-      .def_readonly("observations", &CameraMetrics::observations)
-      .def_readonly("inliers", &CameraMetrics::inliers)
-      .def_readonly("track2_observations", &CameraMetrics::track2_observations)
-      .def_readonly("view_score", &CameraMetrics::view_score)
-      .def_readonly("failure", &CameraMetrics::failure)
-      .def_readonly("rotation_sigma_deg", &CameraMetrics::rotation_sigma_deg)
-      .def_readonly("centre_sigma", &CameraMetrics::centre_sigma)
-      .def_readonly("weak", &CameraMetrics::weak);
-  py::class_<Plane>(m, "Plane", "A plane besides the floor: normal . X = offset in the floor frame.")
-      .def_readonly("normal", &Plane::normal)
-      .def_readonly("offset", &Plane::offset)
-      .def_readonly("points", &Plane::points);
-  py::class_<Calibration>(m, "Calibration",
-                          "A calibration as the core holds it (calibproj.calibration.Calibration.from_core reads it)")
-      .def_readonly("poses", &Calibration::poses, "the registered cameras' CameraPose, in order")
-      .def_readonly("failed", &Calibration::failed, "(camera, reason) of the cameras not calibrated")
-      .def_readonly("metrics", &Calibration::metrics, "(camera, CameraMetrics) of every camera")
-      .def_readonly("points", &Calibration::points, "(P, 3) in the floor frame")
-      .def_readonly("point_ids", &Calibration::point_ids)
-      .def_readonly("unit", &Calibration::unit)
-      .def_readonly("model", &Calibration::model)
-      .def_readonly("registration_order", &Calibration::registration_order)
-      .def_readonly("floor_rms", &Calibration::floor_rms)
-      .def_readonly("planes", &Calibration::planes)
-      .def_property_readonly(
-          "uncertainty",
-          [](const Calibration& c) { return c.uncertainty.empty() ? py::none() : py::cast(c.uncertainty); },
-          "the poses' joint covariance (PoseUncertainty), or None when not known");
 }
 
 void register_formats(py::module_& m) {
@@ -339,7 +247,8 @@ void register_formats(py::module_& m) {
     }
   });
   register_tracks(m);
-  RegisterCalibrationTypes(m);
+  RegisterIntrinsicsType(m);
+  register_calibration(m);
   RegisterProjectedMarkers(m);
   RegisterScaleTypes(m);
   m.def("read_calibration", &formats::ReadCalibration, py::arg("directory"),
@@ -352,7 +261,7 @@ void register_formats(py::module_& m) {
   m.def(
       "write_calibration",
       [](const std::filesystem::path& directory, const py::object& calibration) {
-        formats::WriteCalibration(directory, Converted("calibration", [&] { return CalibrationFrom(calibration); }));
+        formats::WriteCalibration(directory, CalibrationFromPython(calibration));
       },
       py::arg("directory"), py::arg("calibration"),
       "camera_poses.json, metrics.json and points.ply of a Calibration, each written atomically");
@@ -416,10 +325,10 @@ void register_formats(py::module_& m) {
   m.def(
       "scaled",
       [](const py::object& calibration, double factor) {
-        return formats::Scaled(Converted("calibration", [&] { return CalibrationFrom(calibration); }), factor);
+        return formats::Scaled(CalibrationFromPython(calibration), factor);
       },
       py::arg("calibration"), py::arg("factor"),
-      "The calibration (a core Calibration) with every length multiplied by factor, in metres");
+      "The calibration with every length multiplied by factor, in metres");
   m.def(
       "parse_scale", &formats::ParseScale, py::arg("text"),
       "A --scale value as a ScaleMeasurement; ValueError naming the bad part");
@@ -436,7 +345,7 @@ void register_formats(py::module_& m) {
       [](const py::object& calibration, const py::object& measurement, const py::object& markers,
          double radius_sides) {
         const auto projected = MarkersFrom(markers);
-        return formats::ScaleFactor(Converted("calibration", [&] { return CalibrationFrom(calibration); }),
+        return formats::ScaleFactor(CalibrationFromPython(calibration),
                                     MeasurementFrom(measurement), projected ? &*projected : nullptr, radius_sides);
       },
       py::arg("calibration"), py::arg("measurement"), py::arg("markers"), py::arg("radius_sides"));
@@ -453,7 +362,7 @@ void register_formats(py::module_& m) {
       [](const py::object& calibration, const std::string& format, const std::filesystem::path& directory,
          const py::dict& intrinsics, const formats::Tracks* tracks) {
         std::vector<std::string> warnings;
-        const auto files = formats::Export(Converted("calibration", [&] { return CalibrationFrom(calibration); }),
+        const auto files = formats::Export(CalibrationFromPython(calibration),
                                            format, directory,
                                            Converted("intrinsics", [&] { return IntrinsicsFrom(intrinsics); }),
                                            tracks, &warnings);

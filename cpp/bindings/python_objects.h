@@ -1,6 +1,6 @@
 #pragma once
-// The package's Python objects (calibproj.calibration.Calibration, io.intrinsics.Intrinsics)
-// as the core's types, for the binding files that take them; TypeError
+// The package's Python objects as the core's types, for the binding files that take
+// them: a bound Calibration as it is, io.intrinsics.Intrinsics converted; TypeError
 // naming what is missing or of the wrong type.
 
 #include <pybind11/pybind11.h>
@@ -14,7 +14,7 @@
 
 namespace calibproj::bindings {
 
-formats::Calibration CalibrationFromPython(const pybind11::object& calibration);
+const formats::Calibration& CalibrationFromPython(const pybind11::object& calibration);
 // {camera name: Intrinsics}
 std::map<std::string, formats::CameraIntrinsics> IntrinsicsFromPython(const pybind11::dict& cameras);
 

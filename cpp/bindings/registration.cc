@@ -9,6 +9,7 @@
 #include <string>
 #include <type_traits>
 
+#include "calibproj/formats/calibration.h"
 #include "calibproj/registration/incremental.h"
 #include "calibproj/registration/option_table.h"
 #include "calibproj/registration/reconstruction.h"
@@ -140,48 +141,6 @@ py::dict ToDict(const registration::RefineResult& r) {
   return d;
 }
 
-
-py::dict ToDict(const registration::RegistrationResult& r) {
-  const py::ssize_t n = static_cast<py::ssize_t>(r.cameras.size());
-  py::array_t<double> R({n, py::ssize_t{3}, py::ssize_t{3}}), t({n, py::ssize_t{3}});
-  py::array_t<double> mean({n}), std_dev({n});
-  py::array_t<int> observations({n}), inliers({n}), track2({n}), score({n});
-  py::array_t<double> rotation_sigma({n}), centre_sigma({n});
-  std::vector<bool> registered(n), weak(n);
-  std::vector<std::string> failures(n);
-  auto R_view = R.mutable_unchecked<3>();
-  auto t_view = t.mutable_unchecked<2>();
-  for (py::ssize_t c = 0; c < n; ++c) {
-    const auto& camera = r.cameras[c];
-    for (int i = 0; i < 3; ++i) {
-      t_view(c, i) = camera.t(i);
-      for (int j = 0; j < 3; ++j) R_view(c, i, j) = camera.R(i, j);
-    }
-    mean.mutable_at(c) = camera.mean_px;
-    std_dev.mutable_at(c) = camera.std_px;
-    observations.mutable_at(c) = camera.observations;
-    inliers.mutable_at(c) = camera.inliers;
-    track2.mutable_at(c) = camera.track2_observations;
-    score.mutable_at(c) = camera.view_score;
-    rotation_sigma.mutable_at(c) = camera.rotation_sigma_deg;
-    centre_sigma.mutable_at(c) = camera.centre_sigma;
-    weak[c] = camera.weak;
-    registered[c] = camera.registered;
-    failures[c] = camera.failure;
-  }
-  py::dict d;
-  d["registered"] = BoolArray(registered);
-  d["R"] = R; d["t"] = t; d["failure"] = failures;
-  d["mean_px"] = mean; d["std_px"] = std_dev; d["observations"] = observations; d["inliers"] = inliers;
-  d["track2_observations"] = track2; d["view_score"] = score;
-  d["rotation_sigma_deg"] = rotation_sigma; d["centre_sigma"] = centre_sigma; d["weak"] = BoolArray(weak);
-  d["points"] = r.points; d["point_index"] = r.point_index; d["registration_order"] = r.registration_order;
-  d["floor_rms"] = r.floor_rms;
-  d["planes"] = RowMatrix(r.planes); d["point_plane"] = r.point_plane;
-  d["frame_M"] = r.frame.M; d["frame_origin"] = r.frame.origin; d["frame_scale"] = r.frame.scale;
-  d["uncertainty"] = r.uncertainty.empty() ? py::none() : py::cast(r.uncertainty);
-  return d;
-}
 
 }  // namespace
 
@@ -315,8 +274,24 @@ of calibproj.registration.RegistrationOptions.)doc")
                              "Per group the side of the largest marker drawn at its points (NaN: not known).")
       .def_property_readonly("camera_sigma_px", &Reconstruction::camera_sigma_px)
       .def("view_score", &Reconstruction::ViewScore, py::arg("camera"))
-      .def("summarize", [](const Reconstruction& r) { return ToDict(registration::Summarize(r)); },
-           "Poses (R, t) and points in the floor frame, and per-camera metrics, of the current state.");
+      .def(
+          "calibration",
+          [](const Reconstruction& r, const std::vector<std::string>& camera_names,
+             const std::vector<std::int64_t>& point_ids, const std::vector<formats::NamedText>& left_out,
+             const std::string& model) {
+            if (camera_names.size() != static_cast<size_t>(r.num_cameras())) {
+              throw std::invalid_argument("camera_names: " + std::to_string(camera_names.size()) + " names for " +
+                                          std::to_string(r.num_cameras()) + " cameras");
+            }
+            if (point_ids.size() != static_cast<size_t>(r.num_points())) {
+              throw std::invalid_argument("point_ids: " + std::to_string(point_ids.size()) + " ids for " +
+                                          std::to_string(r.num_points()) + " points");
+            }
+            return formats::FromRegistration(registration::Summarize(r), camera_names, point_ids, left_out, model);
+          },
+          py::arg("camera_names"), py::arg("point_ids"), py::arg("left_out"), py::arg("model"),
+          "The Calibration of the current state in the floor frame: camera_names and point_ids name the "
+          "registration's cameras and points, left_out [(camera, reason)] the cameras that failed before it.");
 
   m.def(
       "view_score",

@@ -19,6 +19,8 @@ void register_check(pybind11::module_& m);
 void register_formats(pybind11::module_& m);
 // The Tracks class, in the formats submodule.
 void register_tracks(pybind11::module_& m);
+// The Calibration class and its parts, in the formats submodule.
+void register_calibration(pybind11::module_& m);
 void register_uncertainty(pybind11::module_& m);
 void register_capture(pybind11::module_& m);
 

@@ -228,6 +228,14 @@ as intrinsics, the user's values as given and the first round's SelfCalibration 
 entries it chose are refined again without choosing anew. options: {knob: value}
 (option_table()). Each camera's line goes to logger.info. Releases the GIL.)doc");
   m.def(
+      "mark_untrusted_lenses_weak",
+      [](const selfcal::SelfCalibration& result, formats::Calibration& calibration) {
+        return selfcal::MarkUntrustedLensesWeak(result, calibration);
+      },
+      py::arg("result"), py::arg("calibration"),
+      "Marks weak, in place, every registered camera of the calibration whose lens the self-calibration cannot "
+      "vouch for (its focal length held, or a misfit); [(camera, reason)] of those it marked.");
+  m.def(
       "closed_form_start",
       [](const formats::Tracks& tracks, const py::dict& intrinsics, const py::object& calibration,
          const selfcal::RefineRequest& request, const py::dict& options, const py::object& logger) {

@@ -104,7 +104,19 @@ void register_uncertainty(py::module_& m) {
                     "per camera the index of its refined lens's block (-1: intrinsics taken as exact); empty: none")
       .def_readonly("noise_px", &PoseUncertainty::noise_px, "per camera, its centres' noise (px, 1 sigma per coordinate)")
       .def("named", &PoseUncertainty::Named, py::arg("names"),
-           "the same with cameras given by index renamed to names[index]");
+           "the same with cameras given by index renamed to names[index]")
+      .def(py::pickle(
+          [](const PoseUncertainty& u) {
+            return py::make_tuple(u.cameras, u.reference, u.covariance, u.noise_px, u.lens_block);
+          },
+          [](const py::tuple& state) {
+            if (state.size() != 5) throw std::invalid_argument("PoseUncertainty: not a pickled PoseUncertainty");
+            PoseUncertainty out{state[0].cast<std::vector<std::string>>(), state[1].cast<std::string>(),
+                                state[2].cast<Eigen::MatrixXd>(), state[3].cast<std::vector<double>>(),
+                                state[4].cast<std::vector<int>>()};
+            out.Check();
+            return out;
+          }));
   m.def("triangulation", &Triangulation, py::arg("calibration"), py::arg("intrinsics"), py::arg("points"),
         py::arg("noise_px") = 0.0,
         "Per point (N, 3) of the calibration's frame: the covariance (N, 3, 3) of the point triangulated from the "

@@ -96,7 +96,7 @@ def repaired(calibration: Calibration, intrinsics: dict[str, Intrinsics], stored
         raise ValueError(result.message)
     core, cameras, observations = _core.check.repaired(calibration, intrinsics, tracks, stored_tracks, result,
                                                        weak_rotation_sigma_deg)
-    return (Calibration.from_core(core), {name: intrinsics_from_core(camera) for name, camera in cameras.items()},
+    return (core, {name: intrinsics_from_core(camera) for name, camera in cameras.items()},
             observations)
 
 
@@ -107,12 +107,10 @@ def write_check(path: str | os.PathLike, result: CheckResult) -> None:
 def _with_stored_uncertainty(folder: Path, calibration: Calibration) -> Calibration:
     """The calibration with the covariance its folder's uncertainty.json stores, which the
     repair carries over (a bad file only costs it, with a warning)."""
-    from dataclasses import replace
-
     stored, warning = _core.uncertainty.stored_pose_uncertainty(folder, calibration)
     if warning:
         log.warning("%s; the repaired results will have no uncertainty.json", warning)
-    return replace(calibration, uncertainty=stored)
+    return calibration.replace(uncertainty=stored)
 
 
 def check(

@@ -21,6 +21,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from calibproj import _core
 from calibproj.calibration import Calibration
 from calibproj.io.intrinsics import Intrinsics, has_intrinsics_file, intrinsics_of_cameras, write_intrinsics_dir
 from calibproj.ingest import IngestResult
@@ -222,8 +223,6 @@ def _check_nominal_fov(fov_deg: float | None, request: RefineRequest | None, vid
 def _with_nominal(source: Any, videos: Path, fov_deg: float) -> tuple[dict[str, Intrinsics], dict[str, str]]:
     """The intrinsics of the cameras of ``videos``: from their file where there is one
     (a bad file still fails its camera), else nominal ones from the video's frame size."""
-    from calibproj import _core
-
     names = video_camera_names(videos)
     with_file = [name for name in names if source is not None and has_intrinsics_file(source, name)]
     found, unusable = intrinsics_of_cameras(source, with_file) if with_file else ({}, {})
@@ -260,11 +259,9 @@ def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration
         intrinsics = refined
         calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector,
                                lens_covariance=result.lens_covariance)
-    for name, report in result.reports.items():
-        # Its pose rests on intrinsics nobody checked: it must not steer comparisons.
-        if report.weak_reason and name in calibration.poses and not calibration.metrics[name].weak:
-            calibration.metrics[name].weak = True
-            logger.warning("camera %s is weak: %s", name, report.weak_reason)
+    # A pose resting on intrinsics nobody checked must not steer comparisons.
+    for name, reason in _core.selfcal.mark_untrusted_lenses_weak(result, calibration):
+        logger.warning("camera %s is weak: %s", name, reason)
     return calibration, tracks, intrinsics, (result, given, options)
 
 

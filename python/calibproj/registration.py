@@ -167,14 +167,15 @@ class RegistrationDriver:
         yield Step("done", None, {})
 
     def _warn_weak_cameras(self) -> None:
-        summary = self.reconstruction.summarize()
-        for c, name in enumerate(self.tracks.camera_names):
-            if summary["registered"][c] and summary["weak"][c]:
-                # The centre's sigma waits for the final summary, in the results' unit.
+        calibration = self.result()
+        for name in calibration.registered:
+            metrics = calibration.metrics[name]
+            if metrics.weak:
+                # The centre's sigma waits for the final calibration, in the results' unit.
                 logger.warning("camera %s is weakly determined: rotation known to %.3f deg (1 sigma, limit %g); "
                                "more points in its view help (calibproj generate --densify RESULTS "
                                "plans a short extra projection for it)",
-                               name, summary["rotation_sigma_deg"][c], self.options.weak_rotation_sigma_deg)
+                               name, metrics.rotation_sigma_deg, self.options.weak_rotation_sigma_deg)
 
     def run(self, callback: Callable[[Step], bool | None] | None = None) -> Calibration:
         """All steps; ``callback(step)`` returning False stops after that step."""
@@ -187,13 +188,8 @@ class RegistrationDriver:
         """The calibration in the floor frame, from the current state."""
         if self.reconstruction is None:
             return Calibration.nothing_registered(self.failed, self.options.model)
-        return Calibration.from_summary(
-            self.reconstruction.summarize(),
-            self.tracks.camera_names,
-            self.tracks.point_ids,
-            self.failed,
-            self.options.model,
-        )
+        return self.reconstruction.calibration(self.tracks.camera_names, self.tracks.point_ids,
+                                               list(self.failed.items()), self.options.model)
 
 
 def calibrate(

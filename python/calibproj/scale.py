@@ -163,4 +163,4 @@ def scaled(calibration: Calibration, factor: float) -> Calibration:
     """A copy of the calibration with every length multiplied by ``factor``, in metres."""
     if calibration.unit == "m":
         logger.warning("the calibration is already in metres; scaling it again by %.6g", factor)
-    return Calibration.from_core(_core.formats.scaled(calibration, float(factor)))
+    return _core.formats.scaled(calibration, float(factor))

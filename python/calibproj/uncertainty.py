@@ -82,8 +82,6 @@ def triangulation_uncertainty(
 
 
 def _calibration_with_uncertainty(results: Calibration | str | os.PathLike) -> Calibration:
-    from dataclasses import replace
-
     from calibproj import _core
 
     calibration = load_results(results)
@@ -95,4 +93,4 @@ def _calibration_with_uncertainty(results: Calibration | str | os.PathLike) -> C
     if not path.is_file():
         raise FormatError(f"{path}: no such file; the calibration has no pose covariance (calibrate it again "
                           "with this version of calibproj)")
-    return replace(calibration, uncertainty=_core.uncertainty.read_pose_uncertainty(Path(results)))
+    return calibration.replace(uncertainty=_core.uncertainty.read_pose_uncertainty(Path(results)))

@@ -14,9 +14,17 @@ With --refine-intrinsics both tools self-calibrate: `calibproj calibrate --track
 the executable's tracks with the same options is the reference then (the demo itself
 calibrated without it).
 
+With --room, any rendered room (`calibproj simulate --sequence SEQ`, e.g. the or-table
+scene with its table top) takes the demo's place: both tools detect its videos and
+calibrate them, each from its own tracks.json, with the metric scale from the first
+camera's true height (truth.json) unless --scale is given; tracks.json is compared too.
+
 Run:
   calibproj demo --out DEMO
   python tools/bench/native_parity.py DEMO [--native PATH] [--refine-intrinsics focal,k1,k2]
+  calibproj generate --out SEQ --arrays 48 --scales 1,3,6
+  calibproj simulate --scene or-table --sequence SEQ/sequence.json --out ROOM
+  python tools/bench/native_parity.py --room ROOM --sequence SEQ/sequence.json
 """
 
 from __future__ import annotations
@@ -32,13 +40,24 @@ from native_speed import find_native  # this folder is on sys.path when run as a
 
 def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("demo", help="folder written by `calibproj demo --out DEMO`")
+    parser.add_argument("demo", nargs="?", help="folder written by `calibproj demo --out DEMO`")
+    parser.add_argument("--room", type=Path, help="instead of a demo: a room rendered by `calibproj simulate` "
+                        "(videos/, intrinsics/, truth.json), detected and calibrated by both tools")
+    parser.add_argument("--sequence", type=Path, help="with --room: the sequence.json it was rendered from")
+    parser.add_argument("--scale", help="with --room: the --scale measurement (default: the first camera's true "
+                        "height in truth.json)")
+    parser.add_argument("--model", default="coplanar", help="with --room: the registration model (default coplanar)")
     parser.add_argument("--native", help="calibproj-native executable (default: next to this Python, else PATH)")
     parser.add_argument("--workers", type=int, default=2, help="cameras processed at once by detect (default 2)")
     parser.add_argument("--refine-intrinsics", action="append", default=[], metavar="[CAMERA=]ENTRIES",
                         help="both tools refine these lens entries (repeatable; default: none, the demo's results "
                              "are the reference)")
-    return parser.parse_args()
+    args = parser.parse_args()
+    if (args.demo is None) == (args.room is None):
+        parser.error("give a demo folder or --room (one of them)")
+    if args.room is not None and args.sequence is None:
+        parser.error("--room needs --sequence")
+    return args
 
 
 def run(command: list[str]) -> None:
@@ -57,32 +76,56 @@ def demo_settings(results: Path) -> tuple[str, str]:
     return scale, model
 
 
+def room_settings(room: Path) -> str:
+    """camera-height of the room's first camera, from its truth."""
+    cameras = json.loads((room / "truth.json").read_text())["cameras"]
+    name = sorted(cameras)[0]
+    return f"camera-height:{name}={cameras[name]['center'][2]!r}"
+
+
+def compare_files(out: Path, reference: Path) -> None:
+    """One line per file the executable wrote, then the summary line."""
+    written = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    identical = 0
+    for name in written:
+        same = (reference / name).is_file() and (out / name).read_bytes() == (reference / name).read_bytes()
+        identical += same
+        print(f"{name:<26} {'identical' if same else 'DIFFERENT'}")
+    print(f"native-parity: identical={identical}/{len(written)}")
+
+
 def main() -> None:
     args = parse_args()
-    demo = Path(args.demo)
-    results = demo / "results"
     native = find_native(args.native)
-    scale, model = demo_settings(results)
-    sequence, intrinsics = demo / "sequence" / "sequence.json", demo / "room" / "intrinsics"
+    if args.room is not None:
+        videos, intrinsics, sequence = args.room / "videos", args.room / "intrinsics", args.sequence
+        scale, model, reference = args.scale or room_settings(args.room), args.model, None
+    else:
+        demo = Path(args.demo)
+        reference = demo / "results"
+        scale, model = demo_settings(reference)
+        videos, sequence, intrinsics = demo / "room" / "videos", demo / "sequence" / "sequence.json", demo / "room" / "intrinsics"
     with tempfile.TemporaryDirectory() as scratch:
         out = Path(scratch) / "native"
         tracks = Path(scratch) / "tracks.json"
-        run([native, "detect", str(demo / "room" / "videos"), "--sequence", str(sequence), "--intrinsics",
-             str(intrinsics), "--out", str(tracks), "--workers", str(args.workers), "--no-progress"])
-        options = ["--tracks", str(tracks), "--intrinsics", str(intrinsics), "--model", model, "--sequence",
-                   str(sequence), "--scale", scale, "--export", "yaml,colmap,anipose"]
+        detect = ["detect", str(videos), "--sequence", str(sequence), "--intrinsics", str(intrinsics),
+                  "--workers", str(args.workers), "--no-progress"]
+        run([native, *detect, "--out", str(tracks)])
+        options = ["--intrinsics", str(intrinsics), "--model", model, "--sequence", str(sequence), "--scale", scale,
+                   "--export", "yaml,colmap,anipose"]
         options += [flag for entries in args.refine_intrinsics for flag in ("--refine-intrinsics", entries)]
-        run([native, "calibrate", *options, "--out", str(out)])
-        if args.refine_intrinsics:  # the demo calibrated without: Python on the same tracks is the reference
-            results = Path(scratch) / "python"
-            run([sys.executable, "-m", "calibproj", "calibrate", *options, "--out", str(results), "--no-report"])
-        written = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
-        identical = 0
-        for name in written:
-            same = (results / name).is_file() and (out / name).read_bytes() == (results / name).read_bytes()
-            identical += same
-            print(f"{name:<26} {'identical' if same else 'DIFFERENT'}")
-    print(f"native-parity: identical={identical}/{len(written)}")
+        run([native, "calibrate", "--tracks", str(tracks), *options, "--out", str(out)])
+        python = [sys.executable, "-m", "calibproj"]
+        if args.room is not None:  # Python detects and calibrates the room on its own
+            python_tracks = Path(scratch) / "python_tracks.json"
+            run([*python, *detect, "--out", str(python_tracks)])
+            reference = Path(scratch) / "python"
+            run([*python, "calibrate", "--tracks", str(python_tracks), *options, "--out", str(reference),
+                 "--no-report"])
+        elif args.refine_intrinsics:  # the demo calibrated without: Python on the same tracks is the reference
+            reference = Path(scratch) / "python"
+            run([*python, "calibrate", "--tracks", str(tracks), *options, "--out", str(reference), "--no-report"])
+        compare_files(out, reference)
 
 
 if __name__ == "__main__":

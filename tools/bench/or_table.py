@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         rmse_room = {p: rmse([per_room[p][n]["rotation_deg"] for n in strong]) for p in ROOMS}
         ratio = rmse_room["or-table"] / rmse_room["demo"]
         table = results["or-table"]["calibration"]
-        heights = [plane["offset"] for plane in table.planes]
+        heights = [plane.offset for plane in table.planes]
         height_mm = min((1e3 * abs(h - TOP_M) for h in heights), default=math.inf)
         top_max, top_p99, top_count = top_points_mm(results["or-table"])
         print(f"  rotation RMSE over {', '.join(strong)}: demo {rmse_room['demo']:.4f}, or-table "

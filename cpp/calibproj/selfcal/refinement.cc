@@ -488,6 +488,20 @@ std::optional<std::string> WeakReason(const LensReport& report) {
   return report.misfit;
 }
 
+OrderedTexts MarkUntrustedLensesWeak(const SelfCalibration& result, formats::Calibration& calibration) {
+  OrderedTexts marked;
+  for (const LensReport& report : result.reports) {
+    const std::optional<std::string> reason = WeakReason(report);
+    if (!reason || calibration.PoseOf(report.camera) == nullptr) continue;
+    for (auto& [name, metrics] : calibration.metrics) {
+      if (name != report.camera || metrics.weak) continue;
+      metrics.weak = true;
+      marked.emplace_back(name, *reason);
+    }
+  }
+  return marked;
+}
+
 nlohmann::ordered_json LensReport::ToJson() const {
   const auto optional = [](const std::optional<double>& value) {
     return value ? nlohmann::ordered_json(*value) : nlohmann::ordered_json(nullptr);

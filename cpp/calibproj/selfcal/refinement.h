@@ -141,6 +141,11 @@ struct SelfCalibration {
   const LensReport* ReportOf(const std::string& camera) const;
 };
 
+// Marks weak every registered camera of `calibration` that `result` gives a WeakReason
+// (its pose rests on a lens nobody checked, so it must not steer comparisons); returns
+// the cameras it marked, with the reason, for the caller to report.
+OrderedTexts MarkUntrustedLensesWeak(const SelfCalibration& result, formats::Calibration& calibration);
+
 // Cameras whose lens cannot be refined, with the reason (a request naming an unknown
 // camera raises std::invalid_argument).
 OrderedTexts RefusedCameras(const RefineRequest& request, const IntrinsicsMap& intrinsics,

@@ -81,9 +81,9 @@ def plane_outlines(calibration: Calibration, extent: float) -> list[np.ndarray]:
 
     out = []
     for plane in calibration.planes:
-        n = np.asarray(plane["normal"], dtype=float)
+        n = np.array(plane.normal, dtype=float)
         n /= np.linalg.norm(n)
-        near = np.abs(calibration.points @ n - plane["offset"]) < 0.01 * extent
+        near = np.abs(calibration.points @ n - plane.offset) < 0.01 * extent
         if near.sum() < 3:
             out.append(np.zeros((0, 3)))
             continue
@@ -92,7 +92,7 @@ def plane_outlines(calibration: Calibration, extent: float) -> list[np.ndarray]:
         v = np.cross(n, u)
         flat = np.column_stack([calibration.points[near] @ u, calibration.points[near] @ v]).astype(np.float32)
         hull = cv2.convexHull(flat).reshape(-1, 2).astype(float)
-        out.append(plane["offset"] * n + hull[:, :1] * u + hull[:, 1:] * v)
+        out.append(plane.offset * n + hull[:, :1] * u + hull[:, 1:] * v)
     return out
 
 

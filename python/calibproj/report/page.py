@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.calibration import Calibration
+from calibproj.calibration import Calibration, Plane
 from calibproj.io.file_names import safe_file_names
 from calibproj.io.intrinsics import Intrinsics, intrinsics_of_cameras
 from calibproj.io.jsonio import atomic_write_bytes, atomic_write_text
@@ -435,14 +435,14 @@ def _summary(calibration: Calibration, views: list[CameraView], provenance: dict
     return f'<table class="summary">{body}</table>'
 
 
-def plane_text(plane: dict, unit: str) -> str:
+def plane_text(plane: Plane, unit: str) -> str:
     """A plane the projection landed on besides the floor (a table top), in words."""
-    normal = np.asarray(plane.get("normal", [0.0, 0.0, 1.0]), dtype=float)
+    normal = np.asarray(plane.normal, dtype=float)
     tilt = float(np.degrees(np.arccos(np.clip(abs(normal[2]) / max(np.linalg.norm(normal), 1e-12), -1.0, 1.0))))
     suffix = " m" if unit == "m" else " units"
-    where = (f"{_number(plane.get('offset', 0.0), 4)}{suffix} above the floor" if tilt < 5.0
+    where = (f"{_number(plane.offset, 4)}{suffix} above the floor" if tilt < 5.0
              else f"tilted {tilt:.1f} deg from the floor")
-    return f"{where}, {plane.get('points', 0)} points (e.g. a table left in the projection)"
+    return f"{where}, {plane.points} points (e.g. a table left in the projection)"
 
 
 def _scale_source(calibration: Calibration, provenance: dict | None) -> str:

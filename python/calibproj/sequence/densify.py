@@ -305,7 +305,7 @@ class _CameraView:
 
 
 def _surfaces(calibration) -> list[tuple[np.ndarray, float]]:
-    planes = [(np.asarray(p["normal"], float), float(p["offset"])) for p in calibration.planes]
+    planes = [(np.asarray(p.normal, float), float(p.offset)) for p in calibration.planes]
     return [(np.array([0.0, 0.0, 1.0]), 0.0)] + planes
 
 
