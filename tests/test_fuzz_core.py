@@ -56,9 +56,8 @@ BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "
                         "_core.ingest.ingest_camera[live]", "_core.check.CameraCheck",
                         "_core.capture.Site", "_core.capture.SiteCamera", "_core.capture.play",
                         "_core.capture.record",
-                        "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.Calibration",
-                        "_core.formats.CameraPose", "_core.formats.CameraMetrics", "_core.formats.Plane",
-                        "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
+                        "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.CommandFlag",
+                        "_core.formats.CameraPose", "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
                         "_core.selfcal.Result", "_core.selfcal.RefineRequest", "_core.selfcal.LensReport",
                         "_core.selfcal.SelfCalibration"}
 
@@ -707,6 +706,9 @@ class Baselines:
             "_core.formats.Calibration.center": Spec([("name", "b")]),
             "_core.selfcal.mark_untrusted_lenses_weak": Spec([("result", self.refinement()),
                                                              ("calibration", copy.copy(calibration))]),
+            "_core.formats.CommandFlag": Spec([]),
+            "_core.formats.command_flag": Spec([("command", "calibrate"), ("name", "--scale")]),
+            "_core.formats.command_flags": Spec([]),
             "_core.formats.CameraPose": Spec([]),
             "_core.formats.CameraMetrics": Spec([("mean_px", 0.3), ("std_px", None), ("observations", 18),
                                                  ("inliers", 17), ("track2_observations", 16), ("view_score", 90)],
@@ -854,6 +856,8 @@ class Baselines:
             "_core.formats.ProjectedMarkers": {
                 "sized": lambda: _core.formats.ProjectedMarkers(np.zeros((2, 3, 2)), 4.0, (60, 30), np.ones((2, 3))),
                 "unsized": lambda: _core.formats.ProjectedMarkers(np.zeros((1, 2, 2)), 1.0, (8, 8))},
+            "_core.formats.CommandFlag": {"scale": lambda: _core.formats.command_flag("calibrate", "--scale"),
+                                          "switch": lambda: _core.formats.command_flag("detect", "--json")},
             "_core.formats.CameraPose": {"read": lambda: _core.formats.read_calibration(self.results_folder).pose("a")},
             "_core.formats.CameraMetrics": {
                 "read": lambda: _core.formats.read_calibration(self.results_folder).metrics["a"]},

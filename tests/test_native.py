@@ -468,11 +468,31 @@ def test_both_tools_take_the_same_options_but_those_listed(command: str, python_
     def options(help_text: str) -> set[str]:
         # The options' own lines, not the examples of the description.
         # --verbose: the program's own option, which the Python command takes after it too.
-        return set(re.findall(r"^\s+(?:-\w, )?(--[a-z][a-z0-9-]*)", help_text, re.MULTILINE)) - {"--help", "--verbose"}
+        # An option's line is indented by two spaces; a wrapped help line by more.
+        return set(re.findall(r"^  (?:-\w, )?(--[a-z][a-z0-9-]*)", help_text, re.MULTILINE)) - {"--help", "--verbose"}
 
     python, native = options(run_python(command, "--help").stdout), options(run_native(command, "--help").stdout)
     assert python - native == python_only
     assert native - python == set()
+
+
+def test_both_tools_describe_a_shared_flag_in_the_core_s_words() -> None:
+    """Every flag of the core's table is made from it in both tools: the same metavar and
+    help (the Python command may add a note of its own after it)."""
+    import argparse
+
+    from calibproj import _core
+    from calibproj.cli import build_parser
+
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
+    native_help = {}
+    for flag in _core.formats.command_flags():
+        action = next(a for a in commands[flag.command]._actions if flag.name in a.option_strings)
+        assert action.help.startswith(flag.help), (flag.command, flag.name)
+        assert (action.metavar or "") == flag.metavar, (flag.command, flag.name)
+        if flag.command not in native_help:
+            native_help[flag.command] = " ".join(run_native(flag.command, "--help").stdout.split())
+        assert " ".join(flag.help.split()) in native_help[flag.command], (flag.command, flag.name)
 
 
 def test_detect_runs_into_one_folder_keep_a_report_each(tmp_path: Path) -> None:

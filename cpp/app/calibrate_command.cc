@@ -40,20 +40,14 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
       "Calibrate the cameras: register every camera and refine, then write camera_poses.json, metrics.json and "
       "points.ply (floor frame: z up, floor z = 0), the tracks.json and intrinsics/ they came from, and the exports "
       "asked for. An existing results folder is only overwritten with --force.");
-  cmd->add_option("--tracks", args->tracks, "tracks.json to calibrate from")->required();
-  cmd->add_option("--intrinsics", args->intrinsics, "folder of per-camera intrinsics files")->required();
-  cmd->add_option("--out", args->out, "results folder")->required();
-  cmd->add_flag("--force", args->force, "overwrite the results of an earlier run in --out");
-  cmd->add_option("--scale", args->scale,
-                  "metric scale from one measurement: camera-height:NAME=METRES, distance:CAM_A,CAM_B=METRES or "
-                  "marker-size:[ARRAY/MARKER=]METRES (default: arbitrary unit)");
-  cmd->add_option("--sequence", args->sequence, "sequence.json of the projection: its projector pixels tie every centre to the floor (and --scale marker-size needs it)");
-  cmd->add_option("--merge", args->merge,
-                  "add the observations of an earlier calibration (its results folder or tracks.json): --tracks "
-                  "then come from a projection planned by `calibproj generate --densify`, and --sequence is that "
-                  "densified sequence.json; same intrinsics as the earlier results");
-  cmd->add_option("--export", args->exports,
-                  "also write the calibration as yaml, colmap and/or anipose (comma-separated)");
+  SharedFlag(cmd, "--tracks", args->tracks)->required();
+  SharedFlag(cmd, "--intrinsics", args->intrinsics)->required();
+  SharedFlag(cmd, "--out", args->out)->required();
+  SharedFlag(cmd, "--force", args->force);
+  SharedFlag(cmd, "--scale", args->scale);
+  SharedFlag(cmd, "--sequence", args->sequence);
+  SharedFlag(cmd, "--merge", args->merge);
+  SharedFlag(cmd, "--export", args->exports);
   // One flag per registration knob, from the table the Python options are made from,
   // so that both commands take the same command lines with the same defaults.
   registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));

@@ -34,27 +34,15 @@ std::shared_ptr<CaptureArguments> AddCaptureCommand(CLI::App& app, CLI::App** co
   cmd->add_option("site", args->site, "the site file (calibproj.site/1: cameras, projector, projection)")
       ->required()
       ->type_name("SITE");
-  cmd->add_option("--out", args->out, "results folder (needed unless --check)")->type_name("DIR");
-  cmd->add_flag("--force", args->force, "replace an existing results folder (the whole folder)");
-  cmd->add_option("--recordings", args->recordings,
-                  "where the cameras are recorded while the capture runs (default: RESULTS_DIR-recordings-<time> "
-                  "beside it); moved into RESULTS_DIR/recordings")
-      ->type_name("DIR");
-  cmd->add_option("--check", args->check,
-                  "check the calibration in RESULTS instead of calibrating (as check): --sequence is then the check "
-                  "projection of `calibproj generate --check RESULTS`; --out gets the repaired results (without "
-                  "--out: check only)")
-      ->type_name("RESULTS");
-  cmd->add_option("--sequence", args->sequence, "project this sequence.json instead of the site file's")
-      ->type_name("FILE");
-  cmd->add_option("--projection", args->projection, "the video of --sequence (default: projection.mp4 beside it)")
-      ->type_name("VIDEO");
-  cmd->add_option("--scale", args->scale, "metric scale from one measurement (as calibrate)")
-      ->type_name("MEASUREMENT");
-  cmd->add_option("--export", args->exports,
-                  "also write the calibration as yaml, colmap and/or anipose (comma-separated)")
-      ->type_name("FORMATS");
-  cmd->add_flag("--no-progress", args->no_progress, "no status lines while recording");
+  SharedFlag(cmd, "--out", args->out);
+  SharedFlag(cmd, "--recordings", args->recordings);
+  SharedFlag(cmd, "--check", args->check);
+  SharedFlag(cmd, "--sequence", args->sequence);
+  SharedFlag(cmd, "--projection", args->projection);
+  SharedFlag(cmd, "--scale", args->scale);
+  SharedFlag(cmd, "--force", args->force);
+  SharedFlag(cmd, "--export", args->exports);
+  SharedFlag(cmd, "--no-progress", args->no_progress);
   registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));
   AddRefinementFlags(cmd, &args->refine_intrinsics, &args->self_calibration);
   *command = cmd;

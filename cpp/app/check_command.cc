@@ -32,12 +32,11 @@ std::shared_ptr<CheckArguments> AddCheckCommand(CLI::App& app, CLI::App** comman
       "cameras are re-fitted against the unchanged ones and a complete results folder is written there, with "
       "check.json.");
   cmd->add_option("results", args->results, "results folder of `calibrate`")->required();
-  cmd->add_option("--tracks", args->tracks, "tracks.json of the check projection")->required();
-  cmd->add_option("--out", args->out, "write the repaired results folder here");
-  cmd->add_flag("--force", args->force, "replace an existing --out");
-  cmd->add_option("--export", args->exports,
-                  "also write the repaired calibration as yaml, colmap and/or anipose (comma-separated)");
-  cmd->add_flag("--json", args->json, "print every camera's verdict as check.json has it");
+  SharedFlag(cmd, "--tracks", args->tracks)->required();
+  SharedFlag(cmd, "--out", args->out);
+  SharedFlag(cmd, "--force", args->force);
+  SharedFlag(cmd, "--export", args->exports);
+  SharedFlag(cmd, "--json", args->json);
   check::VisitCheckOptions(args->options, TableFlags(cmd, "check options"));
   *command = cmd;
   return args;

@@ -301,24 +301,15 @@ std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** comm
       "NAME.json). A camera that fails is reported; the others still give tracks. Exit status 1 "
       "when every camera failed.");
   cmd->add_option("videos", args->videos, "folder of camera videos (<camera>.mp4)")->required()->type_name("VIDEOS_DIR");
-  cmd->add_option("--sequence", args->sequence, "sequence.json of the projection")->required()->type_name("FILE");
-  cmd->add_option("--intrinsics", args->intrinsics, "folder of per-camera intrinsics files")
-      ->required()
-      ->type_name("DIR");
-  cmd->add_option("--out", args->out, "tracks file to write (tracks.json)")->required()->type_name("FILE");
-  cmd->add_flag("--force", args->force, "replace an existing --out");
+  SharedFlag(cmd, "--sequence", args->sequence)->required();
+  SharedFlag(cmd, "--intrinsics", args->intrinsics)->required();
+  SharedFlag(cmd, "--out", args->out)->required();
+  SharedFlag(cmd, "--force", args->force);
   cmd->add_option("--workers", args->workers, "cameras processed at once")->capture_default_str();
-  cmd->add_option("--detector-option", args->detector_options,
-                  "marker detector option as calibproj.detect_markers takes it, e.g. quad_decimate=2 (repeatable; "
-                  "default: the detector's defaults)")
-      ->type_name("NAME=VALUE")
-      ->allow_extra_args(false);
-  cmd->add_option("--exposure", args->exposures,
-                  "known exposure time of one camera (repeatable; default: --exposure-s for all)")
-      ->type_name("CAMERA=SECONDS")
-      ->allow_extra_args(false);
-  cmd->add_flag("--no-progress", args->no_progress, "no progress lines");
-  cmd->add_flag("--json", args->json, "print the report as JSON instead of a table");
+  SharedFlag(cmd, "--detector-option", args->detector_options)->allow_extra_args(false);
+  SharedFlag(cmd, "--exposure", args->exposures)->allow_extra_args(false);
+  SharedFlag(cmd, "--no-progress", args->no_progress);
+  SharedFlag(cmd, "--json", args->json);
   // One flag per knob of the ingest's table, from which the Python IngestOptions and
   // its flags are made too: both commands take the same command lines.
   ingest::VisitIngestOptions(args->options, TableFlags(cmd, "ingest options"));

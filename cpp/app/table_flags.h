@@ -10,6 +10,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "calibproj/formats/command_flags.h"
 #include "calibproj/formats/files.h"
 #include "calibproj/registration/option_table.h"
 
@@ -48,6 +49,18 @@ inline auto TableFlags(CLI::App* command, const std::string& group) {
       command->add_option(flag, field, help)->capture_default_str()->group(group);
     }
   };
+}
+
+// A flag both tools take (formats::SharedFlag): its name, metavar and help from the
+// table, `value` filled by CLI11; a switch (no metavar) for a bool.
+template <typename T>
+CLI::Option* SharedFlag(CLI::App* command, const std::string& name, T& value) {
+  const formats::CommandFlag& flag = formats::SharedFlag(command->get_name(), name);
+  if constexpr (std::is_same_v<T, bool>) {
+    return command->add_flag(flag.name, value, flag.help);
+  } else {
+    return command->add_option(flag.name, value, flag.help)->type_name(flag.metavar);
+  }
 }
 
 }  // namespace calibproj::app

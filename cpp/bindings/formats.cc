@@ -10,6 +10,7 @@
 #include <filesystem>
 
 #include "calibproj/formats/calibration.h"
+#include "calibproj/formats/command_flags.h"
 #include "calibproj/formats/detect_report.h"
 #include "calibproj/formats/export.h"
 #include "calibproj/formats/files.h"
@@ -265,6 +266,15 @@ void register_formats(py::module_& m) {
       },
       py::arg("directory"), py::arg("calibration"),
       "camera_poses.json, metrics.json and points.ply of a Calibration, each written atomically");
+  py::class_<formats::CommandFlag>(m, "CommandFlag", "A command-line flag that calibproj and calibproj-native both take.")
+      .def_readonly("command", &formats::CommandFlag::command)
+      .def_readonly("name", &formats::CommandFlag::name)
+      .def_readonly("metavar", &formats::CommandFlag::metavar, "empty for a switch")
+      .def_readonly("help", &formats::CommandFlag::help);
+  m.def("command_flags", &formats::SharedCommandFlags,
+        "Every flag both tools take, by command: the one declaration of their names and help texts");
+  m.def("command_flag", &formats::SharedFlag, py::arg("command"), py::arg("name"),
+        "The flag `name` of `command`; ValueError when both tools do not take it");
   m.def(
       "read_intrinsics",
       [](const std::filesystem::path& path, const std::string& name) {

@@ -33,8 +33,9 @@ import argparse
 from pathlib import Path
 
 from calibproj.commands.options import (add_dataclass_arguments, add_detector_option_argument,
-                                        add_exposure_argument, add_refine_argument, dataclass_changed_from_args,
-                                        dataclass_from_args, parse_detector_options, parse_exposures)
+                                        add_exposure_argument, add_refine_argument, add_shared_argument,
+                                        dataclass_changed_from_args, dataclass_from_args, parse_detector_options,
+                                        parse_exposures)
 
 
 # Ingest options that calibrate does not take: the registration has an option of that name.
@@ -48,17 +49,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     # What most runs need comes first; every other knob is in a group of its own.
     parser.add_argument("videos", nargs="?", metavar="VIDEOS_DIR", help="folder of camera videos (<camera>.mp4)")
-    parser.add_argument("--sequence", metavar="FILE",
-                        help="sequence.json of the projection (needed with videos and by --scale marker-size)")
-    parser.add_argument("--intrinsics", metavar="DIR",
-                        help="folder of per-camera intrinsics files (may be left out with --nominal-fov)")
-    parser.add_argument("--out", required=True, metavar="DIR", help="results folder")
-    parser.add_argument("--scale", metavar="MEASUREMENT",
-                        help="metric scale from one measurement (see above; default: arbitrary unit)")
-    parser.add_argument("--export", metavar="FORMATS",
-                        help="also write the calibration as yaml, colmap and/or anipose (comma-separated)")
-    parser.add_argument("--force", action="store_true", help="replace an existing results folder (the whole folder)")
-    parser.add_argument("--tracks", metavar="FILE", help="tracks.json to calibrate from, instead of videos")
+    add_shared_argument(parser, "calibrate", "--sequence")
+    add_shared_argument(parser, "calibrate", "--intrinsics", " (may be left out with --nominal-fov)")
+    add_shared_argument(parser, "calibrate", "--out", required=True)
+    add_shared_argument(parser, "calibrate", "--scale")
+    add_shared_argument(parser, "calibrate", "--export")
+    add_shared_argument(parser, "calibrate", "--force")
+    add_shared_argument(parser, "calibrate", "--tracks", ", instead of videos")
 
     output = parser.add_argument_group("output and progress")
     output.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
@@ -66,10 +63,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     output.add_argument("--no-progress", action="store_true", help="no progress bars")
 
     more = parser.add_argument_group("more observations and lenses")
-    more.add_argument("--merge", metavar="RESULTS",
-                      help="add the observations of an earlier calibration (its results folder or tracks.json): "
-                           "the new videos record a projection planned by `calibproj generate --densify RESULTS`, "
-                           "and --sequence is that densified sequence.json; same intrinsics as RESULTS")
+    add_shared_argument(more, "calibrate", "--merge")
     add_refine_argument(more)
     more.add_argument("--nominal-fov", type=float, metavar="DEG",
                       help="with videos and --refine-intrinsics: a camera without an intrinsics file starts "
@@ -77,8 +71,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     videos = parser.add_argument_group("ingest of the videos (as calibproj detect)")
     videos.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
-    add_exposure_argument(videos, "with videos; default: estimated")
-    add_detector_option_argument(videos)
+    # The ingest's own flags, as calibproj detect takes them (calibproj-native calibrate
+    # takes tracks only).
+    add_exposure_argument(videos, "detect", " (with videos)")
+    add_detector_option_argument(videos, "detect")
     add_dataclass_arguments(parser, RegistrationOptions, "registration options")
     add_dataclass_arguments(parser, SelfCalibrationOptions, "self-calibration options (with --refine-intrinsics)")
     # --homography-threshold-px is the registration's here; the ingest keeps its default

@@ -32,7 +32,8 @@ from __future__ import annotations
 
 import argparse
 
-from calibproj.commands.options import add_dataclass_arguments, add_refine_argument, dataclass_from_args
+from calibproj.commands.options import (add_dataclass_arguments, add_refine_argument, add_shared_argument,
+                                        dataclass_from_args)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,28 +41,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from calibproj.self_calibration import SelfCalibrationOptions
 
     parser.add_argument("site", metavar="SITE", help="the site file (calibproj.site/1: cameras, projector, projection)")
-    parser.add_argument("--out", metavar="DIR", help="results folder (needed unless --check)")
-    parser.add_argument("--force", action="store_true", help="replace an existing results folder (the whole folder)")
-    parser.add_argument("--recordings", metavar="DIR",
-                        help="where the cameras are recorded while the capture runs (default: "
-                             "RESULTS_DIR-recordings-<time> beside it); moved into RESULTS_DIR/recordings")
-    parser.add_argument("--check", metavar="RESULTS",
-                        help="check the calibration in RESULTS instead of calibrating (as calibproj check): "
-                             "--sequence is then the check projection of `calibproj generate --check RESULTS`; "
-                             "--out gets the repaired results (without --out: check only)")
-    parser.add_argument("--sequence", metavar="FILE",
-                        help="project this sequence.json instead of the site file's (its video: --projection)")
-    parser.add_argument("--projection", metavar="VIDEO",
-                        help="the video of --sequence (default: projection.mp4 beside it)")
-    parser.add_argument("--scale", metavar="MEASUREMENT",
-                        help="metric scale from one measurement (as calibproj calibrate)")
-    parser.add_argument("--export", metavar="FORMATS",
-                        help="also write the calibration as yaml, colmap and/or anipose (comma-separated)")
+    for name in ("--out", "--force", "--recordings", "--check", "--sequence", "--projection", "--scale", "--export"):
+        add_shared_argument(parser, "capture", name)
     add_refine_argument(parser)
     output = parser.add_argument_group("output and progress")
     output.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
     output.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
-    output.add_argument("--no-progress", action="store_true", help="no status lines while recording")
+    add_shared_argument(output, "capture", "--no-progress")
     add_dataclass_arguments(parser, RegistrationOptions, "registration options")
     add_dataclass_arguments(parser, SelfCalibrationOptions, "self-calibration options (with --refine-intrinsics)")
 

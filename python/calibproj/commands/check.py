@@ -33,20 +33,20 @@ from __future__ import annotations
 
 import argparse
 
-from calibproj.commands.options import add_dataclass_arguments, dataclass_from_args
+from calibproj.commands.options import add_dataclass_arguments, add_shared_argument, dataclass_from_args
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from calibproj.check_and_repair import CheckOptions
 
     parser.add_argument("results", metavar="RESULTS", help="results folder of calibproj calibrate")
     parser.add_argument("videos", nargs="?", metavar="VIDEOS_DIR", help="folder of the check projection's videos")
-    parser.add_argument("--tracks", metavar="FILE", help="tracks.json of the check projection, instead of videos")
+    add_shared_argument(parser, "check", "--tracks", extra_help=", instead of videos")
     parser.add_argument("--sequence", metavar="FILE", help="sequence.json of the check projection (with videos)")
-    parser.add_argument("--out", metavar="DIR", help="write the repaired results folder here")
-    parser.add_argument("--force", action="store_true", help="replace an existing --out folder (the whole folder)")
-    parser.add_argument("--export", metavar="FORMATS", help="with --out: also write yaml, colmap and/or anipose")
+    add_shared_argument(parser, "check", "--out")
+    add_shared_argument(parser, "check", "--force")
+    add_shared_argument(parser, "check", "--export")
     parser.add_argument("--no-report", action="store_true", help="with --out: no report.html")
-    parser.add_argument("--json", action="store_true", help="print every camera's verdict as JSON")
+    add_shared_argument(parser, "check", "--json")
     parser.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_dataclass_arguments(parser, CheckOptions, "check options")

@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 
 from calibproj.commands.options import (add_dataclass_arguments, add_detector_option_argument,
-                                        add_exposure_argument, dataclass_from_args, parse_detector_options,
+                                        add_exposure_argument, add_shared_argument, dataclass_from_args, parse_detector_options,
                                         parse_exposures)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -29,16 +29,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from calibproj.ingest_options import IngestOptions
 
     parser.add_argument("videos", metavar="VIDEOS_DIR", help="folder of camera videos (<camera>.mp4)")
-    parser.add_argument("--sequence", required=True, metavar="FILE", help="sequence.json of the projection")
-    parser.add_argument("--intrinsics", required=True, metavar="DIR", help="folder of per-camera intrinsics files")
-    parser.add_argument("--out", required=True, metavar="FILE", help="tracks file to write (tracks.json)")
-    parser.add_argument("--force", action="store_true", help="replace an existing --out")
+    add_shared_argument(parser, "detect", "--sequence", required=True)
+    add_shared_argument(parser, "detect", "--intrinsics", required=True)
+    add_shared_argument(parser, "detect", "--out", required=True)
+    add_shared_argument(parser, "detect", "--force")
     parser.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                         help=f"cameras processed at once (default {DEFAULT_WORKERS})")
-    add_detector_option_argument(parser)
-    add_exposure_argument(parser, "default: --exposure-s for all")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    parser.add_argument("--json", action="store_true", help="print the report as JSON instead of a table")
+    add_detector_option_argument(parser, "detect")
+    add_exposure_argument(parser, "detect")
+    add_shared_argument(parser, "detect", "--no-progress")
+    add_shared_argument(parser, "detect", "--json")
     add_dataclass_arguments(parser, IngestOptions, "ingest options")
 
 

@@ -25,6 +25,20 @@ def attribute_docs(cls: type) -> dict[str, str]:
     return docs
 
 
+def add_shared_argument(parser: Any, command: str, name: str, extra_help: str = "", **kwargs: Any) -> None:
+    """A flag that ``calibproj-native COMMAND`` takes too: its metavar and help are the
+    core's (``_core.formats.command_flag``), ``extra_help`` what only this tool adds;
+    ``kwargs`` (required, action, default, type) are argparse's."""
+    from calibproj import _core
+
+    flag = _core.formats.command_flag(command, name)
+    if not flag.metavar:
+        kwargs.setdefault("action", "store_true")
+    else:
+        kwargs["metavar"] = flag.metavar
+    parser.add_argument(name, help=flag.help + extra_help, **kwargs)
+
+
 def add_refine_argument(parser: Any) -> None:
     """``--refine-intrinsics``, as ``calibproj-native`` takes it (the help is the core's)."""
     from calibproj import _core
@@ -81,10 +95,8 @@ def _comma_list(item_type: type):
     return parse
 
 
-def add_detector_option_argument(parser: Any) -> None:
-    parser.add_argument("--detector-option", action="append", default=[], metavar="NAME=VALUE",
-                        help="marker detector option as calibproj.detect_markers takes it, e.g. quad_decimate=2 "
-                             "(repeatable; default: the detector's defaults)")
+def add_detector_option_argument(parser: Any, command: str) -> None:
+    add_shared_argument(parser, command, "--detector-option", action="append", default=[])
 
 
 def parse_detector_options(items: list[str]) -> dict[str, Any]:
@@ -103,10 +115,8 @@ def parse_detector_options(items: list[str]) -> dict[str, Any]:
     return options
 
 
-def add_exposure_argument(parser: Any, default: str) -> None:
-    parser.add_argument("--exposure", action="append", default=[], metavar="CAMERA=SECONDS",
-                        help="known exposure time of one camera: with it a rolling shutter's readout is measured "
-                             f"where the light codes alone leave it open (repeatable; {default})")
+def add_exposure_argument(parser: Any, command: str, extra_help: str = "") -> None:
+    add_shared_argument(parser, command, "--exposure", extra_help, action="append", default=[])
 
 
 def parse_exposures(items: list[str]) -> dict[str, float]:
