@@ -57,6 +57,8 @@ BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "
                         "_core.capture.Site", "_core.capture.SiteCamera", "_core.capture.play",
                         "_core.capture.record",
                         "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.CommandFlag",
+                        "_core.registration.PairCandidate", "_core.registration.InitialPairResult", "_core.registration.NextCameraCandidate", "_core.registration.RegisterResult",
+                        "_core.registration.AdjustResult", "_core.registration.ReliefTest", "_core.registration.RefineResult", "_core.registration.RunSummary",
                         "_core.formats.CameraPose", "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
                         "_core.selfcal.Result", "_core.selfcal.RefineRequest", "_core.selfcal.LensReport",
                         "_core.selfcal.SelfCalibration"}
@@ -497,6 +499,14 @@ class Baselines:
                 [("cameras", []), ("joint", np.zeros((0, 0)))]),
             "_core.registration.Reconstruction.projector_prediction": Spec([("point", 0)]),
             "_core.registration.Reconstruction.run": Spec([("log", lambda message: None)]),
+            "_core.registration.PairCandidate": Spec([]),
+            "_core.registration.InitialPairResult": Spec([]),
+            "_core.registration.NextCameraCandidate": Spec([]),
+            "_core.registration.RegisterResult": Spec([]),
+            "_core.registration.AdjustResult": Spec([]),
+            "_core.registration.ReliefTest": Spec([]),
+            "_core.registration.RefineResult": Spec([]),
+            "_core.registration.RunSummary": Spec([]),
             "_core.registration.Reconstruction.calibration": Spec(
                 [("camera_names", [f"c{k}" for k in range(len(s["K"]))]), ("point_ids", np.arange(len(s["points"]))),
                  ("left_out", [("x", "no intrinsics file")]), ("model", "coplanar")]),
@@ -807,6 +817,21 @@ class Baselines:
             "_core.registration.Reconstruction": {
                 state: (lambda state=state: self.reconstruction(state))
                 for state in ("fresh", "initialized", "registered")},
+            # The step results, from a registration in each of its states.
+            "_core.registration.PairCandidate": {"ranked": lambda: self.reconstruction().rank_initial_pairs()[0]},
+            "_core.registration.InitialPairResult": {
+                "initialized": lambda: self.reconstruction().initialize(0, 1),
+                "refused": lambda: self.reconstruction("initialized").initialize(0, 1)},
+            "_core.registration.NextCameraCandidate": {
+                "next": lambda: self.reconstruction("initialized").choose_next_camera(),
+                "none": lambda: self.reconstruction("registered").choose_next_camera()},
+            "_core.registration.RegisterResult": {
+                "registered": lambda: self.reconstruction("initialized").register_camera(2),
+                "refused": lambda: self.reconstruction().register_camera(2)},
+            "_core.registration.AdjustResult": {"adjusted": lambda: self.reconstruction("initialized").adjust(True)},
+            "_core.registration.RefineResult": {"refined": lambda: self.reconstruction("registered").refine()},
+            "_core.registration.ReliefTest": {"refined": lambda: self.reconstruction("registered").refine().relief},
+            "_core.registration.RunSummary": {"run": lambda: self.reconstruction().run()},
             "_core.geometry.Similarity3": {
                 "estimated": lambda: _core.geometry.estimate_similarity(s["points"], s["points"] * 2),
                 "degenerate": lambda: _core.geometry.estimate_similarity(s["points"][:1], s["points"][:1])},

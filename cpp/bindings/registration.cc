@@ -89,62 +89,78 @@ py::array_t<bool> BoolArray(const std::vector<bool>& values) {
   return out;
 }
 
-py::dict ToDict(const registration::PairCandidate& p) {
-  py::dict d;
-  d["camera1"] = p.camera1; d["camera2"] = p.camera2; d["score1"] = p.score1; d["score2"] = p.score2;
-  d["common_points"] = p.common_points; d["connected_cameras"] = p.connected_cameras;
-  return d;
+// The registration's step results as read-only classes, each field documented where
+// the struct is (registration/reconstruction.h).
+void RegisterStepResults(py::module_& m) {
+  using namespace registration;
+  py::class_<PairCandidate>(m, "PairCandidate", "A camera pair that could start the registration.")
+      .def_readonly("camera1", &PairCandidate::camera1)
+      .def_readonly("camera2", &PairCandidate::camera2)
+      .def_readonly("score1", &PairCandidate::score1, "view score of the common points in camera1")
+      .def_readonly("score2", &PairCandidate::score2, "view score of the common points in camera2")
+      .def_readonly("common_points", &PairCandidate::common_points)
+      .def_readonly("connected_cameras", &PairCandidate::connected_cameras,
+                    "size of the group of cameras connected to this pair");
+  py::class_<InitialPairResult>(m, "InitialPairResult", "How a pair's initialisation went.")
+      .def_readonly("success", &InitialPairResult::success)
+      .def_readonly("reason", &InitialPairResult::reason, "why it failed")
+      .def_readonly("homography_inliers", &InitialPairResult::homography_inliers)
+      .def_readonly("median_parallax_deg", &InitialPairResult::median_parallax_deg)
+      .def_readonly("solutions", &InitialPairResult::solutions,
+                    "decompositions with the points in front of both cameras")
+      .def_readonly("third_camera", &InitialPairResult::third_camera,
+                    "camera used to pick between two solutions; -1 if both were refined")
+      .def_readonly("normal_agreement", &InitialPairResult::normal_agreement,
+                    "cosine between the chosen normal and the third camera's")
+      .def_readonly("points", &InitialPairResult::points);
+  py::class_<NextCameraCandidate>(m, "NextCameraCandidate", "The unregistered camera to register next.")
+      .def_readonly("camera", &NextCameraCandidate::camera, "-1: none left")
+      .def_readonly("score", &NextCameraCandidate::score)
+      .def_readonly("points", &NextCameraCandidate::points, "observations of reconstructed points");
+  py::class_<RegisterResult>(m, "RegisterResult", "How a camera's registration went.")
+      .def_readonly("success", &RegisterResult::success)
+      .def_readonly("reason", &RegisterResult::reason, "why it failed")
+      .def_readonly("correspondences", &RegisterResult::correspondences)
+      .def_readonly("inliers", &RegisterResult::inliers)
+      .def_readonly("mean_error_px", &RegisterResult::mean_error_px, "after refinement, over the inliers");
+  py::class_<AdjustResult>(m, "AdjustResult", "A bundle adjustment's figures.")
+      .def_readonly("initial_cost", &AdjustResult::initial_cost)
+      .def_readonly("final_cost", &AdjustResult::final_cost)
+      .def_readonly("iterations", &AdjustResult::iterations)
+      .def_readonly("termination", &AdjustResult::termination)
+      .def_readonly("cameras", &AdjustResult::cameras)
+      .def_readonly("points", &AdjustResult::points)
+      .def_readonly("observations", &AdjustResult::observations)
+      .def_readonly("solve_time_s", &AdjustResult::solve_time_s);
+  py::class_<ReliefTest>(m, "ReliefTest", "Whether the floor was found uneven.")
+      .def_readonly("tested", &ReliefTest::tested)
+      .def_readonly("detected", &ReliefTest::detected)
+      .def_readonly("nodes", &ReliefTest::nodes)
+      .def_readonly("gain_chi2", &ReliefTest::gain_chi2, "chi-square of the observations the relief takes off")
+      .def_readonly("threshold_chi2", &ReliefTest::threshold_chi2,
+                    "99.9 % quantile of chi-square with `nodes` degrees of freedom")
+      .def_property_readonly("message", &ReliefTest::Describe, "the verdict and its figures ('' when not tested)");
+  py::class_<RefineResult>(m, "RefineResult", "The final refinement's figures.")
+      .def_readonly("rounds", &RefineResult::rounds)
+      .def_readonly("changed", &RefineResult::changed, "observations whose inlier status changed, over all rounds")
+      .def_readonly("removed", &RefineResult::removed, "inactive observations at the end")
+      .def_readonly("planes_found", &RefineResult::planes_found, "planes found besides the main one (coplanar)")
+      .def_readonly("relief", &RefineResult::relief)
+      .def_readonly("last", &RefineResult::last, "the last round's bundle adjustment")
+      .def_readonly("thresholds", &RefineResult::thresholds, "per camera, pixels")
+      .def_readonly("seconds", &RefineResult::seconds, "wall time of the whole refinement")
+      .def_readonly("covariance_seconds", &RefineResult::covariance_seconds, "of it, the covariance's");
+  py::class_<RunSummary>(m, "RunSummary", "What Reconstruction.run did.")
+      .def_readonly("initialized", &RunSummary::initialized)
+      .def_readonly("initial_pair", &RunSummary::initial_pair)
+      .def_readonly("initial", &RunSummary::initial)
+      .def_readonly("refined", &RunSummary::refined);
 }
-
-py::dict ToDict(const registration::InitialPairResult& r) {
-  py::dict d;
-  d["success"] = r.success; d["reason"] = r.reason; d["homography_inliers"] = r.homography_inliers;
-  d["median_parallax_deg"] = r.median_parallax_deg;
-  d["solutions"] = r.solutions; d["third_camera"] = r.third_camera; d["normal_agreement"] = r.normal_agreement;
-  d["points"] = r.points;
-  return d;
-}
-
-py::dict ToDict(const registration::NextCameraCandidate& n) {
-  py::dict d;
-  d["camera"] = n.camera; d["score"] = n.score; d["points"] = n.points;
-  return d;
-}
-
-py::dict ToDict(const registration::RegisterResult& r) {
-  py::dict d;
-  d["success"] = r.success; d["reason"] = r.reason; d["correspondences"] = r.correspondences;
-  d["inliers"] = r.inliers; d["mean_error_px"] = r.mean_error_px;
-  return d;
-}
-
-py::dict ToDict(const registration::AdjustResult& r) {
-  py::dict d;
-  d["initial_cost"] = r.initial_cost; d["final_cost"] = r.final_cost; d["iterations"] = r.iterations;
-  d["termination"] = r.termination; d["cameras"] = r.cameras; d["points"] = r.points;
-  d["observations"] = r.observations; d["solve_time_s"] = r.solve_time_s;
-  return d;
-}
-
-py::dict ToDict(const registration::ReliefTest& t) {
-  py::dict d;
-  d["tested"] = t.tested; d["detected"] = t.detected; d["nodes"] = t.nodes;
-  d["gain_chi2"] = t.gain_chi2; d["threshold_chi2"] = t.threshold_chi2; d["message"] = t.Describe();
-  return d;
-}
-
-py::dict ToDict(const registration::RefineResult& r) {
-  py::dict d;
-  d["rounds"] = r.rounds; d["changed"] = r.changed; d["removed"] = r.removed; d["planes_found"] = r.planes_found; d["last"] = ToDict(r.last); d["thresholds"] = r.thresholds;
-  d["seconds"] = r.seconds; d["covariance_seconds"] = r.covariance_seconds;
-  d["relief"] = ToDict(r.relief);
-  return d;
-}
-
 
 }  // namespace
 
 void register_registration(py::module_& m) {
+  RegisterStepResults(m);
   using GIL = py::call_guard<py::gil_scoped_release>;
   py::class_<Reconstruction>(m, "Reconstruction", R"doc(Incremental registration state and its steps.
 
@@ -164,30 +180,26 @@ of calibproj.registration.RegistrationOptions.)doc")
            }),
            py::arg("intrinsics"), py::arg("image_sizes"), py::arg("num_points"), py::arg("camera_index"),
            py::arg("point_index"), py::arg("observed"))
-      .def("rank_initial_pairs", [](const Reconstruction& r) {
-             py::list out;
-             for (const auto& p : r.RankInitialPairs()) out.append(ToDict(p));
-             return out;
-           }, "Camera pairs with enough common points, best first (maximising both view scores).")
+      .def("rank_initial_pairs", &Reconstruction::RankInitialPairs, "Camera pairs with enough common points, best first (maximising both view scores).")
       .def("initialize", [](Reconstruction& r, int c1, int c2) {
              registration::InitialPairResult result;
              { py::gil_scoped_release release; result = r.Initialize(c1, c2); }
-             return ToDict(result);
+             return result;
            }, py::arg("camera1"), py::arg("camera2"),
            "Homography, decomposition, disambiguation, initial plane and points of a pair.")
-      .def("choose_next_camera", [](const Reconstruction& r) { return ToDict(r.ChooseNextCamera()); },
+      .def("choose_next_camera", &Reconstruction::ChooseNextCamera,
            "Unregistered camera with the best view score on reconstructed points (camera -1: none).")
       .def("register_camera", [](Reconstruction& r, int c) {
              registration::RegisterResult result;
              { py::gil_scoped_release release; result = r.RegisterCamera(c); }
-             return ToDict(result);
+             return result;
            }, py::arg("camera"), "PnP RANSAC and refinement; a failure marks the camera failed.")
       .def("add_points", &Reconstruction::AddPoints, py::arg("camera"), GIL(),
            "Triangulate (FREE) or back-project (COPLANAR) the new points a registered camera sees.")
       .def("adjust", [](Reconstruction& r, bool final) {
              registration::AdjustResult result;
              { py::gil_scoped_release release; result = r.Adjust(final); }
-             return ToDict(result);
+             return result;
            }, py::arg("final") = false, "Bundle adjustment of all registered cameras and reconstructed points.")
       .def("outlier_thresholds", &Reconstruction::OutlierThresholds,
            "Per-camera reprojection thresholds max(outlier_threshold_px, factor * robust sigma).")
@@ -198,7 +210,7 @@ of calibproj.registration.RegistrationOptions.)doc")
       .def("refine", [](Reconstruction& r) {
              registration::RefineResult result;
              { py::gil_scoped_release release; result = r.Refine(); }
-             return ToDict(result);
+             return result;
            }, "Final bundle adjustment and outlier removal, repeated until nothing is removed.")
       .def("fail_unregistered", &Reconstruction::FailUnregistered, "Give every unregistered camera its reason.")
       .def("run", [](Reconstruction& r, const std::function<void(const std::string&)>& log) {
@@ -211,12 +223,7 @@ of calibproj.registration.RegistrationOptions.)doc")
                  log(message);
                });
              }
-             py::dict d;
-             d["initialized"] = summary.initialized;
-             d["initial_pair"] = ToDict(summary.initial_pair);
-             d["initial"] = ToDict(summary.initial);
-             d["refined"] = ToDict(summary.refined);
-             return d;
+             return summary;
            }, py::arg("log") = std::function<void(const std::string&)>(),
            "All steps in order, in C++ (the standalone executable's path).")
       .def_property_readonly("num_cameras", &Reconstruction::num_cameras)

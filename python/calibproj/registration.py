@@ -7,7 +7,7 @@ hook in, or stop::
 
     driver = RegistrationDriver(tracks, intrinsics)
     for step in driver.steps():
-        print(step.name, step.info)
+        print(step.name, step.camera, step.result)
     calibration = driver.result()
 
 ``calibrate(tracks, intrinsics)`` does all of it and returns a ``Calibration``.
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -59,7 +59,14 @@ class Step:
 
     name: str  # initialize, register, adjust, refine, done
     camera: str | None = None
-    info: dict[str, Any] = field(default_factory=dict)
+    # The core's result of the step: InitialPairResult, RegisterResult, AdjustResult or
+    # RefineResult (_core.registration); None for done.
+    result: Any = None
+    candidate: Any = None  # initialize: the PairCandidate; register: the NextCameraCandidate
+    adjust: Any = None  # register: the bundle adjustment that followed (AdjustResult)
+    new_points: int = 0  # register: points it added
+    outliers_changed: int = 0  # register: observations whose inlier status changed
+    reason: str = ""  # done: why nothing was registered, if so
 
 
 
@@ -125,46 +132,46 @@ class RegistrationDriver:
         """The steps of the C++ ``run()``, in its order, yielding after each one."""
         rec = self.reconstruction
         if rec is None:
-            yield Step("done", None, {"reason": "no camera to register"})
+            yield Step("done", reason="no camera to register")
             return
         for pair in rec.rank_initial_pairs():
-            info = rec.initialize(pair["camera1"], pair["camera2"])
-            names = (self.name(pair["camera1"]), self.name(pair["camera2"]))
-            if info["success"]:
+            info = rec.initialize(pair.camera1, pair.camera2)
+            names = (self.name(pair.camera1), self.name(pair.camera2))
+            if info.success:
                 self.initial_pair = names
                 logger.info("initial pair %s-%s: %d homography inliers, %d points", *names,
-                            info["homography_inliers"], info["points"])
-                yield Step("initialize", f"{names[0]}-{names[1]}", {**pair, **info})
+                            info.homography_inliers, info.points)
+                yield Step("initialize", f"{names[0]}-{names[1]}", info, candidate=pair)
                 break
-            logger.info("initial pair %s-%s rejected: %s", *names, info["reason"])
+            logger.info("initial pair %s-%s rejected: %s", *names, info.reason)
         if self.initial_pair is None:
             rec.fail_unregistered()
-            yield Step("done", None, {"reason": "no camera pair could be initialised"})
+            yield Step("done", reason="no camera pair could be initialised")
             return
         yield Step("adjust", None, rec.adjust(False))
-        while (next_camera := rec.choose_next_camera())["camera"] >= 0:
-            camera = next_camera["camera"]
+        while (next_camera := rec.choose_next_camera()).camera >= 0:
+            camera = next_camera.camera
             info = rec.register_camera(camera)
-            if not info["success"]:
-                logger.warning("camera %s failed: %s", self.name(camera), info["reason"])
-                yield Step("register", self.name(camera), {**next_camera, **info})
+            if not info.success:
+                logger.warning("camera %s failed: %s", self.name(camera), info.reason)
+                yield Step("register", self.name(camera), info, candidate=next_camera)
                 continue
-            info["new_points"] = rec.add_points(camera)
+            new_points = rec.add_points(camera)
             adjusted = rec.adjust(False)
-            info["outliers_changed"] = rec.filter_outliers()
+            outliers_changed = rec.filter_outliers()
             logger.info("camera %s registered: %d of %d correspondences, %.3f px, %d new points",
-                        self.name(camera), info["inliers"], info["correspondences"], info["mean_error_px"],
-                        info["new_points"])
-            yield Step("register", self.name(camera), {**next_camera, **info, "adjust": adjusted})
+                        self.name(camera), info.inliers, info.correspondences, info.mean_error_px, new_points)
+            yield Step("register", self.name(camera), info, candidate=next_camera, adjust=adjusted,
+                       new_points=new_points, outliers_changed=outliers_changed)
         rec.fail_unregistered()
         refined = rec.refine()
-        if refined["relief"]["tested"]:
-            logger.info("%s", refined["relief"]["message"])
+        if refined.relief.tested:
+            logger.info("%s", refined.relief.message)
         logger.info("refined: %d rounds, %d observations left out as outliers, cost %.6g",
-                    refined["rounds"], refined["removed"], refined["last"]["final_cost"])
+                    refined.rounds, refined.removed, refined.last.final_cost)
         self._warn_weak_cameras()
         yield Step("refine", None, refined)
-        yield Step("done", None, {})
+        yield Step("done")
 
     def _warn_weak_cameras(self) -> None:
         calibration = self.result()

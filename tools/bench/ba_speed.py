@@ -237,10 +237,10 @@ def covariance_share(scene: str, seed: int, runs: int) -> float:
     shares, refine_times, covariance_times = [], [], []
     for _ in range(runs):
         driver = RegistrationDriver(sim.tracks, sim.intrinsics)
-        refined = next(step.info for step in driver.steps() if step.name == "refine")
-        shares.append(refined["covariance_seconds"] / refined["seconds"])
-        refine_times.append(refined["seconds"])
-        covariance_times.append(refined["covariance_seconds"])
+        refined = next(step.result for step in driver.steps() if step.name == "refine")
+        shares.append(refined.covariance_seconds / refined.seconds)
+        refine_times.append(refined.seconds)
+        covariance_times.append(refined.covariance_seconds)
     print(f"covariance, {scene}: final bundle adjustment median {statistics.median(refine_times):.3f} s, "
           f"its covariances {statistics.median(covariance_times):.4f} s ({statistics.median(shares):.1%})")
     return statistics.median(shares)
