@@ -28,15 +28,17 @@ void CheckObservation(const std::vector<std::string>& cameras, int camera, std::
   if (!xy.allFinite()) throw std::invalid_argument("observations must be finite");
 }
 
-// The names in `names` that `cameras` lacks, sorted; std::invalid_argument naming them.
-void CheckKnown(const std::vector<std::string>& cameras, const std::vector<std::string>& names) {
+// std::invalid_argument "`what` unknown camera(s) [...]" (sorted, each once) when a
+// name is not among `cameras`.
+void CheckKnown(const std::vector<std::string>& cameras, const std::vector<std::string>& names,
+                const std::string& what = "") {
   std::vector<std::string> unknown;
   for (const auto& name : names) {
     if (std::find(cameras.begin(), cameras.end(), name) == cameras.end()) unknown.push_back(name);
   }
   std::sort(unknown.begin(), unknown.end());
   unknown.erase(std::unique(unknown.begin(), unknown.end()), unknown.end());
-  if (!unknown.empty()) throw std::invalid_argument("unknown camera(s) " + PythonList(unknown));
+  if (!unknown.empty()) throw std::invalid_argument(what + "unknown camera(s) " + PythonList(unknown));
 }
 
 }  // namespace
@@ -53,16 +55,11 @@ std::vector<int> CameraIndices(const std::vector<std::string>& cameras, const st
 }
 
 std::vector<int> CameraIndices(const std::vector<std::string>& cameras, const std::vector<std::string>& names) {
+  CheckKnown(cameras, names, "observations of ");
   std::vector<int> out;
-  std::vector<std::string> unknown;
   for (const auto& name : names) {
-    const auto found = std::find(cameras.begin(), cameras.end(), name);
-    if (found == cameras.end()) unknown.push_back(name);
-    out.push_back(static_cast<int>(found - cameras.begin()));
+    out.push_back(static_cast<int>(std::find(cameras.begin(), cameras.end(), name) - cameras.begin()));
   }
-  std::sort(unknown.begin(), unknown.end());
-  unknown.erase(std::unique(unknown.begin(), unknown.end()), unknown.end());
-  if (!unknown.empty()) throw std::invalid_argument("observations of unknown camera(s) " + PythonList(unknown));
   return out;
 }
 
