@@ -35,22 +35,22 @@ def test_perturbed_start_reaches_the_cost_of_the_true_start(rig, model: str) -> 
     from_truth = solve(rig, rig.poses, rig.points, rig.plane, model=model)
     poses, points, plane = perturbed_start(rig, seed=1)
     from_perturbed = solve(rig, poses, points, plane, model=model)
-    assert from_truth["usable"] and from_perturbed["usable"]
-    assert from_perturbed["initial_cost"] > 100.0 * from_perturbed["final_cost"]
-    relative = abs(from_perturbed["final_cost"] - from_truth["final_cost"]) / from_truth["final_cost"]
+    assert from_truth.usable and from_perturbed.usable
+    assert from_perturbed.initial_cost > 100.0 * from_perturbed.final_cost
+    relative = abs(from_perturbed.final_cost - from_truth.final_cost) / from_truth.final_cost
     assert relative < 1e-6
     # 0.5 px noise: the mean squared residual per coordinate is about 0.25 less the
     # share of degrees of freedom absorbed by the parameters.
-    mean_square = np.mean(from_perturbed["residuals"] ** 2)
+    mean_square = np.mean(from_perturbed.residuals ** 2)
     assert 0.15 < mean_square < 0.25
 
 
 def test_coplanar_points_lie_on_the_refined_plane(rig) -> None:
     poses, points, plane = perturbed_start(rig, seed=2)
     result = solve(rig, poses, points, plane, model="coplanar")
-    n, d = result["plane"][:3], result["plane"][3]
+    n, d = result.plane[:3], result.plane[3]
     assert abs(np.linalg.norm(n) - 1.0) < 1e-12
-    assert np.max(np.abs(result["points"] @ n - d)) < 1e-9
+    assert np.max(np.abs(result.points @ n - d)) < 1e-9
     # The caller's orientation of the normal is kept.
     assert n @ plane[:3] > 0
 
@@ -59,7 +59,7 @@ def test_coplanar_points_lie_on_the_refined_plane(rig) -> None:
 def test_gauge_camera_and_scale_are_held(rig, model: str) -> None:
     poses, points, plane = perturbed_start(rig, seed=3)
     result = solve(rig, poses, points, plane, model=model, gauge_camera=2)
-    np.testing.assert_array_equal(result["poses"][2], poses[2])
+    np.testing.assert_array_equal(result.poses[2], poses[2])
 
     def centre(pose):
         from calibproj.synthetic import matrix_from_rotvec
@@ -67,21 +67,21 @@ def test_gauge_camera_and_scale_are_held(rig, model: str) -> None:
         return -matrix_from_rotvec(pose[:3]).T @ pose[3:]
 
     if model == "free":
-        s = result["scale_camera"]
+        s = result.scale_camera
         before = np.linalg.norm(centre(poses[s]) - centre(poses[2]))
-        after = np.linalg.norm(centre(result["poses"][s]) - centre(result["poses"][2]))
+        after = np.linalg.norm(centre(result.poses[s]) - centre(result.poses[2]))
         assert abs(after - before) < 1e-9 * before
     else:
         n = plane[:3] / np.linalg.norm(plane[:3])
         before = abs(n @ centre(poses[2]) - plane[3] / np.linalg.norm(plane[:3]))
-        after = abs(result["plane"][:3] @ centre(result["poses"][2]) - result["plane"][3])
+        after = abs(result.plane[:3] @ centre(result.poses[2]) - result.plane[3])
         assert abs(after - before) < 1e-9 * before
 
 
 @pytest.mark.parametrize("model", ["free", "coplanar"])
 def test_pose_covariance_is_symmetric_positive_definite(rig, model: str) -> None:
     result = solve(rig, rig.poses, rig.points, rig.plane, model=model, compute_covariance=True)
-    covariances = result["pose_covariances"]
+    covariances = result.pose_covariances
     assert covariances.shape == (len(rig.poses), 6, 6)
     assert np.all(np.isfinite(covariances))
     np.testing.assert_array_equal(covariances[0], np.zeros((6, 6)))  # the gauge camera
@@ -89,7 +89,7 @@ def test_pose_covariance_is_symmetric_positive_definite(rig, model: str) -> None
         sigma = covariances[c]
         np.testing.assert_allclose(sigma, sigma.T, rtol=1e-9, atol=1e-18)
         eigenvalues = np.linalg.eigvalsh(sigma)
-        if model == "free" and c == result["scale_camera"]:
+        if model == "free" and c == result.scale_camera:
             # One direction (the distance to the gauge camera) is fixed by the gauge.
             assert eigenvalues[0] < 1e-9 * eigenvalues[-1] and eigenvalues[1] > 0
         else:
@@ -118,17 +118,17 @@ def test_joint_pose_covariance_matches_the_spread_of_re_noised_solutions(model: 
     clean = paper_ring_rig(seed=5, noise_px=0.0, num_points=150)
     sigma = 0.5
     nominal = solve(clean, clean.poses, clean.points, clean.plane, model=model, compute_covariance=True)
-    predicted = sigma**2 * nominal["pose_covariance"]
+    predicted = sigma**2 * nominal.pose_covariance
     np.testing.assert_allclose(np.diagonal(predicted.reshape(len(clean.poses), 6, len(clean.poses), 6),
                                            axis1=0, axis2=2).transpose(2, 0, 1),
-                               sigma**2 * nominal["pose_covariances"], rtol=1e-12, atol=1e-20)
+                               sigma**2 * nominal.pose_covariances, rtol=1e-12, atol=1e-20)
     rng = np.random.default_rng(11)
     samples = []
     for _ in range(300):
         noisy = clean.observed + rng.normal(0.0, sigma, clean.observed.shape)
         result = ba.bundle_adjust(clean.camera_index, clean.point_index, noisy, clean.K, clean.poses, clean.points,
                                   clean.plane, model=model)
-        samples.append(_pose_deltas(result["poses"], clean.poses))
+        samples.append(_pose_deltas(result.poses, clean.poses))
     empirical = np.cov(np.array(samples).T)
     cameras = range(1, len(clean.poses))
     for c in cameras:
@@ -150,25 +150,25 @@ def test_robust_losses_and_linear_solvers_agree_on_clean_data(rig) -> None:
     reference = solve(rig, rig.poses, rig.points, rig.plane)
     for linear_solver in ("dense_schur", "sparse_schur", "iterative_schur"):
         result = solve(rig, rig.poses, rig.points, rig.plane, linear_solver=linear_solver)
-        assert abs(result["final_cost"] - reference["final_cost"]) < 1e-7 * reference["final_cost"]
+        assert abs(result.final_cost - reference.final_cost) < 1e-7 * reference.final_cost
     huber = solve(rig, rig.poses, rig.points, rig.plane, loss="huber", loss_scale=3.0)
-    np.testing.assert_allclose(huber["poses"], reference["poses"], atol=1e-6)
+    np.testing.assert_allclose(huber.poses, reference.poses, atol=1e-6)
 
 
 def test_fixed_poses_refine_points_only(rig) -> None:
     rng = np.random.default_rng(8)
     points = rig.points + rng.normal(0.0, 0.02, rig.points.shape)
     result = solve(rig, rig.poses, points, rig.plane, refine_poses=False)
-    np.testing.assert_array_equal(result["poses"], rig.poses)
-    assert np.sqrt(np.mean(np.sum((result["points"] - rig.points) ** 2, axis=1))) < 2e-3
+    np.testing.assert_array_equal(result.poses, rig.poses)
+    assert np.sqrt(np.mean(np.sum((result.points - rig.points) ** 2, axis=1))) < 2e-3
 
 
 def test_fixed_points_refine_poses_only(rig) -> None:
     rng = np.random.default_rng(9)
     poses = perturb_poses(rig.poses, 1.0, 0.03, rng)
     result = solve(rig, poses, rig.points, rig.plane, refine_points=False)
-    np.testing.assert_array_equal(result["points"], rig.points)
-    np.testing.assert_allclose(result["poses"], rig.poses, atol=2e-3)
+    np.testing.assert_array_equal(result.points, rig.points)
+    np.testing.assert_allclose(result.poses, rig.poses, atol=2e-3)
 
 
 def small_problem():
@@ -251,9 +251,9 @@ def test_rotation_cache_changes_nothing(rig, model: str) -> None:
     poses, points, plane = perturbed_start(rig, seed=12)
     cached = solve(rig, poses, points, plane, model=model, cache_rotations=True)
     plain = solve(rig, poses, points, plane, model=model, cache_rotations=False)
-    assert cached["iterations"] == plain["iterations"]
-    np.testing.assert_array_equal(cached["poses"], plain["poses"])
-    np.testing.assert_array_equal(cached["points"], plain["points"])
+    assert cached.iterations == plain.iterations
+    np.testing.assert_array_equal(cached.poses, plain.poses)
+    np.testing.assert_array_equal(cached.points, plain.points)
 
 
 def test_piecewise_planar_recovers_a_table_top_and_free_points() -> None:
@@ -281,10 +281,10 @@ def test_piecewise_planar_recovers_a_table_top_and_free_points() -> None:
     result = ba.bundle_adjust(rig.camera_index, rig.point_index, observed, rig.K, poses, start, rig.plane,
                               model="coplanar", more_planes=np.array([[0.02, -0.01, 1.0, 0.93]]),
                               point_plane=point_plane, max_iterations=200)
-    assert result["usable"] and result["final_cost"] < 1e-12
-    np.testing.assert_allclose(result["more_planes"][0], [0.0, 0.0, 1.0, 0.9], atol=1e-7)
-    np.testing.assert_allclose(result["points"], points, atol=1e-7)
-    np.testing.assert_allclose(result["poses"], rig.poses, atol=1e-7)
+    assert result.usable and result.final_cost < 1e-12
+    np.testing.assert_allclose(result.more_planes[0], [0.0, 0.0, 1.0, 0.9], atol=1e-7)
+    np.testing.assert_allclose(result.points, points, atol=1e-7)
+    np.testing.assert_allclose(result.poses, rig.poses, atol=1e-7)
     # Bad plane assignments are one clear error.
     with pytest.raises(ValueError, match="plane 2 out of range"):
         ba.bundle_adjust(rig.camera_index, rig.point_index, observed, rig.K, poses, start, rig.plane,

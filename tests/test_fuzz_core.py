@@ -56,7 +56,7 @@ BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "
                         "_core.ingest.ingest_camera[live]", "_core.check.CameraCheck",
                         "_core.capture.Site", "_core.capture.SiteCamera", "_core.capture.play",
                         "_core.capture.record",
-                        "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.CommandFlag",
+                        "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.CommandFlag", "_core.ba.Result",
                         "_core.registration.PairCandidate", "_core.registration.InitialPairResult", "_core.registration.NextCameraCandidate", "_core.registration.RegisterResult",
                         "_core.registration.AdjustResult", "_core.registration.ReliefTest", "_core.registration.RefineResult", "_core.registration.RunSummary",
                         "_core.formats.CameraPose", "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
@@ -402,6 +402,11 @@ class Baselines:
             r.run()
         return r
 
+    def bundle_adjustment(self, compute_covariance: bool) -> Any:
+        call = self.specs()["_core.ba.bundle_adjust"]
+        return _core.ba.bundle_adjust(*(value for _, value in call.args),
+                                      **{**call.kwargs, "compute_covariance": compute_covariance})
+
     def self_calibration(self, compute_covariance: bool) -> Any:
         call = self.specs()["_core.selfcal.self_calibrate"]
         return _core.selfcal.self_calibrate(*(value for _, value in call.args),
@@ -434,6 +439,7 @@ class Baselines:
         return {
             "_core.ba.bundle_adjust": Spec(ba_args, ba_kwargs),
             "_bench.bundle_adjust_autodiff": Spec(ba_args, ba_kwargs),
+            "_core.ba.Result": Spec([]),
             "_core.ba.evaluate_free_cost": Spec([("K", s["K"][0]), ("observed", x[0]), ("pose", pose),
                                                 ("point", s["points"][0]), ("want", [True, True])]),
             "_core.ba.evaluate_plane_cost": Spec([("K", s["K"][0]), ("observed", x[0]), ("pose", pose),
@@ -817,6 +823,9 @@ class Baselines:
             "_core.registration.Reconstruction": {
                 state: (lambda state=state: self.reconstruction(state))
                 for state in ("fresh", "initialized", "registered")},
+            "_core.ba.Result": {
+                covariance: (lambda covariance=covariance: self.bundle_adjustment(covariance == "with covariance"))
+                for covariance in ("with covariance", "without")},
             # The step results, from a registration in each of its states.
             "_core.registration.PairCandidate": {"ranked": lambda: self.reconstruction().rank_initial_pairs()[0]},
             "_core.registration.InitialPairResult": {

@@ -54,7 +54,7 @@ def cost_from_truth(driver: RegistrationDriver, sim, model: str) -> float:
         camera_map[camera_index[keep]], point_map[point_index[keep]], xy[keep], K, poses, X,
         np.array([0.0, 0.0, 1.0, 0.0]), model=model,
     )
-    return result["final_cost"]
+    return result.final_cost
 
 
 @pytest.mark.parametrize("model", ["coplanar", "free"])
@@ -109,7 +109,7 @@ def predicted_rotation_sigma_deg(sim, camera: str, gauge: str, model: str) -> fl
         camera_index, point_index, xy, K, poses, X, np.array([0.0, 0.0, 1.0, 0.0]), model=model,
         gauge_camera=names.index(gauge), compute_covariance=True,
     )
-    covariance = result["pose_covariances"][names.index(camera)][:3, :3]
+    covariance = result.pose_covariances[names.index(camera)][:3, :3]
     return float(np.degrees(np.sqrt(np.linalg.eigvalsh(covariance).max())))
 
 

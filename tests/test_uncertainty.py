@@ -59,7 +59,7 @@ def test_predicted_triangulation_error_matches_re_noised_calibrations() -> None:
     rig = paper_ring_rig(seed=5, noise_px=0.0, num_points=150)
     nominal = _core.ba.bundle_adjust(rig.camera_index, rig.point_index, rig.observed, rig.K, rig.poses, rig.points,
                                      rig.plane, model="coplanar", compute_covariance=True)
-    calibration, intrinsics = _calibration_of(rig, rig.poses, SIGMA_PX**2 * nominal["pose_covariance"])
+    calibration, intrinsics = _calibration_of(rig, rig.poses, SIGMA_PX**2 * nominal.pose_covariance)
     targets = np.array([[0.3, -0.2, 0.9], [-0.6, 0.4, 1.7], [0.9, 0.5, 0.0]])
     predicted = triangulation_uncertainty(calibration, targets, intrinsics=intrinsics)
     assert np.isfinite(predicted.sigma).all()
@@ -69,7 +69,7 @@ def test_predicted_triangulation_error_matches_re_noised_calibrations() -> None:
     for _ in range(200):
         noisy = rig.observed + rng.normal(0.0, SIGMA_PX, rig.observed.shape)
         solved = _core.ba.bundle_adjust(rig.camera_index, rig.point_index, noisy, rig.K, rig.poses, rig.points,
-                                        rig.plane, model="coplanar")["poses"]
+                                        rig.plane, model="coplanar").poses
         placed = []
         for X, seen in zip(targets, predicted.cameras):
             cams = [names.index(name) for name in seen]
@@ -286,7 +286,7 @@ def test_the_poses_sensitivity_to_a_lens_matches_solving_again(model: str) -> No
                  loss="huber", loss_scale=0.5)
     solved = _core.ba.bundle_adjust(rig.camera_index, rig.point_index, rig.observed, rig.K, rig.poses, rig.points,
                                     rig.plane, **solve)
-    sensitivity = solved["lens_sensitivity"]
+    sensitivity = solved.lens_sensitivity
     assert sensitivity.shape == (6 * len(rig.K), 16)
     assert np.allclose(sensitivity[:6], 0.0)  # the gauge camera's pose is held
     for column in (0, 3, 8, 12):
@@ -296,9 +296,9 @@ def test_the_poses_sensitivity_to_a_lens_matches_solving_again(model: str) -> No
             J = jacobians.reshape(-1, 2, 8)[:, :, column % 8] * (lens_block[rig.camera_index] == column // 8)[:, None]
             # r = projected - observed: a lens change dr = J dk is the observations moving by -J dk.
             observed = rig.observed - sign * step * J
-            moved.append(_core.ba.bundle_adjust(rig.camera_index, rig.point_index, observed, rig.K, solved["poses"],
-                                                solved["points"], solved["plane"], model=model, loss="huber",
-                                                loss_scale=0.5)["poses"])
+            moved.append(_core.ba.bundle_adjust(rig.camera_index, rig.point_index, observed, rig.K, solved.poses,
+                                                solved.points, solved.plane, model=model, loss="huber",
+                                                loss_scale=0.5).poses)
         numeric = _pose_change(moved[1], moved[0]) / (2 * step)
         assert np.abs(numeric).max() > 1e-6
         assert np.allclose(sensitivity[:, column], numeric, rtol=2e-3, atol=2e-3 * np.abs(numeric).max()), column

@@ -8,5 +8,7 @@
 
 PYBIND11_MODULE(_bench, m) {
   m.doc() = "Benchmark-only: bundle adjustment with Ceres AutoDiff costs";
+  // Its results are the core's ba.Result class: the core registers it first.
+  pybind11::module_::import("calibproj._core");
   calibproj::bindings::def_bundle_adjust(m, "bundle_adjust_autodiff", calibproj::bench::AutoDiffCosts());
 }

@@ -1,6 +1,7 @@
-// Bindings of calibproj::ba: numpy arrays in, a dict of numpy arrays out.
+// Bindings of calibproj::ba: numpy arrays in, a Result of numpy arrays out.
 
 #include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
@@ -67,7 +68,7 @@ py::tuple EvaluateCost(const ceres::CostFunction& cost, const std::vector<Eigen:
   return py::make_tuple(ok, residual, out_jacobians);
 }
 
-py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::VectorXi& point_index,
+ba::Result BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::VectorXi& point_index,
                         const RowMatrix& observed,
                         const py::array_t<double, py::array::c_style | py::array::forcecast>& intrinsics,
                         const RowMatrix& poses, const RowMatrix& points, const Eigen::VectorXd& plane,
@@ -125,34 +126,61 @@ py::dict BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::Vector
     py::gil_scoped_release release;
     result = ba::BundleAdjust(data, options, make_cost);
   }
-  py::dict out;
-  out["initial_cost"] = result.initial_cost;
-  out["final_cost"] = result.final_cost;
-  out["iterations"] = result.iterations;
-  out["termination"] = result.termination;
-  out["usable"] = result.usable;
-  out["solve_time_s"] = result.solve_time_s;
-  out["gauge_camera"] = result.gauge_camera;
-  out["scale_camera"] = result.scale_camera;
-  out["poses"] = result.poses;
-  out["points"] = result.points;
-  out["plane"] = Eigen::VectorXd(result.plane);
-  out["more_planes"] = RowMatrix(result.more_planes);
-  out["residuals"] = result.residuals;
-  if (options.compute_covariance) {
-    py::array_t<double> covariances({static_cast<py::ssize_t>(result.pose_covariances.size()), py::ssize_t{6}, py::ssize_t{6}});
-    auto cov = covariances.mutable_unchecked<3>();
-    for (size_t c = 0; c < result.pose_covariances.size(); ++c) {
-      for (int i = 0; i < 6; ++i) for (int j = 0; j < 6; ++j) cov(c, i, j) = result.pose_covariances[c](i, j);
+  return result;
+}
+
+// (C, 6, 6) of the per-camera covariances, or None when none was computed.
+py::object PoseCovariances(const ba::Result& r) {
+  if (r.pose_covariances.empty()) return py::none();
+  py::array_t<double> out({static_cast<py::ssize_t>(r.pose_covariances.size()), py::ssize_t{6}, py::ssize_t{6}});
+  auto view = out.mutable_unchecked<3>();
+  for (size_t c = 0; c < r.pose_covariances.size(); ++c) {
+    for (int i = 0; i < 6; ++i) {
+      for (int j = 0; j < 6; ++j) view(c, i, j) = r.pose_covariances[c](i, j);
     }
-    out["pose_covariances"] = covariances;
-    out["pose_covariance"] = result.pose_covariance;
-    out["covariance_time_s"] = result.covariance_time_s;
-    out["covariance_failure"] = result.covariance_failure;
-    if (lens_block.size() > 0) out["lens_sensitivity"] = result.lens_sensitivity;
   }
-  out["report"] = result.report;
-  return out;
+  return std::move(out);
+}
+
+// A matrix, or None when it is empty (not computed).
+py::object MatrixOrNone(const Eigen::MatrixXd& matrix) {
+  return matrix.size() == 0 ? py::none() : py::cast(matrix);
+}
+
+// The Result class, once per process (the benchmark module shares it).
+void RegisterResult(py::module_& m) {
+  if (py::detail::get_type_info(typeid(ba::Result))) return;
+  py::class_<ba::Result>(m, "Result", "A bundle adjustment's solution and figures; its arrays are copies.")
+      .def_readonly("initial_cost", &ba::Result::initial_cost, "0.5 * sum of squared (robustified) residuals")
+      .def_readonly("final_cost", &ba::Result::final_cost)
+      .def_readonly("iterations", &ba::Result::iterations)
+      .def_readonly("termination", &ba::Result::termination)
+      .def_readonly("usable", &ba::Result::usable, "Ceres found the solution usable")
+      .def_readonly("solve_time_s", &ba::Result::solve_time_s)
+      .def_readonly("gauge_camera", &ba::Result::gauge_camera)
+      .def_readonly("scale_camera", &ba::Result::scale_camera, "FREE with poses and points refined; -1 otherwise")
+      .def_property_readonly(
+          "poses", [](const ba::Result& r) { return RowMatrix(r.poses); }, "(C, 6) cam_from_world [angle-axis, t]")
+      .def_property_readonly(
+          "points", [](const ba::Result& r) { return RowMatrix(r.points); }, "(P, 3)")
+      .def_property_readonly(
+          "plane", [](const ba::Result& r) { return Eigen::VectorXd(r.plane); }, "[nx, ny, nz, d] (COPLANAR)")
+      .def_property_readonly(
+          "more_planes", [](const ba::Result& r) { return RowMatrix(r.more_planes); }, "(K, 4), refined (COPLANAR)")
+      .def_property_readonly(
+          "residuals", [](const ba::Result& r) { return RowMatrix(r.residuals); }, "(N, 2) projected minus observed, pixels")
+      .def_property_readonly("pose_covariances", &PoseCovariances,
+                             "(C, 6, 6) of [dtheta, dt] per camera, with compute_covariance; else None")
+      .def_property_readonly(
+          "pose_covariance", [](const ba::Result& r) { return MatrixOrNone(r.pose_covariance); },
+          "(6C, 6C) joint covariance with the cross terms, with compute_covariance; else None")
+      .def_readonly("covariance_time_s", &ba::Result::covariance_time_s)
+      .def_readonly("covariance_failure", &ba::Result::covariance_failure,
+                    "why the covariance was requested but not given; empty otherwise")
+      .def_property_readonly(
+          "lens_sensitivity", [](const ba::Result& r) { return MatrixOrNone(r.lens_sensitivity); },
+          "(6C, 8L) d [dtheta, dt] / d lens, with compute_covariance and lens_block; else None")
+      .def_readonly("report", &ba::Result::report, "Ceres' full report, with full_report");
 }
 
 // Plus, Minus and their Jacobians of a manifold, for tests of its invariants.
@@ -181,6 +209,7 @@ py::dict ManifoldFunctions(const ceres::Manifold& manifold, const Eigen::VectorX
 }  // namespace
 
 void def_bundle_adjust(py::module_& m, const char* name, const ba::CostFactory& make_cost) {
+  RegisterResult(m);
   m.def(
       name,
       [make_cost](const Eigen::VectorXi& camera_index, const Eigen::VectorXi& point_index, const RowMatrix& observed,
@@ -218,7 +247,7 @@ more_planes (K, 4) and point_plane (P,) (0: plane, k: more_planes[k - 1], -1: a 
 loss: none | huber | cauchy (scale in pixels); linear_solver: auto | dense_schur |
 sparse_schur | iterative_schur | dense_qr | sparse_normal_cholesky. The gauge camera's
 pose is held fixed, and the scale through the plane offset (COPLANAR) or the distance
-to the scale camera (FREE; -1 picks the farthest). Returns a dict with the refined
+to the scale camera (FREE; -1 picks the farthest). Returns a Result with the refined
 poses, points, plane, more_planes, per-observation residuals (N, 2), costs, iterations, termination,
 solve time and, if compute_covariance, pose_covariances (C, 6, 6) of [dtheta, dt], their
 joint covariance pose_covariance (6C, 6C) with the cross terms, and covariance_time_s;

@@ -323,9 +323,9 @@ def _refine(R: np.ndarray, t: np.ndarray, K: np.ndarray, camera_index: np.ndarra
         model="free", loss=options.loss, loss_scale=options.loss_scale_px, max_iterations=options.max_iterations,
         num_threads=options.num_threads, refine_poses=False,
     )
-    logger.info("evaluation points refined: cost %.6g -> %.6g in %d iterations", result["initial_cost"],
-                result["final_cost"], result["iterations"])
-    return np.asarray(result["points"], dtype=float).reshape(-1, 3)
+    logger.info("evaluation points refined: cost %.6g -> %.6g in %d iterations", result.initial_cost,
+                result.final_cost, result.iterations)
+    return np.asarray(result.points, dtype=float).reshape(-1, 3)
 
 
 def normalised_rays(K: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -154,7 +154,7 @@ def run_ceres(solver, problem, model, poses, points, plane, threads):
         model=model, num_threads=threads,
     )
     elapsed = time.perf_counter() - start
-    return elapsed, float(result["final_cost"]), int(result["iterations"])
+    return elapsed, float(result.final_cost), int(result.iterations)
 
 
 def ceres_time_breakdown(solver, problem, model, poses, points, plane, threads) -> str:
@@ -163,7 +163,7 @@ def ceres_time_breakdown(solver, problem, model, poses, points, plane, threads) 
         model=model, num_threads=threads, full_report=True,
     )
     keep = ("Schur structure", "Linear solver  ", "Residual only", "Jacobian & residual", "Linear solver ", "Minimizer  ", "Total")
-    lines = [line.strip() for line in result["report"].splitlines() if line.strip().startswith(tuple(k.strip() for k in keep))]
+    lines = [line.strip() for line in result.report.splitlines() if line.strip().startswith(tuple(k.strip() for k in keep))]
     return "\n    ".join(lines)
 
 
