@@ -207,22 +207,22 @@ def test_manifolds_satisfy_ceres_invariants() -> None:
     for name, functions, x, size in manifold_cases(rng):
         zero = np.zeros(size)
         at_x = functions(x, x, zero)
-        np.testing.assert_allclose(at_x["plus"], x, atol=1e-15, err_msg=f"{name}: Plus(x, 0) = x")
-        np.testing.assert_allclose(at_x["minus"], zero, atol=1e-15, err_msg=f"{name}: Minus(x, x) = 0")
+        np.testing.assert_allclose(at_x.plus, x, atol=1e-15, err_msg=f"{name}: Plus(x, 0) = x")
+        np.testing.assert_allclose(at_x.minus, zero, atol=1e-15, err_msg=f"{name}: Minus(x, x) = 0")
         for _ in range(20):
             delta = 0.3 * rng.normal(size=size)
-            y = functions(x, x, delta)["plus"]
-            back = functions(x, y, zero)["minus"]
+            y = functions(x, x, delta).plus
+            back = functions(x, y, zero).minus
             np.testing.assert_allclose(back, delta, atol=1e-12, err_msg=f"{name}: Minus(Plus(x, d), x) = d")
-            again = functions(x, x, back)["plus"]
+            again = functions(x, x, back).plus
             np.testing.assert_allclose(again, y, atol=1e-12, err_msg=f"{name}: Plus(x, Minus(y, x)) = y")
-        plus_numeric = numeric_jacobian(lambda d: functions(x, x, d)["plus"], zero)
-        assert relative_error(at_x["plus_jacobian"], plus_numeric) < TOLERANCE, name
-        minus_numeric = numeric_jacobian(lambda y: functions(x, y, zero)["minus"], x)
+        plus_numeric = numeric_jacobian(lambda d: functions(x, x, d).plus, zero)
+        assert relative_error(at_x.plus_jacobian, plus_numeric) < TOLERANCE, name
+        minus_numeric = numeric_jacobian(lambda y: functions(x, y, zero).minus, x)
         # Minus is defined on the manifold only: compare along its tangent directions.
-        P = at_x["plus_jacobian"]
-        assert relative_error(at_x["minus_jacobian"] @ P, minus_numeric @ P) < TOLERANCE, name
-        np.testing.assert_allclose(at_x["minus_jacobian"] @ P, np.eye(size), atol=1e-12,
+        P = at_x.plus_jacobian
+        assert relative_error(at_x.minus_jacobian @ P, minus_numeric @ P) < TOLERANCE, name
+        np.testing.assert_allclose(at_x.minus_jacobian @ P, np.eye(size), atol=1e-12,
                                    err_msg=f"{name}: MinusJacobian * PlusJacobian = I")
 
 
@@ -230,12 +230,12 @@ def test_plane_manifold_keeps_a_unit_normal_and_the_fixed_offset() -> None:
     rng = np.random.default_rng(5)
     x = np.array([0.0, 0.6, 0.8, 2.0])
     for _ in range(20):
-        plus = ba.plane_manifold(x[:3], True, x, x, rng.normal(size=2))["plus"]
+        plus = ba.plane_manifold(x[:3], True, x, x, rng.normal(size=2)).plus
         assert abs(np.linalg.norm(plus[:3]) - 1.0) < 1e-14
         assert plus[3] == 2.0
     pose = np.array([0.1, 0.2, 0.3, 1.0, -2.0, 0.5])
     for _ in range(20):
-        plus = ba.fixed_distance_pose_manifold(pose[3:], pose, pose, rng.normal(size=5))["plus"]
+        plus = ba.fixed_distance_pose_manifold(pose[3:], pose, pose, rng.normal(size=5)).plus
         assert abs(np.linalg.norm(plus[3:]) - np.linalg.norm(pose[3:])) < 1e-14
 
 

@@ -237,10 +237,10 @@ def _table_top_centres(result, truth) -> tuple[int, int, float]:
         seen = truth["image_points"][name]
         true_xy = dict(zip(seen["ids"], np.asarray(seen["undistorted"]).reshape(-1, 2)))
         shown += int((xyz[seen["ids"], 2] > 0.5).sum())
-        centres = camera.raw["centres"]
-        ids = np.asarray(centres["array"]) * per_array + np.asarray(centres["marker"])
+        centres = camera.raw.centres
+        ids = np.asarray(centres.array) * per_array + np.asarray(centres.marker)
         kept += int((xyz[ids, 2] > 0.5).sum())
-        worst = max(worst, max(float(np.linalg.norm(xy - true_xy[int(i)])) for i, xy in zip(ids, centres["xy"])))
+        worst = max(worst, max(float(np.linalg.norm(xy - true_xy[int(i)])) for i, xy in zip(ids, centres.xy)))
     return kept, shown, worst
 
 
@@ -256,8 +256,8 @@ def test_the_ingest_finds_the_markers_on_the_table_top(small_table_videos) -> No
     kept, shown, worst = _table_top_centres(explored, truth)
     assert kept >= 0.25 * shown and worst < 1.0
     for camera in explored.cameras.values():
-        assert camera.raw["patterns_in_regions"] > 0
-        assert sum(scale["folded"] for scale in camera.raw["scales"]) > 0
+        assert camera.raw.patterns_in_regions > 0
+        assert sum(scale.folded for scale in camera.raw.scales) > 0
     report = explored.report()["cameras"]
     assert all("folded" in scale for camera in report.values() for scale in camera["scales"])
     # Planned with the floor's homography alone, the table top's markers are never found.

@@ -59,9 +59,12 @@ BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "
                         "_core.check.CalibrationCheck", "_core.check.CameraVerdict", "_core.formats.CommandFlag", "_core.ba.Result",
                         "_core.registration.PairCandidate", "_core.registration.InitialPairResult", "_core.registration.NextCameraCandidate", "_core.registration.RegisterResult",
                         "_core.registration.AdjustResult", "_core.registration.ReliefTest", "_core.registration.RefineResult", "_core.registration.RunSummary",
-                        "_core.formats.CameraPose", "_core.formats.CameraIntrinsics", "_core.formats.Tracks", "_core.formats.ScaleFit",
+                        "_core.formats.CameraPose", "_core.formats.Tracks", "_core.formats.ScaleFit",
                         "_core.selfcal.Result", "_core.selfcal.RefineRequest", "_core.selfcal.LensReport",
-                        "_core.selfcal.SelfCalibration"}
+                        "_core.selfcal.SelfCalibration", "_core.sync.SyncResult", "_core.sync.CodeLocation",
+                        "_core.sync.BandFit", "_core.sync.ReadoutEstimate", "_core.ingest.ScaleRecords",
+                        "_core.ingest.MergedCentres", "_core.ingest.FrameClockStats", "_core.Knob",
+                        "_core.ba.ManifoldValues"}
 
 # Keyword options of registration.Reconstruction (cpp/bindings/registration.cc).
 REGISTRATION_OPTIONS = {
@@ -384,7 +387,15 @@ class Baselines:
         self.image = self.marker_image()
         self.K = np.array([[80.0, 0, 32], [0, 80.0, 24], [0, 0, 1]])
         self.dist = np.array([0.01, -0.002, 0.0, 0.0, 0.0])
+        self.intrinsics = _core.formats.CameraIntrinsics("cam", (64, 48), self.K, self.dist)
         self.apriltag_spec = next(s for s in _core.detect.family_specs() if s.startswith("apriltag"))
+
+    def synchronised(self) -> Any:
+        return _core.sync.synchronise(self.signal, self.levels, self.start_code, self.end_code, self.rate, "cam")
+
+    def readout(self) -> Any:
+        return _core.sync.estimate_readout(self.bands, self.levels, self.start_code, self.end_code,
+                                           _core.sync.FrameMap(9.0, self.rate, 0.5))
 
     def marker_image(self) -> np.ndarray:
         bits = np.asarray(_core.detect.marker_bits("aruco:4X4_50", 3))
@@ -432,8 +443,8 @@ class Baselines:
                             rcond=None)[0].T
         corners = np.array([[[10.0, 10], [50, 10], [50, 50], [10, 50]], [[60.0, 10], [90, 12], [88, 40], [62, 38]]])
         sequence = self.sequence
-        sync_options = {entry["name"]: entry["default"] for entry in _core.sync.option_table()}
-        ingest_options = {entry["name"]: entry["default"] for entry in _core.ingest.option_table()}
+        sync_options = {knob.name: knob.default for knob in _core.sync.option_table()}
+        ingest_options = {knob.name: knob.default for knob in _core.ingest.option_table()}
         marker_corners = np.array([[20.0, 20], [80, 20], [80, 80], [20, 80]])
         n = 12
         return {
@@ -578,7 +589,7 @@ class Baselines:
             "_core.check.CameraCheck": Spec([]),
             "_core.check.check_options": Spec([], {"tolerance_px": 0.5, "min_points": 6}),
             "_core.check.check_camera": Spec(self.camera_check_args(), options={
-                entry["name"]: entry["default"] for entry in _core.check.option_table()}),
+                knob.name: knob.default for knob in _core.check.option_table()}),
             "_core.registration.check_options": Spec([], dict(REGISTRATION_OPTIONS)),
             "_core.ingest.option_table": Spec([]),
             "_core.sync.synchronise": Spec([("signal", self.signal), ("levels", self.levels),
@@ -589,29 +600,37 @@ class Baselines:
                                            ("source", "cam")], options=sync_options),
             "_core.sync.estimate_readout": Spec([("band_signals", self.bands), ("levels", self.levels),
                                                 ("start_code", self.start_code), ("end_code", self.end_code),
-                                                ("map", {"offset": 9.0, "rate": self.rate, "exposure": 0.5})],
+                                                ("map", _core.sync.FrameMap(9.0, self.rate, 0.5))],
                                                options=sync_options),
             "_core.ingest.Sequence": Spec([("document", sequence)]),
             "_core.ingest.light_levels": Spec([("sequence", self.core_sequence)]),
-            "_core.ingest.lens_tables_map": Spec([("K", self.K), ("dist", self.dist), ("resolution", (64, 48)),
+            "_core.sync.FrameMap": Spec([("offset", 9.0), ("rate", 1.0), ("exposure", 0.5)]),
+            "_core.Knob": Spec([]),
+            "_core.ba.ManifoldValues": Spec([]),
+            **{f"_core.sync.{name}": Spec([]) for name in ("SyncResult", "CodeLocation", "BandFit", "ReadoutEstimate")},
+            **{f"_core.ingest.{name}": Spec([]) for name in ("CameraIngestResult", "ScaleRecords", "MergedCentres",
+                                                             "ScaleStats", "FrameClockStats")},
+            "_core.sync.FrameMap.camera_frame": Spec([("projector_time", 3.0)]),
+            "_core.sync.FrameMap.projector_time": Spec([("camera_frame", 12.0)]),
+            "_core.ingest.lens_tables_map": Spec([("intrinsics", self.intrinsics), ("resolution", (64, 48)),
                                                  ("points", s["observed"][:5] / 10), ("undistort", True)]),
             "_core.ingest.refine_undistorted_corners": Spec([
-                ("image", self.image), ("corners", marker_corners), ("K", self.K), ("dist", self.dist),
+                ("image", self.image), ("corners", marker_corners), ("intrinsics", self.intrinsics),
                 ("cells", 6), ("outward_fraction", 0.45), ("passes", 6)]),
             "_core.ingest.shows_marker": Spec([
-                ("image", self.image), ("corners", marker_corners), ("K", self.K), ("dist", self.dist),
+                ("image", self.image), ("corners", marker_corners), ("intrinsics", self.intrinsics),
                 ("spec", "aruco:4X4_50"), ("id", 3), ("inverted", False)]),
             **self.format_specs(),
             "_core.ingest.ingest_camera": Spec(
-                [("video", f["tiny.mkv"]), ("sequence", self.core_sequence), ("K", self.K), ("dist", self.dist),
-                 ("resolution", (64, 48)), ("source", "cam"), ("aruco", _core.detect.ArucoOptions()),
+                [("video", f["tiny.mkv"]), ("sequence", self.core_sequence), ("intrinsics", self.intrinsics),
+                 ("source", "cam"), ("aruco", _core.detect.ArucoOptions()),
                  ("apriltag", _core.detect.AprilTagOptions()), ("progress", lambda decoded, total: None),
                  ("live", None)],
                 options=ingest_options),
             # The tiny video read as a live source (FFmpeg's file protocol), recorded.
             "_core.ingest.ingest_camera[live]": Spec(
-                [("video", f["tiny.mkv"]), ("sequence", self.core_sequence), ("K", self.K), ("dist", self.dist),
-                 ("resolution", (64, 48)), ("source", "cam"), ("aruco", _core.detect.ArucoOptions()),
+                [("video", f["tiny.mkv"]), ("sequence", self.core_sequence), ("intrinsics", self.intrinsics),
+                 ("source", "cam"), ("aruco", _core.detect.ArucoOptions()),
                  ("apriltag", _core.detect.AprilTagOptions()), ("progress", None),
                  ("live", _core.video.SourceOptions(open_timeout_s=2.0, stall_timeout_s=2.0,
                                                     record_path=str(self.files["tiny.mkv"]) + ".rec.mkv"))]),
@@ -666,17 +685,17 @@ class Baselines:
         volume = np.array([[0.05, 0.05, 0.5], [0.1, 0.2, 0.0]])
         # The self-calibration of the two cameras (its calls and results, and their receivers).
         request = _core.selfcal.RefineRequest.parse(["focal,k1"])
-        selfcal_options = {entry["name"]: entry["default"] for entry in _core.selfcal.option_table()}
+        selfcal_options = {knob.name: knob.default for knob in _core.selfcal.option_table()}
         refine_args = [("tracks", tracks), ("intrinsics", intrinsics), ("calibration", calibration),
                        ("request", request)]
         refine_kwargs = {"options": selfcal_options, "num_threads": 1, "given": intrinsics, "earlier": None,
-                         "logger": logging.getLogger("fuzz")}
+                         "log": logging.getLogger("fuzz").info}
         self.refinement = lambda: _core.selfcal.refine_lenses(*(value for _, value in refine_args), **refine_kwargs)
         self.request = request
         return {
             "_core.selfcal.refine_lenses": Spec(refine_args, refine_kwargs),
             "_core.selfcal.closed_form_start": Spec(refine_args, {"options": selfcal_options,
-                                                                 "logger": logging.getLogger("fuzz")}),
+                                                                 "log": logging.getLogger("fuzz").info}),
             "_core.selfcal.convert_tracks": Spec([("tracks", tracks), ("given", intrinsics), ("refined", {
                 "a": Intrinsics("a", (64, 48), self.K * np.array([[1.1], [1.1], [1.0]]), self.dist)})]),
             "_core.selfcal.refused_cameras": Spec([("request", request), ("intrinsics", intrinsics),
@@ -730,12 +749,20 @@ class Baselines:
                                                  ("inliers", 17), ("track2_observations", 16), ("view_score", 90)],
                                                 {"failure": None, "rotation_sigma_deg": 0.01, "weak": True}),
             "_core.formats.Plane": Spec([("normal", [0.0, 0.6, 0.8]), ("offset", 0.5), ("points", 3)]),
-            "_core.formats.CameraIntrinsics": Spec([]),
+            "_core.formats.CameraIntrinsics": Spec([("name", "a"), ("resolution", (64, 48)), ("K", self.K),
+                                                    ("dist", self.dist)]),
+            "_core.formats.CameraIntrinsics.undistort_points": Spec([("pixels", [[1.0, 2.0], [60.0, 40.0]])]),
+            "_core.formats.CameraIntrinsics.distort_points": Spec([("pixels", [[1.0, 2.0], [60.0, 40.0]])]),
+            "_core.formats.CameraIntrinsics.normalize": Spec([("pixels", [[1.0, 2.0], [60.0, 40.0]])]),
+            "_core.formats.CameraIntrinsics.project_normalized": Spec([("xy", [[0.1, -0.2], [0.0, 0.3]])]),
+            "_core.formats.CameraIntrinsics.contains": Spec([("pixels", [[1.0, 2.0], [70.0, 40.0]])],
+                                                             {"margin_px": 1.0}),
+            "_core.formats.CameraIntrinsics.max_monotonic_radius": Spec([], {"limit": 2.0, "step": 0.01}),
             "_core.formats.Tracks": Spec([]),
             "_core.check.CalibrationCheck": Spec([]),
             "_core.check.CameraVerdict": Spec([]),
             "_core.check.check_calibration": Spec(check_args, options={
-                entry["name"]: entry["default"] for entry in _core.check.option_table()}),
+                knob.name: knob.default for knob in _core.check.option_table()}),
             "_core.check.working_volume": Spec([("calibration", calibration)]),
             "_core.check.predicted_shift_sigma": Spec([
                 *[arg for arg in self.camera_check_args() if arg[0] in ("K", "R", "t", "points", "volume", "width",
@@ -745,9 +772,9 @@ class Baselines:
             "_core.check.CalibrationCheck.exit_status": Spec([("repaired", True)]),
             "_core.formats.write_calibration": Spec([("directory", folder), ("calibration", calibration)]),
             "_core.formats.write_intrinsics": Spec([("out", folder / "written.json"), ("intrinsics", intrinsics["a"]),
-                                                   ("extra_json", '{"board_calibration": {"rms_px": 0.1}}')]),
+                                                   ("extra", {"board_calibration": {"rms_px": 0.1}})]),
             "_core.formats.read_intrinsics": Spec([("path", str(folder / "a.json")), ("name", "a")]),
-            "_core.formats.intrinsics_from_json": Spec([("text", json.dumps(intrinsics["a"].to_json())),
+            "_core.formats.intrinsics_from_json": Spec([("document", intrinsics["a"].to_json()),
                                                        ("name", "a")]),
             "_core.formats.Tracks.read": Spec([("path", str(folder / "valid_tracks.json"))]),
             "_core.formats.Tracks.from_observations": Spec([
@@ -849,6 +876,20 @@ class Baselines:
                 "apriltag": lambda: _core.detect.MarkerDetector(self.apriltag_spec)},
             "_core.detect.ArucoOptions": {"default": _core.detect.ArucoOptions},
             "_core.ingest.Sequence": {"read": lambda: self.core_sequence},
+            "_core.ingest.CameraIngestResult": {"empty": _core.ingest.CameraIngestResult},
+            "_core.Knob": {name: (lambda table=table: table()[0]) for name, table in (
+                ("registration", _core.registration.option_table), ("check", _core.check.option_table))},
+            "_core.ba.ManifoldValues": {"plane": lambda: _core.ba.plane_manifold(
+                np.array([0.0, 0, 1]), False, np.array([0.0, 0, 1, 1]), np.array([0.0, 0, 1, 1]), np.zeros(3))},
+            "_core.ingest.ScaleRecords": {"empty": lambda: _core.ingest.CameraIngestResult().records},
+            "_core.ingest.MergedCentres": {"empty": lambda: _core.ingest.CameraIngestResult().centres},
+            "_core.ingest.FrameClockStats": {"empty": lambda: _core.ingest.CameraIngestResult().timing},
+            "_core.ingest.ScaleStats": {"empty": _core.ingest.ScaleStats},
+            "_core.sync.FrameMap": {"synced": lambda: self.synchronised().map},
+            "_core.sync.SyncResult": {"synced": self.synchronised},
+            "_core.sync.CodeLocation": {"start": lambda: self.synchronised().start},
+            "_core.sync.ReadoutEstimate": {"estimated": self.readout},
+            "_core.sync.BandFit": {"first": lambda: self.readout().bands[0]},
             "_core.check.CameraCheck": {"checked": lambda: _core.check.check_camera(
                 *(value for _, value in self.camera_check_args()))},
             "_core.check.CalibrationCheck": {"checked": lambda: self.check_call()},

@@ -90,15 +90,15 @@ def centre_errors(result, truth, camera: str) -> tuple[np.ndarray, np.ndarray]:
     points = truth["image_points"][camera]
     true_xy = dict(zip(points["ids"], points["undistorted"]))
     raw = result.cameras[camera].raw
-    records = raw["records"]
+    records = raw.records
     markers_per_array = result.tracks.markers_per_array
-    record_ids = records["array"] * markers_per_array + records["marker"]
+    record_ids = records.array * markers_per_array + records.marker
     ids, xy = result.tracks.observations(camera)
     errors, sides = [], []
     for point_id, centre in zip(ids, xy):
-        kept = (record_ids == point_id) & records["kept"]
+        kept = (record_ids == point_id) & records.kept
         errors.append(np.linalg.norm(centre - true_xy[int(point_id)]))
-        sides.append(records["side_px"][kept].max())
+        sides.append(records.side_px[kept].max())
     return np.array(errors), np.array(sides)
 
 
@@ -139,18 +139,18 @@ def test_apriltag_centres_match_the_truth(apriltag, apriltag_results):
 
 def check_roi_equals_whole_frame(results):
     for camera in results[True].cameras:
-        roi, whole = (results[flag].cameras[camera].raw["records"] for flag in (True, False))
-        assert roi["in_region"].sum() > 0, camera
-        assert not whole["in_region"].any()
+        roi, whole = (results[flag].cameras[camera].raw.records for flag in (True, False))
+        assert roi.in_region.sum() > 0, camera
+        assert not whole.in_region.any()
         # The same markers but for a few at the edge of decodability: a region is shrunk
         # to its target module size, and its contrast (which sets the threshold) is that
         # of one marker, where the whole frame's is the frame's.
-        keys = [list(zip(r["pattern"].tolist(), r["marker"].tolist())) for r in (roi, whole)]
+        keys = [list(zip(r.pattern.tolist(), r.marker.tolist())) for r in (roi, whole)]
         common = set(keys[0]) & set(keys[1])
         assert len(common) >= 0.97 * max(len(k) for k in keys), (camera, len(keys[0]), len(keys[1]))
         first = [keys[0].index(k) for k in sorted(common)]
         second = [keys[1].index(k) for k in sorted(common)]
-        assert np.abs(roi["centre"][first] - whole["centre"][second]).max() < MAX_ROI_DIFFERENCE_PX, camera
+        assert np.abs(roi.centre[first] - whole.centre[second]).max() < MAX_ROI_DIFFERENCE_PX, camera
 
 
 def test_roi_detection_equals_whole_frame_detection_aruco(aruco_results):
@@ -166,14 +166,14 @@ def check_verified_equals_detected(results):
     its region is found, and its centre comes from the same edge fit started elsewhere."""
     for camera in results[True].cameras:
         raws = [results[key].cameras[camera].raw for key in (True, "detector")]
-        verified, detected = (raw["records"] for raw in raws)
-        assert raws[0]["markers_verified"] >= 0.5 * verified["in_region"].sum() > 0, camera
-        assert raws[1]["markers_verified"] == 0, camera
-        keys = [list(zip(r["pattern"].tolist(), r["marker"].tolist())) for r in (verified, detected)]
+        verified, detected = (raw.records for raw in raws)
+        assert raws[0].markers_verified >= 0.5 * verified.in_region.sum() > 0, camera
+        assert raws[1].markers_verified == 0, camera
+        keys = [list(zip(r.pattern.tolist(), r.marker.tolist())) for r in (verified, detected)]
         assert set(keys[1]) <= set(keys[0]), camera
         first = [keys[0].index(k) for k in keys[1]]
-        difference = np.linalg.norm(verified["centre"][first] - detected["centre"], axis=1)
-        wide = detected["side_px"] >= MIN_SIDE_PX
+        difference = np.linalg.norm(verified.centre[first] - detected.centre, axis=1)
+        wide = detected.side_px >= MIN_SIDE_PX
         assert np.sqrt(np.mean(difference[wide] ** 2)) < MAX_VERIFIED_RMS_DIFFERENCE_PX, camera
 
 
@@ -190,13 +190,13 @@ def test_detections_come_from_clean_frames_only(aruco, aruco_results):
     for camera, report in aruco_results[True].cameras.items():
         raw = report.raw
         clean = truth["clean_frames"][camera]
-        records = raw["records"]
-        for pattern, first, count in zip(records["pattern"], records["first_frame"], records["frame_count"]):
+        records = raw.records
+        for pattern, first, count in zip(records.pattern, records.first_frame, records.frame_count):
             assert set(range(first, first + count)) <= set(clean[pattern]), (camera, pattern)
-        assert raw["patterns_dropped"] == 0
+        assert raw.patterns_dropped == 0
         # Frames between the codes that show no pattern to detect are never converted.
-        assert raw["frames_converted"] < raw["frames_decoded"]
-        assert raw["frames_detected"] <= len(sequence.patterns)
+        assert raw.frames_converted < raw.frames_decoded
+        assert raw.frames_detected <= len(sequence.patterns)
 
 
 def test_the_thumbnail_shows_the_pattern_where_most_markers_were_found(aruco_results):
@@ -204,8 +204,8 @@ def test_the_thumbnail_shows_the_pattern_where_most_markers_were_found(aruco_res
     marker to a zoomed camera where another shows tens."""
     for result in aruco_results.values():
         for name, camera in result.cameras.items():
-            found = np.bincount(camera.raw["records"]["pattern"])
-            chosen = camera.raw["thumbnail_pattern"]
+            found = np.bincount(camera.raw.records.pattern)
+            chosen = camera.raw.thumbnail_pattern
             assert found[chosen] == found.max(), name
             assert chosen == int(np.argmax(found)), name  # ties: the earlier pattern
 
@@ -215,20 +215,20 @@ def test_merged_centre_is_the_mean_of_the_kept_scales(aruco_results):
     options = IngestOptions()
     for camera, report in result.cameras.items():
         raw = report.raw
-        records, centres = raw["records"], raw["centres"]
-        for array, marker, xy in zip(centres["array"], centres["marker"], centres["xy"]):
-            mine = (records["array"] == array) & (records["marker"] == marker)
-            kept = mine & records["kept"]
-            assert np.allclose(records["centre"][kept].mean(axis=0), xy)
-            assert np.all(records["deviation_px"][kept] <= options.max_deviation_px)
-            assert np.all(records["deviation_px"][mine & ~records["kept"]] > options.max_deviation_px)
+        records, centres = raw.records, raw.centres
+        for array, marker, xy in zip(centres.array, centres.marker, centres.xy):
+            mine = (records.array == array) & (records.marker == marker)
+            kept = mine & records.kept
+            assert np.allclose(records.centre[kept].mean(axis=0), xy)
+            assert np.all(records.deviation_px[kept] <= options.max_deviation_px)
+            assert np.all(records.deviation_px[mine & ~records.kept] > options.max_deviation_px)
 
 
 def test_averaged_frames_stay_accurate(aruco):
     out, sequence, truth = aruco
     result = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(average_frames=3),
                     progress=False)
-    counts = np.concatenate([c.raw["records"]["frame_count"] for c in result.cameras.values()])
+    counts = np.concatenate([c.raw.records.frame_count for c in result.cameras.values()])
     # As many as the camera records clean, up to three (the test room shows each pattern
     # for only 3 projector frames).
     assert 1 < counts.max() <= 3
@@ -240,9 +240,9 @@ def test_scales_a_camera_cannot_resolve_are_skipped(aruco, aruco_results):
     coarse = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(min_module_px=4.5),
                     progress=False)
     for camera, report in coarse.cameras.items():
-        smallest = report.raw["scales"][0]
-        assert smallest["skipped_patterns"] > 0, camera
-        assert report.raw["frames_detected"] < aruco_results[True].cameras[camera].raw["frames_detected"]
+        smallest = report.raw.scales[0]
+        assert smallest.skipped_patterns > 0, camera
+        assert report.raw.frames_detected < aruco_results[True].cameras[camera].raw.frames_detected
 
 
 def test_a_recording_that_runs_on_is_not_decoded_past_the_projection(aruco, aruco_results, tmp_path):
@@ -258,7 +258,7 @@ def test_a_recording_that_runs_on_is_not_decoded_past_the_projection(aruco, aruc
     short = aruco_results[True]
     for name, camera in result.cameras.items():
         timing = truth["timing"]["cameras"][name]
-        assert camera.raw["frames_decoded"] < timing["recorded_frames"] - 3.5 * timing["fps"], name
+        assert camera.raw.frames_decoded < timing["recorded_frames"] - 3.5 * timing["fps"], name
         ids, xy = result.tracks.observations(name)
         short_ids, short_xy = short.tracks.observations(name)
         np.testing.assert_array_equal(ids, short_ids)
@@ -325,7 +325,7 @@ def test_edges_fitted_in_undistorted_pixels_keep_large_markers_exact():
         image = distorted_marker(centre, module)
         _, raw = raw_detector.detect(image)
         _, refined_in_image = image_detector.detect(image)
-        ours = _core.ingest.refine_undistorted_corners(image, raw[0], WIDE.K, WIDE.dist, 6)
+        ours = _core.ingest.refine_undistorted_corners(image, raw[0], WIDE, 6)
         error = np.linalg.norm(marker_centres(ours[None])[0] - centre)
         naive = np.linalg.norm(marker_centres(WIDE.undistort_points(refined_in_image[0])[None])[0] - centre)
         assert error < 0.03 and naive > 0.3, (centre, error, naive)
@@ -338,8 +338,8 @@ def test_a_marker_is_verified_only_where_and_as_it_is_drawn():
     raw_detector = MarkerDetector("aruco:4X4_50", inverted=True, corner_refinement="none")
     image = distorted_marker(np.array([800.0, 420.0]), 16.0)
     _, raw = raw_detector.detect(image)
-    corners = _core.ingest.refine_undistorted_corners(image, raw[0], WIDE.K, WIDE.dist, 6)
-    verify = partial(_core.ingest.shows_marker, image, K=WIDE.K, dist=WIDE.dist, spec="aruco:4X4_50")
+    corners = _core.ingest.refine_undistorted_corners(image, raw[0], WIDE, 6)
+    verify = partial(_core.ingest.shows_marker, image, intrinsics=WIDE, spec="aruco:4X4_50")
     assert verify(corners, id=3, inverted=True)
     assert not verify(corners, id=4, inverted=True)
     assert not verify(corners, id=3, inverted=False)
@@ -350,9 +350,9 @@ def test_a_marker_is_verified_only_where_and_as_it_is_drawn():
 def test_lens_tables_match_the_exact_mapping():
     rng = np.random.default_rng(0)
     pixels = rng.uniform([0, 0], [959, 539], (2000, 2))
-    undistorted = _core.ingest.lens_tables_map(WIDE.K, WIDE.dist, (960, 540), pixels, True)
+    undistorted = _core.ingest.lens_tables_map(WIDE, (960, 540), pixels, True)
     assert np.abs(undistorted - WIDE.undistort_points(pixels)).max() < 0.005
-    distorted = _core.ingest.lens_tables_map(WIDE.K, WIDE.dist, (960, 540), undistorted, False)
+    distorted = _core.ingest.lens_tables_map(WIDE, (960, 540), undistorted, False)
     assert np.abs(distorted - WIDE.distort_points(undistorted)).max() < 0.005
 
 

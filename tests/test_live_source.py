@@ -86,14 +86,14 @@ def test_a_stream_is_ingested_as_it_arrives_and_recorded_unchanged(room, tmp_pat
     # The recording holds the packets that were decoded live: the same frames, the same
     # light code fit and the same centres.
     for key in ("array", "marker"):
-        np.testing.assert_array_equal(recorded.raw["centres"][key], camera.raw["centres"][key])
-    np.testing.assert_allclose(recorded.raw["centres"]["xy"], camera.raw["centres"]["xy"], atol=1e-9)
-    assert recorded.raw["sync"]["offset"] == pytest.approx(camera.raw["sync"]["offset"], abs=1e-9)
+        np.testing.assert_array_equal(getattr(recorded.raw.centres, key), getattr(camera.raw.centres, key))
+    np.testing.assert_allclose(recorded.raw.centres.xy, camera.raw.centres.xy, atol=1e-9)
+    assert recorded.raw.sync.map.offset == pytest.approx(camera.raw.sync.map.offset, abs=1e-9)
 
     # Against the file the stream was made from: the same MSMs within what the stream's
     # re-encoding changes.
     original = ingest({CAMERA: stream}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
-    assert len(camera.raw["centres"]["array"]) >= 0.95 * len(original.raw["centres"]["array"])
+    assert len(camera.raw.centres.array) >= 0.95 * len(original.raw.centres.array)
     truth = json.loads((out / "truth.json").read_text())
     assert truth["cameras"]  # the rendered room's truth is there for the capture tests
 
@@ -198,7 +198,7 @@ def test_an_http_stream_and_a_file_being_written_are_sources_too(room, tmp_path)
         server.wait()
     assert camera.error is None, camera.error
     original = ingest({CAMERA: stream}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
-    assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
+    assert len(camera.raw.centres.array) == len(original.raw.centres.array)
 
     growing = tmp_path / "recorder.ts"
     writer = subprocess.Popen(["ffmpeg", "-v", "error", "-re", "-i", str(stream), "-c", "copy", "-f", "mpegts",
@@ -213,7 +213,7 @@ def test_an_http_stream_and_a_file_being_written_are_sources_too(room, tmp_path)
         writer.kill()
         writer.wait()
     assert camera.error is None, camera.error
-    assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
+    assert len(camera.raw.centres.array) == len(original.raw.centres.array)
 
 
 def test_an_rtsp_stream_pushed_by_an_encoder_is_a_source_too(room):
@@ -236,7 +236,7 @@ def test_an_rtsp_stream_pushed_by_an_encoder_is_a_source_too(room):
     pusher.join(timeout=30)
     assert camera.error is None, camera.error
     original = ingest({CAMERA: stream}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
-    assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
+    assert len(camera.raw.centres.array) == len(original.raw.centres.array)
 
 
 def test_an_rtsp_server_is_a_source_too(room):
@@ -259,8 +259,8 @@ def test_an_rtsp_server_is_a_source_too(room):
         server.communicate()
     assert camera.error is None, camera.error
     original = ingest({CAMERA: stream}, sequence, out / "intrinsics", progress=False).cameras[CAMERA]
-    assert len(camera.raw["centres"]["array"]) == len(original.raw["centres"]["array"])
-    np.testing.assert_allclose(camera.raw["centres"]["xy"], original.raw["centres"]["xy"], atol=1e-9)
+    assert len(camera.raw.centres.array) == len(original.raw.centres.array)
+    np.testing.assert_allclose(camera.raw.centres.xy, original.raw.centres.xy, atol=1e-9)
 
 
 def _decoded_grey(path: Path) -> list[np.ndarray]:

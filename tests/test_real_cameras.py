@@ -96,9 +96,9 @@ def small_room_with(out, **camera_changes):
 
 def assert_records_from_clean_frames(result, truth) -> None:
     for name, camera in result.cameras.items():
-        records = camera.raw["records"]
+        records = camera.raw.records
         clean = truth["clean_frames"][name]
-        for pattern, first, count in zip(records["pattern"], records["first_frame"], records["frame_count"]):
+        for pattern, first, count in zip(records.pattern, records.first_frame, records.frame_count):
             assert set(range(first, first + count)) <= set(clean[pattern]), name
 
 
@@ -120,11 +120,11 @@ def test_dropped_frames_keep_sync_to_a_tenth_of_a_frame(dropping):
     for name, camera in result.cameras.items():
         timing = truth["timing"]["cameras"][name]
         assert timing["dropped_frames"], name  # the seed drops some frames in every camera
-        sync = camera.raw["sync"]
+        sync = camera.raw.sync
         offset = -timing["first_exposure_start_s"] * timing["fps"]
-        assert abs(sync["offset"] - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync["offset_uncertainty"]), name
+        assert abs(sync.map.offset - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync.offset_uncertainty), name
         # The rate error, as the drift it makes over the whole sequence, camera frames.
-        drift = abs(sync["rate"] - timing["fps_ratio"]) * truth["timing"]["sequence_frames"]
+        drift = abs(sync.map.rate - timing["fps_ratio"]) * truth["timing"]["sequence_frames"]
         assert drift < MAX_SYNC_ERROR_FRAMES, name
 
 
@@ -156,8 +156,8 @@ def test_detections_come_from_recorded_clean_frames_and_only_drops_lose_patterns
         dropped = set(truth["timing"]["cameras"][name]["dropped_frames"])
         # Patterns with a dropped frame among their clean frames or next to them.
         hit = sum(1 for frames in clean if frames and dropped & set(range(frames[0] - 1, frames[-1] + 2)))
-        assert raw["patterns_missing"] + raw["patterns_dropped"] <= hit, name
-        handled = sum(s["detected_patterns"] + s["skipped_patterns"] for s in raw["scales"])
+        assert raw.patterns_missing + raw.patterns_dropped <= hit, name
+        handled = sum(s.detected_patterns + s.skipped_patterns for s in raw.scales)
         assert handled >= sum(1 for frames in clean if frames) - hit, name
 
 
@@ -172,9 +172,9 @@ def test_rolling_shutter_readout_is_measured_and_sync_is_the_first_rows(rolling)
     report = result.report()["cameras"]
     for name, camera in result.cameras.items():
         timing = truth["timing"]["cameras"][name]
-        sync = camera.raw["sync"]
+        sync = camera.raw.sync
         offset = -timing["first_exposure_start_s"] * timing["fps"]
-        assert abs(sync["offset"] - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync["offset_uncertainty"]), name
+        assert abs(sync.map.offset - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync.offset_uncertainty), name
     cam2, cam3 = report["cam2"]["sync"], report["cam3"]["sync"]
     assert abs(cam3["readout_s"] - READOUT_S) < MAX_READOUT_ERROR_S
     assert cam3["readout_sigma_s"] < MAX_READOUT_ERROR_S / 2
@@ -197,14 +197,14 @@ def test_a_known_exposure_measures_the_readout_of_a_camera_seeing_few_phases(rol
         assert sync["readout_sigma_s"] < MAX_READOUT_ERROR_S / 2, name
         timing = truth["timing"]["cameras"][name]
         offset = -timing["first_exposure_start_s"] * timing["fps"]
-        assert abs(given.cameras[name].raw["sync"]["offset"] - offset) <= MAX_SYNC_ERROR_FRAMES, name
+        assert abs(given.cameras[name].raw.sync.map.offset - offset) <= MAX_SYNC_ERROR_FRAMES, name
 
 
 def test_rolling_shutter_picks_frames_clean_in_every_row(rolling):
     _, truth, result = rolling
     assert_records_from_clean_frames(result, truth)
     for camera in result.cameras.values():
-        assert len(camera.raw["centres"]["array"]) > 40
+        assert len(camera.raw.centres.array) > 40
 
 
 def test_a_global_shutter_reads_out_in_no_time(dropping):
@@ -485,8 +485,8 @@ def test_a_real_room_gives_right_observations_only(real_room):
         assert errors.max() < WRONG_PX, name  # no observation of another marker or pattern
         assert np.sqrt(np.mean(errors**2)) < 0.3, name
         timing = truth["timing"]["cameras"][name]
-        sync = camera.raw["sync"]
+        sync = camera.raw.sync
         offset = -timing["first_exposure_start_s"] * timing["fps"]
-        if sync["readout"] is None:
-            assert sync["offset_uncertainty"] >= 0.5, name
-        assert abs(sync["offset"] - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync["offset_uncertainty"]), name
+        if sync.readout is None:
+            assert sync.offset_uncertainty >= 0.5, name
+        assert abs(sync.map.offset - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync.offset_uncertainty), name

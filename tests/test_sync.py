@@ -77,10 +77,10 @@ def test_sync_error_is_below_a_tenth_of_a_frame(fps, exposure, known):
     for offset in rng.uniform(3.0, 60.0, 4):
         signal, rate = record(sequence, fps, offset, exposure, rng)
         result = synchronise(signal, sequence, fps, options)
-        assert abs(result["offset"] - offset) < MAX_SYNC_ERROR_FRAMES
-        assert abs(result["rate"] / rate - 1.0) < 2e-4
-        assert result["offset_uncertainty"] < MAX_SYNC_ERROR_FRAMES
-        assert abs(result["exposure"] - exposure) < 0.1
+        assert abs(result.map.offset - offset) < MAX_SYNC_ERROR_FRAMES
+        assert abs(result.map.rate / rate - 1.0) < 2e-4
+        assert result.offset_uncertainty < MAX_SYNC_ERROR_FRAMES
+        assert abs(result.map.exposure - exposure) < 0.1
 
 
 def test_clock_drift_is_measured():
@@ -90,9 +90,9 @@ def test_clock_drift_is_measured():
     for drift in (-400e-6, 250e-6):
         signal, rate = record(sequence, 30.0, 17.3, 1.0, rng, drift=drift)
         result = synchronise(signal, sequence, 30.0, known_exposure(1.0, 30.0))
-        assert abs(result["offset"] - 17.3) < MAX_SYNC_ERROR_FRAMES
+        assert abs(result.map.offset - 17.3) < MAX_SYNC_ERROR_FRAMES
         # 0.005 frame over the ~140 frames between the codes of this short sequence.
-        assert (result["rate"] / nominal - 1.0) == pytest.approx(drift, abs=6e-5)
+        assert (result.map.rate / nominal - 1.0) == pytest.approx(drift, abs=6e-5)
 
 
 @pytest.mark.parametrize("missing", [0.02, 0.1])
@@ -104,7 +104,7 @@ def test_codes_are_found_over_frames_the_camera_dropped(missing):
     signal, _ = record(sequence, 25.0, 23.6, 0.5, rng)
     signal[1:][rng.random(len(signal) - 1) < missing] = np.nan
     result = synchronise(signal, sequence, 25.0)
-    assert abs(result["offset"] - 23.6) < MAX_SYNC_ERROR_FRAMES
+    assert abs(result.map.offset - 23.6) < MAX_SYNC_ERROR_FRAMES
     with pytest.raises(RuntimeError, match="start light code"):
         synchronise(signal, sequence, 25.0, IngestOptions(max_missing_share=missing / 20))
 
@@ -119,12 +119,12 @@ def test_short_exposure_truth_lies_within_the_reported_uncertainty():
     for offset in rng.uniform(3.0, 60.0, 6):
         signal, rate = record(sequence, 30.0, offset, exposure, rng)
         result = synchronise(signal, sequence, 30.0)
-        assert abs(result["offset"] - offset) <= result["offset_uncertainty"] + 1e-9
-        window = result["window_map"]
-        assert window["offset"] >= offset - 1e-6  # windows start no later than the truth's
-        assert window["exposure"] - window["offset"] >= exposure - offset - 1e-6  # and end no earlier
-        if result["sharp"]:
-            assert abs(result["offset"] - offset) < MAX_SYNC_ERROR_FRAMES
+        assert abs(result.map.offset - offset) <= result.offset_uncertainty + 1e-9
+        window = result.window_map
+        assert window.offset >= offset - 1e-6  # windows start no later than the truth's
+        assert window.exposure - window.offset >= exposure - offset - 1e-6  # and end no earlier
+        if result.sharp:
+            assert abs(result.map.offset - offset) < MAX_SYNC_ERROR_FRAMES
 
 
 def test_correlation_peaks_at_the_code():
@@ -134,8 +134,8 @@ def test_correlation_peaks_at_the_code():
     levels = _core.ingest.light_levels(sequence.core())
     start = _core.sync.locate_code(signal, levels, sequence.start_code.to_dict(), 25.0 / PROJECTOR_FPS)
     expected = 12.4 + 25.0 / PROJECTOR_FPS * sequence.start_code.first_frame
-    assert start["correlation"] > 0.99
-    assert abs(start["frame"] - expected) < MAX_SYNC_ERROR_FRAMES
+    assert start.correlation > 0.99
+    assert abs(start.frame - expected) < MAX_SYNC_ERROR_FRAMES
 
 
 def test_a_missing_code_is_an_error_with_the_best_correlation():
@@ -208,10 +208,10 @@ def test_rendered_videos_synchronise_to_a_tenth_of_a_frame(rendered):
         fps = truth["timing"]["cameras"][name]["fps"]
         options = IngestOptions(exposure_s=KNOWN_EXPOSURES.get(name, 0.0))
         result = synchronise(luma_signal(out / "videos" / f"{name}.mp4"), sequence, fps, options, source=name)
-        error = abs(result["offset"] - offset)
-        assert abs(result["rate"] / rate - 1.0) < 1e-4, name
+        error = abs(result.map.offset - offset)
+        assert abs(result.map.rate / rate - 1.0) < 1e-4, name
         if name == "short30":  # no frame across a light change: an interval
-            assert error <= result["offset_uncertainty"], name
+            assert error <= result.offset_uncertainty, name
         else:
             assert error < MAX_SYNC_ERROR_FRAMES, name
 
@@ -224,10 +224,10 @@ def test_ingest_synchronises_while_decoding(rendered):
     assert not result.failed
     for name, camera in result.cameras.items():
         offset, rate, _ = true_map(truth, name)
-        sync = camera.raw["sync"]
-        assert abs(sync["offset"] - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync["offset_uncertainty"]), name
-        assert abs(sync["rate"] / rate - 1.0) < 1e-4, name
-        assert len(camera.raw["signal"]) < truth["timing"]["cameras"][name]["recorded_frames"], name
+        sync = camera.raw.sync
+        assert abs(sync.map.offset - offset) <= max(MAX_SYNC_ERROR_FRAMES, sync.offset_uncertainty), name
+        assert abs(sync.map.rate / rate - 1.0) < 1e-4, name
+        assert len(camera.raw.signal) < truth["timing"]["cameras"][name]["recorded_frames"], name
 
 
 def automatic_exposure(signal, target, time_constant_s, fps):
@@ -254,4 +254,4 @@ def test_a_camera_adjusting_its_exposure_during_the_code_still_finds_it():
     with pytest.raises(RuntimeError, match="light code not found"):
         synchronise(signal, sequence, 30.0, options.replace(detrend_frames=0))
     result = synchronise(signal, sequence, 30.0, options)
-    assert abs(result["offset"] - offset) < 1.0
+    assert abs(result.map.offset - offset) < 1.0

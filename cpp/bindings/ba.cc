@@ -183,8 +183,14 @@ void RegisterResult(py::module_& m) {
       .def_readonly("report", &ba::Result::report, "Ceres' full report, with full_report");
 }
 
-// Plus, Minus and their Jacobians of a manifold, for tests of its invariants.
-py::dict ManifoldFunctions(const ceres::Manifold& manifold, const Eigen::VectorXd& x, const Eigen::VectorXd& y,
+// Plus, Minus and their Jacobians of a manifold at one point, for tests of its invariants.
+struct ManifoldValues {
+  Eigen::VectorXd plus;   // Plus(x, delta)
+  Eigen::VectorXd minus;  // Minus(y, x)
+  RowMatrix plus_jacobian, minus_jacobian;  // at x
+};
+
+ManifoldValues ManifoldFunctions(const ceres::Manifold& manifold, const Eigen::VectorXd& x, const Eigen::VectorXd& y,
                            const Eigen::VectorXd& delta) {
   const int ambient = manifold.AmbientSize();
   const int tangent = manifold.TangentSize();
@@ -192,18 +198,21 @@ py::dict ManifoldFunctions(const ceres::Manifold& manifold, const Eigen::VectorX
     throw std::invalid_argument("manifold: expected x, y of size " + std::to_string(ambient) + " and delta of size " +
                                 std::to_string(tangent));
   }
-  Eigen::VectorXd x_plus_delta(ambient), y_minus_x(tangent);
-  RowMatrix plus_jacobian(ambient, tangent), minus_jacobian(tangent, ambient);
-  manifold.Plus(x.data(), delta.data(), x_plus_delta.data());
-  manifold.Minus(y.data(), x.data(), y_minus_x.data());
-  manifold.PlusJacobian(x.data(), plus_jacobian.data());
-  manifold.MinusJacobian(x.data(), minus_jacobian.data());
-  py::dict out;
-  out["plus"] = x_plus_delta;
-  out["minus"] = y_minus_x;
-  out["plus_jacobian"] = plus_jacobian;
-  out["minus_jacobian"] = minus_jacobian;
+  ManifoldValues out{Eigen::VectorXd(ambient), Eigen::VectorXd(tangent), RowMatrix(ambient, tangent),
+                     RowMatrix(tangent, ambient)};
+  manifold.Plus(x.data(), delta.data(), out.plus.data());
+  manifold.Minus(y.data(), x.data(), out.minus.data());
+  manifold.PlusJacobian(x.data(), out.plus_jacobian.data());
+  manifold.MinusJacobian(x.data(), out.minus_jacobian.data());
   return out;
+}
+
+void RegisterManifoldValues(py::module_& m) {
+  py::class_<ManifoldValues>(m, "ManifoldValues", "A manifold's Plus, Minus and their Jacobians at one point")
+      .def_readonly("plus", &ManifoldValues::plus, "Plus(x, delta)")
+      .def_readonly("minus", &ManifoldValues::minus, "Minus(y, x)")
+      .def_readonly("plus_jacobian", &ManifoldValues::plus_jacobian, "d Plus(x, delta) / d delta at delta = 0")
+      .def_readonly("minus_jacobian", &ManifoldValues::minus_jacobian, "d Minus(y, x) / d y at y = x");
 }
 
 }  // namespace
@@ -259,6 +268,7 @@ Bad input raises ValueError naming the problem. Releases the GIL while solving.)
 
 void register_ba(py::module_& m) {
   def_bundle_adjust(m, "bundle_adjust", ba::AnalyticCosts());
+  RegisterManifoldValues(m);
 
   m.def(
       "evaluate_free_cost",

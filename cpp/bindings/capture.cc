@@ -141,7 +141,7 @@ void register_capture(py::module_& m) {
           [](const CapturedRun& r, const std::string& name) {
             const formats::CameraOutcome& camera = r.Camera(name);
             if (!camera.ok()) throw py::value_error("camera " + name + " failed: " + camera.error);
-            return IngestResultDict(camera.result, r.plan.sequence);
+            return BoundIngestResult(camera.result, r.plan.sequence);
           },
           py::arg("name"), "A camera's ingest as ingest_camera returns it (an ingested camera only).")
       .def(

@@ -194,47 +194,7 @@ void RegisterProjectedMarkers(py::module_& m) {
           "The projector image's centre (pixels)");
 }
 
-// From a calibproj.io.intrinsics.Intrinsics.
-formats::CameraIntrinsics CameraIntrinsicsFrom(const py::handle& camera) {
-  formats::CameraIntrinsics in;
-  in.name = camera.attr("name").cast<std::string>();
-  in.K = camera.attr("K").cast<Eigen::Matrix3d>();
-  in.dist = camera.attr("dist").attr("ravel")().cast<std::vector<double>>();
-  const py::object resolution = camera.attr("resolution");
-  in.has_resolution = !resolution.is_none();
-  if (in.has_resolution) std::tie(in.width, in.height) = resolution.cast<std::pair<double, double>>();
-  return in;
-}
-
-std::map<std::string, formats::CameraIntrinsics> IntrinsicsFrom(const py::dict& cameras) {
-  std::map<std::string, formats::CameraIntrinsics> out;
-  for (const auto& [name, camera] : cameras) out[name.cast<std::string>()] = CameraIntrinsicsFrom(camera);
-  return out;
-}
-
 }  // namespace
-
-std::map<std::string, formats::CameraIntrinsics> IntrinsicsFromPython(const py::dict& cameras) {
-  return Converted("intrinsics", [&] { return IntrinsicsFrom(cameras); });
-}
-
-// The core's camera intrinsics as a bound class (read-only).
-static void RegisterIntrinsicsType(py::module_& m) {
-  using formats::CameraIntrinsics;
-  py::class_<CameraIntrinsics>(m, "CameraIntrinsics",
-                               "A camera's intrinsics as the core holds them (calibproj.io.intrinsics."
-                               "intrinsics_from_core reads them)")
-      .def_readonly("name", &CameraIntrinsics::name)
-      .def_property_readonly(
-          "resolution",
-          [](const CameraIntrinsics& in) -> py::object {
-            if (!in.has_resolution) return py::none();
-            return py::make_tuple(static_cast<std::int64_t>(in.width), static_cast<std::int64_t>(in.height));
-          },
-          "(width, height), or None when the file gives none")
-      .def_readonly("K", &CameraIntrinsics::K)
-      .def_readonly("dist", &CameraIntrinsics::dist);
-}
 
 void register_formats(py::module_& m) {
   // A bad input file: the message names the file and the problem.
@@ -248,7 +208,7 @@ void register_formats(py::module_& m) {
     }
   });
   register_tracks(m);
-  RegisterIntrinsicsType(m);
+  register_camera_intrinsics(m);
   register_calibration(m);
   RegisterProjectedMarkers(m);
   RegisterScaleTypes(m);
@@ -285,27 +245,24 @@ void register_formats(py::module_& m) {
       "InputError naming the file and the problem");
   m.def(
       "write_intrinsics",
-      [](const std::filesystem::path& out, const py::object& intrinsics, const std::string& extra_json) {
-        nlohmann::ordered_json extra = nlohmann::ordered_json::object();
-        if (!extra_json.empty()) {
-          extra = nlohmann::ordered_json::parse(extra_json, nullptr, /*allow_exceptions=*/false);
-          if (!extra.is_object()) throw py::value_error("extra: not the JSON text of an object");
+      [](const std::filesystem::path& out, const formats::CameraIntrinsics& intrinsics, const py::object& extra) {
+        nlohmann::ordered_json entries = nlohmann::ordered_json::object();
+        if (!extra.is_none()) {
+          if (!py::isinstance<py::dict>(extra)) throw py::type_error("extra: expected a dict or None");
+          entries = PythonToJson<nlohmann::ordered_json>(extra, "extra");
         }
-        formats::WriteIntrinsics(out, Converted("intrinsics", [&] { return CameraIntrinsicsFrom(intrinsics); }),
-                                 extra);
+        formats::WriteIntrinsics(out, intrinsics, entries);
       },
-      py::arg("out"), py::arg("intrinsics"), py::arg("extra_json") = "",
-      "Our intrinsics file of an Intrinsics, written atomically; extra_json: the JSON text of an object whose "
-      "entries follow the format's own (how they were measured)");
+      py::arg("out"), py::arg("intrinsics"), py::arg("extra") = py::none(),
+      "Our intrinsics file of an Intrinsics, written atomically; extra: a dict whose entries follow the "
+      "format's own (how they were measured, their uncertainty)");
   m.def(
       "intrinsics_from_json",
-      [](const std::string& text, const std::string& name) {
-        const nlohmann::json document = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-        if (document.is_discarded()) throw py::value_error("not valid JSON");
-        return formats::IntrinsicsFromDocument(document, name);
+      [](const py::object& document, const std::string& name) {
+        return formats::IntrinsicsFromDocument(PythonToJson(document, "document"), name);
       },
-      py::arg("text"), py::arg("name"),
-      "The CameraIntrinsics of the JSON text of our format's body; ValueError with the problem");
+      py::arg("document"), py::arg("name"),
+      "The CameraIntrinsics of our format's body (a dict, as json.load gives it); ValueError with the problem");
   m.def("intrinsics_files", &formats::IntrinsicsFilesIn, py::arg("directory"),
         "Camera name -> its intrinsics files in the folder (.json, .yaml, .yml, .xml; sorted); InputError when "
         "the folder does not exist or holds none");
@@ -326,7 +283,7 @@ void register_formats(py::module_& m) {
   m.def(
       "with_earlier_observations",
       [](const std::filesystem::path& earlier, const formats::Tracks& tracks, const py::dict& intrinsics) {
-        const auto cameras = Converted("intrinsics", [&] { return IntrinsicsFrom(intrinsics); });
+        const auto cameras = IntrinsicsFromPython(intrinsics);
         return formats::WithEarlierObservations(earlier, tracks, cameras);
       },
       py::arg("earlier"), py::arg("tracks"), py::arg("intrinsics"),
@@ -362,9 +319,7 @@ void register_formats(py::module_& m) {
   m.def("parse_export_formats", &formats::ParseExportFormats, py::arg("text"));
   m.def(
       "colmap_camera",
-      [](const py::object& intrinsics) {
-        return formats::ColmapCamera(Converted("intrinsics", [&] { return CameraIntrinsicsFrom(intrinsics); }));
-      },
+      [](const formats::CameraIntrinsics& intrinsics) { return formats::ColmapCamera(intrinsics); },
       py::arg("intrinsics"), "(COLMAP model, parameters) of an Intrinsics");
   m.def("quaternion_wxyz", &formats::QuaternionWxyz, py::arg("R"), "Unit quaternion (w, x, y, z), w >= 0");
   m.def(
@@ -374,7 +329,7 @@ void register_formats(py::module_& m) {
         std::vector<std::string> warnings;
         const auto files = formats::Export(CalibrationFromPython(calibration),
                                            format, directory,
-                                           Converted("intrinsics", [&] { return IntrinsicsFrom(intrinsics); }),
+                                           IntrinsicsFromPython(intrinsics),
                                            tracks, &warnings);
         return py::make_tuple(files, warnings);
       },

@@ -37,18 +37,16 @@ bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const py:
 
 void CheckSyncOptionValues(sync::SyncOptions& o) { VisitSync(o, limits::OptionChecker{"sync options: "}); }
 
-py::list SyncOptionTable() {
+std::vector<Knob> SyncOptionTable() {
   return KnobTable<sync::SyncOptions>([](auto& o, auto&& visit) { VisitSync(o, visit); });
 }
 
-py::list IngestOptionTable() {
+std::vector<Knob> IngestOptionTable() {
   return KnobTable<ingest::IngestOptions>([](auto& o, auto&& visit) { ingest::VisitIngestOptions(o, visit); });
 }
 
-void ThrowUnknownOption(const std::string& what, const std::string& key, const py::list& table) {
-  std::string names;
-  for (const auto& entry : table) names += (names.empty() ? "" : ", ") + entry["name"].cast<std::string>();
-  throw std::invalid_argument(what + ": unknown option '" + key + "' (choose from " + names + ")");
+void ThrowUnknownOption(const std::string& what, const std::string& key, const std::vector<Knob>& table) {
+  throw std::invalid_argument(what + ": unknown option '" + key + "' (choose from " + KnobNames(table) + ")");
 }
 
 }  // namespace calibproj::bindings

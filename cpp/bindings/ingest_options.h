@@ -4,13 +4,17 @@
 
 #include <pybind11/pybind11.h>
 
+#include <nlohmann/json.hpp>
+
 #include <map>
 #include <string>
+#include <vector>
 
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/ingest/camera_ingest.h"
 #include "calibproj/ingest/sequence_description.h"
 #include "calibproj/sync/synchronise.h"
+#include "knob_setter.h"
 
 namespace calibproj::bindings {
 
@@ -24,20 +28,28 @@ bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const pyb
 // magnitude (limits::OptionChecker); the ingest's own Check() does this for its options.
 void CheckSyncOptionValues(sync::SyncOptions& o);
 
-// Per knob, in order: {name, default, help}; calibproj.ingest_options.IngestOptions is
+// Per knob, in order, a Knob; calibproj.ingest_options.IngestOptions is
 // made from the ingest's, which holds the sync's (but fixed_exposure, in seconds there).
-pybind11::list SyncOptionTable();
-pybind11::list IngestOptionTable();
+std::vector<Knob> SyncOptionTable();
+std::vector<Knob> IngestOptionTable();
 
 // The ingest options of keyword arguments named as option_table() names them, with these
 // detector options; ValueError for an unknown name.
 ingest::IngestOptions IngestOptionsFromKwargs(const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
                                               const pybind11::kwargs& kwargs);
 
+// One camera's ingest with its entry of detect_report.json (made once, where
+// calibproj-native makes it), bound as _core.ingest.CameraIngestResult.
+struct IngestResult {
+  ingest::CameraIngestResult result;
+  nlohmann::ordered_json report;
+};
+
 // One camera's ingest as calibproj.ingest reads it (CameraIngest.raw).
-pybind11::dict IngestResultDict(const ingest::CameraIngestResult& result, const ingest::SequenceDescription& sequence);
+pybind11::object BoundIngestResult(const ingest::CameraIngestResult& result,
+                                   const ingest::SequenceDescription& sequence);
 
 // Throws std::invalid_argument naming `key` and listing the names of `table`.
-[[noreturn]] void ThrowUnknownOption(const std::string& what, const std::string& key, const pybind11::list& table);
+[[noreturn]] void ThrowUnknownOption(const std::string& what, const std::string& key, const std::vector<Knob>& table);
 
 }  // namespace calibproj::bindings

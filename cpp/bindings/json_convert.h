@@ -49,28 +49,30 @@ inline pybind11::object JsonToPython(const nlohmann::json& value) {
 // A Python value as json.dumps would write it (dict keys must be strings; tuples are
 // lists; numpy scalars are numbers). std::invalid_argument naming `where` for anything
 // else, a non-finite float, an integer beyond 64 bits or nesting deeper than the files allow.
-inline nlohmann::json PythonToJson(const pybind11::handle& value, const std::string& where, int depth = 0) {
+// Json = nlohmann::ordered_json keeps the dicts' order, as json.dumps does.
+template <typename Json = nlohmann::json>
+Json PythonToJson(const pybind11::handle& value, const std::string& where, int depth = 0) {
   namespace py = pybind11;
   if (depth > kMaxDocumentDepth) throw std::invalid_argument(where + ": nested deeper than 512 levels");
   if (value.is_none()) return nullptr;
   if (py::isinstance<py::bool_>(value)) return value.cast<bool>();
   if (py::isinstance<py::str>(value)) return value.cast<std::string>();
   if (py::isinstance<py::dict>(value)) {
-    nlohmann::json out = nlohmann::json::object();
+    Json out = Json::object();
     for (const auto& item : py::reinterpret_borrow<py::dict>(value)) {
       if (!py::isinstance<py::str>(item.first)) {
         throw std::invalid_argument(where + ": keys must be strings, got " + TypeName(item.first));
       }
       const std::string key = item.first.cast<std::string>();
-      out[key] = PythonToJson(item.second, where + "['" + key + "']", depth + 1);
+      out[key] = PythonToJson<Json>(item.second, where + "['" + key + "']", depth + 1);
     }
     return out;
   }
   if (py::isinstance<py::list>(value) || py::isinstance<py::tuple>(value)) {
-    nlohmann::json out = nlohmann::json::array();
+    Json out = Json::array();
     size_t index = 0;
     for (const auto& item : value) {
-      out.push_back(PythonToJson(item, where + "[" + std::to_string(index++) + "]", depth + 1));
+      out.push_back(PythonToJson<Json>(item, where + "[" + std::to_string(index++) + "]", depth + 1));
     }
     return out;
   }

@@ -5,9 +5,9 @@
 #include <pybind11/pybind11.h>
 
 #include <stdexcept>
-
 #include <string>
 #include <type_traits>
+#include <vector>
 
 #include "checks.h"
 #include "convert.h"
@@ -32,18 +32,25 @@ struct KnobSetter {
   }
 };
 
-// Per knob of an option struct, in order: {name, default, help}; `visit(options,
-// visitor)` walks its table.
+// One knob of an option table as Python sees it (_core.Knob): the Python options
+// classes and both command lines are made from these.
+struct Knob {
+  std::string name;
+  pybind11::object default_value;     // bool, int, float or str (an enumerated knob's choice)
+  std::string help;
+  std::vector<std::string> choices;   // an enumerated knob's; empty otherwise
+};
+
+// The names of a table, "a, b, c".
+std::string KnobNames(const std::vector<Knob>& table);
+
+// Per knob of an option struct, in order; `visit(options, visitor)` walks its table.
 template <typename Options, typename Visit>
-pybind11::list KnobTable(Visit&& visit) {
+std::vector<Knob> KnobTable(Visit&& visit) {
   Options o;
-  pybind11::list table;
+  std::vector<Knob> table;
   visit(o, [&table](const char* name, const auto& field, const char* help) {
-    pybind11::dict entry;
-    entry["name"] = name;
-    entry["default"] = field;
-    entry["help"] = help;
-    table.append(entry);
+    table.push_back({name, pybind11::cast(field), help, {}});
   });
   return table;
 }
@@ -59,10 +66,8 @@ Options OptionsFromKeywords(const pybind11::dict& values, const std::string& wha
     KnobSetter setter{key, item.second, what + " option '" + key + "'"};
     visit(options, setter);
     if (!setter.found) {
-      std::string names;
-      const pybind11::list table = KnobTable<Options>(visit);
-      for (const auto& entry : table) names += (names.empty() ? "" : ", ") + entry["name"].cast<std::string>();
-      throw std::invalid_argument(what + ": unknown option '" + key + "' (choose from " + names + ")");
+      throw std::invalid_argument(what + ": unknown option '" + key + "' (choose from " +
+                                  KnobNames(KnobTable<Options>(visit)) + ")");
     }
   }
   options.Check();

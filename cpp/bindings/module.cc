@@ -14,6 +14,7 @@ PYBIND11_MODULE(_core, m) {
   m.doc() = "calibproj C++ core: bundle adjustment, geometry, registration, detection, video";
   m.attr("ceres_version") = CERES_VERSION_STRING;
   m.attr("opencv_version") = CV_VERSION;
+  calibproj::bindings::register_knob(m);
 
   auto ba = m.def_submodule("ba", "Bundle adjustment with analytic Jacobians (Ceres)");
   calibproj::bindings::register_ba(ba);

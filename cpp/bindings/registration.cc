@@ -42,23 +42,19 @@ registration::Options OptionsFromKwargs(const py::kwargs& kwargs) {
 
 // Per knob: name, default (an enumerated one by name), help and, for an enumerated
 // one, its choices; the Python options class and flags are made from it.
-py::list OptionTable() {
-  py::list table;
+std::vector<Knob> OptionTable() {
+  std::vector<Knob> table;
   registration::Options defaults;
   registration::VisitRegistrationOptions(defaults, [&table](const char* name, const auto& field, const char* help) {
     using T = std::decay_t<decltype(field)>;
-    py::dict entry;
-    entry["name"] = name;
-    entry["help"] = help;
+    Knob knob{name, py::none(), help, {}};
     if constexpr (std::is_enum_v<T>) {
-      entry["default"] = registration::ChoiceName(field);
-      py::list choices;
-      for (const auto& [choice, unused] : registration::Choices<T>::All()) choices.append(choice);
-      entry["choices"] = choices;
+      knob.default_value = py::str(registration::ChoiceName(field));
+      for (const auto& [choice, unused] : registration::Choices<T>::All()) knob.choices.push_back(choice);
     } else {
-      entry["default"] = field;
+      knob.default_value = py::cast(field);
     }
-    table.append(entry);
+    table.push_back(std::move(knob));
   });
   return table;
 }
@@ -314,7 +310,7 @@ of calibproj.registration.RegistrationOptions.)doc")
       "check_options", [](const py::kwargs& kwargs) { OptionsFromKwargs(kwargs); },
       "Raises ValueError naming the first registration option (keyword) that is unknown or out of range.");
   m.def("option_table", &OptionTable,
-        "Every registration knob as {name, default, help[, choices]}, in order: the one declaration "
+        "Every registration knob as a Knob (name, default, help, choices), in order: the one declaration "
         "calibproj.registration.RegistrationOptions and both command lines are made from.");
 }
 

@@ -7,6 +7,8 @@
 
 namespace calibproj::bindings {
 
+// The Knob class (one entry of every stage's option_table()), in the top module.
+void register_knob(pybind11::module_& m);
 void register_ba(pybind11::module_& m);
 void register_geometry(pybind11::module_& m);
 void register_registration(pybind11::module_& m);
@@ -14,6 +16,8 @@ void register_detect(pybind11::module_& m);
 void register_video(pybind11::module_& m);
 void register_sync(pybind11::module_& m);
 void register_ingest(pybind11::module_& m);
+// The CameraIngestResult class and its parts, in the ingest submodule.
+void register_ingest_result(pybind11::module_& m);
 void register_selfcal(pybind11::module_& m);
 void register_check(pybind11::module_& m);
 void register_formats(pybind11::module_& m);
@@ -21,6 +25,8 @@ void register_formats(pybind11::module_& m);
 void register_tracks(pybind11::module_& m);
 // The Calibration class and its parts, in the formats submodule.
 void register_calibration(pybind11::module_& m);
+// The CameraIntrinsics class, in the formats submodule.
+void register_camera_intrinsics(pybind11::module_& m);
 void register_uncertainty(pybind11::module_& m);
 void register_capture(pybind11::module_& m);
 

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -88,7 +89,7 @@ void RegisterResult(py::module_& m) {
            "(8, 8) the covariance of camera a's lens with camera b's (ValueError out of range)");
 }
 
-py::list SelfCalibrationOptionTable() {
+std::vector<Knob> SelfCalibrationOptionTable() {
   return KnobTable<selfcal::SelfCalibrationOptions>(
       [](auto& o, auto&& visit) { selfcal::VisitSelfCalibrationOptions(o, visit); });
 }
@@ -98,14 +99,13 @@ selfcal::SelfCalibrationOptions SelfCalibrationOptionsFrom(const py::dict& value
       values, "self-calibration", [](auto& o, auto&& visit) { selfcal::VisitSelfCalibrationOptions(o, visit); });
 }
 
-// The core's log lines to Python's logging (calibproj.self_calibration's logger).
-std::function<void(const std::string&)> LogTo(const py::object& logger) {
-  if (!py::hasattr(logger, "info") || !PyCallable_Check(logger.attr("info").ptr())) {
-    throw py::type_error("logger: expected a logging.Logger (an object with a callable info)");
-  }
-  return [logger](const std::string& line) {
+// The core's log lines to a Python callable (calibproj.self_calibration's logger.info).
+std::function<void(const std::string&)> LogTo(const py::function& log) {
+  // Copies of the std::function made without the GIL share the one reference.
+  auto function = std::make_shared<py::function>(log);
+  return [function](const std::string& line) {
     py::gil_scoped_acquire acquire;
-    logger.attr("info")(line);
+    (*function)(line);
   };
 }
 
@@ -193,13 +193,13 @@ selfcal::SelfCalibration SelfCalibrateFromPython(const formats::Tracks& tracks, 
                                                  const py::dict& options, int num_threads,
                                                  const std::optional<py::dict>& given,
                                                  const std::optional<selfcal::SelfCalibration>& earlier,
-                                                 const py::object& logger) {
+                                                 const py::function& log_line) {
   const auto core_intrinsics = IntrinsicsFromPython(intrinsics);
   const formats::Calibration core_calibration = CalibrationFromPython(calibration);
   const auto settings = SelfCalibrationOptionsFrom(options);
   std::optional<selfcal::IntrinsicsMap> core_given;
   if (given) core_given = IntrinsicsFromPython(*given);
-  const auto log = LogTo(logger);  // made (and destroyed) with the GIL held
+  const auto log = LogTo(log_line);  // made (and destroyed) with the GIL held
   py::gil_scoped_release release;
   return selfcal::SelfCalibrate(tracks, core_intrinsics, core_calibration, request, settings, num_threads,
                                 core_given ? &*core_given : nullptr, earlier ? &earlier->reports : nullptr, log);
@@ -213,20 +213,20 @@ void register_selfcal(py::module_& m) {
   RegisterRefinement(m);
   m.attr("refine_intrinsics_help") = selfcal::kRefineIntrinsicsHelp;
   m.def("option_table", &SelfCalibrationOptionTable,
-        "Per self-calibration knob, in order: {name, default, help}; SelfCalibrationOptions is made from it.");
+        "Every self-calibration knob as a Knob (name, default, help), in order; SelfCalibrationOptions is made from it.");
   m.def(
       "check_options", [](const py::kwargs& kwargs) { SelfCalibrationOptionsFrom(kwargs); },
       "ValueError naming the first knob that is not a positive number, or an unknown one.");
   m.def("refine_lenses", &SelfCalibrateFromPython, py::arg("tracks"), py::arg("intrinsics"), py::arg("calibration"),
         py::arg("request"), py::kw_only(), py::arg("options"), py::arg("num_threads") = 1,
-        py::arg("given") = py::none(), py::arg("earlier") = py::none(), py::arg("logger"),
+        py::arg("given") = py::none(), py::arg("earlier") = py::none(), py::arg("log"),
         R"doc(The requested lens entries of the registered cameras of calibration, refined (a SelfCalibration).
 
 tracks are undistorted with intrinsics ({name: Intrinsics}), where the refinement starts; an entry
 held keeps its value in given (default: intrinsics). A later round passes the first round's result
 as intrinsics, the user's values as given and the first round's SelfCalibration as earlier: the
 entries it chose are refined again without choosing anew. options: {knob: value}
-(option_table()). Each camera's line goes to logger.info. Releases the GIL.)doc");
+(option_table()). Each camera's line goes to log(line). Releases the GIL.)doc");
   m.def(
       "mark_untrusted_lenses_weak",
       [](const selfcal::SelfCalibration& result, formats::Calibration& calibration) {
@@ -238,13 +238,13 @@ entries it chose are refined again without choosing anew. options: {knob: value}
   m.def(
       "closed_form_start",
       [](const formats::Tracks& tracks, const py::dict& intrinsics, const py::object& calibration,
-         const selfcal::RefineRequest& request, const py::dict& options, const py::object& logger) {
+         const selfcal::RefineRequest& request, const py::dict& options, const py::function& log) {
         return selfcal::ClosedFormStart(tracks, IntrinsicsFromPython(intrinsics),
                                         CalibrationFromPython(calibration), request,
-                                        SelfCalibrationOptionsFrom(options), LogTo(logger));
+                                        SelfCalibrationOptionsFrom(options), LogTo(log));
       },
       py::arg("tracks"), py::arg("intrinsics"), py::arg("calibration"), py::arg("request"), py::kw_only(),
-      py::arg("options"), py::arg("logger"),
+      py::arg("options"), py::arg("log"),
       "{name: formats.CameraIntrinsics} to start the refinement from: the given ones, but for a camera whose\n"
       "focal length is to be refined and disagrees by more than closed_form_min_change with the closed-form\n"
       "planar autocalibration, that one.");

@@ -5,9 +5,12 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cmath>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "calibproj/formats/files.h"
 #include "calibproj/sync/synchronise.h"
 #include "checks.h"
 #include "ingest_options.h"
@@ -48,8 +51,80 @@ sync::FrameWindow CodeWindow(const sync::LightTimeline& timeline, const sync::Li
 
 }  // namespace
 
+// The synchronisation's results as bound classes (read-only).
+void RegisterSyncTypes(py::module_& m) {
+  py::class_<sync::FrameMap>(m, "FrameMap",
+                             "Projector time to camera frames: frame = offset + rate * projector frame; exposure "
+                             "in camera frames")
+      .def(py::init([](double offset, double rate, double exposure) {
+             if (!std::isfinite(offset) || !std::isfinite(rate) || !std::isfinite(exposure)) {
+               throw py::value_error("FrameMap: offset, rate and exposure must be finite");
+             }
+             return sync::FrameMap{offset, rate, exposure};
+           }),
+           py::arg("offset"), py::arg("rate"), py::arg("exposure"))
+      .def_readonly("offset", &sync::FrameMap::offset, "camera frame at which the sequence's frame 0 starts")
+      .def_readonly("rate", &sync::FrameMap::rate, "camera frames per projector frame")
+      .def_readonly("exposure", &sync::FrameMap::exposure, "exposure time, camera frames")
+      .def("camera_frame", &sync::FrameMap::CameraFrame, py::arg("projector_time"),
+           "Camera frame whose exposure starts at a projector time (frames)")
+      .def("projector_time", &sync::FrameMap::ProjectorTime, py::arg("camera_frame"),
+           "Projector time (frames) at which a camera frame starts its exposure")
+      .def("__repr__", [](const sync::FrameMap& map) {
+        return "FrameMap(offset=" + formats::PythonFloat(map.offset) + ", rate=" + formats::PythonFloat(map.rate) +
+               ", exposure=" + formats::PythonFloat(map.exposure) + ")";
+      });
+  py::class_<sync::CodeLocation>(m, "CodeLocation", "Where one light code lies in a camera's brightness signal")
+      .def_readonly("correlation", &sync::CodeLocation::correlation, "best coarse correlation (-1..1)")
+      .def_readonly("frame", &sync::CodeLocation::frame, "camera frame where the code's first projector frame starts")
+      .def_readonly("uncertainty", &sync::CodeLocation::uncertainty,
+                    "half-width of the equally good positions, camera frames")
+      .def_readonly("map", &sync::CodeLocation::map, "local fit (rate as searched)")
+      .def_readonly("window_map", &sync::CodeLocation::window_map,
+                    "covers every exposure window that fits (same rate)")
+      .def_readonly("rms", &sync::CodeLocation::rms, "fit residual RMS as a share of the code's contrast")
+      .def_readonly("sharp", &sync::CodeLocation::sharp, "the offsets that fit span at most two grid steps");
+  py::class_<sync::BandFit>(m, "BandFit", "One horizontal band's fit of the light codes (rolling shutter)")
+      .def_readonly("row", &sync::BandFit::row, "centre row of the band, share of the image height")
+      .def_readonly("offset", &sync::BandFit::offset, "camera frames")
+      .def_readonly("sigma", &sync::BandFit::sigma, "camera frames")
+      .def_readonly("rms", &sync::BandFit::rms, "fit residual over contrast")
+      .def_readonly("used", &sync::BandFit::used, "sharp and showing the codes");
+  py::class_<sync::ReadoutEstimate>(m, "ReadoutEstimate", "A rolling shutter's readout from bands of the image")
+      .def_readonly("bands", &sync::ReadoutEstimate::bands, "every band that could be fitted")
+      .def_readonly("valid", &sync::ReadoutEstimate::valid, "enough sharp bands, spread over the image")
+      .def_readonly("readout", &sync::ReadoutEstimate::readout, "camera frames from the first row's start to the last's")
+      .def_readonly("readout_sigma", &sync::ReadoutEstimate::readout_sigma, "1 sigma, camera frames")
+      .def_readonly("first_row_offset", &sync::ReadoutEstimate::first_row_offset,
+                    "offset of the frame map of the first row")
+      .def_readonly("offset_sigma", &sync::ReadoutEstimate::offset_sigma, "camera frames")
+      .def_readonly("applied", &sync::ReadoutEstimate::applied, "the frame map was moved to the first row")
+      .def_readonly("bands_used", &sync::ReadoutEstimate::bands_used);
+  py::class_<sync::SyncResult>(m, "SyncResult", "A camera's frame map found from the light codes")
+      .def_readonly("map", &sync::SyncResult::map,
+                    "the frame map (the first row's when a rolling-shutter readout was applied)")
+      .def_readonly("window_map", &sync::SyncResult::window_map,
+                    "covers the exposure window of every map that fits the codes as well (every row)")
+      .def_readonly("start", &sync::SyncResult::start, "the start code's location")
+      .def_readonly("end", &sync::SyncResult::end, "the end code's location")
+      .def_readonly("offset_uncertainty", &sync::SyncResult::offset_uncertainty,
+                    "camera frames: the offsets that explain the signal as well (about a frame when no camera "
+                    "frame spans a light change)")
+      .def_readonly("rate_uncertainty", &sync::SyncResult::rate_uncertainty, "camera frames per projector frame")
+      .def_readonly("sharp", &sync::SyncResult::sharp, "the offsets that fit span at most two grid steps")
+      .def_readonly("rms", &sync::SyncResult::rms, "joint fit residual as a share of the contrast")
+      .def_property_readonly(
+          "readout",
+          [](const sync::SyncResult& r) -> std::optional<sync::ReadoutEstimate> {
+            if (!r.readout.valid) return std::nullopt;
+            return r.readout;
+          },
+          "the rolling-shutter readout, None when not measured");
+}
+
 void register_sync(py::module_& m) {
-  m.def("option_table", &SyncOptionTable, "Every sync knob as {name, default, help}, in order.");
+  RegisterSyncTypes(m);
+  m.def("option_table", &SyncOptionTable, "Every sync knob as a Knob (name, default, help), in order.");
   m.def(
       "synchronise",
       [](const DoubleArray& signal, const DoubleArray& levels, const py::dict& start, const py::dict& end,
@@ -64,7 +139,7 @@ void register_sync(py::module_& m) {
           py::gil_scoped_release release;
           result = sync::Synchronise(values, timeline, start_code, end_code, nominal_rate, options, source);
         }
-        return SyncResultDict(result);
+        return result;
       },
       py::arg("signal"), py::arg("levels"), py::arg("start_code"), py::arg("end_code"), py::arg("nominal_rate"),
       py::arg("source") = "signal",
@@ -86,14 +161,14 @@ void register_sync(py::module_& m) {
           py::gil_scoped_release release;
           location = sync::LocateCode(values, timeline, light_code, nominal_rate, options, source, "light");
         }
-        return CodeLocationDict(location);
+        return location;
       },
       py::arg("signal"), py::arg("levels"), py::arg("code"), py::arg("nominal_rate"), py::arg("source") = "signal",
       "Where one light code lies in a brightness signal (see synchronise).");
   m.def(
       "estimate_readout",
       [](const py::array_t<double, py::array::c_style | py::array::forcecast>& band_signals,
-         const DoubleArray& levels, const py::dict& start, const py::dict& end, const py::dict& map,
+         const DoubleArray& levels, const py::dict& start, const py::dict& end, const sync::FrameMap& frame_map,
          const py::kwargs& kwargs) {
         RequireShape(band_signals, {-1, -1}, "band_signals");
         const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
@@ -106,28 +181,18 @@ void register_sync(py::module_& m) {
         const std::vector<sync::FrameWindow> windows{
             CodeWindow(timeline, LightCodeFromDict(start, "start_code"), options, "start_code"),
             CodeWindow(timeline, LightCodeFromDict(end, "end_code"), options, "end_code")};
-        const sync::FrameMap frame_map{DictItem<double>(map, "offset", "map"), DictItem<double>(map, "rate", "map"),
-                                       DictItem<double>(map, "exposure", "map")};
         if (!(frame_map.rate > 0.0) || !(frame_map.exposure > 0.0)) throw std::invalid_argument("map: bad rate or exposure");
         sync::ReadoutEstimate estimate;
         {
           py::gil_scoped_release release;
           estimate = sync::EstimateReadout(bands, timeline, windows, frame_map, options.fit);
         }
-        py::list fits;
-        for (const sync::BandFit& band : estimate.bands) {
-          fits.append(py::dict(py::arg("row") = band.row, py::arg("offset") = band.offset,
-                               py::arg("sigma") = band.sigma, py::arg("rms") = band.rms, py::arg("used") = band.used));
-        }
-        return py::dict(py::arg("valid") = estimate.valid, py::arg("readout") = estimate.readout,
-                        py::arg("sigma") = estimate.readout_sigma,
-                        py::arg("first_row_offset") = estimate.first_row_offset,
-                        py::arg("offset_sigma") = estimate.offset_sigma, py::arg("bands") = fits);
+        return estimate;
       },
       py::arg("band_signals"), py::arg("levels"), py::arg("start_code"), py::arg("end_code"), py::arg("map"),
       "Rolling-shutter readout (camera frames) from the brightness of horizontal bands of the image "
       "(bands, frames), fitted around both light codes starting from the whole frame's map "
-      "({offset, rate, exposure}); per band its row, offset, sigma, fit rms and whether it was used.");
+      "(a FrameMap); a ReadoutEstimate, with per band its row, offset, sigma, fit rms and whether it was used.");
 }
 
 }  // namespace calibproj::bindings

@@ -34,7 +34,7 @@ from typing import Any
 from calibproj import _core
 from calibproj.calibration import Calibration
 from calibproj.ingest import IngestResult
-from calibproj.io.intrinsics import Intrinsics, intrinsics_from_core
+from calibproj.io.intrinsics import Intrinsics
 from calibproj.option_tables import options_class
 from calibproj.results import CHECK_FILE
 from calibproj.tracks import Tracks
@@ -94,10 +94,7 @@ def repaired(calibration: Calibration, intrinsics: dict[str, Intrinsics], stored
     the core, as calibproj-native repairs)."""
     if not result.trusted:
         raise ValueError(result.message)
-    core, cameras, observations = _core.check.repaired(calibration, intrinsics, tracks, stored_tracks, result,
-                                                       weak_rotation_sigma_deg)
-    return (core, {name: intrinsics_from_core(camera) for name, camera in cameras.items()},
-            observations)
+    return _core.check.repaired(calibration, intrinsics, tracks, stored_tracks, result, weak_rotation_sigma_deg)
 
 
 def write_check(path: str | os.PathLike, result: CheckResult) -> None:

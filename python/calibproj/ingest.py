@@ -54,15 +54,16 @@ class CameraIngest:
         video: path of the video.
         intrinsics: path (or description) of the intrinsics used.
         error: the failure, or None.
-        raw: everything the C++ ingest returned (sync, statistics, per-scale
-            ``records`` and merged ``centres`` as numpy arrays, the luma ``signal``).
+        raw: what the C++ ingest returned, a ``_core.ingest.CameraIngestResult`` (sync,
+            statistics, per-scale ``records`` and merged ``centres`` as numpy columns,
+            the luma ``signal``); None when it failed.
     """
 
     name: str
     video: str
     intrinsics: str
     error: str | None = None
-    raw: dict[str, Any] = field(default_factory=dict, repr=False)
+    raw: Any = field(default=None, repr=False)
     # Mean brightness per frame of a camera whose light codes were not found, averaged
     # over `brightness_step` frames per value: what the report draws to show why.
     brightness: np.ndarray | None = field(default=None, repr=False)
@@ -83,12 +84,12 @@ class CameraIngest:
                                        "values": [round(float(v), 5) for v in self.brightness]}
             return entry
         # Built by the C++ core, as calibproj-native builds it.
-        entry.update(self.raw["report"])
+        entry.update(self.raw.report)
         return entry
 
     def thumbnail(self) -> np.ndarray | None:
         """The grey copy of the frame where most markers were found (``IngestOptions.thumbnail_width``), or None."""
-        image = self.raw.get("thumbnail") if self.ok else None
+        image = self.raw.thumbnail if self.ok and self.raw is not None else None
         return image if image is not None and image.size else None
 
 
@@ -127,10 +128,10 @@ class IngestResult:
         return {"sequence": recorded(self.sequence_source), "markers": self.markers, "cameras": cameras}
 
     def _thumbnail_entry(self, camera: CameraIngest, file: str) -> dict[str, Any]:
-        pattern = int(camera.raw["thumbnail_pattern"])
+        pattern = int(camera.raw.thumbnail_pattern)
         array = self.pattern_arrays[pattern] if 0 <= pattern < len(self.pattern_arrays) else None
         return {"file": file, "pattern": pattern, "array": array,
-                "scale": camera.thumbnail().shape[1] / float(camera.raw["video"]["width"])}
+                "scale": camera.thumbnail().shape[1] / float(camera.raw.video.width)}
 
     def write_thumbnails(self, folder: str | os.PathLike) -> dict[str, str]:
         """Each camera's thumbnail as ``<folder>/<camera>.png``; camera -> file path."""
@@ -297,10 +298,9 @@ class _CameraJob:
         try:
             if camera_intrinsics is None:
                 raise ValueError(source)
-            resolution = camera_intrinsics.resolution
             report.raw = _core.ingest.ingest_camera(
-                str(video), self.sequence, camera_intrinsics.K, camera_intrinsics.dist, resolution, source,
-                self.aruco, self.apriltag, self.bars.callback(name), live=self.live, **self.kwargs)
+                str(video), self.sequence, camera_intrinsics, source, self.aruco, self.apriltag,
+                self.bars.callback(name), live=self.live, **self.kwargs)
         except (ValueError, RuntimeError, OSError) as error:
             if self.bars.cancelled.is_set():  # the C++ core reports the interruption as its error
                 raise KeyboardInterrupt(f"camera {name}: ingest interrupted") from None
@@ -311,7 +311,7 @@ class _CameraJob:
                 report.brightness, report.brightness_step = _brightness_trace(video, self.kwargs)
         else:
             self.bars.finish(name, complete=True)
-            logger.info("camera %s: %d MSMs", name, len(report.raw["centres"]["array"]))
+            logger.info("camera %s: %d MSMs", name, len(report.raw.centres.array))
         return report
 
 
@@ -407,15 +407,15 @@ def luma_signal(video: str | os.PathLike, options: IngestOptions | None = None) 
 
 
 def synchronise(signal: np.ndarray, sequence: Any, camera_fps: float, options: IngestOptions | None = None,
-                source: str = "signal") -> dict[str, Any]:
+                source: str = "signal") -> Any:
     """Frame map of a camera from its per-frame mean luma (NaN = not measured).
 
-    Returns a dict: ``offset`` (camera frame at which the sequence's frame 0 starts),
-    ``rate`` (camera frames per projector frame), ``exposure`` (camera frames),
-    ``offset_uncertainty`` (camera frames: the offsets that explain the signal as well;
-    about a frame when no camera frame spans a light change), ``sharp``, ``window_map``
-    (a map whose exposure windows cover every one that fits), and per code ``start`` /
-    ``end`` (correlation, position). RuntimeError naming ``source`` when a code is not
+    Returns a ``_core.sync.SyncResult``: its ``map`` (``offset``, the camera frame at
+    which the sequence's frame 0 starts; ``rate``, camera frames per projector frame;
+    ``exposure``, camera frames), ``offset_uncertainty`` (camera frames: the offsets
+    that explain the signal as well; about a frame when no camera frame spans a light
+    change), ``sharp``, ``window_map`` (a map whose exposure windows cover every one
+    that fits), and per code ``start`` / ``end`` (correlation, position). RuntimeError naming ``source`` when a code is not
     found (with the best correlation seen) or the two codes disagree.
     """
     from calibproj import _core
@@ -498,11 +498,11 @@ def _tracks(cameras: dict[str, CameraIngest], markers_per_array: int) -> Tracks:
     for index, camera in enumerate(cameras.values()):
         if not camera.ok:
             continue
-        centres = camera.raw["centres"]
-        point_ids = msm_point_ids(centres["array"], centres["marker"], markers_per_array)
+        centres = camera.raw.centres
+        point_ids = msm_point_ids(centres.array, centres.marker, markers_per_array)
         names.append(np.full(len(point_ids), index, dtype=np.int32))
         ids.append(point_ids)
-        xy.append(np.asarray(centres["xy"], dtype=float).reshape(-1, 2))
+        xy.append(np.asarray(centres.xy, dtype=float).reshape(-1, 2))
     if not ids:
         return Tracks.empty(list(cameras), markers_per_array)
     return Tracks.from_observations(list(cameras), np.concatenate(names), np.concatenate(ids), np.concatenate(xy),

@@ -43,7 +43,7 @@ once the first detections give it; the scales of each MSM are merged.""",
 def sync_kwargs(options: IngestOptions, camera_fps: float) -> dict[str, Any]:
     """The synchronisation part of the options (``calibproj._core.sync`` keywords), the
     exposure in the camera's frames."""
-    names = {entry["name"] for entry in _core.sync.option_table()}
+    names = {knob.name for knob in _core.sync.option_table()}
     kwargs = {name: value for name, value in options.to_kwargs().items() if name in names}
     kwargs["fixed_exposure"] = options.exposure_s * camera_fps
     return kwargs

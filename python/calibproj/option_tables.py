@@ -15,19 +15,18 @@ from collections.abc import Callable
 from typing import Any
 
 
-def options_class(name: str, table: list[dict[str, Any]], summary: str, module: str, *,
+def options_class(name: str, table: list[Any], summary: str, module: str, *,
                   frozen: bool = False, methods: dict[str, Callable] | None = None) -> type:
-    """A dataclass with one field per entry of ``table`` ({name, default, help[,
-    choices]}), in its order: the entry's default, its help as ``metadata["help"]``,
+    """A dataclass with one field per knob of ``table`` (``_core.Knob``: name, default,
+    help, choices), in its order: the entry's default, its help as ``metadata["help"]``,
     its choices (if any) as ``metadata["choices"]``; documented by ``summary`` and an
     ``Attributes:`` section of the helps."""
     fields = []
     doc = [summary, "", "Attributes:"]
     for knob in table:
-        metadata = {"help": knob["help"], "choices": tuple(knob.get("choices", ()))}
-        fields.append((knob["name"], type(knob["default"]),
-                       dataclasses.field(default=knob["default"], metadata=metadata)))
-        doc.append(textwrap.fill(f"{knob['name']}: {knob['help']}", 88, initial_indent="    ",
+        metadata = {"help": knob.help, "choices": knob.choices}
+        fields.append((knob.name, type(knob.default), dataclasses.field(default=knob.default, metadata=metadata)))
+        doc.append(textwrap.fill(f"{knob.name}: {knob.help}", 88, initial_indent="    ",
                                  subsequent_indent="        "))
     cls = dataclasses.make_dataclass(name, fields, frozen=frozen,
                                      namespace={**(methods or {}), "__module__": module})

@@ -24,7 +24,7 @@ import numpy as np
 
 from calibproj import _core
 from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics, image_size
+from calibproj.io.intrinsics import Intrinsics
 from calibproj.option_tables import options_class
 from calibproj.tracks import Tracks
 
@@ -98,12 +98,13 @@ class RegistrationDriver:
         self.all_cameras = tuple(tracks.camera_names)
         self.tracks = tracks.drop_cameras(missing) if missing else tracks
         self.initial_pair: tuple[str, str] | None = None
+        self._final: Calibration | None = None  # the calibration once refined
         if not self.tracks.camera_names:
             self.reconstruction = None  # every camera failed before registration
             return
         self.intrinsics = {name: intrinsics[name] for name in self.tracks.camera_names}
         K = np.array([self.intrinsics[name].K for name in self.tracks.camera_names]).reshape(-1, 3, 3)
-        sizes = np.array([image_size(self.intrinsics[name]) for name in self.tracks.camera_names]).reshape(-1, 2)
+        sizes = np.array([self.intrinsics[name].image_size() for name in self.tracks.camera_names]).reshape(-1, 2)
         camera_index, point_index, xy = self.tracks.bundle_arrays()
         self.reconstruction = _core.registration.Reconstruction(
             K, sizes, self.tracks.num_points, camera_index, point_index, xy, **self.options.to_kwargs()
@@ -169,27 +170,18 @@ class RegistrationDriver:
             logger.info("%s", refined.relief.message)
         logger.info("refined: %d rounds, %d observations left out as outliers, cost %.6g",
                     refined.rounds, refined.removed, refined.last.final_cost)
-        self._warn_weak_cameras()
+        self._final = self.result()
+        _warn_weak_cameras(self._final, self.options.weak_rotation_sigma_deg)
         yield Step("refine", None, refined)
         yield Step("done")
-
-    def _warn_weak_cameras(self) -> None:
-        calibration = self.result()
-        for name in calibration.registered:
-            metrics = calibration.metrics[name]
-            if metrics.weak:
-                # The centre's sigma waits for the final calibration, in the results' unit.
-                logger.warning("camera %s is weakly determined: rotation known to %.3f deg (1 sigma, limit %g); "
-                               "more points in its view help (calibproj generate --densify RESULTS "
-                               "plans a short extra projection for it)",
-                               name, metrics.rotation_sigma_deg, self.options.weak_rotation_sigma_deg)
 
     def run(self, callback: Callable[[Step], bool | None] | None = None) -> Calibration:
         """All steps; ``callback(step)`` returning False stops after that step."""
         for step in self.steps():
             if callback is not None and callback(step) is False:
-                break
-        return self.result()
+                return self.result()
+        # Nothing changes after the refinement: its calibration is the result.
+        return self._final if self._final is not None else self.result()
 
     def result(self) -> Calibration:
         """The calibration in the floor frame, from the current state."""
@@ -197,6 +189,16 @@ class RegistrationDriver:
             return Calibration.nothing_registered(self.failed, self.options.model)
         return self.reconstruction.calibration(self.tracks.camera_names, self.tracks.point_ids,
                                                list(self.failed.items()), self.options.model)
+
+
+def _warn_weak_cameras(calibration: Calibration, limit_deg: float) -> None:
+    for name in calibration.registered:
+        metrics = calibration.metrics[name]
+        if metrics.weak:
+            # The centre's sigma waits for the final calibration, in the results' unit.
+            logger.warning("camera %s is weakly determined: rotation known to %.3f deg (1 sigma, limit %g); "
+                           "more points in its view help (calibproj generate --densify RESULTS "
+                           "plans a short extra projection for it)", name, metrics.rotation_sigma_deg, limit_deg)
 
 
 def calibrate(

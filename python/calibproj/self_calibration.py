@@ -34,7 +34,7 @@ import numpy as np
 
 from calibproj import _core
 from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics, intrinsics_from_core, intrinsics_from_json
+from calibproj.io.intrinsics import Intrinsics, intrinsics_from_json
 from calibproj.io.jsonio import FormatError, read_json
 from calibproj.option_tables import options_class
 from calibproj.tracks import Tracks
@@ -78,8 +78,8 @@ def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibra
     options = options or SelfCalibrationOptions()
     result = _core.selfcal.refine_lenses(tracks, dict(intrinsics), calibration, request, options=asdict(options),
                                          num_threads=num_threads, given=None if given is None else dict(given),
-                                         earlier=earlier, logger=logger)
-    return _from_core(result.intrinsics), result
+                                         earlier=earlier, log=logger.info)
+    return dict(result.intrinsics), result
 
 
 def closed_form_start(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
@@ -89,8 +89,8 @@ def closed_form_start(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], cali
     ``options.closed_form_min_change`` with the closed-form planar autocalibration, that
     one. Cameras whose focal length is not refined count as known."""
     start = _core.selfcal.closed_form_start(tracks, dict(intrinsics), calibration, request, options=asdict(options),
-                                            logger=logger)
-    return {name: value if same_intrinsics(value, start[name]) else intrinsics_from_core(start[name])
+                                            log=logger.info)
+    return {name: value if same_intrinsics(value, start[name]) else start[name]
             for name, value in intrinsics.items()}
 
 
@@ -113,10 +113,6 @@ def convert_tracks(tracks: Tracks, given: Mapping[str, Intrinsics], refined: Map
     """Tracks undistorted with ``given`` re-expressed as undistorted with ``refined`` (a
     camera whose intrinsics are the same in both is left as it is)."""
     return _core.selfcal.convert_tracks(tracks, dict(given), dict(refined))
-
-
-def _from_core(cameras: Mapping[str, Any]) -> dict[str, Intrinsics]:
-    return {name: intrinsics_from_core(value) for name, value in cameras.items()}
 
 
 SCHEMA_KIND = "self_calibration"

@@ -92,13 +92,13 @@ def centre_rms(camera, truth: dict, markers_per_array: int) -> tuple[float, int]
     raw = camera.raw
     points = truth["image_points"][camera.name]
     true_xy = dict(zip(points["ids"], points["undistorted"]))
-    records, centres = raw["records"], raw["centres"]
-    record_ids = records["array"] * markers_per_array + records["marker"]
+    records, centres = raw.records, raw.centres
+    record_ids = records.array * markers_per_array + records.marker
     errors = []
-    for array, marker, xy in zip(centres["array"], centres["marker"], centres["xy"]):
+    for array, marker, xy in zip(centres.array, centres.marker, centres.xy):
         point = int(array) * markers_per_array + int(marker)
-        kept = (record_ids == point) & records["kept"]
-        if point in true_xy and records["side_px"][kept].min() >= MIN_SIDE_PX:
+        kept = (record_ids == point) & records.kept
+        if point in true_xy and records.side_px[kept].min() >= MIN_SIDE_PX:
             errors.append(np.linalg.norm(xy - true_xy[point]))
     return (float(np.sqrt(np.mean(np.square(errors)))) if errors else float("nan")), len(errors)
 
@@ -126,18 +126,18 @@ def measure(system: str, folder: Path, sequence: Sequence, cameras: list[str] | 
             continue
         raw = camera.raw
         rms, count = centre_rms(camera, truth, result.tracks.markers_per_array)
-        detected = raw["frames_detected"]
-        detect_ms = 1e3 * raw["seconds_detection"] / max(detected, 1)
-        sync = raw["sync"]
+        detected = raw.frames_detected
+        detect_ms = 1e3 * raw.seconds_detection / max(detected, 1)
+        sync = raw.sync
         print(f"{system}: {name:<9}{ffmpeg_s:9.2f}{ingest_s:9.2f}{ingest_s / ffmpeg_s:7.2f}"
-              f"{ingest_cpu / ffmpeg_cpu:10.2f}{raw['frames_decoded']:8d}"
-              f"{detected:7d}{detect_ms:7.1f}{len(raw['centres']['array']):6d}{rms:8.3f}{count:5d}"
-              f"  offset {sync['offset']:.3f}+-{sync['offset_uncertainty']:.3f} rate {sync['rate']:.6f}", flush=True)
+              f"{ingest_cpu / ffmpeg_cpu:10.2f}{raw.frames_decoded:8d}"
+              f"{detected:7d}{detect_ms:7.1f}{len(raw.centres.array):6d}{rms:8.3f}{count:5d}"
+              f"  offset {sync.map.offset:.3f}+-{sync.offset_uncertainty:.3f} rate {sync.map.rate:.6f}", flush=True)
         totals["ingest"] += ingest_s
         totals["ffmpeg"] += ffmpeg_s
         totals["ingest_cpu"] += ingest_cpu
         totals["ffmpeg_cpu"] += ffmpeg_cpu
-        totals["detection"] += raw["seconds_detection"]
+        totals["detection"] += raw.seconds_detection
         totals["frames"] += detected
     print(f"{system}: total ffmpeg {totals['ffmpeg']:.1f} s, ingest {totals['ingest']:.1f} s, "
           f"ratio {totals['ingest'] / max(totals['ffmpeg'], 1e-9):.2f} "

@@ -19,46 +19,10 @@ namespace fs = std::filesystem;
 namespace {
 
 const std::vector<std::string> kYamlSuffixes = {".yaml", ".yml", ".xml"};
-const std::vector<size_t> kDistortionLengths = {4, 5, 8, 12, 14};
 
 std::string Lower(std::string text) {
   std::transform(text.begin(), text.end(), text.begin(), [](unsigned char c) { return std::tolower(c); });
   return text;
-}
-
-std::string PythonMatrix(const Eigen::Matrix3d& K) {
-  std::string out = "[";
-  for (int r = 0; r < 3; ++r) {
-    out += r ? ", [" : "[";
-    for (int c = 0; c < 3; ++c) out += (c ? ", " : "") + PythonFloat(K(r, c));
-    out += "]";
-  }
-  return out + "]";
-}
-
-// What is wrong with these values (the Python Intrinsics' own checks), or "".
-std::string Problem(const CameraIntrinsics& in) {
-  const Eigen::Matrix3d& K = in.K;
-  bool finite = K.allFinite();
-  for (double d : in.dist) finite = finite && std::isfinite(d);
-  if (!finite) return "K and dist must be finite numbers";
-  if (K(0, 0) <= 0 || K(1, 1) <= 0) {
-    return "focal lengths must be positive, got fx=" + PythonFloat(K(0, 0)) + ", fy=" + PythonFloat(K(1, 1));
-  }
-  if (K(0, 1) != 0 || K(1, 0) != 0 || K(2, 0) != 0 || K(2, 1) != 0 || K(2, 2) != 1) {
-    // OpenCV's distortion functions ignore a skew term, so none is accepted.
-    return "K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got " + PythonMatrix(K);
-  }
-  if (std::find(kDistortionLengths.begin(), kDistortionLengths.end(), in.dist.size()) == kDistortionLengths.end()) {
-    return "dist must have 4, 5, 8, 12, 14 coefficients, got " + std::to_string(in.dist.size());
-  }
-  // Without a resolution the principal point gives the image size.
-  const double width = in.ImageWidth(), height = in.ImageHeight();
-  if (!(width > 0 && width <= limits::kMaxImageSide && height > 0 && height <= limits::kMaxImageSide)) {
-    return "image size must be at most " + std::to_string(limits::kMaxImageSide) + " pixels per side, got " +
-           FormatNumber("%g", width) + "x" + FormatNumber("%g", height);
-  }
-  return "";
 }
 
 // [width, height]: two positive integral numbers.
@@ -90,7 +54,7 @@ CameraIntrinsics Build(const std::string& name, const nlohmann::json& K, const n
   for (int i = 0; i < 9; ++i) in.K(i / 3, i % 3) = K_values.values[i];
   if (resolution) SetResolution(*resolution, &in);
   if (in.dist.empty()) in.dist.assign(5, 0.0);
-  if (const std::string problem = Problem(in); !problem.empty()) {
+  if (const std::string problem = IntrinsicsProblem(in); !problem.empty()) {
     throw std::invalid_argument("intrinsics of " + PythonRepr(name) + ": " + problem);
   }
   return in;

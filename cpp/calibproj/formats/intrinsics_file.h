@@ -9,19 +9,9 @@
 #include <string>
 #include <vector>
 
+#include "calibproj/formats/camera_intrinsics.h"
+
 namespace calibproj::formats {
-
-struct CameraIntrinsics {
-  std::string name;
-  bool has_resolution = false;
-  double width = 0.0, height = 0.0;
-  Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
-  std::vector<double> dist;
-
-  // The image size, or twice the principal point when the file gives none.
-  double ImageWidth() const { return has_resolution ? width : 2.0 * K(0, 2) + 1.0; }
-  double ImageHeight() const { return has_resolution ? height : 2.0 * K(1, 2) + 1.0; }
-};
 
 // One intrinsics file in any supported format, named `name` (empty: the file stem);
 // InputError naming the file and the problem, with the Python reader's messages.

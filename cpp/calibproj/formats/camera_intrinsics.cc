@@ -1,0 +1,196 @@
+#include "calibproj/formats/camera_intrinsics.h"
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+
+#include "calibproj/common/limits.h"
+#include "calibproj/formats/files.h"
+
+namespace calibproj::formats {
+
+namespace {
+
+constexpr int kUndistortMaxIterations = 200;
+constexpr double kUndistortEpsilonPx = 1e-9;
+
+std::string PythonMatrix(const Eigen::Matrix3d& K) {
+  std::string out = "[";
+  for (int r = 0; r < 3; ++r) {
+    out += r ? ", [" : "[";
+    for (int c = 0; c < 3; ++c) out += (c ? ", " : "") + PythonFloat(K(r, c));
+    out += "]";
+  }
+  return out + "]";
+}
+
+// Coefficient `k` of OpenCV's order, zero beyond the vector's length.
+double Coefficient(const std::vector<double>& dist, std::size_t k) { return k < dist.size() ? dist[k] : 0.0; }
+
+// OpenCV's radial factor (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6).
+double RadialFactor(const std::vector<double>& dist, double r2) {
+  const double numerator =
+      1.0 + r2 * (Coefficient(dist, 0) + r2 * (Coefficient(dist, 1) + r2 * Coefficient(dist, 4)));
+  const double denominator =
+      1.0 + r2 * (Coefficient(dist, 5) + r2 * (Coefficient(dist, 6) + r2 * Coefficient(dist, 7)));
+  return numerator / denominator;
+}
+
+bool Tilted(const std::vector<double>& dist) {
+  return dist.size() == 14 && (dist[12] != 0.0 || dist[13] != 0.0);
+}
+
+std::vector<cv::Point2d> CvPoints(const Points2d& rows) {
+  std::vector<cv::Point2d> out(rows.rows());
+  for (Eigen::Index i = 0; i < rows.rows(); ++i) out[i] = {rows(i, 0), rows(i, 1)};
+  return out;
+}
+
+Points2d Rows(const std::vector<cv::Point2d>& points) {
+  Points2d out(points.size(), 2);
+  for (std::size_t i = 0; i < points.size(); ++i) out.row(i) << points[i].x, points[i].y;
+  return out;
+}
+
+cv::Matx33d CvMatrix(const Eigen::Matrix3d& K) {
+  cv::Matx33d out;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) out(r, c) = K(r, c);
+  }
+  return out;
+}
+
+}  // namespace
+
+bool CameraIntrinsics::HasDistortion() const {
+  return std::any_of(dist.begin(), dist.end(), [](double c) { return c != 0.0; });
+}
+
+Points2d CameraIntrinsics::UndistortPixels(const Points2d& distorted) const {
+  if (distorted.rows() == 0 || !HasDistortion()) return distorted;
+  std::vector<cv::Point2d> out;
+  const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, kUndistortMaxIterations,
+                                  kUndistortEpsilonPx);
+  const cv::Matx33d camera = CvMatrix(K);
+  cv::undistortPoints(CvPoints(distorted), out, camera, dist, cv::Matx33d::eye(), camera, criteria);
+  return Rows(out);
+}
+
+Points2d CameraIntrinsics::DistortPixels(const Points2d& undistorted) const {
+  if (undistorted.rows() == 0 || !HasDistortion()) return undistorted;
+  return ProjectNormalized(Normalize(undistorted));
+}
+
+Points2d CameraIntrinsics::Normalize(const Points2d& undistorted) const {
+  Points2d out(undistorted.rows(), 2);
+  for (Eigen::Index i = 0; i < undistorted.rows(); ++i) {
+    out(i, 0) = (undistorted(i, 0) - K(0, 2)) / K(0, 0);
+    out(i, 1) = (undistorted(i, 1) - K(1, 2)) / K(1, 1);
+  }
+  return out;
+}
+
+Points2d CameraIntrinsics::ProjectNormalized(const Points2d& normalized) const {
+  if (Tilted(dist)) {  // the tilted-sensor model, through OpenCV
+    if (normalized.rows() == 0) return normalized;
+    std::vector<cv::Point3d> rays(normalized.rows());
+    for (Eigen::Index i = 0; i < normalized.rows(); ++i) rays[i] = {normalized(i, 0), normalized(i, 1), 1.0};
+    std::vector<cv::Point2d> out;
+    cv::projectPoints(rays, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), CvMatrix(K), dist, out);
+    return Rows(out);
+  }
+  // OpenCV's radial, tangential and thin-prism distortion, written out.
+  const double p1 = Coefficient(dist, 2), p2 = Coefficient(dist, 3);
+  const double s1 = Coefficient(dist, 8), s2 = Coefficient(dist, 9), s3 = Coefficient(dist, 10),
+               s4 = Coefficient(dist, 11);
+  Points2d out(normalized.rows(), 2);
+  for (Eigen::Index i = 0; i < normalized.rows(); ++i) {
+    const double x = normalized(i, 0), y = normalized(i, 1);
+    const double r2 = x * x + y * y;
+    const double radial = RadialFactor(dist, r2);
+    const double xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2);
+    const double yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y + r2 * (s3 + s4 * r2);
+    out(i, 0) = (K(0, 0) * xd + K(0, 1) * yd) + K(0, 2);
+    out(i, 1) = (K(1, 0) * xd + K(1, 1) * yd) + K(1, 2);
+  }
+  return out;
+}
+
+double CameraIntrinsics::MaxMonotonicRadius(double limit, double step) const {
+  if (!(step > 0.0) || !(limit >= step) || limit / step > 1e8) {
+    throw std::invalid_argument("max_monotonic_radius: need 0 < step <= limit and at most 1e8 steps, got limit=" +
+                                PythonFloat(limit) + ", step=" + PythonFloat(step));
+  }
+  // The radii step, 2 step, ... up to limit, as numpy.arange(step, limit + step, step).
+  const double delta = (step + step) - step;
+  const auto count = static_cast<std::size_t>(std::ceil(((limit + step) - step) / step));
+  bool finite = true;
+  double previous = 0.0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const double radius = step + static_cast<double>(i) * delta;
+    const double distorted = radius * RadialFactor(dist, radius * radius);
+    finite = finite && std::isfinite(distorted);
+    if (i > 0 && !(distorted > previous)) return step + static_cast<double>(i - 1) * delta;
+    previous = distorted;
+  }
+  return finite ? limit : step;
+}
+
+std::vector<bool> CameraIntrinsics::Contains(const Points2d& pixels, double margin_px) const {
+  if (!has_resolution) throw std::invalid_argument("intrinsics of " + PythonRepr(name) + ": resolution unknown");
+  std::vector<bool> inside(pixels.rows());
+  for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
+    const double u = pixels(i, 0), v = pixels(i, 1);
+    inside[i] = u >= margin_px && u <= width - 1 - margin_px && v >= margin_px && v <= height - 1 - margin_px;
+  }
+  return inside;
+}
+
+std::string IntrinsicsProblem(const CameraIntrinsics& in) {
+  const Eigen::Matrix3d& K = in.K;
+  bool finite = K.allFinite();
+  for (double d : in.dist) finite = finite && std::isfinite(d);
+  if (!finite) return "K and dist must be finite numbers";
+  if (K(0, 0) <= 0 || K(1, 1) <= 0) {
+    return "focal lengths must be positive, got fx=" + PythonFloat(K(0, 0)) + ", fy=" + PythonFloat(K(1, 1));
+  }
+  if (K(0, 1) != 0 || K(1, 0) != 0 || K(2, 0) != 0 || K(2, 1) != 0 || K(2, 2) != 1) {
+    // OpenCV's distortion functions ignore a skew term, so none is accepted.
+    return "K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], got " + PythonMatrix(K);
+  }
+  if (std::find(kDistortionLengths.begin(), kDistortionLengths.end(), in.dist.size()) == kDistortionLengths.end()) {
+    return "dist must have 4, 5, 8, 12, 14 coefficients, got " + std::to_string(in.dist.size());
+  }
+  if (in.has_resolution && !(in.width > 0 && in.width == std::floor(in.width) && in.height > 0 &&
+                             in.height == std::floor(in.height))) {
+    return "resolution must be two positive integers [width, height], got [" + PythonFloat(in.width) + ", " +
+           PythonFloat(in.height) + "]";
+  }
+  // Without a resolution the principal point gives the image size.
+  const double width = in.ImageWidth(), height = in.ImageHeight();
+  if (!(width > 0 && width <= limits::kMaxImageSide && height > 0 && height <= limits::kMaxImageSide)) {
+    return "image size must be at most " + std::to_string(limits::kMaxImageSide) + " pixels per side, got " +
+           FormatNumber("%g", width) + "x" + FormatNumber("%g", height);
+  }
+  return "";
+}
+
+CameraIntrinsics MakeIntrinsics(const std::string& name, std::optional<std::pair<double, double>> resolution,
+                                const Eigen::Matrix3d& K, std::vector<double> dist) {
+  CameraIntrinsics in;
+  in.name = name;
+  in.has_resolution = resolution.has_value();
+  if (resolution) std::tie(in.width, in.height) = *resolution;
+  in.K = K;
+  in.dist = dist.empty() ? std::vector<double>(5, 0.0) : std::move(dist);
+  if (const std::string problem = IntrinsicsProblem(in); !problem.empty()) {
+    throw std::invalid_argument("intrinsics of " + PythonRepr(name) + ": " + problem);
+  }
+  return in;
+}
+
+}  // namespace calibproj::formats
