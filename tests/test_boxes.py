@@ -113,13 +113,13 @@ def _rotation_rmse_not_weak(calibration, truth_file) -> float:
 @pytest.fixture(scope="module")
 def table_room(tmp_path_factory):
     """The demo room with and without its table, calibrated (coplanar model)."""
-    from calibproj.registration import calibrate
+    from calibproj.registration import register
 
     folder = tmp_path_factory.mktemp("table")
     out = {}
     for preset in ("demo", "or-table"):
         simulation = simulate_tracks(preset, folder / preset, seed=0, noise_px=0.1)
-        out[preset] = (simulation, calibrate(simulation.tracks, simulation.intrinsics), folder / preset / "truth.json")
+        out[preset] = (simulation, register(simulation.tracks, simulation.intrinsics), folder / preset / "truth.json")
     return out
 
 

@@ -11,7 +11,7 @@ import pytest
 from calibproj.cli import main
 from calibproj import _core
 from calibproj.evaluation import EvaluationOptions, best_pair, evaluate, evaluate_held_out, triangulate_tracks
-from calibproj.registration import calibrate
+from calibproj.registration import register
 from calibproj.simulate import simulate_tracks
 from calibproj.synthetic import matrix_from_rotvec
 
@@ -21,7 +21,7 @@ NOISE_PX = 0.5
 @pytest.fixture(scope="module")
 def paper():
     sim = simulate_tracks("paper", None, noise_px=NOISE_PX, seed=7)
-    return sim, calibrate(sim.tracks, sim.intrinsics)
+    return sim, register(sim.tracks, sim.intrinsics)
 
 
 def test_paper_rig_is_a_full_success_at_2_px(paper) -> None:

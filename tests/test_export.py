@@ -12,7 +12,7 @@ import pytest
 from calibproj.cli import main
 from calibproj.export import colmap_camera, export, export_all, parse_formats, quaternion_wxyz
 from calibproj.io.intrinsics import Intrinsics
-from calibproj.registration import calibrate
+from calibproj.registration import register
 from calibproj.scale import apply_scale
 from calibproj.simulate import simulate_tracks
 
@@ -21,7 +21,7 @@ from calibproj.simulate import simulate_tracks
 def small():
     """Three cameras: cam1 and cam3 without distortion, cam2 with k1 and k2."""
     sim = simulate_tracks("small", None, noise_px=0.3, seed=1)
-    calibration = calibrate(sim.tracks, sim.intrinsics)
+    calibration = register(sim.tracks, sim.intrinsics)
     metric = apply_scale(calibration, f"camera-height:cam1={sim.scene.camera('cam1').center[2]}")
     return sim, metric
 

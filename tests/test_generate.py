@@ -16,7 +16,7 @@ from calibproj.sequence.codes import code_pair
 from calibproj.sequence.layout import MsmLayout
 from calibproj.sequence.sequence import Sequence
 from calibproj.io.jsonio import FormatError, read_json, write_json
-from calibproj.markers import MarkerDetector, marker_centres
+from calibproj.sequence.markers import MarkerDetector, marker_centres
 
 # A small sequence that still has every ingredient: a non-integer module size
 # (scale 1.4), several arrays, markers of 24 px (4 px modules for ArUco 4x4).

@@ -21,7 +21,7 @@ from calibproj.sequence.builder import build_sequence
 from calibproj.ingest import ingest
 from calibproj.ingest_options import IngestOptions
 from calibproj.io.intrinsics import Intrinsics, read_intrinsics, write_intrinsics
-from calibproj.markers import MarkerDetector, marker_centres, render_marker
+from calibproj.sequence.markers import MarkerDetector, marker_centres, render_marker
 from calibproj.sequence.video import GreyVideoWriter
 from calibproj.simulate.render import simulate_videos
 from calibproj.simulate.scene import load_scene

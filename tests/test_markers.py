@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calibproj import detect_markers
-from calibproj.markers import (
+from calibproj.sequence.markers import (
     MarkerDetector,
     family_info,
     marker_bits,

@@ -297,11 +297,11 @@ def test_calibrate_interrupted_or_failing_keeps_the_previous_results(small: Path
 def test_a_file_the_core_cannot_write_is_an_os_error_naming_it(small: Path, tmp_path: Path) -> None:
     """The results files are written by the C++ core: a write it cannot make reaches
     Python as OSError with the system's errno and the path, as open() raises it."""
-    from calibproj.registration import calibrate
+    from calibproj.registration import register
     from calibproj.io.intrinsics import load_intrinsics_dir
     from calibproj.tracks import Tracks
 
-    calibration = calibrate(Tracks.read(small / "tracks.json"), load_intrinsics_dir(small / "intrinsics"))
+    calibration = register(Tracks.read(small / "tracks.json"), load_intrinsics_dir(small / "intrinsics"))
     blocked = tmp_path / "blocked"
     blocked.write_text("a file where the results folder should be")
     with pytest.raises(OSError) as error:

@@ -13,7 +13,7 @@ from calibproj import _core
 from calibproj.calibration import Calibration
 from calibproj.comparison import compare, rotation_errors_to_reference
 from calibproj.io.poses import CameraPoses
-from calibproj.registration import RegistrationDriver, RegistrationOptions, calibrate
+from calibproj.registration import RegistrationDriver, RegistrationOptions, register
 from calibproj.simulate import simulate_tracks
 from calibproj.simulate.scene import FloorRelief
 from calibproj.synthetic import matrix_from_rotvec, rotvec_from_matrix
@@ -85,7 +85,7 @@ def test_paper_rig_reaches_the_global_optimum_within_bounds(model: str, seed: in
 @pytest.mark.parametrize("model", ["coplanar", "free"])
 def test_gross_outliers_leave_the_result_within_bounds(model: str) -> None:
     sim = simulate_tracks("paper", None, noise_px=0.5, seed=3, outlier_fraction=0.05)
-    calibration = calibrate(sim.tracks, sim.intrinsics, RegistrationOptions(model=model))
+    calibration = register(sim.tracks, sim.intrinsics, RegistrationOptions(model=model))
     assert calibration.failed == {}
     rotation, translation, _ = errors(calibration, sim)
     assert rotation < MAX_ROTATION_RMSE_DEG
@@ -119,7 +119,7 @@ def test_or_full_registers_the_close_up_camera(model: str) -> None:
     rotation is only known to ~0.5 deg (the near-affine view trades rotation for lateral
     translation), so it is held to its Cramer-Rao bound; the other cameras to the paper bounds."""
     sim = simulate_tracks("or-full", None, noise_px=0.5, seed=0)
-    calibration = calibrate(sim.tracks, sim.intrinsics, RegistrationOptions(model=model))
+    calibration = register(sim.tracks, sim.intrinsics, RegistrationOptions(model=model))
     assert calibration.failed == {}
     _, _, result = errors(calibration, sim)
     close_up = "ceiling"
@@ -149,7 +149,7 @@ def test_a_lone_camera_is_told_it_needs_a_second() -> None:
     sim = simulate_tracks("small", None, noise_px=0.5, seed=5)
     names = np.asarray(sim.tracks.camera_names)[sim.tracks.camera_index]
     lone = sim.tracks.camera_names[0]
-    calibration = calibrate(sim.tracks.select(names == lone), sim.intrinsics)
+    calibration = register(sim.tracks.select(names == lone), sim.intrinsics)
     assert calibration.failed[lone].startswith("the only camera with observations (a calibration needs two")
     assert all(calibration.failed[name] == "no observations" for name in sim.tracks.camera_names[1:])
 
@@ -162,7 +162,7 @@ def test_disconnected_group_and_camera_with_too_few_points_are_reported() -> Non
     keep = np.ones(len(tracks), bool)
     keep[np.flatnonzero(names == "near4")[4:]] = False
     tracks = tracks.select(keep)
-    calibration = calibrate(tracks, sim.intrinsics)
+    calibration = register(tracks, sim.intrinsics)
     assert set(calibration.failed) == {"far5", "far6", "near4"}
     assert "disconnected" in calibration.failed["far5"]
     assert "only 4 points" in calibration.failed["near4"]
@@ -175,7 +175,7 @@ def test_missing_intrinsics_fail_one_camera_only() -> None:
     sim = simulate_tracks("paper", None, noise_px=0.5, seed=6)
     intrinsics = dict(sim.intrinsics)
     del intrinsics["far2"]
-    calibration = calibrate(sim.tracks, intrinsics)
+    calibration = register(sim.tracks, intrinsics)
     assert calibration.failed == {"far2": "no intrinsics for this camera"}
     assert len(calibration.registered) == len(sim.tracks.camera_names) - 1
 
@@ -235,7 +235,7 @@ def test_a_caller_can_stop_after_any_step() -> None:
 
 def test_calibration_round_trips_through_its_files(tmp_path) -> None:
     sim = simulate_tracks("paper", None, noise_px=0.5, seed=9)
-    calibration = calibrate(sim.tracks, sim.intrinsics)
+    calibration = register(sim.tracks, sim.intrinsics)
     calibration.save(tmp_path)
     loaded = type(calibration).load(tmp_path)
     assert loaded.registered == calibration.registered
@@ -261,7 +261,7 @@ def test_pose_uncertainty_flags_the_close_up_camera_as_weak(tmp_path) -> None:
     weak limit, the others' far below; the written poses carry them, and comparing with
     the truth aligns on the cameras that are not weak."""
     sim = simulate_tracks("or-full", None, noise_px=0.5, seed=0)
-    calibration = calibrate(sim.tracks, sim.intrinsics, INDEPENDENT_ERRORS)
+    calibration = register(sim.tracks, sim.intrinsics, INDEPENDENT_ERRORS)
     metrics = calibration.metrics
     assert [name for name, m in metrics.items() if m.weak] == ["ceiling"]
     # The bound's covariance is for residuals of unit variance; the noise is 0.5 px.
@@ -298,7 +298,7 @@ def test_a_weak_camera_does_not_pull_the_others() -> None:
                                         tracks.point_ids[tracks.point_index], tracks.xy + on_ceiling[:, None] * bias,
                                         tracks.markers_per_array)
 
-    first, second = (calibrate(biased(seed), sim.intrinsics, RegistrationOptions()) for seed in (3, 4))
+    first, second = (register(biased(seed), sim.intrinsics, RegistrationOptions()) for seed in (3, 4))
     assert first.metrics["ceiling"].weak and second.metrics["ceiling"].weak
     strong = [name for name in first.poses if name != "ceiling"]
     result = compare(CameraPoses({n: first.poses[n] for n in strong}, first.unit),
@@ -336,7 +336,7 @@ def rotation_error_deg(calibration, sim, name: str) -> float:
 @pytest.mark.parametrize("seed", [0, 1])
 def test_the_projector_makes_the_zoomed_camera_known_with_an_honest_sigma(seed: int) -> None:
     sim, markers = demo_with_projector(seed=seed)
-    without = calibrate(sim.tracks, sim.intrinsics, INDEPENDENT_ERRORS)
+    without = register(sim.tracks, sim.intrinsics, INDEPENDENT_ERRORS)
     driver = RegistrationDriver(sim.tracks, sim.intrinsics, INDEPENDENT_ERRORS, projector=markers)
     calibration = driver.run()
     assert without.metrics["ceiling"].weak  # too few points to place it from the cameras alone
@@ -371,9 +371,9 @@ def test_a_camera_seeing_a_few_centres_alone_is_registered_through_the_projector
            ((camera_index == ceiling) & ~np.isin(point_index, keep_points))
     sparse = tracks.select(~drop)
     assert (sparse.bundle_arrays()[0] == sparse.camera_names.index("ceiling")).sum() == 5
-    without = calibrate(sparse, sim.intrinsics, RegistrationOptions())
+    without = register(sparse, sim.intrinsics, RegistrationOptions())
     assert "ceiling" in without.failed
-    calibration = calibrate(sparse, sim.intrinsics, RegistrationOptions(), projector=markers)
+    calibration = register(sparse, sim.intrinsics, RegistrationOptions(), projector=markers)
     assert "ceiling" in calibration.registered
     assert calibration.metrics["ceiling"].weak
     error = rotation_error_deg(calibration, sim, "ceiling")
@@ -391,7 +391,7 @@ def test_a_noisier_camera_gets_its_own_noise_and_a_wider_sigma() -> None:
     noisy[camera_index == far2] += rng.normal(scale=0.3, size=(int((camera_index == far2).sum()), 2))
     degraded = Tracks.from_observations(tracks.camera_names, camera_index, np.asarray(tracks.point_ids)[point_index],
                                         noisy, tracks.markers_per_array)
-    plain = calibrate(degraded, sim.intrinsics, RegistrationOptions(estimate_noise=False), projector=markers)
+    plain = register(degraded, sim.intrinsics, RegistrationOptions(estimate_noise=False), projector=markers)
     driver = RegistrationDriver(degraded, sim.intrinsics, RegistrationOptions(), projector=markers)
     weighted = driver.run()
     sigma = dict(zip(degraded.camera_names, driver.reconstruction.camera_sigma_px))

@@ -17,7 +17,7 @@ from calibproj.sequence.builder import build_sequence
 from calibproj.io.intrinsics import read_intrinsics
 from calibproj.io.poses import read_poses
 from calibproj.tracks import Tracks
-from calibproj.markers import MarkerDetector, marker_centres
+from calibproj.sequence.markers import MarkerDetector, marker_centres
 from calibproj.simulate.atlas import AtlasLayout
 from calibproj.simulate.geometric import project_points
 from calibproj.simulate.render import IDEAL_PHOTOMETRIC, RenderOptions, render_stills, simulate_videos

@@ -11,7 +11,7 @@ import pytest
 
 from calibproj.cli import main
 from calibproj.io.intrinsics import write_intrinsics_dir
-from calibproj.registration import calibrate
+from calibproj.registration import register
 from calibproj.report import write_report
 from calibproj.simulate import simulate_tracks
 
@@ -37,7 +37,7 @@ def starved(tracks, camera: str, keep: int):
 def report_with_a_failed_camera(tmp_path_factory):
     sim = simulate_tracks("small", None, noise_px=0.3, seed=6)
     tracks = starved(sim.tracks, "cam3", 4)
-    calibration = calibrate(tracks, sim.intrinsics)
+    calibration = register(tracks, sim.intrinsics)
     assert list(calibration.failed) == ["cam3"]
     out = tmp_path_factory.mktemp("report")
     calibration.save(out)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibproj.cli import main
-from calibproj.registration import calibrate
+from calibproj.registration import register
 from calibproj.scale import (
     ProjectedMarkers,
     apply_scale,
@@ -31,7 +31,7 @@ MAX_MARKER_SCALE_ERROR = 0.003
 @pytest.fixture(scope="module")
 def paper():
     sim = simulate_tracks("paper", None, noise_px=0.5, seed=3)
-    return sim, calibrate(sim.tracks, sim.intrinsics)
+    return sim, register(sim.tracks, sim.intrinsics)
 
 
 def rigid_centre_errors(calibration, scene) -> np.ndarray:
@@ -122,7 +122,7 @@ def test_marker_size_is_local_under_a_tilted_projector() -> None:
     scene = load_scene("paper", seed=5)
     tilted = Projector(position=(0.9, -0.4, 3.0), look_at=(0.0, 0.0, 0.0), resolution=(1920, 1080), fx=1400.0)
     sim = simulate_tracks(dataclasses.replace(scene, projector=tilted), None, noise_px=0.5, seed=5)
-    calibration = calibrate(sim.tracks, sim.intrinsics)
+    calibration = register(sim.tracks, sim.intrinsics)
     markers = layout_markers(sim.layout)
     pixels = markers.pixels(calibration.point_ids)
     chosen = calibration.point_ids[np.argmin(np.linalg.norm(pixels - [600.0, 350.0], axis=1))]

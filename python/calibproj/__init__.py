@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from calibproj.evaluation import evaluate
     from calibproj.ingest import detect
     from calibproj.ingest_options import IngestOptions
-    from calibproj.markers import detect_markers
+    from calibproj.sequence.markers import detect_markers
     from calibproj.pipeline import calibrate
     from calibproj.registration import RegistrationOptions
     from calibproj.sequence import generate
@@ -47,7 +47,7 @@ _EXPORTS = {
     "calibrate": "calibproj.pipeline",
     "compare": "calibproj.comparison",
     "detect": "calibproj.ingest",
-    "detect_markers": "calibproj.markers",
+    "detect_markers": "calibproj.sequence.markers",
     "evaluate": "calibproj.evaluation",
     "generate": "calibproj.sequence",
     "simulate_tracks": "calibproj.simulate",

@@ -488,7 +488,7 @@ def _intrinsics_for(intrinsics: Any, name: str) -> tuple[Intrinsics | None, str]
 def core_detector_options(system: str, options: Mapping[str, Any]) -> tuple[Any, Any]:
     """The core's (aruco, apriltag) detector options from options as
     ``calibproj.detect_markers`` takes them."""
-    from calibproj.markers import _build_options
+    from calibproj.sequence.markers import _build_options
 
     return _build_options(system, dict(options))
 

@@ -29,7 +29,7 @@ from calibproj.ingest_inputs import check_videos
 from calibproj.ingest_options import IngestOptions
 from calibproj.io.output_folder import OutputFolder
 from calibproj.registration import RegistrationOptions
-from calibproj.registration import calibrate as register
+from calibproj.registration import register
 from calibproj.provenance import provenance, write_provenance
 from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
 from calibproj.self_calibration import (RefineRequest, SelfCalibrationOptions, closed_form_start, convert_tracks,

@@ -10,7 +10,7 @@ hook in, or stop::
         print(step.name, step.camera, step.result)
     calibration = driver.result()
 
-``calibrate(tracks, intrinsics)`` does all of it and returns a ``Calibration``.
+``register(tracks, intrinsics)`` does all of it and returns a ``Calibration``.
 """
 
 from __future__ import annotations
@@ -201,7 +201,7 @@ def _warn_weak_cameras(calibration: Calibration, limit_deg: float) -> None:
                            "plans a short extra projection for it)", name, metrics.rotation_sigma_deg, limit_deg)
 
 
-def calibrate(
+def register(
     tracks: Tracks,
     intrinsics: Mapping[str, Intrinsics],
     options: RegistrationOptions | None = None,

@@ -19,7 +19,7 @@ import numpy as np
 
 from calibproj.comparison import compare
 from calibproj.io.poses import CameraPoses
-from calibproj.registration import RegistrationOptions, calibrate
+from calibproj.registration import RegistrationOptions, register
 from calibproj.simulate import simulate_tracks
 
 
@@ -51,7 +51,7 @@ def main() -> None:
             truth = CameraPoses({c.name: (c.R, c.t) for c in sim.scene.cameras}, "m")
             for model, r in results.items():
                 start = time.perf_counter()
-                calibration = calibrate(sim.tracks, sim.intrinsics, RegistrationOptions(model=model, seed=seed))
+                calibration = register(sim.tracks, sim.intrinsics, RegistrationOptions(model=model, seed=seed))
                 r["time"].append(time.perf_counter() - start)
                 everything = not calibration.failed and len(calibration.registered) == len(sim.scene.cameras)
                 r["all"] += everything

@@ -23,6 +23,7 @@ import numpy as np
 
 from calibproj.sequence.codes import LightCode, code_pair
 from calibproj.sequence.layout import MsmLayout
+from calibproj.sequence.markers import family_info
 from calibproj.sequence.sequence import MarkerSystem, Pattern, Segment, Sequence
 from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET, GreyVideoWriter
 
@@ -272,8 +273,6 @@ def _with_overrides(options: SequenceOptions | None, overrides: dict[str, Any]) 
 
 
 def _marker_system(options: SequenceOptions) -> MarkerSystem:
-    from calibproj.markers import family_info
-
     info = family_info(options.markers)
     return MarkerSystem(spec=info.spec, system=info.system, family=info.name, grid_cells=info.grid_cells,
                         quad_cells=info.quad_cells, id_count=info.id_count, inverted=bool(options.inverted))

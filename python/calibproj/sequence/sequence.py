@@ -23,6 +23,7 @@ import numpy as np
 
 from calibproj.sequence.codes import LightCode
 from calibproj.sequence.layout import MsmLayout
+from calibproj.sequence.markers import marker_bits
 from calibproj.sequence.raster import draw_cells
 from calibproj.io.jsonio import FormatError, write_json
 
@@ -187,8 +188,6 @@ class Sequence:
 
     def _marker_cells(self, marker_id: int) -> np.ndarray:
         if marker_id not in self._bits:
-            from calibproj.markers import marker_bits
-
             self._bits[marker_id] = marker_bits(self.markers.spec, marker_id).astype(np.float64)
         return self._bits[marker_id]
 

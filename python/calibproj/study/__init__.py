@@ -45,7 +45,7 @@ def study_markers(out: str | os.PathLike, families: tuple[str, ...] = DEFAULT_FA
         plan: sweeps and calibrations of one's own (overrides ``quick``).
     """
     from calibproj.io.output_folder import OutputFolder
-    from calibproj.markers import family_info
+    from calibproj.sequence.markers import family_info
     from calibproj.study.report import write_study
 
     families = tuple(family_info(f).spec for f in families)  # ValueError naming an unknown family

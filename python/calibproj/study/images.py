@@ -60,7 +60,7 @@ class ImageCondition:
 def measure_image(condition: ImageCondition) -> dict[str, Any]:
     """Detection rate, centre error (RMS and worst, px), false detections and detection
     time (ms) of one rendered image; a dict with the condition's fields."""
-    from calibproj.markers import MarkerDetector, family_info, marker_centres
+    from calibproj.sequence.markers import MarkerDetector, family_info, marker_centres
     from calibproj.simulate.geometric import marker_corners_on_floor, project_points
     from calibproj.simulate.render import RenderOptions, render_stills
 

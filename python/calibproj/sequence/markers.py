@@ -42,6 +42,8 @@ from typing import Any
 
 import numpy as np
 
+from calibproj.sequence.raster import draw_cells
+
 DEFAULT_MARKERS = "aruco:4X4_50"
 
 _REFINEMENT_METHODS = ("none", "subpix", "edges")
@@ -95,8 +97,6 @@ def render_marker(
         inverted: white marker on black (as projected) instead of black on white.
         quiet_modules: width of the background margin in cells (>= 0).
     """
-    from calibproj.sequence.raster import draw_cells
-
     if not module_px > 0:
         raise ValueError(f"module_px must be positive, got {module_px}")
     if not quiet_modules >= 0:
