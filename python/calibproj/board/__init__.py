@@ -6,7 +6,7 @@ where the corners were seen and each view's error. ``calibproj intrinsics`` is t
 command line.
 """
 
-from calibproj.board.calibration import BoardCalibration, BoardOptions, calibrate_with_board
+from calibproj.board.fit import BoardCalibration, BoardOptions, calibrate_with_board
 from calibproj.board.spec import BoardDetector, BoardSpec
 
 __all__ = ["BoardCalibration", "BoardDetector", "BoardOptions", "BoardSpec", "calibrate_with_board"]

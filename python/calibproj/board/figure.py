@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from calibproj.board.calibration import BoardCalibration
+from calibproj.board.fit import BoardCalibration
 from calibproj.report.figures import DEFAULT_DPI, png_bytes
 
 

@@ -18,7 +18,7 @@ from calibproj.commands.options import add_dataclass_arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from calibproj.board.calibration import BoardOptions
+    from calibproj.board.fit import BoardOptions
 
     parser.add_argument("source", metavar="SOURCE", help="video, folder of images, or one image of the board")
     parser.add_argument("--board", required=True, metavar="SPEC",
