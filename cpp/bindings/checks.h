@@ -63,9 +63,11 @@ inline void RequireCount(long long value, long long lo, long long hi, const std:
   }
 }
 
-// The Python type's name of an object, for messages.
+// The Python type's name of an object (its __name__: "ndarray", not "numpy.ndarray"), for
+// messages.
 inline std::string TypeName(const pybind11::handle& value) {
-  return pybind11::str(pybind11::type::handle_of(value).attr("__name__"));
+  const std::string name = Py_TYPE(value.ptr())->tp_name;
+  return name.substr(name.rfind('.') + 1);
 }
 
 // What a value of type T is called in messages.
