@@ -728,6 +728,11 @@ class Baselines:
             "_core.uncertainty.stored_pose_uncertainty": Spec([("directory", folder / "results"),
                                                                ("calibration", calibration)]),
             "_core.formats.read_calibration": Spec([("directory", folder / "results")]),
+            "_core.formats.read_camera_poses": Spec([("path", folder / "results" / "camera_poses.json")]),
+            "_core.formats.CameraPoses": Spec([("poses", poses), ("unit", "m"), ("failed", {"c": "not seen"}),
+                                               ("source", "estimate.json"), ("weak", ["b"])]),
+            "_core.formats.CameraPoses.center": Spec([("name", "a")]),
+            "_core.formats.CameraPoses.centers": Spec([("names", ["a", "b"])]),
             "_core.formats.Calibration": Spec(calibration_args, {"registration_order": ["a", "b"],
                                                                  "uncertainty": self.pose_uncertainty}),
             "_core.formats.Calibration.nothing_registered": Spec([("failed", {"a": "no intrinsics file"}),
@@ -937,6 +942,8 @@ class Baselines:
             "_core.formats.CameraMetrics": {
                 "read": lambda: _core.formats.read_calibration(self.results_folder).metrics["a"]},
             "_core.formats.Plane": {"read": lambda: _core.formats.read_calibration(self.results_folder).planes[0]},
+            "_core.formats.CameraPoses": {
+                "read": lambda: _core.formats.read_camera_poses(self.results_folder / "camera_poses.json")},
             "_core.formats.CameraIntrinsics": {
                 "read": lambda: _core.formats.read_intrinsics(self.results_folder / "a.json", "a")},
             "_core.formats.Tracks": {

@@ -54,16 +54,16 @@ py::array ReadOnly(const T& value) {
 }
 
 // {camera: (R, t)} in registration order.
-py::dict PosesOf(const Calibration& c) {
+py::dict PosesOf(const std::vector<CameraPose>& poses) {
   py::dict out;
-  for (const CameraPose& pose : c.poses) {
+  for (const CameraPose& pose : poses) {
     out[py::str(pose.name)] = py::make_tuple(ReadOnly(pose.R), ReadOnly(pose.t));
   }
   return out;
 }
 
-void SetPoses(Calibration& c, const py::dict& poses) {
-  c.poses = Attribute("poses", [&] {
+std::vector<CameraPose> PosesFrom(const py::dict& poses) {
+  return Attribute("poses", [&] {
     std::vector<CameraPose> out;
     for (const auto& [name, pose] : poses) {
       const auto R_t = pose.cast<std::pair<Eigen::Matrix3d, Eigen::Vector3d>>();
@@ -73,9 +73,11 @@ void SetPoses(Calibration& c, const py::dict& poses) {
   });
 }
 
-py::dict FailedOf(const Calibration& c) {
+void SetPoses(Calibration& c, const py::dict& poses) { c.poses = PosesFrom(poses); }
+
+py::dict FailedOf(const std::vector<NamedText>& failed) {
   py::dict out;
-  for (const auto& [name, reason] : c.failed) out[py::str(name)] = reason;
+  for (const auto& [name, reason] : failed) out[py::str(name)] = reason;
   return out;
 }
 
@@ -242,7 +244,7 @@ void RegisterParts(py::module_& m) {
 }
 
 py::tuple CalibrationState(const Calibration& c) {
-  return py::make_tuple(PosesOf(c), FailedOf(c), MetricsOf(c), c.points, c.point_ids, c.unit, c.model,
+  return py::make_tuple(PosesOf(c.poses), FailedOf(c.failed), MetricsOf(c), c.points, c.point_ids, c.unit, c.model,
                         c.registration_order, c.floor_rms, c.planes, UncertaintyOf(c));
 }
 
@@ -256,8 +258,65 @@ const formats::Calibration& CalibrationFromPython(const py::object& calibration)
   return calibration.cast<const Calibration&>();
 }
 
+// camera_poses.json or truth.json as `calibproj compare` reads them.
+void RegisterCameraPoses(py::module_& m) {
+  using formats::CameraPoses;
+  const auto pose_of = [](const CameraPoses& p, const std::string& name) -> const CameraPose& {
+    const CameraPose* pose = p.PoseOf(name);
+    if (pose == nullptr) throw py::value_error("camera " + formats::PythonRepr(name) + " has no pose");
+    return *pose;
+  };
+  py::class_<CameraPoses>(m, "CameraPoses",
+                          "World-to-camera poses by camera name (x_cam = R X + t, floor frame), the unit of their "
+                          "frame, the failed cameras and those reported weak: a camera_poses.json, a truth.json, or "
+                          "a calibration's poses")
+      .def(py::init([](const py::dict& poses, const std::string& unit, const py::dict& failed,
+                       const std::string& source, const py::iterable& weak) {
+             if (unit != "arbitrary" && unit != "m") {
+               throw py::value_error("unit must be one of ['arbitrary', 'm'], got " + formats::PythonRepr(unit));
+             }
+             CameraPoses p{PosesFrom(poses), NamedTexts("failed", failed), unit, {}, source};
+             for (const py::handle name : weak) p.weak.push_back(py::str(name).cast<std::string>());
+             return p;
+           }),
+           py::arg("poses"), py::arg("unit") = "arbitrary", py::arg("failed") = py::dict(), py::arg("source") = "",
+           py::arg("weak") = py::tuple())
+      .def_property_readonly(
+          "poses", [](const CameraPoses& p) { return PosesOf(p.poses); }, "{camera: (R, t)}, in the file's order")
+      .def_property_readonly(
+          "failed", [](const CameraPoses& p) { return FailedOf(p.failed); }, "{camera: reason}")
+      .def_readonly("unit", &CameraPoses::unit, "'m' (metric) or 'arbitrary'")
+      .def_readonly("source", &CameraPoses::source, "where the poses came from (a file), for messages")
+      .def_property_readonly(
+          "weak", [](const CameraPoses& p) { return py::frozenset(py::cast(p.weak)); },
+          "cameras reported weakly determined (rotation sigma above its limit)")
+      .def_property_readonly(
+          "names",
+          [](const CameraPoses& p) {
+            std::vector<std::string> names;
+            for (const CameraPose& pose : p.poses) names.push_back(pose.name);
+            return names;
+          },
+          "the cameras with a pose, in order")
+      .def_property_readonly("is_metric", [](const CameraPoses& p) { return p.unit == "m"; })
+      .def(
+          "center", [pose_of](const CameraPoses& p, const std::string& name) { return pose_of(p, name).Centre(); },
+          py::arg("name"), "the camera's centre -R^T t; ValueError for a camera without a pose")
+      .def(
+          "centers",
+          [pose_of](const CameraPoses& p, const std::vector<std::string>& names) {
+            formats::PointRows out(names.size(), 3);
+            for (std::size_t i = 0; i < names.size(); ++i) out.row(i) = pose_of(p, names[i]).Centre().transpose();
+            return out;
+          },
+          py::arg("names"), "(N, 3) the centres of these cameras");
+  m.def("read_camera_poses", &formats::ReadCameraPoses, py::arg("path"),
+        "The CameraPoses of a camera_poses.json or a truth.json; InputError naming the file and the problem");
+}
+
 void register_calibration(py::module_& m) {
   RegisterParts(m);
+  RegisterCameraPoses(m);
   py::class_<Calibration>(
       m, "Calibration",
       "Camera poses (world-to-camera, floor frame), points and per-camera metrics of a calibration.\n\n"
@@ -276,9 +335,10 @@ void register_calibration(py::module_& m) {
             return formats::FromRegistration({}, {}, {}, NamedTexts("failed", failed), model);
           },
           py::arg("failed"), py::arg("model"), "The result when no camera could even enter the registration.")
-      .def_property("poses", &PosesOf, &SetPoses, "{camera: (R, t)} of the registered cameras, in order")
       .def_property(
-          "failed", &FailedOf, [](Calibration& c, const py::dict& failed) { c.failed = NamedTexts("failed", failed); },
+          "poses", [](const Calibration& c) { return PosesOf(c.poses); }, &SetPoses, "{camera: (R, t)} of the registered cameras, in order")
+      .def_property(
+          "failed", [](const Calibration& c) { return FailedOf(c.failed); }, [](Calibration& c, const py::dict& failed) { c.failed = NamedTexts("failed", failed); },
           "{camera: reason} of the cameras not calibrated")
       .def_property("metrics", &MetricsOf, &SetMetrics, "{camera: CameraMetrics} of every camera (copies)")
       .def_property(

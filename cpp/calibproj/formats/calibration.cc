@@ -33,6 +33,13 @@ const CameraPose* Calibration::PoseOf(const std::string& name) const {
   return nullptr;
 }
 
+const CameraPose* CameraPoses::PoseOf(const std::string& name) const {
+  for (const auto& pose : poses) {
+    if (pose.name == name) return &pose;
+  }
+  return nullptr;
+}
+
 std::string Calibration::FailureOf(const std::string& name) const {
   for (const auto& [camera, reason] : failed) {
     if (camera == name) return reason;

@@ -88,6 +88,23 @@ std::string CameraPosesJson(const Calibration& calibration);
 std::string MetricsJson(const Calibration& calibration);
 std::string PointsPly(const Calibration& calibration);
 
+// The camera poses of a camera_poses.json or of a simulation's truth.json (both write
+// every camera as {R, t, center}), without a calibration's metrics and points: what
+// `calibproj compare` compares.
+struct CameraPoses {
+  std::vector<CameraPose> poses;  // in the file's order
+  std::vector<NamedText> failed;  // camera -> reason
+  std::string unit = "arbitrary";  // or "m"
+  std::vector<std::string> weak;   // cameras the file marks weakly determined
+  std::string source;              // the file, for messages
+
+  const CameraPose* PoseOf(const std::string& name) const;
+};
+
+// The poses of a camera_poses.json or a truth.json (told apart by its schema tag);
+// InputError naming the file and the problem.
+CameraPoses ReadCameraPoses(const std::filesystem::path& path);
+
 // Files that a calibration writes; an existing one is only replaced with force.
 extern const std::vector<std::string> kCalibrationFiles;
 

@@ -22,7 +22,7 @@ using nlohmann::json;
 
 namespace {
 
-constexpr double kRotationTolerance = 1e-6;  // calibproj.io.poses.ROTATION_TOLERANCE
+constexpr double kRotationTolerance = 1e-6;  // |R R^T - I| a rotation read from a file may show
 const std::set<std::string> kUnits = {"arbitrary", "m"};
 const std::set<std::string> kModels = {"free", "coplanar"};
 
@@ -67,14 +67,15 @@ const json& Member(const json& object, const std::string& key, const std::string
   return *found;
 }
 
-CameraPose PoseOf(const std::string& name, const json& entry) {
+// The pose of cameras.<name>; sets *weak to its "weak" flag.
+CameraPose PoseOf(const std::string& name, const json& entry, bool* weak) {
   const std::string where = "cameras." + name;
   if (!entry.is_object() || !entry.contains("R") || !entry.contains("t")) {
     throw std::invalid_argument(where + ": expected an object with R (3x3) and t (3)");
   }
   CameraPose pose{name, RotationOf(entry["R"], where + ".R"), VectorOf(entry["t"], where + ".t")};
   if (entry.contains("center")) VectorOf(entry["center"], where + ".center");
-  if (entry.contains("weak")) BoolValue(entry["weak"], where + ".weak");
+  *weak = entry.contains("weak") && BoolValue(entry["weak"], where + ".weak");
   OptionalNonNegative(entry, "rotation_sigma_deg", where);
   OptionalNonNegative(entry, "centre_sigma", where);
   const double off = (pose.R * pose.R.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
@@ -84,30 +85,46 @@ CameraPose PoseOf(const std::string& name, const json& entry) {
   return pose;
 }
 
-void ReadPoses(const fs::path& path, Calibration* calibration) {
-  const json document = ReadSchemaJson(path, "camera_poses", 1);
+// The poses of a file of `kind` (camera_poses or truth: both write {unit, frame,
+// cameras: {name: {R, t, center}}, failed}).
+CameraPoses PosesOfFile(const fs::path& path, const std::string& kind) {
+  const json document = ReadSchemaJson(path, kind, 1);
+  CameraPoses out;
+  out.source = path.string();
   try {
     const auto unit = document.find("unit");
     if (unit == document.end() || !unit->is_string() || !kUnits.count(unit->get<std::string>())) {
       throw std::invalid_argument("unit must be one of ['arbitrary', 'm'], got " +
                                   (unit == document.end() ? std::string("null") : Describe(*unit)));
     }
-    calibration->unit = unit->get<std::string>();
+    out.unit = unit->get<std::string>();
     const auto frame = document.find("frame");
     if (frame != document.end() && *frame != "floor") {
       throw std::invalid_argument("frame must be 'floor', got " + Describe(*frame));
     }
     const json& cameras = Member(document, "cameras", "an object {name: {R, t, center}}");
-    for (const auto& name : KeysInFileOrder(path, "cameras")) calibration->poses.push_back(PoseOf(name, cameras[name]));
+    for (const auto& name : KeysInFileOrder(path, "cameras")) {
+      bool weak = false;
+      out.poses.push_back(PoseOf(name, cameras[name], &weak));
+      if (weak) out.weak.push_back(name);
+    }
     if (document.contains("failed")) {
       const json& failed = Member(document, "failed", "an object {name: reason}");
       for (const auto& name : KeysInFileOrder(path, "failed")) {
-        calibration->failed.emplace_back(name, StringValue(failed[name], "failed." + name));
+        out.failed.emplace_back(name, StringValue(failed[name], "failed." + name));
       }
     }
   } catch (const std::invalid_argument& error) {
     throw InputError(path.string() + ": " + error.what());
   }
+  return out;
+}
+
+void ReadPoses(const fs::path& path, Calibration* calibration) {
+  CameraPoses poses = PosesOfFile(path, "camera_poses");
+  calibration->poses = std::move(poses.poses);
+  calibration->failed = std::move(poses.failed);
+  calibration->unit = std::move(poses.unit);
 }
 
 CameraMetrics MetricsOf(const std::string& where, const json& entry) {
@@ -292,6 +309,21 @@ void ReadPoints(const fs::path& path, Calibration* calibration) {
 }
 
 }  // namespace
+
+CameraPoses ReadCameraPoses(const fs::path& path) {
+  // A simulation's truth.json holds its cameras as camera_poses.json does.
+  std::string kind = "camera_poses";
+  try {
+    const json document = ReadJson(path);
+    const auto tag = document.is_object() ? document.find("schema") : document.end();
+    if (document.is_object() && tag != document.end() && tag->is_string() &&
+        tag->get<std::string>().rfind("calibproj.truth/", 0) == 0) {
+      kind = "truth";
+    }
+  } catch (const std::exception&) {  // ReadSchemaJson names the problem
+  }
+  return PosesOfFile(path, kind);
+}
 
 Calibration ReadCalibration(const fs::path& directory) {
   if (!fs::is_directory(directory)) throw InputError(directory.string() + ": no such results folder");
