@@ -75,6 +75,12 @@ std::vector<CameraPose> PosesFrom(const py::dict& poses) {
 
 void SetPoses(Calibration& c, const py::dict& poses) { c.poses = PosesFrom(poses); }
 
+std::vector<std::string> NamesOf(const std::vector<CameraPose>& poses) {
+  std::vector<std::string> names;
+  for (const CameraPose& pose : poses) names.push_back(pose.name);
+  return names;
+}
+
 py::dict FailedOf(const std::vector<NamedText>& failed) {
   py::dict out;
   for (const auto& [name, reason] : failed) out[py::str(name)] = reason;
@@ -291,13 +297,7 @@ void RegisterCameraPoses(py::module_& m) {
           "weak", [](const CameraPoses& p) { return py::frozenset(py::cast(p.weak)); },
           "cameras reported weakly determined (rotation sigma above its limit)")
       .def_property_readonly(
-          "names",
-          [](const CameraPoses& p) {
-            std::vector<std::string> names;
-            for (const CameraPose& pose : p.poses) names.push_back(pose.name);
-            return names;
-          },
-          "the cameras with a pose, in order")
+          "names", [](const CameraPoses& p) { return NamesOf(p.poses); }, "the cameras with a pose, in order")
       .def_property_readonly("is_metric", [](const CameraPoses& p) { return p.unit == "m"; })
       .def(
           "center", [pose_of](const CameraPoses& p, const std::string& name) { return pose_of(p, name).Centre(); },
@@ -357,13 +357,7 @@ void register_calibration(py::module_& m) {
                     "the registered cameras' joint pose covariance (PoseUncertainty) from the final bundle "
                     "adjustment; None when not known (uncertainty.json holds it)")
       .def_property_readonly(
-          "registered",
-          [](const Calibration& c) {
-            std::vector<std::string> names;
-            for (const CameraPose& pose : c.poses) names.push_back(pose.name);
-            return names;
-          },
-          "the registered cameras, in order")
+          "registered", [](const Calibration& c) { return NamesOf(c.poses); }, "the registered cameras, in order")
       .def("status", &StatusOf, py::arg("name"),
            "reference (the first registered camera: the others' sigmas are relative to it), ok, weak (its "
            "rotation known worse than the registration's limit) or failed")

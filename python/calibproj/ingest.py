@@ -415,8 +415,9 @@ def synchronise(signal: np.ndarray, sequence: Any, camera_fps: float, options: I
     ``exposure``, camera frames), ``offset_uncertainty`` (camera frames: the offsets
     that explain the signal as well; about a frame when no camera frame spans a light
     change), ``sharp``, ``window_map`` (a map whose exposure windows cover every one
-    that fits), and per code ``start`` / ``end`` (correlation, position). RuntimeError naming ``source`` when a code is not
-    found (with the best correlation seen) or the two codes disagree.
+    that fits), and per code ``start`` / ``end`` (correlation, position). RuntimeError
+    naming ``source`` when a code is not found (with the best correlation seen) or the
+    two codes disagree.
     """
     from calibproj import _core
     from calibproj.ingest_options import sync_kwargs
