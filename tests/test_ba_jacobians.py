@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.synthetic import matrix_from_rotvec
+from calibproj.simulate.synthetic import matrix_from_rotvec
 
 ba = _core.ba
 K = np.array([[917.0, 0.3, 959.5], [0.0, 915.0, 539.5], [0.0, 0.0, 1.0]])
@@ -97,7 +97,7 @@ def grazing_configuration(rng: np.random.Generator) -> tuple[np.ndarray, np.ndar
     right = np.cross(forward, n)
     right /= np.linalg.norm(right)
     R = np.stack([right, np.cross(forward, right), forward])
-    from calibproj.synthetic import rotvec_from_matrix
+    from calibproj.simulate.synthetic import rotvec_from_matrix
 
     pose = np.concatenate([rotvec_from_matrix(R), -R @ centre])
     ab = householder_basis(n).T @ (X - d * n)

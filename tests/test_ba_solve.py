@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.synthetic import paper_ring_rig, perturb_poses
+from calibproj.simulate.synthetic import paper_ring_rig, perturb_poses
 
 ba = _core.ba
 
@@ -62,7 +62,7 @@ def test_gauge_camera_and_scale_are_held(rig, model: str) -> None:
     np.testing.assert_array_equal(result.poses[2], poses[2])
 
     def centre(pose):
-        from calibproj.synthetic import matrix_from_rotvec
+        from calibproj.simulate.synthetic import matrix_from_rotvec
 
         return -matrix_from_rotvec(pose[:3]).T @ pose[3:]
 
@@ -100,7 +100,7 @@ def test_pose_covariance_is_symmetric_positive_definite(rig, model: str) -> None
 
 def _pose_deltas(poses: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """[dtheta, dt] per camera with R = Exp(dtheta) R_reference, t = t_reference + dt."""
-    from calibproj.synthetic import matrix_from_rotvec, rotvec_from_matrix
+    from calibproj.simulate.synthetic import matrix_from_rotvec, rotvec_from_matrix
 
     deltas = []
     for pose, ref in zip(poses, reference):
@@ -260,7 +260,7 @@ def test_piecewise_planar_recovers_a_table_top_and_free_points() -> None:
     """COPLANAR with a second plane (a table top 0.9 m up) and some points off both
     (free 3D points): from perturbed poses, points and planes, noise-free observations
     give back the truth (the gauge camera's pose and the floor's offset fix the frame)."""
-    from calibproj.synthetic import project
+    from calibproj.simulate.synthetic import project
 
     rig = paper_ring_rig(seed=5, noise_px=0.0, num_points=800)
     points = rig.points.copy()

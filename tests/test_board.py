@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from calibproj.board import BoardDetector, BoardOptions, BoardSpec, calibrate_with_board
-from calibproj.cli import main
-from calibproj.io.intrinsics import read_intrinsics
+from calibproj.cli.main import main
+from calibproj.formats.intrinsics import read_intrinsics
 
 SIZE = (640, 480)
 K_TRUE = np.array([[520.0, 0.0, 322.0], [0.0, 518.0, 236.0], [0.0, 0.0, 1.0]])

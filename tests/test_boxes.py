@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from calibproj.io.jsonio import FormatError
+from calibproj.formats.jsonio import FormatError
 from calibproj.simulate import boxes
 from calibproj.simulate.geometric import msm_floor_points, msm_surfaces, simulate_tracks
 from calibproj.simulate.presets import preset_document
@@ -98,7 +98,7 @@ def test_truth_gives_each_centre_its_surface(tmp_path) -> None:
 
 
 def _rotation_rmse_not_weak(calibration, truth_file) -> float:
-    from calibproj.comparison import compare
+    from calibproj.evaluation.comparison import compare
 
     import tempfile
     from pathlib import Path
@@ -113,7 +113,7 @@ def _rotation_rmse_not_weak(calibration, truth_file) -> float:
 @pytest.fixture(scope="module")
 def table_room(tmp_path_factory):
     """The demo room with and without its table, calibrated (coplanar model)."""
-    from calibproj.registration import register
+    from calibproj.registration.driver import register
 
     folder = tmp_path_factory.mktemp("table")
     out = {}
@@ -134,8 +134,8 @@ def test_the_table_left_in_place_costs_no_accuracy(table_room) -> None:
 
 
 def test_the_table_top_is_found_at_its_height(table_room) -> None:
-    from calibproj.comparison import align_centers
-    from calibproj.scale import parse_scale, scale_factor, scaled
+    from calibproj.evaluation.comparison import align_centers
+    from calibproj.scale.metric import parse_scale, scale_factor, scaled
 
     simulation, calibration, _ = table_room["or-table"]
     assert len(calibration.planes) == 1
@@ -159,8 +159,8 @@ def test_the_table_top_is_found_at_its_height(table_room) -> None:
 
 
 def test_the_table_is_in_the_results_and_the_report(tmp_path, capsys) -> None:
-    from calibproj.calibration import Calibration
-    from calibproj.cli import main
+    from calibproj.formats.calibration import Calibration
+    from calibproj.cli.main import main
 
     simulate_tracks("or-table", tmp_path / "sim", seed=0, noise_px=0.1)
     code = main(["calibrate", "--tracks", str(tmp_path / "sim" / "tracks.json"), "--intrinsics",
@@ -248,8 +248,8 @@ def test_the_ingest_finds_the_markers_on_the_table_top(small_table_videos) -> No
     """Markers on the table top are not where the floor's homography puts them: whole
     frames explored now and then find them, the table's own homography then plans them,
     and markers folded over its edge are not searched or kept."""
-    from calibproj.ingest import ingest
-    from calibproj.ingest_options import IngestOptions
+    from calibproj.ingest.videos import ingest
+    from calibproj.ingest.options import IngestOptions
 
     out, sequence, truth = small_table_videos
     explored = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(), progress=False)

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.calibration import Calibration, CameraMetrics, Plane
-from calibproj.synthetic import matrix_from_rotvec
+from calibproj.formats.calibration import Calibration, CameraMetrics, Plane
+from calibproj.simulate.synthetic import matrix_from_rotvec
 
 
 def two_cameras() -> Calibration:

@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibproj.capture import capture
-from calibproj.cli import main
-from calibproj.comparison import compare, rotation_angle_deg
-from calibproj.demo import LIVE_SCENE, LIVE_SEQUENCE
+from calibproj.capture.session import capture
+from calibproj.cli.main import main
+from calibproj.evaluation.comparison import compare, rotation_angle_deg
+from calibproj.cli.demo_room import LIVE_SCENE, LIVE_SEQUENCE
 from calibproj.sequence import generate
 from calibproj.simulate.scene import CameraChange
 from calibproj.simulate.virtual_room import VirtualRoom

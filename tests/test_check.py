@@ -214,7 +214,7 @@ def room(tmp_path_factory) -> dict:
 
 
 def test_a_second_recording_of_an_unchanged_room_confirms_every_camera(room) -> None:
-    from calibproj.check_and_repair import check
+    from calibproj.check.repair import check
 
     result = check(room["folder"] / "results", room["kept"].tracks)
     assert result.trusted and not result.changed
@@ -244,10 +244,10 @@ def test_a_lens_model_error_in_one_part_of_the_image_is_not_taken_for_a_move(roo
     the other points of its calibration, the lens model's error there turns its fit
     (far5 of rendered rooms: 0.018 deg, "moved" at 0.67 px); against the same points'
     calibration observations, the error is in both and the camera is unchanged."""
-    from calibproj.calibration import Calibration
-    from calibproj.check_and_repair import check_cameras
-    from calibproj.io.intrinsics import load_intrinsics_dir
-    from calibproj.tracks import Tracks
+    from calibproj.formats.calibration import Calibration
+    from calibproj.check.repair import check_cameras
+    from calibproj.formats.intrinsics import load_intrinsics_dir
+    from calibproj.formats.tracks import Tracks
 
     results = room["folder"] / "results"
     calibration, intrinsics = Calibration.load(results), load_intrinsics_dir(results / "intrinsics")
@@ -274,10 +274,10 @@ def test_a_lens_model_error_in_one_part_of_the_image_is_not_taken_for_a_move(roo
 
 
 def test_the_moved_and_rezoomed_cameras_are_found_and_repaired(room) -> None:
-    from calibproj.calibration import Calibration
-    from calibproj.check_and_repair import CHECK_FILE, check
-    from calibproj.comparison import CameraPoses, compare
-    from calibproj.io.intrinsics import load_intrinsics_dir
+    from calibproj.formats.calibration import Calibration
+    from calibproj.check.repair import CHECK_FILE, check
+    from calibproj.evaluation.comparison import CameraPoses, compare
+    from calibproj.formats.intrinsics import load_intrinsics_dir
 
     out = room["folder"] / "repaired"
     result = check(room["folder"] / "results", room["again"].tracks, out=out)
@@ -322,7 +322,7 @@ def test_the_moved_and_rezoomed_cameras_are_found_and_repaired(room) -> None:
 def test_a_moved_floor_or_projector_is_not_repaired_against(room, tmp_path) -> None:
     """Every camera moved (as when the projector or the floor did): no majority agrees
     with the stored calibration, so nothing is repaired and the message says why."""
-    from calibproj.check_and_repair import check
+    from calibproj.check.repair import check
     from calibproj.simulate import simulate_tracks
     from calibproj.simulate.scene import CameraChange
     from calibproj.sequence import Sequence
@@ -338,8 +338,8 @@ def test_a_moved_floor_or_projector_is_not_repaired_against(room, tmp_path) -> N
 
 
 def test_a_covered_camera_is_not_seen_and_keeps_its_pose(room) -> None:
-    from calibproj.check_and_repair import check
-    from calibproj.tracks import Tracks
+    from calibproj.check.repair import check
+    from calibproj.formats.tracks import Tracks
 
     kept = room["kept"].tracks
     others = kept.camera_index != kept.camera_names.index("near1")
@@ -394,7 +394,7 @@ def test_the_native_check_prints_writes_and_exits_as_the_python_command(room, tm
                  "intrinsics/ceiling.json", "intrinsics/far2.json", "uncertainty.json"):
         assert (tmp_path / "native" / name).read_bytes() == (tmp_path / "python" / name).read_bytes(), name
     # Tracks of other points than the calibrated ones: one line naming the file, status 2.
-    from calibproj.tracks import Tracks
+    from calibproj.formats.tracks import Tracks
 
     tracks = Tracks.read(again)
     Tracks.from_observations(tracks.camera_names, np.asarray(tracks.camera_names)[tracks.camera_index],
@@ -409,7 +409,7 @@ def test_the_native_check_prints_writes_and_exits_as_the_python_command(room, tm
 def test_the_check_projection_is_short_and_tests_every_camera(room, tmp_path) -> None:
     from test_pipeline import run_cli
 
-    from calibproj.check_and_repair import check
+    from calibproj.check.repair import check
     from calibproj.sequence import Sequence
     from calibproj.simulate import simulate_tracks
 
@@ -466,7 +466,7 @@ def test_a_rendered_check_projection_finds_the_turned_camera(tmp_path) -> None:
     """Videos end to end: the small room rendered and calibrated, the check projection
     planned from it (short light codes) and rendered again with one camera turned by
     0.3 deg; the check synchronises every camera and finds that one moved."""
-    from calibproj.check_and_repair import check
+    from calibproj.check.repair import check
     from calibproj.pipeline import calibrate
     from calibproj.sequence import generate
     from calibproj.sequence.check_sequence import plan_check
@@ -546,13 +546,13 @@ def test_a_rezoomed_wide_angle_camera_keeps_its_pose() -> None:
 def test_a_repaired_rezoomed_camera_gets_its_pixels_undistorted_with_its_new_focal_length(room) -> None:
     """The repaired results folder holds the re-zoomed camera's new focal length and its
     observations undistorted with it, as a calibration of the new room would."""
-    from calibproj.calibration import Calibration
-    from calibproj.check_and_repair import check_cameras, repaired
-    from calibproj.io.intrinsics import load_intrinsics_dir
+    from calibproj.formats.calibration import Calibration
+    from calibproj.check.repair import check_cameras, repaired
+    from calibproj.formats.intrinsics import load_intrinsics_dir
     from calibproj.sequence import Sequence
     from calibproj.simulate import simulate_tracks
     from calibproj.simulate.scene import CameraChange
-    from calibproj.tracks import Tracks
+    from calibproj.formats.tracks import Tracks
 
     results = room["folder"] / "results"
     stored_intrinsics = load_intrinsics_dir(results / "intrinsics")
@@ -586,10 +586,10 @@ def test_a_repaired_camera_is_as_uncertain_as_the_repair_says(room) -> None:
     noise (0.5 px on both cameras); the other cameras' blocks stay the stored ones."""
     import cv2
 
-    from calibproj.calibration import Calibration
-    from calibproj.check_and_repair import _with_stored_uncertainty, check_cameras, repaired
-    from calibproj.io.intrinsics import load_intrinsics_dir
-    from calibproj.tracks import Tracks
+    from calibproj.formats.calibration import Calibration
+    from calibproj.check.repair import _with_stored_uncertainty, check_cameras, repaired
+    from calibproj.formats.intrinsics import load_intrinsics_dir
+    from calibproj.formats.tracks import Tracks
 
     results, again = room["folder"] / "results", room["again"].tracks
     calibration = _with_stored_uncertainty(results, Calibration.load(results))
@@ -662,7 +662,7 @@ def test_cameras_that_cannot_be_tested_say_why_and_the_others_are(room, tmp_path
 
     from test_pipeline import run_cli
 
-    from calibproj.check_and_repair import check
+    from calibproj.check.repair import check
 
     results = tmp_path / "results"
     shutil.copytree(room["folder"] / "results", results)
@@ -692,7 +692,7 @@ def test_cameras_that_cannot_be_tested_say_why_and_the_others_are(room, tmp_path
     # Only one camera seen: nothing can be said against the calibration (exit 3, not 4).
     kept = room["kept"].tracks
     alone = kept.camera_index == kept.camera_names.index("far4")
-    from calibproj.tracks import Tracks
+    from calibproj.formats.tracks import Tracks
 
     Tracks.from_observations(kept.camera_names, kept.camera_index[alone], kept.point_ids[kept.point_index[alone]],
                              kept.xy[alone], kept.markers_per_array).write(tmp_path / "alone.json")

@@ -11,7 +11,7 @@ import pytest
 
 import calibproj
 from calibproj import version
-from calibproj.cli import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, main
+from calibproj.cli.main import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, main
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -90,10 +90,10 @@ def test_an_option_of_another_command_is_named_as_such(capsys: pytest.CaptureFix
 def test_calibrate_takes_the_ingest_options_of_its_videos() -> None:
     """calibrate ingests videos as detect does, so it takes detect's knobs (found by a
     user: --min-correlation was answered with "did you mean --min-coverage?")."""
-    from calibproj.cli import build_parser, parse_arguments
-    from calibproj.commands.calibrate import INGEST_OPTIONS_NOT_HERE
-    from calibproj.commands.options import dataclass_changed_from_args
-    from calibproj.ingest_options import IngestOptions
+    from calibproj.cli.main import build_parser, parse_arguments
+    from calibproj.cli.calibrate import INGEST_OPTIONS_NOT_HERE
+    from calibproj.cli.options import dataclass_changed_from_args
+    from calibproj.ingest.options import IngestOptions
 
     parser = build_parser()
     args = parse_arguments(parser, ["calibrate", "videos", "--out", "o", "--min-correlation", "0.7",
@@ -105,7 +105,7 @@ def test_calibrate_takes_the_ingest_options_of_its_videos() -> None:
 
 
 def every_command_parser() -> dict:
-    from calibproj.cli import build_parser
+    from calibproj.cli.main import build_parser
 
     parser = build_parser()
     commands = next(action.choices for action in parser._actions if isinstance(action.choices, dict))
@@ -135,7 +135,7 @@ def test_common_options_come_first_and_the_rest_in_groups(capsys: pytest.Capture
 
 
 def test_verbose_is_taken_after_the_command_too(capsys: pytest.CaptureFixture) -> None:
-    from calibproj.cli import build_parser, parse_arguments
+    from calibproj.cli.main import build_parser, parse_arguments
 
     for line in (["-v", "compare", "a", "b"], ["compare", "a", "b", "-v"], ["compare", "-v", "a", "b"]):
         args = parse_arguments(build_parser(), line)
@@ -156,7 +156,7 @@ def test_every_command_that_replaces_a_folder_says_force_alike() -> None:
 @pytest.fixture
 def videos(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """Two cameras' videos (empty files), and an ingest that fails the test if started."""
-    from calibproj import ingest
+    from calibproj.ingest import videos as ingest
 
     def forbidden(*args, **kwargs):
         raise AssertionError("the ingest started before the scale was checked")
@@ -231,7 +231,7 @@ def test_an_interrupt_while_the_commands_are_imported_gives_one_line(
         monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, raised: Exception) -> None:
     """Found by probing Ctrl-C at 0.8 s: a dataclass being made turned it into a
     RuntimeError, which printed a traceback."""
-    from calibproj import cli
+    from calibproj.cli import main as cli
 
     def build_parser():
         raise raised
@@ -251,7 +251,7 @@ def test_an_interrupt_while_the_commands_are_imported_gives_one_line(
 ])
 def test_one_exit_status_convention(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture,
                                     raised: BaseException, status: int, line: str) -> None:
-    from calibproj.commands import compare
+    from calibproj.cli import compare
 
     def run(args):
         raise raised

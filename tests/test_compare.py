@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from calibproj.cli import main
-from calibproj.comparison import compare
-from calibproj.calibration import Calibration
-from calibproj.io.poses import CameraPoses, read_poses
+from calibproj.cli.main import main
+from calibproj.evaluation.comparison import compare
+from calibproj.formats.calibration import Calibration
+from calibproj.formats.poses import CameraPoses, read_poses
 from calibproj.simulate.geometric import simulate_tracks
 from calibproj.simulate.scene import load_scene
 from calibproj.simulate.truth import truth_document, write_truth
@@ -195,8 +195,8 @@ def test_truth_file_is_read_like_camera_poses(tmp_path):
 def test_rotation_errors_relative_to_the_reference_ignore_a_common_rotation() -> None:
     """A frame turned as a whole changes no relative rotation; a camera turned by a known
     tiny angle shows exactly that angle, the reference none."""
-    from calibproj.comparison import rotation_errors_to_reference
-    from calibproj.synthetic import matrix_from_rotvec
+    from calibproj.evaluation.comparison import rotation_errors_to_reference
+    from calibproj.simulate.synthetic import matrix_from_rotvec
 
     rng = np.random.default_rng(3)
     truth = {name: matrix_from_rotvec(rng.normal(size=3)) for name in ("a", "b", "c")}

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from calibproj.cli import main
+from calibproj.cli.main import main
 
 TERMINAL_ROWS, TERMINAL_COLUMNS = 40, 120
 DEMO_TIMEOUT_S = 900.0

@@ -13,14 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibproj.comparison import CameraPoses, compare
+from calibproj.evaluation.comparison import CameraPoses, compare
 from calibproj.pipeline import calibrate
 from calibproj.sequence import Sequence, build_sequence
 from calibproj.sequence.densify import DensifyOptions, densify
 from calibproj.simulate import simulate_tracks
 from calibproj.simulate.geometric import project_points, projected_points
 from calibproj.simulate.scene import load_scene
-from calibproj.tracks import Tracks
+from calibproj.formats.tracks import Tracks
 
 from test_native import run_native
 
@@ -148,9 +148,9 @@ def test_a_texture_that_moves_large_markers_more_leaves_the_small_ones_their_wei
     whose points the small markers tie to the projector, keeps their weight."""
     import dataclasses
 
-    from calibproj.comparison import rotation_errors_to_reference
-    from calibproj.registration import RegistrationDriver, RegistrationOptions
-    from calibproj.scale import ProjectedMarkers, projected_markers
+    from calibproj.evaluation.comparison import rotation_errors_to_reference
+    from calibproj.registration.driver import RegistrationDriver, RegistrationOptions
+    from calibproj.sequence.projected import ProjectedMarkers, projected_markers
 
     scene, sequence, dense, intrinsics = room["scene"], room["sequence"], room["dense"], room["first"].intrinsics
     rng = np.random.default_rng(0)

@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 
-from calibproj.cli import main
+from calibproj.cli.main import main
 from calibproj import _core
-from calibproj.evaluation import EvaluationOptions, best_pair, evaluate, evaluate_held_out, triangulate_tracks
-from calibproj.registration import register
+from calibproj.evaluation.independent import EvaluationOptions, best_pair, evaluate, evaluate_held_out, triangulate_tracks
+from calibproj.registration.driver import register
 from calibproj.simulate import simulate_tracks
-from calibproj.synthetic import matrix_from_rotvec
+from calibproj.simulate.synthetic import matrix_from_rotvec
 
 NOISE_PX = 0.5
 
@@ -121,7 +121,7 @@ def test_save_is_a_transaction_on_the_results_folder(results, tmp_path, monkeypa
     import shutil
 
     import calibproj.report
-    from calibproj.io.output_folder import OutputFolder
+    from calibproj.formats.output_folder import OutputFolder
 
     folder = tmp_path / "results"
     shutil.copytree(results / "results", folder)

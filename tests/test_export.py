@@ -9,11 +9,11 @@ import cv2
 import numpy as np
 import pytest
 
-from calibproj.cli import main
-from calibproj.export import colmap_camera, export, export_all, parse_formats, quaternion_wxyz
-from calibproj.io.intrinsics import Intrinsics
-from calibproj.registration import register
-from calibproj.scale import apply_scale
+from calibproj.cli.main import main
+from calibproj.formats.export import colmap_camera, export, export_all, parse_formats, quaternion_wxyz
+from calibproj.formats.intrinsics import Intrinsics
+from calibproj.registration.driver import register
+from calibproj.scale.metric import apply_scale
 from calibproj.simulate import simulate_tracks
 
 

@@ -12,7 +12,7 @@ naming the mutated file. The mutations that break the format must give status 2,
 a camera's intrinsics file: that camera fails (status 1, the file named), the others go
 on.
 
-The commands run in-process (``calibproj.cli.main``) in WORKERS worker processes, each
+The commands run in-process (``calibproj.cli.main.main``) in WORKERS worker processes, each
 started once (this file run as a script with --serve): Python with numpy and OpenCV
 starts too slowly for a process per file. A worker that does not answer in time is
 killed (a hang) and replaced; one that dies is a crash.
@@ -60,7 +60,7 @@ PER_CAMERA = ("calibrate_intrinsics", "detect_intrinsics", "evaluate_intrinsics"
 
 
 # ---------------------------------------------------------------------------------------
-# Workers: calibproj.cli.main in a process of its own, one command line per request.
+# Workers: calibproj.cli.main.main in a process of its own, one command line per request.
 
 
 def serve() -> None:
@@ -68,8 +68,10 @@ def serve() -> None:
     ``{"status", "stderr"}`` per line on the original stdout. The command's stdout goes
     to /dev/null and its stderr (file descriptor 2, so the log and anything the C++
     core writes) into a file read back for the answer."""
-    from calibproj.cli import main
-    from calibproj import evaluation, ingest, pipeline  # noqa: F401  (imported once, before the first request)
+    from calibproj.cli.main import main
+    from calibproj import pipeline
+    from calibproj.evaluation import independent as evaluation
+    from calibproj.ingest import videos as ingest  # noqa: F401  (imported once, before the first request)
 
     answers = os.fdopen(os.dup(1), "w")
     os.dup2(os.open(os.devnull, os.O_WRONLY), 1)

@@ -638,10 +638,11 @@ class Baselines:
 
     def format_specs(self) -> dict[str, Spec]:
         """The results files, the metric scale and the exports (_core.formats)."""
-        from calibproj.calibration import CameraMetrics, Calibration, Plane
-        from calibproj.io.intrinsics import Intrinsics, write_intrinsics
-        from calibproj.scale import ProjectedMarkers, parse_scale
-        from calibproj.tracks import Tracks
+        from calibproj.formats.calibration import CameraMetrics, Calibration, Plane
+        from calibproj.formats.intrinsics import Intrinsics, write_intrinsics
+        from calibproj.scale.metric import parse_scale
+        from calibproj.sequence.projected import ProjectedMarkers
+        from calibproj.formats.tracks import Tracks
 
         centres = np.stack(np.meshgrid(np.arange(6) * 10.0, np.arange(3) * 10.0), -1).reshape(2, 9, 2)
         points = np.column_stack([centres.reshape(-1, 2) / 100.0, np.zeros(18)])

@@ -45,10 +45,10 @@ PER_CAMERA_FORMATS = {"calibrate_intrinsics", "detect_intrinsics"}
 
 def python_refuses(run: Run) -> str | None:
     """The Python package's message for a mutated file its reader refuses (None: read)."""
-    from calibproj.io.intrinsics import read_intrinsics
-    from calibproj.io.jsonio import FormatError
+    from calibproj.formats.intrinsics import read_intrinsics
+    from calibproj.formats.jsonio import FormatError
     from calibproj.sequence.sequence import Sequence
-    from calibproj.tracks import Tracks
+    from calibproj.formats.tracks import Tracks
 
     readers = {"sequence": Sequence.load, "tracks": Tracks.read}
     try:
@@ -214,8 +214,8 @@ def test_mutated_results_folders_fail_cleanly(native: Path, calibrated: tuple[Pa
     through the core's one reader: this holds the Python side to it)."""
     import shutil
 
-    from calibproj.calibration import Calibration
-    from calibproj.io.jsonio import FormatError
+    from calibproj.formats.calibration import Calibration
+    from calibproj.formats.jsonio import FormatError
 
     results, tracks = calibrated
     rng = np.random.default_rng(SEED)

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from calibproj import generate
-from calibproj.cli import main
+from calibproj.cli.main import main
 from calibproj.sequence import SequenceOptions, build_sequence, default_frames_per_pattern
 from calibproj.sequence.codes import code_pair
 from calibproj.sequence.layout import MsmLayout
 from calibproj.sequence.sequence import Sequence
-from calibproj.io.jsonio import FormatError, read_json, write_json
+from calibproj.formats.jsonio import FormatError, read_json, write_json
 from calibproj.sequence.markers import MarkerDetector, marker_centres
 
 # A small sequence that still has every ingredient: a non-integer module size

@@ -1,4 +1,5 @@
-"""The package's import graph: no cycles, and every module importable by its dotted name.
+"""The package's import graph: no cycles, no stage importing a later stage, and every
+module importable by its dotted name.
 
 The graph is read from the source with ``ast``: every ``import`` and ``from ... import``
 statement of every module, at module level or inside functions and classes, relative
@@ -131,11 +132,46 @@ def test_the_walk_sees_every_kind_of_import(tmp_path: Path) -> None:
 
 
 def test_the_package_import_graph_has_no_cycle() -> None:
-    assert len(MODULES) > 40 and "calibproj.cli" in MODULES
+    assert len(MODULES) > 40 and "calibproj.cli.main" in MODULES
     graph = import_graph(MODULES)
-    assert "calibproj._core" in graph["calibproj.registration"]  # extension modules are nodes too
+    assert "calibproj._core" in graph["calibproj.registration.driver"]  # extension modules are nodes too
     cycle = find_cycle(graph)
     assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+# The package's stages in the order data flows through them, as the C++ core's: a
+# module may import its own stage and the stages before it, never one after it. The
+# top-level ``calibproj`` (its lazy map of exported names) and ``__main__`` come last.
+STAGES = ("_core", "_bench", "version", "common", "formats", "sequence", "simulate", "ingest", "selfcal",
+          "scale", "registration", "uncertainty", "evaluation", "report", "board", "pipeline", "check",
+          "capture", "study", "cli", "__main__", "")
+
+
+def stage_of(module: str) -> str:
+    """``calibproj.a.b`` -> ``a``; the package itself -> ``""``."""
+    return module.split(".")[1] if "." in module else ""
+
+
+def upward_imports(graph: dict[str, set[str]], stages: tuple[str, ...] = STAGES) -> list[str]:
+    """Every edge from a module to a later stage's, as ``"a -> b"``."""
+    rank = {stage: index for index, stage in enumerate(stages)}
+    return sorted(f"{module} -> {name}" for module, names in graph.items() for name in names
+                  if rank[stage_of(name)] > rank[stage_of(module)])
+
+
+def test_an_upward_import_is_found_and_named() -> None:
+    graph = {"calibproj.formats.tracks": {"calibproj._core"},
+             "calibproj.scale.metric": {"calibproj.formats.tracks", "calibproj.registration.driver"},
+             "calibproj.cli.main": {"calibproj.scale.metric"}}
+    assert upward_imports(graph) == ["calibproj.scale.metric -> calibproj.registration.driver"]
+
+
+def test_every_module_belongs_to_a_stage_and_imports_no_later_stage() -> None:
+    unplaced = sorted(module for module in MODULES if stage_of(module) not in STAGES)
+    assert not unplaced, "modules outside the stages (a flat module, or a stage missing from STAGES): " + \
+        ", ".join(unplaced)
+    upward = upward_imports(import_graph(MODULES))
+    assert not upward, "imports of a later stage:\n" + "\n".join(upward)
 
 
 @pytest.mark.parametrize("name", sorted(MODULES))

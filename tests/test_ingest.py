@@ -16,16 +16,16 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.cli import main
+from calibproj.cli.main import main
 from calibproj.sequence.builder import build_sequence
-from calibproj.ingest import ingest
-from calibproj.ingest_options import IngestOptions
-from calibproj.io.intrinsics import Intrinsics, read_intrinsics, write_intrinsics
+from calibproj.ingest.videos import ingest
+from calibproj.ingest.options import IngestOptions
+from calibproj.formats.intrinsics import Intrinsics, read_intrinsics, write_intrinsics
 from calibproj.sequence.markers import MarkerDetector, marker_centres, render_marker
 from calibproj.sequence.video import GreyVideoWriter
 from calibproj.simulate.render import simulate_videos
 from calibproj.simulate.scene import load_scene
-from calibproj.tracks import Tracks
+from calibproj.formats.tracks import Tracks
 
 # Merged centres of MSMs with a marker at least this wide (detected side, pixels) must
 # be within MAX_RMS_PX of the truth; smaller ones are left to the detector's own tests.
@@ -440,7 +440,7 @@ def test_an_interrupted_ingest_stops_every_camera_early(aruco, monkeypatch):
     import signal
     import threading
 
-    import calibproj.ingest as ingest_module
+    import calibproj.ingest.videos as ingest_module
 
     out, sequence, _ = aruco
     first_call = threading.Event()

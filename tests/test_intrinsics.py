@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from calibproj.io.intrinsics import (
+from calibproj.formats.intrinsics import (
     Intrinsics,
     intrinsics_of_cameras,
     load_intrinsics_dir,

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.ingest import ingest
+from calibproj.ingest.videos import ingest
 from calibproj.simulate.render import RenderOptions, simulate_videos
 
 from test_ingest import msm_sequence  # the tests folder is on sys.path under pytest

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from calibproj.sequence import generate
-from calibproj.ingest_options import IngestOptions
-from calibproj.registration import RegistrationOptions
+from calibproj.ingest.options import IngestOptions
+from calibproj.registration.driver import RegistrationOptions
 from calibproj.simulate import simulate_tracks
 from calibproj.simulate.render import simulate_videos
 
@@ -108,9 +108,9 @@ def test_native_refines_intrinsics_as_python_does(simulation: Path, tmp_path: Pa
     """Both tools run the core's self-calibration and write the same bytes: the entries
     refined and held and why, the refined intrinsics, the tracks re-expressed with them,
     the poses. The focal lengths are given 5 % off."""
-    from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir, write_intrinsics_dir
-    from calibproj.self_calibration import convert_tracks
-    from calibproj.tracks import Tracks
+    from calibproj.formats.intrinsics import Intrinsics, load_intrinsics_dir, write_intrinsics_dir
+    from calibproj.selfcal.lenses import convert_tracks
+    from calibproj.formats.tracks import Tracks
 
     truth = load_intrinsics_dir(simulation / "intrinsics")
     given = {name: Intrinsics(name, i.resolution, np.diag([1.05, 1.05, 1.0]) @ i.K, i.dist) for name, i in truth.items()}
@@ -447,7 +447,7 @@ PYTHON_ONLY_CALIBRATE = {"--exposure", "--json", "--no-progress", "--no-report",
 def ingest_flags() -> set[str]:
     """The ingest's options as flags, which the Python calibrate takes from detect for its
     videos (calibproj-native calibrates tracks; its detect takes them)."""
-    from calibproj.commands.calibrate import INGEST_OPTIONS_NOT_HERE
+    from calibproj.cli.calibrate import INGEST_OPTIONS_NOT_HERE
 
     return {"--detector-option"} | {"--" + field.name.replace("_", "-") for field in dataclasses.fields(IngestOptions)
                                      if field.name not in INGEST_OPTIONS_NOT_HERE}
@@ -482,7 +482,7 @@ def test_both_tools_describe_a_shared_flag_in_the_core_s_words() -> None:
     import argparse
 
     from calibproj import _core
-    from calibproj.cli import build_parser
+    from calibproj.cli.main import build_parser
 
     commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
     native_help = {}

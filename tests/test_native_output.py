@@ -1,4 +1,4 @@
-"""calibproj-native writes its outputs as the Python commands do (calibproj/io/output_folder.py):
+"""calibproj-native writes its outputs as the Python commands do (calibproj/formats/output_folder.py):
 a results folder replaced whole or not at all, the same lock (a Python run and a native run
 on one output exclude each other), the same refusals in one line, the same exit statuses."""
 
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from calibproj.io.output_folder import OutputBusyError, OutputFile, OutputFolder
+from calibproj.formats.output_folder import OutputBusyError, OutputFile, OutputFolder
 from calibproj.simulate import simulate_tracks
 from test_native import NATIVE, error_line, run_native, run_python
 from test_output_folder import siblings, snapshot

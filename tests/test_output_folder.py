@@ -12,11 +12,11 @@ from pathlib import Path
 
 import pytest
 
-from calibproj.cli import main
-from calibproj.io import jsonio
-from calibproj.io.output_folder import OutputBusyError, OutputError, OutputFile, OutputFolder
+from calibproj.cli.main import main
+from calibproj.formats import jsonio
+from calibproj.formats.output_folder import OutputBusyError, OutputError, OutputFile, OutputFolder
 from calibproj.simulate import simulate_tracks
-from calibproj.tracks import Tracks
+from calibproj.formats.tracks import Tracks
 
 
 def siblings(path: Path) -> list[str]:
@@ -218,7 +218,7 @@ def test_calibrate_force_leaves_nothing_of_the_previous_run(small: Path, tmp_pat
 @pytest.fixture
 def no_ingest(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> list[str]:
     """A videos folder whose ingest fails the test if it is ever started."""
-    from calibproj import ingest
+    from calibproj.ingest import videos as ingest
 
     def forbidden(*args, **kwargs):
         raise AssertionError("the ingest started before the output was checked")
@@ -297,9 +297,9 @@ def test_calibrate_interrupted_or_failing_keeps_the_previous_results(small: Path
 def test_a_file_the_core_cannot_write_is_an_os_error_naming_it(small: Path, tmp_path: Path) -> None:
     """The results files are written by the C++ core: a write it cannot make reaches
     Python as OSError with the system's errno and the path, as open() raises it."""
-    from calibproj.registration import register
-    from calibproj.io.intrinsics import load_intrinsics_dir
-    from calibproj.tracks import Tracks
+    from calibproj.registration.driver import register
+    from calibproj.formats.intrinsics import load_intrinsics_dir
+    from calibproj.formats.tracks import Tracks
 
     calibration = register(Tracks.read(small / "tracks.json"), load_intrinsics_dir(small / "intrinsics"))
     blocked = tmp_path / "blocked"
@@ -314,7 +314,7 @@ def test_a_file_is_never_written_over_a_device_a_pipe_or_a_folder(small: Path, t
     path: the core fuzz test's "/dev/null" turned the machine's /dev/null into a plain
     file (as root). Both writers (Python's and the core's) now refuse, naming the path."""
     from calibproj import _core
-    from calibproj.io.intrinsics import load_intrinsics_dir
+    from calibproj.formats.intrinsics import load_intrinsics_dir
 
     pipe = tmp_path / "pipe"
     os.mkfifo(pipe)

@@ -13,12 +13,12 @@ import cv2
 import numpy as np
 import pytest
 
-from calibproj.cli import EXIT_FAILURE, EXIT_USAGE, main
-from calibproj.comparison import compare
-from calibproj.evaluation import evaluate
+from calibproj.cli.main import EXIT_FAILURE, EXIT_USAGE, main
+from calibproj.evaluation.comparison import compare
+from calibproj.evaluation.independent import evaluate
 from calibproj.sequence import generate
 from calibproj.pipeline import calibrate
-from calibproj.registration import RegistrationOptions
+from calibproj.registration.driver import RegistrationOptions
 from calibproj.simulate.geometric import simulate_tracks
 from calibproj.simulate.render import simulate_videos
 
@@ -232,7 +232,7 @@ def test_videos_without_intrinsics_files(room: Path, tmp_path: Path) -> None:
     the truth is 93). With one camera calibrated, the floor's metric is known and the
     two others' focal lengths follow; with none, three cameras do not determine three
     focal lengths (planar self-calibration needs four), and all are held and reported."""
-    from calibproj.io.intrinsics import load_intrinsics_dir, read_intrinsics
+    from calibproj.formats.intrinsics import load_intrinsics_dir, read_intrinsics
 
     one_file = tmp_path / "intrinsics"
     one_file.mkdir()

@@ -7,7 +7,7 @@ import logging
 
 import pytest
 
-from calibproj.progress import PeriodicProgress, progress_bar
+from calibproj.common.progress import PeriodicProgress, progress_bar
 
 
 class Terminal(io.StringIO):
@@ -19,7 +19,7 @@ def test_a_terminal_gets_a_bar_and_a_log_file_gets_lines(caplog: pytest.LogCaptu
     bar = progress_bar(100, "camera far1", stream=Terminal())
     assert type(bar).__name__ == "tqdm"
     bar.close()
-    caplog.set_level(logging.INFO, logger="calibproj.progress")
+    caplog.set_level(logging.INFO, logger="calibproj.common.progress")
     lines = progress_bar(100, "camera far1", stream=io.StringIO(), interval_s=0.0)
     assert isinstance(lines, PeriodicProgress)
     lines.update(40)
@@ -33,7 +33,7 @@ def test_a_terminal_gets_a_bar_and_a_log_file_gets_lines(caplog: pytest.LogCaptu
 
 
 def test_lines_come_at_most_once_per_interval(caplog: pytest.LogCaptureFixture) -> None:
-    caplog.set_level(logging.INFO, logger="calibproj.progress")
+    caplog.set_level(logging.INFO, logger="calibproj.common.progress")
     lines = PeriodicProgress(None, "render far2", interval_s=3600.0)
     for _ in range(1000):
         lines.update()
@@ -77,7 +77,7 @@ def test_log_lines_do_not_cut_a_bar_on_a_terminal(monkeypatch: pytest.MonkeyPatc
 def test_a_cameras_bar_closes_when_its_own_ingest_ends(monkeypatch: pytest.MonkeyPatch) -> None:
     """Its time and rate stay its own (a finished camera's bar used to tick on until the
     slowest camera ended), and a complete one shows every frame it decoded as done."""
-    from calibproj.ingest import _Progress
+    from calibproj.ingest.videos import _Progress
 
     terminal = Terminal()
     monkeypatch.setattr("sys.stderr", terminal)

@@ -7,9 +7,9 @@ import hashlib
 import json
 from pathlib import Path
 
-from calibproj.cli import main
-from calibproj.io.file_names import path_as_recorded, safe_file_names
-from calibproj.provenance import file_identity, read_provenance
+from calibproj.cli.main import main
+from calibproj.formats.file_names import path_as_recorded, safe_file_names
+from calibproj.formats.provenance import file_identity, read_provenance
 from calibproj.simulate import simulate_tracks
 
 

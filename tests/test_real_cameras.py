@@ -17,7 +17,7 @@ import pytest
 from calibproj import _core
 from calibproj.sequence.builder import build_sequence
 from calibproj.sequence.video import GreyVideoWriter
-from calibproj.ingest import ingest
+from calibproj.ingest.videos import ingest
 from calibproj.simulate.render import simulate_videos
 from calibproj.simulate.people import ProjectorLight, blocked, surface_points
 from calibproj.simulate.render import RenderOptions

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.calibration import Calibration
-from calibproj.comparison import compare, rotation_errors_to_reference
-from calibproj.io.poses import CameraPoses
-from calibproj.registration import RegistrationDriver, RegistrationOptions, register
+from calibproj.formats.calibration import Calibration
+from calibproj.evaluation.comparison import compare, rotation_errors_to_reference
+from calibproj.formats.poses import CameraPoses
+from calibproj.registration.driver import RegistrationDriver, RegistrationOptions, register
 from calibproj.simulate import simulate_tracks
 from calibproj.simulate.scene import FloorRelief
-from calibproj.synthetic import matrix_from_rotvec, rotvec_from_matrix
-from calibproj.tracks import Tracks
+from calibproj.simulate.synthetic import matrix_from_rotvec, rotvec_from_matrix
+from calibproj.formats.tracks import Tracks
 
 # Bounds of the registration issue (paper section 3.1 rig, 0.5 px noise).
 MAX_ROTATION_RMSE_DEG = 0.02
@@ -312,7 +312,7 @@ def demo_with_projector(noise_px: float = 0.1, seed: int = 0, projector_dist: tu
                         relief: FloorRelief | None = None):
     from dataclasses import replace
 
-    from calibproj.scale import layout_markers
+    from calibproj.sequence.projected import layout_markers
     from calibproj.sequence.layout import MsmLayout
     from calibproj.simulate.scene import load_scene
 
@@ -482,7 +482,7 @@ def test_the_relief_grid_has_the_cells_asked_for(caplog) -> None:
     nodes = {}
     for cells in (8, 24):
         caplog.clear()
-        with caplog.at_level(logging.INFO, logger="calibproj.registration"):
+        with caplog.at_level(logging.INFO, logger="calibproj.registration.driver"):
             options = RegistrationOptions(error_correlation=0.0, relief_cells=cells)
             RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
         found = re.search(r"over its (\d+) nodes", caplog.text)
@@ -507,7 +507,7 @@ def test_a_flat_floor_keeps_the_flat_model_and_its_sigma(caplog) -> None:
         return RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
 
     flat = calibrated(0.0)
-    with caplog.at_level(logging.INFO, logger="calibproj.registration"):
+    with caplog.at_level(logging.INFO, logger="calibproj.registration.driver"):
         tested = calibrated(RegistrationOptions().floor_relief)
     assert "floor flat within the noise: kept exactly flat" in caplog.text
     assert tested.floor_rms < 1e-9

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from scipy.ndimage import map_coordinates
 
-from calibproj.cli import main
+from calibproj.cli.main import main
 from calibproj.sequence.builder import build_sequence
-from calibproj.io.intrinsics import read_intrinsics
-from calibproj.io.poses import read_poses
-from calibproj.tracks import Tracks
+from calibproj.formats.intrinsics import read_intrinsics
+from calibproj.formats.poses import read_poses
+from calibproj.formats.tracks import Tracks
 from calibproj.sequence.markers import MarkerDetector, marker_centres
 from calibproj.simulate.atlas import AtlasLayout
 from calibproj.simulate.geometric import project_points

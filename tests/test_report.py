@@ -9,9 +9,9 @@ import re
 import numpy as np
 import pytest
 
-from calibproj.cli import main
-from calibproj.io.intrinsics import write_intrinsics_dir
-from calibproj.registration import register
+from calibproj.cli.main import main
+from calibproj.formats.intrinsics import write_intrinsics_dir
+from calibproj.registration.driver import register
 from calibproj.report import write_report
 from calibproj.simulate import simulate_tracks
 
@@ -180,10 +180,10 @@ def test_a_camera_without_observations_is_drawn_empty(report_with_a_failed_camer
     """Its coverage plot shows no observed cell (a colour scale of 0..0 used to paint every cell full)."""
     import cv2
 
-    from calibproj.io.intrinsics import load_intrinsics_dir
+    from calibproj.formats.intrinsics import load_intrinsics_dir
     from calibproj.report.data import camera_views
     from calibproj.report.figures import camera_coverage
-    from calibproj.tracks import Tracks
+    from calibproj.formats.tracks import Tracks
 
     path, calibration = report_with_a_failed_camera
     tracks = Tracks.read(path.parent / "tracks.json")
@@ -201,8 +201,8 @@ def test_numbers_table_gives_centre_height_tilt_and_heading() -> None:
     """A camera 2.5 m above (1, -2) looking straight down; another tilted 30 deg towards +x."""
     from types import SimpleNamespace
 
-    from calibproj.calibration import Calibration, CameraMetrics
-    from calibproj.io.intrinsics import Intrinsics
+    from calibproj.formats.calibration import Calibration, CameraMetrics
+    from calibproj.formats.intrinsics import Intrinsics
     from calibproj.report.page import numbers_table
 
     def pose(centre, tilt_deg):

@@ -7,17 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from calibproj.cli import main
-from calibproj.registration import register
-from calibproj.scale import (
-    ProjectedMarkers,
-    apply_scale,
-    check_measurement,
-    layout_markers,
-    parse_scale,
-    scale_factor,
-    scaled,
-)
+from calibproj.cli.main import main
+from calibproj.registration.driver import register
+from calibproj.scale.metric import apply_scale, check_measurement, parse_scale, scale_factor, scaled
+from calibproj.sequence.projected import ProjectedMarkers, layout_markers
 from calibproj.simulate import simulate_tracks
 from calibproj.simulate.scene import Projector, load_scene
 
@@ -186,8 +179,8 @@ def calibrate_args(sim_dir, out, *extra: str) -> list[str]:
 
 
 def test_cli_scale_writes_metric_results(small_simulation, tmp_path, capsys) -> None:
-    from calibproj.calibration import Calibration
-    from calibproj.io.poses import read_poses
+    from calibproj.formats.calibration import Calibration
+    from calibproj.formats.poses import read_poses
 
     truth = read_poses(small_simulation / "truth.json")
     height = truth.center("cam1")[2]

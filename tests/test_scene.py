@@ -142,7 +142,7 @@ def test_scene_validation_names_the_file_and_the_field(tmp_path, edit, message):
 def test_people_round_trip_and_bad_fields_are_named(tmp_path):
     from dataclasses import replace
 
-    from calibproj.io.jsonio import FormatError
+    from calibproj.formats.jsonio import FormatError
     from calibproj.simulate.scene import Person
 
     scene = replace(load_scene("small"), people=(Person((-1.0, 0.0), (1.0, 0.5), start_s=2.0, height_m=1.8),))
@@ -224,7 +224,7 @@ def test_an_uneven_floor_is_met_by_every_ray_and_round_trips(tmp_path) -> None:
     ("slope", 1, r"unknown field"),
 ])
 def test_a_bad_floor_relief_is_named(field, value, message) -> None:
-    from calibproj.io.jsonio import FormatError
+    from calibproj.formats.jsonio import FormatError
 
     document = _document()
     document["floor"]["relief"] = {field: value}

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from calibproj import _core
-from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir
+from calibproj.formats.intrinsics import Intrinsics, load_intrinsics_dir
 from calibproj.pipeline import calibrate
-from calibproj.self_calibration import (FILE_NAME, RefineRequest, SelfCalibrationOptions, convert_tracks,
+from calibproj.selfcal.lenses import (FILE_NAME, RefineRequest, SelfCalibrationOptions, convert_tracks,
                                         read_given_intrinsics)
 from calibproj.simulate.geometric import simulate_tracks
 
@@ -278,8 +278,8 @@ def test_refined_relative_rotations_are_as_good_as_with_the_true_intrinsics(or_r
     """Gauge-free: the rotation between every two cameras (not weak) against the truth.
     (Aligned on the camera centres, every rotation would also carry the centres' error,
     which follows the focal lengths' few hundredths of a percent.)"""
-    from calibproj.comparison import rotation_angle_deg
-    from calibproj.io.poses import read_poses
+    from calibproj.evaluation.comparison import rotation_angle_deg
+    from calibproj.formats.poses import read_poses
 
     folder, simulation, truth, nominal, reference, refined = or_room
     true_poses = read_poses(folder / "sim" / "truth.json").poses
@@ -308,8 +308,8 @@ def test_higher_order_terms_need_coverage(or_room) -> None:
 
 
 def test_tracks_and_evaluation_follow_the_refined_intrinsics(or_room) -> None:
-    from calibproj.evaluation import evaluate
-    from calibproj.tracks import Tracks
+    from calibproj.evaluation.independent import evaluate
+    from calibproj.formats.tracks import Tracks
 
     folder, simulation, truth, nominal, reference, refined = or_room
     given = read_given_intrinsics(folder / "refined" / FILE_NAME)

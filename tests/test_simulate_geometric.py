@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from calibproj.cli import main
+from calibproj.cli.main import main
 from calibproj.sequence.layout import MsmLayout
-from calibproj.io.intrinsics import load_intrinsics_dir
-from calibproj.io.poses import read_poses
+from calibproj.formats.intrinsics import load_intrinsics_dir
+from calibproj.formats.poses import read_poses
 from calibproj.simulate.geometric import project_points, simulate_tracks
 from calibproj.simulate.scene import load_scene, read_scene
-from calibproj.tracks import Tracks
+from calibproj.formats.tracks import Tracks
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from calibproj.cli import main
+from calibproj.cli.main import main
 from calibproj.study import StudyPlan, study_markers
 from calibproj.study.executor import run_all
 from calibproj.study.images import ImageCondition, measure_image

@@ -11,8 +11,8 @@ import pytest
 
 from calibproj import _core
 from calibproj.sequence.builder import build_sequence
-from calibproj.ingest import ingest, luma_signal, synchronise
-from calibproj.ingest_options import IngestOptions
+from calibproj.ingest.videos import ingest, luma_signal, synchronise
+from calibproj.ingest.options import IngestOptions
 from calibproj.simulate.render import simulate_videos
 from calibproj.simulate.scene import load_scene
 

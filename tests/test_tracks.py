@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from calibproj.tracks import Tracks, msm_point_ids
+from calibproj.formats.tracks import Tracks, msm_point_ids
 
 CAMERAS = ("a", "b", "c", "d")
 
@@ -159,7 +159,7 @@ def test_malformed_files_name_the_file(tmp_path, document, message):
 
 
 def test_a_json_writer_names_its_file_for_a_value_json_cannot_hold(tmp_path):
-    from calibproj.io.jsonio import write_json
+    from calibproj.formats.jsonio import write_json
 
     path = tmp_path / "metrics.json"
     with pytest.raises(ValueError, match=f"^{re.escape(str(path))}: cannot write the metrics file: a value is NaN"):

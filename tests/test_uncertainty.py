@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from calibproj import _core, triangulation_uncertainty
-from calibproj.calibration import Calibration, CameraMetrics
-from calibproj.io.intrinsics import Intrinsics
-from calibproj.io.jsonio import FormatError
+from calibproj.formats.calibration import Calibration, CameraMetrics
+from calibproj.formats.intrinsics import Intrinsics
+from calibproj.formats.jsonio import FormatError
 from calibproj.pipeline import calibrate
 from calibproj.simulate import simulate_tracks
-from calibproj.synthetic import matrix_from_rotvec, paper_ring_rig
+from calibproj.simulate.synthetic import matrix_from_rotvec, paper_ring_rig
 
 SIGMA_PX = 0.5
 
@@ -216,7 +216,7 @@ def test_damaged_uncertainty_files_give_one_clear_line(demo_results: Path, tmp_p
 
 
 def test_the_free_model_says_which_distance_it_held(tmp_path: Path) -> None:
-    from calibproj.registration import RegistrationOptions
+    from calibproj.registration.driver import RegistrationOptions
 
     sim = simulate_tracks("small", None, noise_px=0.3, seed=2)
     calibrate(sim.tracks, sim.intrinsics, out=tmp_path / "r", options=RegistrationOptions(model="free"),
@@ -308,7 +308,7 @@ def test_the_poses_sensitivity_to_a_lens_matches_solving_again(model: str) -> No
 def refined_results(tmp_path_factory) -> tuple[Path, Path]:
     """The demo room calibrated from intrinsics 5 % off, refining them, and with the true
     intrinsics taken as exact."""
-    from calibproj.self_calibration import convert_tracks
+    from calibproj.selfcal.lenses import convert_tracks
 
     sim = simulate_tracks("demo", None, noise_px=0.2, seed=0)
     given = {}

@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import pytest
 
-from calibproj.comparison import rotation_errors_to_reference
+from calibproj.evaluation.comparison import rotation_errors_to_reference
 from calibproj.pipeline import calibrate
 from calibproj.sequence import build_sequence
 from calibproj.sequence.densify import DensifyOptions, densify

@@ -1,6 +1,6 @@
 #pragma once
 // Outputs written as one transaction, as the Python package writes them
-// (calibproj/io/output_folder.py), with its file names, its lock and its messages, so
+// (calibproj/formats/output_folder.py), with its file names, its lock and its messages, so
 // that a Python run and a native run on the same output exclude each other.
 //
 // OutputFolder(path):

@@ -1,5 +1,5 @@
 // calibproj._core.formats.Calibration: the result of a calibration as the package's one
-// Calibration class (calibproj.calibration.Calibration), with its CameraPose,
+// Calibration class (calibproj.formats.calibration.Calibration), with its CameraPose,
 // CameraMetrics and Plane. Values, like the dataclasses they replace: an attribute read
 // gives a copy, an attribute set replaces it, `replace` gives a changed copy.
 

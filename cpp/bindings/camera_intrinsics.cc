@@ -1,5 +1,5 @@
 // calibproj._core.formats.CameraIntrinsics: the one camera type (K, distortion, image
-// size and the lens's mappings), which Python knows as calibproj.io.intrinsics.Intrinsics.
+// size and the lens's mappings), which Python knows as calibproj.formats.intrinsics.Intrinsics.
 
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
@@ -143,7 +143,7 @@ void register_camera_intrinsics(py::module_& m) {
   m.attr("distortion_lengths") = py::tuple(py::cast(formats::kDistortionLengths));
   py::class_<CameraIntrinsics>(
       m, "CameraIntrinsics",
-      "One camera's pinhole matrix, OpenCV distortion and image size (calibproj.io.intrinsics.Intrinsics).\n\n"
+      "One camera's pinhole matrix, OpenCV distortion and image size (calibproj.formats.intrinsics.Intrinsics).\n\n"
       "name: camera name; resolution: (width, height) pixels, None when the file does not say; K: 3x3 "
       "[[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew, as OpenCV); dist: OpenCV's coefficients, 4, 5, 8, 12 or "
       "14 (None or empty: five zeros). Values are checked: ValueError naming the camera and the problem. "

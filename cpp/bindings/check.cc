@@ -243,7 +243,7 @@ void register_check(py::module_& m) {
       "check_options", [](const py::kwargs& kwargs) { CheckOptionsFromKwargs(kwargs); },
       "Raises ValueError naming the first check option (keyword) that is unknown or out of range.");
   m.def("option_table", &CheckOptionTable,
-        "Every check knob as a Knob (name, default, help), in order: the one declaration calibproj.check.CheckOptions "
+        "Every check knob as a Knob (name, default, help), in order: the one declaration calibproj.check.repair.CheckOptions "
         "and both command lines are made from.");
 }
 

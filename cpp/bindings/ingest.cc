@@ -141,7 +141,7 @@ void register_ingest(py::module_& m) {
         "Whether a camera's known exposure time (--exposure CAMERA=SECONDS) is one: 0 < seconds <= 1.");
   m.def("option_table", &IngestOptionTable,
         "Every ingest knob as a Knob (name, default, help), in order: the one declaration "
-        "calibproj.ingest_options.IngestOptions and both command lines are made from.");
+        "calibproj.ingest.options.IngestOptions and both command lines are made from.");
   py::class_<ingest::SequenceDescription>(
       m, "Sequence",
       "A projection sequence as the core holds it: the body of sequence.json (Sequence.to_dict()) read and "

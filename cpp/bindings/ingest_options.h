@@ -28,7 +28,7 @@ bool SetIngestOption(ingest::IngestOptions* o, const std::string& key, const pyb
 // magnitude (limits::OptionChecker); the ingest's own Check() does this for its options.
 void CheckSyncOptionValues(sync::SyncOptions& o);
 
-// Per knob, in order, a Knob; calibproj.ingest_options.IngestOptions is
+// Per knob, in order, a Knob; calibproj.ingest.options.IngestOptions is
 // made from the ingest's, which holds the sync's (but fixed_exposure, in seconds there).
 std::vector<Knob> SyncOptionTable();
 std::vector<Knob> IngestOptionTable();
@@ -45,7 +45,7 @@ struct IngestResult {
   nlohmann::ordered_json report;
 };
 
-// One camera's ingest as calibproj.ingest reads it (CameraIngest.raw).
+// One camera's ingest as calibproj.ingest.videos reads it (CameraIngest.raw).
 pybind11::object BoundIngestResult(const ingest::CameraIngestResult& result,
                                    const ingest::SequenceDescription& sequence);
 

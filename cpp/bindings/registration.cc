@@ -162,7 +162,7 @@ void register_registration(py::module_& m) {
 
 Reconstruction(intrinsics (C, 3, 3), image_sizes (C, 2), num_points, camera_index (N,),
 point_index (N,), observed (N, 2) undistorted pixels, **options). Options are the fields
-of calibproj.registration.RegistrationOptions.)doc")
+of calibproj.registration.driver.RegistrationOptions.)doc")
       .def(py::init([](const py::array_t<double, py::array::c_style | py::array::forcecast>& K,
                        const RowMatrix& image_sizes, int num_points, const Eigen::VectorXi& camera_index,
                        const Eigen::VectorXi& point_index, const RowMatrix& observed, const py::kwargs& kwargs) {
@@ -311,7 +311,7 @@ of calibproj.registration.RegistrationOptions.)doc")
       "Raises ValueError naming the first registration option (keyword) that is unknown or out of range.");
   m.def("option_table", &OptionTable,
         "Every registration knob as a Knob (name, default, help, choices), in order: the one declaration "
-        "calibproj.registration.RegistrationOptions and both command lines are made from.");
+        "calibproj.registration.driver.RegistrationOptions and both command lines are made from.");
 }
 
 }  // namespace calibproj::bindings

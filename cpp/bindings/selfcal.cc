@@ -99,7 +99,7 @@ selfcal::SelfCalibrationOptions SelfCalibrationOptionsFrom(const py::dict& value
       values, "self-calibration", [](auto& o, auto&& visit) { selfcal::VisitSelfCalibrationOptions(o, visit); });
 }
 
-// The core's log lines to a Python callable (calibproj.self_calibration's logger.info).
+// The core's log lines to a Python callable (calibproj.selfcal.lenses's logger.info).
 std::function<void(const std::string&)> LogTo(const py::function& log) {
   // Copies of the std::function made without the GIL share the one reference.
   auto function = std::make_shared<py::function>(log);

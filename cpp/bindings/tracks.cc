@@ -1,5 +1,5 @@
 // calibproj._core.formats.Tracks: the core's tracks as the package's one Tracks class
-// (calibproj.tracks.Tracks), its arrays read-only numpy views of the core's memory.
+// (calibproj.formats.tracks.Tracks), its arrays read-only numpy views of the core's memory.
 
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
@@ -103,7 +103,7 @@ py::array PixelsView(const py::object& self) {
 }  // namespace
 
 void register_tracks(py::module_& m) {
-  py::class_<Tracks>(m, "Tracks", R"(Observations of points by cameras: calibproj.tracks.Tracks.
+  py::class_<Tracks>(m, "Tracks", R"(Observations of points by cameras: calibproj.formats.tracks.Tracks.
 
 A point is one projected MSM, identified by (array, marker) with point id
 array * markers_per_array + marker, or, for evaluation data, any non-negative integer

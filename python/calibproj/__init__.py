@@ -8,9 +8,13 @@ in the subpackage ``calibproj.simulate`` (``simulate_tracks`` is also exported h
 ``triangulation_uncertainty`` tells how accurately the calibrated cameras place given
 points.
 
-Every module is importable by its dotted name: no name exported here is also the name
-of a submodule (the projection sequence lives in ``calibproj.sequence``, the pose
-comparison in ``calibproj.comparison``, the evaluation in ``calibproj.evaluation``).
+The package is laid out by stage, as the C++ core it drives: ``common``, ``formats``,
+``sequence``, ``simulate``, ``ingest``, ``selfcal``, ``scale``, ``registration``,
+``uncertainty``, ``evaluation``, ``report``, ``board``, then ``pipeline`` (the whole
+calibration), ``check``, ``capture``, ``study`` and ``cli``; a stage imports only the
+stages before it. Every module is importable by its dotted name: no name exported here
+is also the name of a submodule (the projection sequence lives in ``calibproj.sequence``,
+the pose comparison in ``calibproj.evaluation.comparison``).
 """
 
 # No "from __future__ import ..." and no call at the top level: importing __future__
@@ -22,36 +26,36 @@ TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing at start
 
 if TYPE_CHECKING:
     from calibproj.version import __version__
-    from calibproj.calibration import Calibration
-    from calibproj.comparison import compare
-    from calibproj.evaluation import evaluate
-    from calibproj.ingest import detect
-    from calibproj.ingest_options import IngestOptions
+    from calibproj.formats.calibration import Calibration
+    from calibproj.evaluation.comparison import compare
+    from calibproj.evaluation.independent import evaluate
+    from calibproj.ingest.videos import detect
+    from calibproj.ingest.options import IngestOptions
     from calibproj.sequence.markers import detect_markers
     from calibproj.pipeline import calibrate
-    from calibproj.registration import RegistrationOptions
+    from calibproj.registration.driver import RegistrationOptions
     from calibproj.sequence import generate
     from calibproj.simulate import simulate_tracks
-    from calibproj.tracks import Tracks
-    from calibproj.uncertainty import triangulation_uncertainty
+    from calibproj.formats.tracks import Tracks
+    from calibproj.uncertainty.triangulation import triangulation_uncertainty
 
 # Each exported name and the module that defines it, imported on first use: the
 # command line starts without numpy, OpenCV, the C++ core (or even logging) loaded, so
 # that Ctrl-C at its start meets its own handler.
 _EXPORTS = {
     "__version__": "calibproj.version",
-    "Calibration": "calibproj.calibration",
-    "IngestOptions": "calibproj.ingest_options",
-    "RegistrationOptions": "calibproj.registration",
-    "Tracks": "calibproj.tracks",
+    "Calibration": "calibproj.formats.calibration",
+    "IngestOptions": "calibproj.ingest.options",
+    "RegistrationOptions": "calibproj.registration.driver",
+    "Tracks": "calibproj.formats.tracks",
     "calibrate": "calibproj.pipeline",
-    "compare": "calibproj.comparison",
-    "detect": "calibproj.ingest",
+    "compare": "calibproj.evaluation.comparison",
+    "detect": "calibproj.ingest.videos",
     "detect_markers": "calibproj.sequence.markers",
-    "evaluate": "calibproj.evaluation",
+    "evaluate": "calibproj.evaluation.independent",
     "generate": "calibproj.sequence",
     "simulate_tracks": "calibproj.simulate",
-    "triangulation_uncertainty": "calibproj.uncertainty",
+    "triangulation_uncertainty": "calibproj.uncertainty.triangulation",
 }
 
 __all__ = [*_EXPORTS]

@@ -9,12 +9,12 @@ import sys
 
 def run() -> int:
     try:
-        from calibproj.cli import main
+        from calibproj.cli.main import main
     except KeyboardInterrupt:
         print("calibproj: interrupted", file=sys.stderr)
         return 130
     except Exception as error:
-        from calibproj.interruption import caused_by_interrupt
+        from calibproj.common.interruption import caused_by_interrupt
 
         if not caused_by_interrupt(error):
             raise

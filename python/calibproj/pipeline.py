@@ -5,9 +5,9 @@
 and, given ``out``, writes the results folder: ``camera_poses.json``,
 ``metrics.json``, ``points.ply``, ``tracks.json`` (and ``detect_report.json`` from
 videos), ``intrinsics/`` (the files used), exports, and ``report.html`` with
-``report/*.png`` (``calibproj.results``).
+``report/*.png`` (``calibproj.formats.results``).
 
-The folder is written as one transaction (``calibproj.io.output_folder``): checked and
+The folder is written as one transaction (``calibproj.formats.output_folder``): checked and
 locked before the ingest starts, written beside it and moved into place at the end; an
 existing folder is only replaced, whole, with ``force``, and a run that fails or is
 interrupted leaves the previous folder as it was.
@@ -22,22 +22,22 @@ from pathlib import Path
 from typing import Any
 
 from calibproj import _core
-from calibproj.calibration import Calibration
-from calibproj.io.intrinsics import Intrinsics, has_intrinsics_file, intrinsics_of_cameras, write_intrinsics_dir
-from calibproj.ingest import IngestResult
-from calibproj.ingest_inputs import check_videos
-from calibproj.ingest_options import IngestOptions
-from calibproj.io.output_folder import OutputFolder
-from calibproj.registration import RegistrationOptions
-from calibproj.registration import register
-from calibproj.provenance import provenance, write_provenance
-from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
-from calibproj.self_calibration import (RefineRequest, SelfCalibrationOptions, closed_form_start, convert_tracks,
+from calibproj.formats.calibration import Calibration
+from calibproj.formats.intrinsics import Intrinsics, has_intrinsics_file, intrinsics_of_cameras, write_intrinsics_dir
+from calibproj.ingest.videos import IngestResult
+from calibproj.ingest.inputs import check_videos
+from calibproj.ingest.options import IngestOptions
+from calibproj.formats.output_folder import OutputFolder
+from calibproj.registration.driver import RegistrationOptions
+from calibproj.registration.driver import register
+from calibproj.formats.provenance import provenance, write_provenance
+from calibproj.selfcal.lenses import FILE_NAME as SELF_CALIBRATION_FILE
+from calibproj.selfcal.lenses import (RefineRequest, SelfCalibrationOptions, closed_form_start, convert_tracks,
                                         nominal_intrinsics, self_calibrate, write_self_calibration)
-from calibproj.results import (CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, RECORDINGS_DIR,
+from calibproj.formats.results import (CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, RECORDINGS_DIR,
                                TRACKS_FILE)
-from calibproj.tracks import Tracks
-from calibproj.io.jsonio import FormatError
+from calibproj.formats.tracks import Tracks
+from calibproj.formats.jsonio import FormatError
 
 logger = logging.getLogger(__name__)
 
@@ -69,20 +69,20 @@ def calibrate(
     Args:
         source: ``Tracks``, a ``tracks.json``, a folder of camera videos
             (``<camera>.mp4``; then ``sequence`` is required), or the
-            ``calibproj.ingest.IngestResult`` of videos already ingested (a capture's).
+            ``calibproj.ingest.videos.IngestResult`` of videos already ingested (a capture's).
         intrinsics: camera name -> ``Intrinsics``, or a folder of intrinsics files.
         sequence: the projection's ``sequence.json`` (or ``Sequence``): needed for
             videos and for ``scale="marker-size:..."``.
         out: results folder; nothing is written without it.
         options: registration knobs (``RegistrationOptions``; defaults of the paper).
-        scale: one metric measurement (``calibproj.scale``), e.g. ``"camera-height:far1=2.7"``;
+        scale: one metric measurement (``calibproj.scale.metric``), e.g. ``"camera-height:far1=2.7"``;
             None keeps the arbitrary unit (first registered camera at height 1).
-        exports: any of ``yaml``, ``colmap``, ``anipose`` (``calibproj.export``).
+        exports: any of ``yaml``, ``colmap``, ``anipose`` (``calibproj.formats.export``).
         report: write ``report.html`` and ``report/*.png`` (needs ``out``).
         force: replace an existing results folder ``out`` (the whole folder: nothing
             of the earlier run remains); without it an existing folder is an error.
         ingest_options, detector_options, exposures, workers, progress: passed to
-            ``calibproj.ingest.ingest`` when ``source`` is videos (``exposures``: known
+            ``calibproj.ingest.videos.ingest`` when ``source`` is videos (``exposures``: known
             exposure times of some cameras, name -> seconds). With
             ``refine_intrinsics`` and no ``ingest_options``, the ingest's local check
             (``consistency_local_neighbours``) is off: it compares each centre with its
@@ -90,7 +90,7 @@ def calibrate(
             not allow.
         command: the command line to record in ``provenance.json`` (None: a Python call).
         refine_intrinsics: lens entries to refine from the projection itself
-            (``calibproj.self_calibration``), e.g. ``"focal,k1,k2"`` for every camera or
+            (``calibproj.selfcal.lenses``), e.g. ``"focal,k1,k2"`` for every camera or
             ``["focal,k1,k2", "ceiling=none"]``; the intrinsics given are the start. The
             refined intrinsics are the ones in ``intrinsics/``, ``tracks.json`` is
             undistorted with them, and ``self_calibration.json`` says, per camera, what was
@@ -99,7 +99,7 @@ def calibrate(
         nominal_fov_deg: with videos and ``refine_intrinsics``: a camera without an
             intrinsics file (or every camera, when ``intrinsics`` is None) starts from a
             pinhole with this horizontal field of view, the principal point at the image
-            centre and no distortion (``calibproj.self_calibration.nominal_intrinsics``).
+            centre and no distortion (``calibproj.selfcal.lenses.nominal_intrinsics``).
         merge: the results folder (or ``tracks.json``) of an earlier calibration of the same
             cameras, whose observations are added to the new ones: the new projection is
             then one that ``calibproj generate --densify`` planned from those results (its
@@ -109,8 +109,8 @@ def calibrate(
         recordings: a folder (the capture's recorded videos) moved into the results folder
             as ``recordings/`` when the results are written; left where it is otherwise.
     """
-    from calibproj.export import parse_formats
-    from calibproj.scale import check_measurement, parse_scale, scale_factor, scaled
+    from calibproj.formats.export import parse_formats
+    from calibproj.scale.metric import check_measurement, parse_scale, scale_factor, scaled
 
     formats = parse_formats(",".join(exports)) if exports else []
     request = _refine_request(refine_intrinsics) if refine_intrinsics else None
@@ -128,7 +128,7 @@ def calibrate(
     if exposures and videos is None:
         raise ValueError("exposures apply to videos, not to tracks")
     if exposures:
-        from calibproj.ingest import check_exposures
+        from calibproj.ingest.videos import check_exposures
 
         check_exposures(exposures, video_camera_names(videos))
     _check_nominal_fov(nominal_fov_deg, request, videos, intrinsics)
@@ -275,7 +275,7 @@ def _videos_folder(source: Tracks | str | os.PathLike) -> Path | None:
 
 def video_camera_names(folder: Path) -> list[str]:
     """The cameras of a videos folder as the ingest names them (video file stems)."""
-    from calibproj.ingest import VIDEO_SUFFIXES
+    from calibproj.ingest.videos import VIDEO_SUFFIXES
 
     if not folder.is_dir():
         return []
@@ -293,7 +293,7 @@ def _tracks_of(source, sequence, intrinsics, ingest_options, detector_options, e
         raise FileNotFoundError(f"{path}: no such videos folder")
     if sequence is None:
         raise ValueError(f"{path}: calibrating from videos needs the projection's sequence.json")
-    from calibproj.ingest import ingest
+    from calibproj.ingest.videos import ingest
 
     result = ingest(path, sequence, intrinsics, options=ingest_options, detector_options=detector_options,
                     workers=workers, progress=progress, exposures=exposures)
@@ -340,7 +340,7 @@ def _left_out(ingest_failed: dict[str, str], unusable_intrinsics: dict[str, str]
 
 
 def _projected_markers(sequence: Any, markers_per_array: int | None) -> Any:
-    from calibproj.scale import projected_markers, read_projected_markers
+    from calibproj.sequence.projected import projected_markers, read_projected_markers
 
     if isinstance(sequence, (str, os.PathLike)):
         return read_projected_markers(sequence, markers_per_array)
@@ -352,7 +352,7 @@ def write_results(out: Path, final: Path, calibration: Calibration, tracks: Trac
     """Everything of a results folder but provenance.json, into the staging folder ``out``
     that becomes ``final``: intrinsics/, tracks.json, the detect report and frames (with
     ``ingest_result``), the calibration files, the exports and the report."""
-    from calibproj.export import export_all
+    from calibproj.formats.export import export_all
     from calibproj.report import write_report
 
     used = {name: intrinsics[name] for name in tracks.camera_names if name in intrinsics}

@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from calibproj import _bench, _core
-from calibproj.synthetic import paper_ring_rig, perturb_poses
+from calibproj.simulate.synthetic import paper_ring_rig, perturb_poses
 
 
 def parse_args() -> argparse.Namespace:
@@ -230,7 +230,7 @@ def main() -> None:
 def covariance_share(scene: str, seed: int, runs: int) -> float:
     """Median over runs of the covariance's time over the refinement's, in a calibration
     of the scene's simulated tracks (the registration driven as calibrate drives it)."""
-    from calibproj.registration import RegistrationDriver
+    from calibproj.registration.driver import RegistrationDriver
     from calibproj.simulate import simulate_tracks
 
     sim = simulate_tracks(scene, None, noise_px=0.3, seed=seed)

@@ -6,11 +6,11 @@ a 960x540 projector) is
 
 - run live (``calibproj.simulate.virtual_room``: Xvfb as the projector's output, each
   camera streaming what it sees of it over loopback UDP on its own clock) and captured
-  with ``calibproj.capture`` (the projection played there by libmpv); and
+  with ``calibproj.capture.session`` (the projection played there by libmpv); and
 - rendered to video files with the same sequence and seed
   (``calibproj.simulate.render``) and calibrated with ``calibproj.pipeline.calibrate``.
 
-Both are compared with the room's truth (Sim(3) alignment, ``calibproj.comparison``).
+Both are compared with the room's truth (Sim(3) alignment, ``calibproj.evaluation.comparison``).
 Per seed it prints both RMSEs, when the poses were written after the projection ended,
 the frames every camera recorded, and the CPU time of ingesting the recordings (as
 files) against a plain decode of the same recordings (``ffmpeg -f null``). The last line:
@@ -35,10 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.capture import capture
-from calibproj.comparison import compare
-from calibproj.demo import LIVE_SCENE, LIVE_SEQUENCE
-from calibproj.ingest import ingest
+from calibproj.capture.session import capture
+from calibproj.evaluation.comparison import compare
+from calibproj.cli.demo_room import LIVE_SCENE, LIVE_SEQUENCE
+from calibproj.ingest.videos import ingest
 from calibproj.pipeline import calibrate
 from calibproj.sequence import generate
 from calibproj.simulate.render import simulate_videos

@@ -44,11 +44,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from realism import CONDITIONS, calibrate_scaled  # noqa: E402
 
-from calibproj.calibration import Calibration  # noqa: E402
-from calibproj.check_and_repair import CheckOptions, UntrustedReference, check  # noqa: E402
-from calibproj.comparison import CameraPoses, compare  # noqa: E402
-from calibproj.demo import marker_side_on_floor  # noqa: E402
-from calibproj.registration import RegistrationOptions  # noqa: E402
+from calibproj.formats.calibration import Calibration  # noqa: E402
+from calibproj.check.repair import CheckOptions, UntrustedReference, check  # noqa: E402
+from calibproj.evaluation.comparison import CameraPoses, compare  # noqa: E402
+from calibproj.cli.demo_room import marker_side_on_floor  # noqa: E402
+from calibproj.registration.driver import RegistrationOptions  # noqa: E402
 from calibproj.sequence import Sequence, generate  # noqa: E402
 from calibproj.sequence.check_sequence import plan_check  # noqa: E402
 from calibproj.sequence.densify import DensifyOptions, densify  # noqa: E402

@@ -36,8 +36,8 @@ import numpy as np
 
 from calibproj.sequence.builder import build_sequence
 from calibproj.sequence.sequence import Sequence
-from calibproj.ingest import ingest
-from calibproj.ingest_options import IngestOptions
+from calibproj.ingest.videos import ingest
+from calibproj.ingest.options import IngestOptions
 
 SYSTEMS = {"aruco": "aruco:4X4_50", "apriltag": "apriltag:tag36h11"}
 MIN_SIDE_PX = 20.0

@@ -38,11 +38,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.comparison import align_centers, compare
+from calibproj.evaluation.comparison import align_centers, compare
 from calibproj.pipeline import calibrate
 from calibproj.sequence import generate
 from calibproj.simulate.render import simulate_videos
-from calibproj.tracks import Tracks
+from calibproj.formats.tracks import Tracks
 
 ROOMS = ("demo", "or-table")
 TOP_M = 0.9  # the or-table preset's table top

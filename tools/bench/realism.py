@@ -43,12 +43,12 @@ from pathlib import Path
 
 import numpy as np
 
-from calibproj.comparison import compare, rotation_errors_to_reference
-from calibproj.demo import marker_side_on_floor
-from calibproj.evaluation import EvaluationOptions, evaluate, evaluate_held_out
-from calibproj.io.intrinsics import load_intrinsics_dir
+from calibproj.evaluation.comparison import compare, rotation_errors_to_reference
+from calibproj.cli.demo_room import marker_side_on_floor
+from calibproj.evaluation.independent import EvaluationOptions, evaluate, evaluate_held_out
+from calibproj.formats.intrinsics import load_intrinsics_dir
 from calibproj.pipeline import calibrate
-from calibproj.registration import RegistrationOptions
+from calibproj.registration.driver import RegistrationOptions
 from calibproj.sequence import Sequence, generate
 from calibproj.sequence.densify import DensifyOptions, densify
 from calibproj.simulate.presets import REAL_PEOPLE
@@ -255,7 +255,7 @@ def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics:
                          scale=scale, force=True, progress=False, merge=merge, refine_intrinsics=refine_intrinsics)
     except ValueError as error:
         logging.warning("%s: %s", label, error)
-        from calibproj.calibration import Calibration
+        from calibproj.formats.calibration import Calibration
 
         return Calibration.load(results)
 
@@ -324,7 +324,7 @@ def max_readout_error(report: dict, truth: dict) -> tuple[float, float] | None:
 
 def wrong_assignments(tracks_path: Path, truth: dict, threshold_px: float) -> int:
     """Observations farther than threshold_px from their point's true (distorted) image position."""
-    from calibproj.tracks import Tracks
+    from calibproj.formats.tracks import Tracks
 
     tracks = Tracks.read(tracks_path)
     wrong = 0

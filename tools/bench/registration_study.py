@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from calibproj.comparison import compare
-from calibproj.io.poses import CameraPoses
-from calibproj.registration import RegistrationOptions, register
+from calibproj.evaluation.comparison import compare
+from calibproj.formats.poses import CameraPoses
+from calibproj.registration.driver import RegistrationOptions, register
 from calibproj.simulate import simulate_tracks
 
 

@@ -23,7 +23,7 @@ Per run (true, nominal, refined, focal-only):
   weak in the true-intrinsics run and declared observable by the refinement of the
   angle between the estimated relative rotation R_i R_j^T and the true one (deg), and
   the ratio refined / true;
-- rotation RMSE after Sim(3) alignment on the camera centres (``calibproj.comparison``),
+- rotation RMSE after Sim(3) alignment on the camera centres (``calibproj.evaluation.comparison``),
   over the cameras not weak and over all, and the ratio refined / true. The alignment
   carries the centres' error into every rotation (a focal error of 0.05 % moves the
   centres by about as much and tilts every camera by ~0.02 deg), so this mixes the
@@ -66,17 +66,17 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from calibproj.calibration import Calibration
-from calibproj.comparison import compare, rotation_angle_deg
-from calibproj.evaluation import Evaluation, EvaluationOptions, evaluate
-from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir
-from calibproj.io.poses import read_poses
+from calibproj.formats.calibration import Calibration
+from calibproj.evaluation.comparison import compare, rotation_angle_deg
+from calibproj.evaluation.independent import Evaluation, EvaluationOptions, evaluate
+from calibproj.formats.intrinsics import Intrinsics, load_intrinsics_dir
+from calibproj.formats.poses import read_poses
 from calibproj.pipeline import calibrate
-from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
-from calibproj.self_calibration import convert_tracks
+from calibproj.selfcal.lenses import FILE_NAME as SELF_CALIBRATION_FILE
+from calibproj.selfcal.lenses import convert_tracks
 from calibproj.simulate.geometric import GeometricSimulation, simulate_tracks
 from calibproj.simulate.scene import Scene, load_scene
-from calibproj.tracks import Tracks
+from calibproj.formats.tracks import Tracks
 
 RUNS = ("true", "nominal", "refined", "focal-only")
 MAX_FOCAL_PCT = 0.3

@@ -44,12 +44,12 @@ from pathlib import Path
 import numpy as np
 
 from calibproj import _core
-from calibproj.io.intrinsics import Intrinsics, load_intrinsics_dir
+from calibproj.formats.intrinsics import Intrinsics, load_intrinsics_dir
 from calibproj.pipeline import calibrate
-from calibproj.registration import RegistrationOptions
-from calibproj.self_calibration import convert_tracks
+from calibproj.registration.driver import RegistrationOptions
+from calibproj.selfcal.lenses import convert_tracks
 from calibproj.simulate import simulate_tracks
-from calibproj.tracks import Tracks
+from calibproj.formats.tracks import Tracks
 
 
 def parse_args() -> argparse.Namespace:

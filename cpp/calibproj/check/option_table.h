@@ -1,6 +1,6 @@
 #pragma once
 // Every knob of the camera check, by name, with its documentation, in one table: the
-// Python binding (keyword options, calibproj.check.CheckOptions and its flags) and the
+// Python binding (keyword options, calibproj.check.repair.CheckOptions and its flags) and the
 // standalone executable walk it. The defaults are those of check::CheckOptions.
 
 #include "calibproj/check/camera_check.h"

@@ -1,7 +1,7 @@
 #pragma once
 // A calibration as its results folder holds it, and its files: camera_poses.json,
 // metrics.json and points.ply (docs/conventions.md). The Python package
-// (calibproj.calibration) and calibproj-native both write them through here, so both
+// (calibproj.formats.calibration) and calibproj-native both write them through here, so both
 // write the same bytes.
 
 #include <Eigen/Core>

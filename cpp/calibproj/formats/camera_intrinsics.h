@@ -1,7 +1,7 @@
 #pragma once
 // The one camera type: a camera's pinhole matrix, OpenCV distortion and image size, and
 // the lens's mappings between distorted image pixels, undistorted pixels of the same K
-// (what tracks hold) and normalised coordinates. Python's calibproj.io.intrinsics.
+// (what tracks hold) and normalised coordinates. Python's calibproj.formats.intrinsics.
 // Intrinsics is this type, bound.
 
 #include <Eigen/Core>

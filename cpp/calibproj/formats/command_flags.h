@@ -1,6 +1,6 @@
 #pragma once
 // The command-line flags that calibproj's commands and calibproj-native's both take,
-// declared once with their help text: the Python parsers (calibproj.commands) and the
+// declared once with their help text: the Python parsers (calibproj.cli) and the
 // executable's (cpp/app) are made from this table, so both tools describe a flag in the
 // same words. Whether a flag is required, its type and its default stay with each tool.
 

@@ -1,6 +1,6 @@
 #pragma once
 // detect_report.json (calibproj.detect_report/1) and the printed summary of the detect
-// command, in the layout of the Python package (calibproj.ingest.CameraIngest.summary).
+// command, in the layout of the Python package (calibproj.ingest.videos.CameraIngest.summary).
 
 #include <filesystem>
 #include <nlohmann/json.hpp>

@@ -1,5 +1,5 @@
 #pragma once
-// A calibration in the formats of other tools (the Python module calibproj.export
+// A calibration in the formats of other tools (the Python module calibproj.formats.export
 // documents each layout): calibration_opencv.yaml (cv::FileStorage), colmap/*.txt
 // (COLMAP's text model) and calibration.toml (aniposelib). Only registered cameras are
 // written, with world-to-camera poses in the floor frame.

@@ -1,6 +1,6 @@
 #pragma once
 // Typed values of the JSON documents calibproj reads, with the messages of the Python
-// package's calibproj.io.json_values (which now reads through here for the formats
+// package's calibproj.formats.json_values (which now reads through here for the formats
 // the C++ core owns). A number is a JSON number (not true, not "3"); an integer is a
 // number without a fractional part. Every check throws std::invalid_argument naming
 // the entry (`where`, e.g. "observations.cam0.xy"); each format's reader adds the file.

@@ -1,6 +1,6 @@
 #pragma once
 // Metric scale of a calibration from one length measured in the room
-// (`--scale` of both command lines; the Python module calibproj.scale documents the
+// (`--scale` of both command lines; the Python module calibproj.scale.metric documents the
 // measurements and how a marker's size becomes a scale).
 //
 // Errors are std::invalid_argument with the message shown to the user.

@@ -1,6 +1,6 @@
 #pragma once
 // Tracks: which cameras saw which point, and where (undistorted pixels). The one type
-// the core, calibproj-native and the Python package (bound as calibproj.tracks.Tracks)
+// the core, calibproj-native and the Python package (bound as calibproj.formats.tracks.Tracks)
 // share.
 //
 // A point is one projected MSM, identified by (array, marker) with point id

@@ -1,6 +1,6 @@
 #pragma once
 // Every knob of the ingest, by name, in one table: the Python binding (keyword
-// options, calibproj.ingest_options.IngestOptions) and the standalone executable
+// options, calibproj.ingest.options.IngestOptions) and the standalone executable
 // (command-line flags) both walk it, so neither can miss a knob.
 //
 // visit(name, field, help) is called once per knob, in the order of IngestOptions'

@@ -1,6 +1,6 @@
 #pragma once
 // The registration loop (paper section 2.2) over the steps of Reconstruction.
-// The Python driver (calibproj.registration) runs the same steps in the same order.
+// The Python driver (calibproj.registration.driver) runs the same steps in the same order.
 
 #include <functional>
 #include <string>

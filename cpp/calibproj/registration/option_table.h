@@ -1,6 +1,6 @@
 #pragma once
 // Every knob of the registration, by name, with its documentation, in one table: the
-// Python binding (keyword options, and calibproj.registration.RegistrationOptions with
+// Python binding (keyword options, and calibproj.registration.driver.RegistrationOptions with
 // its command-line flags, generated from it) and the standalone executable (its
 // calibrate flags) all walk it, so none can miss or redefine a knob. The defaults are
 // those of registration::Options.

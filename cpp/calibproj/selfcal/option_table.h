@@ -1,6 +1,6 @@
 #pragma once
 // Every knob of the self-calibration, by name, with its documentation, in one table:
-// the Python binding (calibproj.self_calibration.SelfCalibrationOptions and the flags
+// the Python binding (calibproj.selfcal.lenses.SelfCalibrationOptions and the flags
 // of calibproj calibrate) and the standalone executable (its calibrate flags) walk it.
 // The defaults are those of selfcal::SelfCalibrationOptions.
 

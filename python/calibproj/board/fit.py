@@ -18,7 +18,7 @@ import numpy as np
 
 from calibproj.board.spec import MIN_CHESSBOARD_SIDE, MIN_CORNERS, BoardDetector, BoardSpec
 from calibproj.board.views import View, grey_images, select_views, sharpness
-from calibproj.io.intrinsics import Intrinsics
+from calibproj.formats.intrinsics import Intrinsics
 
 logger = logging.getLogger(__name__)
 

@@ -7,10 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibproj.calibration import Calibration, CameraMetrics
-from calibproj.io.intrinsics import Intrinsics
-from calibproj.reprojection import reprojection_errors
-from calibproj.tracks import Tracks
+from calibproj.formats.calibration import Calibration, CameraMetrics
+from calibproj.formats.intrinsics import Intrinsics
+from calibproj.registration.reprojection import reprojection_errors
+from calibproj.formats.tracks import Tracks
 
 
 @dataclass(frozen=True, eq=False)  # numpy fields

@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from calibproj.calibration import Calibration
+from calibproj.formats.calibration import Calibration
 from calibproj.report.data import CameraView
 
 DEFAULT_DPI = 80

@@ -18,18 +18,18 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.calibration import Calibration, Plane
-from calibproj.io.file_names import safe_file_names
-from calibproj.io.intrinsics import Intrinsics, intrinsics_of_cameras
-from calibproj.io.jsonio import atomic_write_bytes, atomic_write_text
+from calibproj.formats.calibration import Calibration, Plane
+from calibproj.formats.file_names import safe_file_names
+from calibproj.formats.intrinsics import Intrinsics, intrinsics_of_cameras
+from calibproj.formats.jsonio import atomic_write_bytes, atomic_write_text
 from calibproj.report import figures
 from calibproj.report.data import CameraView, camera_views
 from calibproj.report.scene_view import scene_view_html
-from calibproj.provenance import read_provenance
-from calibproj.self_calibration import FILE_NAME as SELF_CALIBRATION_FILE
-from calibproj.results import (CHECK_FILE, DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, UNCERTAINTY_FILE,
+from calibproj.formats.provenance import read_provenance
+from calibproj.selfcal.lenses import FILE_NAME as SELF_CALIBRATION_FILE
+from calibproj.formats.results import (CHECK_FILE, DETECT_REPORT_FILE, EVALUATION_FILE, TRACKS_FILE, UNCERTAINTY_FILE,
                                intrinsics_source, load_results)
-from calibproj.tracks import Tracks
+from calibproj.formats.tracks import Tracks
 from calibproj.version import __version__
 
 logger = logging.getLogger(__name__)

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from calibproj.calibration import Calibration
+from calibproj.formats.calibration import Calibration
 from calibproj.report.data import CameraView
 from calibproj.report.figures import (FRUSTUM_SHARE, camera_colours, drawable_views, floor_outline, frustum,
                                       plane_outlines, scene_extent, subsampled)

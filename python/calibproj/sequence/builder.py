@@ -352,7 +352,7 @@ def _greedy_omissions(outside: np.ndarray, close: np.ndarray) -> tuple[int, ...]
 
 
 def _write_video(sequence: Sequence, path: Path, crf: int, preset: str, progress: bool) -> None:
-    from calibproj.progress import progress_bar
+    from calibproj.common.progress import progress_bar
 
     bar = progress_bar(sequence.frame_count, f"write {path.name}", enabled=progress)
     try:
@@ -367,7 +367,7 @@ def _write_video(sequence: Sequence, path: Path, crf: int, preset: str, progress
 def _write_pngs(sequence: Sequence, folder: Path) -> None:
     import cv2
 
-    from calibproj.io.jsonio import atomic_write_bytes
+    from calibproj.formats.jsonio import atomic_write_bytes
 
     for index in range(len(sequence.patterns)):
         ok, encoded = cv2.imencode(".png", sequence.pattern_image(index))

@@ -30,7 +30,7 @@ from calibproj.sequence.sequence import Sequence
 
 log = logging.getLogger(__name__)
 
-# Observations a camera needs to be tested (calibproj.check_and_repair.CheckOptions's
+# Observations a camera needs to be tested (calibproj.check.repair.CheckOptions's
 # default min_points: a pose has six parameters).
 MIN_TESTED_POINTS = 6
 
@@ -87,9 +87,9 @@ def plan_check(results: str | os.PathLike, sequences: list[Sequence],
     registered camera the calibrated points it will see; and per camera what its test
     will resolve: how far the working volume may seem to move in its image (1 sigma, px,
     at ``options.noise_px``), None where the camera's intrinsics or points do not say."""
-    from calibproj.calibration import Calibration
-    from calibproj.results import TRACKS_FILE
-    from calibproj.tracks import Tracks
+    from calibproj.formats.calibration import Calibration
+    from calibproj.formats.results import TRACKS_FILE
+    from calibproj.formats.tracks import Tracks
 
     options = options or CheckSequenceOptions()
     folder = Path(results)
@@ -214,8 +214,8 @@ class _CameraView:
 
 
 def _camera_views(calibration, tracks, base: Sequence, folder: Path) -> dict[str, _CameraView]:
-    from calibproj.io.intrinsics import intrinsics_of_cameras
-    from calibproj.results import INTRINSICS_DIR
+    from calibproj.formats.intrinsics import intrinsics_of_cameras
+    from calibproj.formats.results import INTRINSICS_DIR
 
     if not (folder / INTRINSICS_DIR).is_dir():
         return {}  # planned by the points alone

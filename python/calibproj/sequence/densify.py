@@ -218,10 +218,10 @@ def densify(results: str | os.PathLike, sequence: Sequence,
     """The densified sequence for the calibration in the folder ``results`` (made from a
     recording of ``sequence``) and the plan per camera; ``(None, [])`` when no camera
     needs it. A camera that cannot be planned for is logged and left out."""
-    from calibproj.calibration import Calibration
-    from calibproj.results import TRACKS_FILE, resolve_intrinsics
-    from calibproj.scale import projected_markers
-    from calibproj.tracks import Tracks
+    from calibproj.formats.calibration import Calibration
+    from calibproj.formats.results import TRACKS_FILE, resolve_intrinsics
+    from calibproj.sequence.projected import projected_markers
+    from calibproj.formats.tracks import Tracks
 
     options = options or DensifyOptions()
     folder = Path(results)

@@ -25,7 +25,7 @@ from calibproj.sequence.codes import LightCode
 from calibproj.sequence.layout import MsmLayout
 from calibproj.sequence.markers import marker_bits
 from calibproj.sequence.raster import draw_cells
-from calibproj.io.jsonio import FormatError, write_json
+from calibproj.formats.jsonio import FormatError, write_json
 
 KIND = "sequence"  # the schema tag calibproj.sequence/1
 MAJOR = 1

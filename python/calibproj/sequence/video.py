@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.io.jsonio import require_replaceable
+from calibproj.formats.jsonio import require_replaceable
 
 log = logging.getLogger(__name__)
 

@@ -29,11 +29,11 @@ import numpy as np
 
 from calibproj.sequence.layout import MsmLayout
 from calibproj.sequence.sequence import Sequence
-from calibproj.io.intrinsics import Intrinsics, write_intrinsics_dir
+from calibproj.formats.intrinsics import Intrinsics, write_intrinsics_dir
 from calibproj.simulate import boxes
 from calibproj.simulate.scene import Camera, Scene, load_scene, save_scene
 from calibproj.simulate.truth import truth_document, write_truth
-from calibproj.tracks import Tracks
+from calibproj.formats.tracks import Tracks
 
 logger = logging.getLogger(__name__)
 

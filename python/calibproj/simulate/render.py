@@ -46,8 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.io.intrinsics import write_intrinsics_dir
-from calibproj.io.jsonio import FormatError
+from calibproj.formats.intrinsics import write_intrinsics_dir
+from calibproj.formats.jsonio import FormatError
 from calibproj.simulate.atlas import AtlasLayout
 from calibproj.simulate.contents import AtlasStore
 from calibproj.simulate.geometric import evaluation_tracks
@@ -491,7 +491,7 @@ def _people_in_view(scene: Scene, view: FloorView, camera: Camera, sequence: Any
 def _render_all(scene: Scene, sequence: Any, timeline: ProjectionTimeline, clocks: dict[str, CameraClock],
                 views: dict[str, FloorView], folder: Path, seed: int, options: RenderOptions,
                 progress: bool) -> dict[str, CameraVideo]:
-    from calibproj.progress import progress_bar
+    from calibproj.common.progress import progress_bar
     from calibproj.sequence.video import GreyVideoWriter
 
     layout = _atlas_layout(scene, views, options)

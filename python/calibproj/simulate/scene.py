@@ -51,8 +51,8 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.io.intrinsics import DISTORTION_LENGTHS, Intrinsics
-from calibproj.io.jsonio import FormatError, read_json, write_json
+from calibproj.formats.intrinsics import DISTORTION_LENGTHS, Intrinsics
+from calibproj.formats.jsonio import FormatError, read_json, write_json
 from calibproj.simulate.presets import PRESETS, preset_document
 
 SCHEMA_KIND = "scene"

@@ -1,7 +1,7 @@
 """Ground truth of a simulation: ``truth.json`` (``calibproj.truth/1``).
 
 Cameras are written like ``camera_poses.json`` (``R``, ``t``, ``center``) so that
-``calibproj.io.poses.read_poses`` reads both, plus what a test needs to check a
+``calibproj.formats.poses.read_poses`` reads both, plus what a test needs to check a
 calibration end to end::
 
     {"schema": "calibproj.truth/1", "unit": "m", "frame": "floor",
@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.io.jsonio import write_json
-from calibproj.io.poses import SCHEMA_MAJOR, TRUTH_KIND, pose_json
+from calibproj.formats.jsonio import write_json
+from calibproj.formats.poses import SCHEMA_MAJOR, TRUTH_KIND, pose_json
 from calibproj.simulate.scene import Scene
 
 

@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from calibproj.io.intrinsics import write_intrinsics_dir
-from calibproj.io.jsonio import write_json
+from calibproj.formats.intrinsics import write_intrinsics_dir
+from calibproj.formats.jsonio import write_json
 from calibproj.simulate.scene import Scene, load_scene, save_scene
 
 logger = logging.getLogger(__name__)

@@ -44,7 +44,7 @@ def study_markers(out: str | os.PathLike, families: tuple[str, ...] = DEFAULT_FA
         force: replace an existing study folder.
         plan: sweeps and calibrations of one's own (overrides ``quick``).
     """
-    from calibproj.io.output_folder import OutputFolder
+    from calibproj.formats.output_folder import OutputFolder
     from calibproj.sequence.markers import family_info
     from calibproj.study.report import write_study
 
@@ -69,7 +69,7 @@ def study_markers(out: str | os.PathLike, families: tuple[str, ...] = DEFAULT_FA
 def study_recordings(out: str | os.PathLike, folders: list[str | os.PathLike], force: bool = False) -> Path:
     """The study of a user's own recordings (``calibproj.study.recordings``): two or more
     results folders of the same room, one per marker family, compared; the page's path."""
-    from calibproj.io.output_folder import OutputFolder
+    from calibproj.formats.output_folder import OutputFolder
     from calibproj.study.recordings import compare_recordings
     from calibproj.study.report import write_recordings
 

@@ -39,8 +39,8 @@ def run_calibration(task: CalibrationCondition) -> dict[str, Any]:
     """Registered cameras, rotation and translation RMSE against the truth (over the
     cameras not reported weak), evaluation error on independent points and the
     ingest's detection time per frame, in a dict with the task's fields."""
-    from calibproj.comparison import compare
-    from calibproj.evaluation import EvaluationOptions, evaluate
+    from calibproj.evaluation.comparison import compare
+    from calibproj.evaluation.independent import EvaluationOptions, evaluate
     from calibproj.pipeline import calibrate
     from calibproj.sequence import generate
     from calibproj.simulate.render import simulate_videos
@@ -85,7 +85,7 @@ def msm_centre_rms(tracks_path: Path, truth_path: Path, wrong_px: float = 3.0) -
     the ingest works) are left out of it."""
     import json
 
-    from calibproj.tracks import Tracks
+    from calibproj.formats.tracks import Tracks
 
     tracks = Tracks.read(tracks_path)
     truth = json.loads(truth_path.read_text())["image_points"]

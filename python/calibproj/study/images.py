@@ -103,7 +103,7 @@ def _refined_as_the_ingest_does(image: np.ndarray, camera: Any, ids: np.ndarray,
     """The detector's raw corners refined by the ingest's straight-edge fit (the centres
     a calibration uses); a marker whose edges cannot be fitted is dropped."""
     from calibproj import _core
-    from calibproj.io.intrinsics import Intrinsics
+    from calibproj.formats.intrinsics import Intrinsics
 
     gray = np.ascontiguousarray(image if image.ndim == 2 else image[..., 0])
     K = np.array([[camera.fx, 0.0, camera.cx], [0.0, camera.fy, camera.cy], [0.0, 0.0, 1.0]])

@@ -10,14 +10,14 @@ import json
 from pathlib import Path
 from typing import Any
 
-from calibproj.results import DETECT_REPORT_FILE
+from calibproj.formats.results import DETECT_REPORT_FILE
 
 
 def compare_recordings(folders: list[Path]) -> dict[str, Any]:
     """Per results folder its family and cameras; per pair of folders the agreement of
     their poses. ValueError naming a folder that is not a calibration from videos."""
-    from calibproj.calibration import Calibration
-    from calibproj.comparison import compare
+    from calibproj.formats.calibration import Calibration
+    from calibproj.evaluation.comparison import compare
 
     runs = []
     for folder in folders:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from calibproj.io.jsonio import atomic_write_bytes, atomic_write_text, write_json
+from calibproj.formats.jsonio import atomic_write_bytes, atomic_write_text, write_json
 from calibproj.report.figures import DEFAULT_DPI, png_bytes
 from calibproj.report.page import STYLE
 from calibproj.study.images import IMAGE_SIZE

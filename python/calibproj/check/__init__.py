@@ -1,0 +1,1 @@
+"""Check a stored calibration with a short projection, and repair the cameras that moved."""

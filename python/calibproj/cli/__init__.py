@@ -1,0 +1,1 @@
+"""The ``calibproj`` command line: ``main`` and one module per subcommand."""

@@ -1,1 +1,0 @@
-"""One module per ``calibproj`` subcommand (see ``calibproj.cli``)."""

@@ -1,0 +1,1 @@
+"""What every stage uses: option tables from the core's declarations, progress, interruption."""

@@ -1,0 +1,1 @@
+"""The files of a calibration: intrinsics, tracks, calibration, results folder, exports."""

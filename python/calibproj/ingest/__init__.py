@@ -1,0 +1,1 @@
+"""From camera videos to MSM tracks: inputs checked, sync, detection, merging."""

@@ -1,1 +1,0 @@
-"""File formats: schema-versioned JSON, intrinsics, atomic writes."""

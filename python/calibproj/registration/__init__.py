@@ -1,0 +1,1 @@
+"""The incremental registration, driven step by step over the core's steps."""

@@ -1,0 +1,1 @@
+"""Metric scale from one length measured in the room."""

@@ -1,0 +1,1 @@
+"""Self-calibration: focal lengths and lens distortion from the projection."""
