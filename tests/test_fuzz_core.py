@@ -64,7 +64,7 @@ BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "
                         "_core.selfcal.SelfCalibration", "_core.sync.SyncResult", "_core.sync.CodeLocation",
                         "_core.sync.BandFit", "_core.sync.ReadoutEstimate", "_core.ingest.ScaleRecords",
                         "_core.ingest.MergedCentres", "_core.ingest.FrameClockStats", "_core.Knob",
-                        "_core.ba.ManifoldValues"}
+                        "_core.ba.ManifoldValues", "_core.selfcal.RefinedCalibration"}
 
 # Keyword options of registration.Reconstruction (cpp/bindings/registration.cc).
 REGISTRATION_OPTIONS = {
@@ -423,6 +423,11 @@ class Baselines:
         return _core.selfcal.self_calibrate(*(value for _, value in call.args),
                                             **{**call.kwargs, "compute_covariance": compute_covariance})
 
+    @staticmethod
+    def opened(output: Any) -> Any:
+        output.open()
+        return output
+
     def specs(self) -> dict[str, Spec | None]:
         """Valid calls by qualified name (None: a property or a method without arguments
         whose receivers are listed in receivers())."""
@@ -693,7 +698,25 @@ class Baselines:
                          "log": logging.getLogger("fuzz").info}
         self.refinement = lambda: _core.selfcal.refine_lenses(*(value for _, value in refine_args), **refine_kwargs)
         self.request = request
+        rounds_args = [("calibration", calibration), ("tracks", tracks), ("intrinsics", intrinsics),
+                       ("request", request)]
+        rounds_kwargs = {"options": selfcal_options, "num_threads": 1,
+                         "register": lambda tracks, intrinsics, lens_covariance: calibration,
+                         "log": logging.getLogger("fuzz").info}
+        self.refined_calibration = lambda: _core.selfcal.refine_with_registrations(
+            *(value for _, value in rounds_args), **rounds_kwargs)
+        # The results-folder transaction, on folders of its own.
+        outputs = folder / "outputs"
+        self.output_folder = lambda: _core.formats.OutputFolder(outputs / "folder", force=True)
+        self.output_file = lambda: _core.formats.OutputFile(outputs / "file.json", force=True)
         return {
+            "_core.formats.OutputFolder": Spec([("path", outputs / "folder")],
+                                               {"force": True, "signature": ["tracks.json"], "min_free_bytes": 1}),
+            "_core.formats.OutputFile": Spec([("path", outputs / "file.json")],
+                                             {"force": True, "inputs": [str(folder / "results" / "a.json")],
+                                              "min_free_bytes": 1}),
+            "_core.selfcal.refine_with_registrations": Spec(rounds_args, rounds_kwargs),
+            "_core.selfcal.RefinedCalibration": Spec([]),
             "_core.selfcal.refine_lenses": Spec(refine_args, refine_kwargs),
             "_core.selfcal.closed_form_start": Spec(refine_args, {"options": selfcal_options,
                                                                  "log": logging.getLogger("fuzz").info}),
@@ -901,6 +924,11 @@ class Baselines:
             "_core.check.CalibrationCheck": {"checked": lambda: self.check_call()},
             "_core.selfcal.RefineRequest": {"parsed": lambda: self.request},
             "_core.selfcal.SelfCalibration": {"refined": lambda: self.refinement()},
+            "_core.selfcal.RefinedCalibration": {"refined": lambda: self.refined_calibration()},
+            "_core.formats.OutputFolder": {"fresh": lambda: self.output_folder(),
+                                           "open": lambda: self.opened(self.output_folder())},
+            "_core.formats.OutputFile": {"fresh": lambda: self.output_file(),
+                                         "open": lambda: self.opened(self.output_file())},
             "_core.selfcal.LensReport": {
                 name: (lambda name=name: self.refinement().reports[name]) for name in ("a", "b")},
             "_core.selfcal.LensCovariance": {"empty": _core.selfcal.LensCovariance,
@@ -997,7 +1025,7 @@ def spec_calls(qualified: str, name: str, target: Callable[[], Callable], spec: 
         if arg == "progress":
             mutations = [("raises ValueError", raise_value_error), ("wrong signature", lambda: None),
                          ("not callable", 3)]
-        if arg == "log":
+        if arg in ("log", "register"):
             mutations = [("raises ValueError", raise_value_error), ("wrong signature", lambda: None),
                          ("not callable", 3), ("None", None)]
         calls.append(call(f"{arg} left out", values[:i], spec.kwargs))

@@ -1,6 +1,7 @@
-"""calibproj-native writes its outputs as the Python commands do (calibproj/formats/output_folder.py):
-a results folder replaced whole or not at all, the same lock (a Python run and a native run
-on one output exclude each other), the same refusals in one line, the same exit statuses."""
+"""calibproj-native writes its outputs as the Python commands do, through the core's one
+transaction (cpp/calibproj/formats/output_folder.h): a results folder replaced whole or not
+at all, the same lock (a Python run and a native run on one output exclude each other), the
+same refusals in one line, the same exit statuses."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ import pytest
 from calibproj.formats.output_folder import OutputBusyError, OutputFile, OutputFolder
 from calibproj.simulate import simulate_tracks
 from test_native import NATIVE, error_line, run_native, run_python
-from test_output_folder import siblings, snapshot
+from test_output_folder import siblings, snapshot, without_privileges
 
 EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
 WAIT_S = 60.0
@@ -135,13 +136,13 @@ def test_detect_replaces_an_existing_file_only_when_forced_and_never_its_sequenc
     assert forced.returncode == EXIT_USAGE and "no-sequence.json" in error_line(forced)
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
 def test_a_read_only_parent_is_named(small: Path, tmp_path: Path) -> None:
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(0o555)
     try:
-        result = run_native(*calibrate_args(small, locked / "results"))
+        result = subprocess.run(without_privileges([str(NATIVE), *calibrate_args(small, locked / "results")]),
+                                capture_output=True, text=True)
     finally:
         locked.chmod(0o755)
     assert result.returncode == EXIT_USAGE

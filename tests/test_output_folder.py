@@ -7,6 +7,9 @@ import errno
 import json
 import logging
 import os
+import shutil
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -127,7 +130,7 @@ def test_a_second_writer_of_the_same_folder_fails_at_once(tmp_path: Path) -> Non
         pass
 
 
-def test_paths_that_cannot_be_written_are_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_paths_that_cannot_be_written_are_named(tmp_path: Path) -> None:
     a_file = tmp_path / "file"
     a_file.write_text("x")
     with pytest.raises(OutputError, match=f"{a_file}: exists and is not a folder"):
@@ -136,31 +139,52 @@ def test_paths_that_cannot_be_written_are_named(tmp_path: Path, monkeypatch: pyt
         OutputFolder(a_file / "out").open()
     with pytest.raises(OutputError, match=f"{tmp_path}: is a folder"):
         OutputFile(tmp_path).open()
-    # Permissions as a non-root user sees them (root passes os.access checks).
-    monkeypatch.setattr(os, "access", lambda path, mode: False)
-    with pytest.raises(OutputError, match=f"{tmp_path / 'out'}: cannot write in {tmp_path} \\(permission denied\\)"):
-        OutputFolder(tmp_path / "out").open()
-    with pytest.raises(OutputError, match="permission denied"):
-        OutputFile(tmp_path / "tracks.json").open()
 
 
-def pretend_the_disk_is_full(monkeypatch: pytest.MonkeyPatch) -> None:
-    """os.statvfs reports no free block left, everything else as it is."""
-    real = os.statvfs
-
-    class Full:
-        def __init__(self, path):
-            stats = real(path)
-            self.f_flag, self.f_frsize, self.f_bavail = stats.f_flag, stats.f_frsize, 0
-
-    monkeypatch.setattr(os, "statvfs", Full)
+# The capabilities that let root write anywhere: dropped, root is bound by permissions.
+DROPPED_CAPABILITIES = "--bounding-set=-dac_override,-dac_read_search"
 
 
-def test_a_full_disk_is_found_before_the_work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    pretend_the_disk_is_full(monkeypatch)
-    with pytest.raises(OutputError, match=f"{tmp_path / 'out'}: the disk is full"):
-        OutputFolder(tmp_path / "out").open()
-    assert not (tmp_path / "out").exists() and siblings(tmp_path / "out") == []
+def without_privileges(command: list[str]) -> list[str]:
+    """``command`` run as permissions bind it: for root, without the capabilities that
+    let it write anywhere (setpriv drops them from the child's bounding set)."""
+    if os.geteuid() != 0:
+        return command
+    if shutil.which("setpriv") is None or subprocess.run(["setpriv", DROPPED_CAPABILITIES, "true"],
+                                                         capture_output=True).returncode != 0:
+        pytest.skip("root writes into read-only folders, and this machine cannot drop that right")
+    return ["setpriv", DROPPED_CAPABILITIES, *command]
+
+
+def test_a_folder_without_write_permission_is_named(tmp_path: Path) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    code = ("from calibproj.formats.output_folder import OutputError, OutputFile, OutputFolder\n"
+            "for output in (OutputFolder(%r), OutputFile(%r)):\n"
+            "    try:\n"
+            "        output.open()\n"
+            "    except OutputError as error:\n"
+            "        print(error)\n" % (str(locked / "out"), str(locked / "tracks.json")))
+    try:
+        result = subprocess.run(without_privileges([sys.executable, "-c", code]), capture_output=True, text=True,
+                                timeout=120)
+    finally:
+        locked.chmod(0o755)
+    assert result.stdout.splitlines() == [f"{locked / 'out'}: cannot write in {locked} (permission denied)",
+                                          f"{locked / 'tracks.json'}: cannot write in {locked} (permission denied)"], \
+        result.stderr
+
+
+def test_a_full_disk_is_found_before_the_work(tmp_path: Path) -> None:
+    """A disk with less free space than the output needs to start (here: more than any
+    disk has) is refused, and the folders made for the output are removed again."""
+    needed = 2**60
+    with pytest.raises(OutputError, match=f"{tmp_path / 'a' / 'out'}: the disk is full"):
+        OutputFolder(tmp_path / "a" / "out", min_free_bytes=needed).open()
+    with pytest.raises(OutputError, match=f"{tmp_path / 'a' / 'tracks.json'}: the disk is full"):
+        OutputFile(tmp_path / "a" / "tracks.json", min_free_bytes=needed).open()
+    assert not (tmp_path / "a").exists()
 
 
 def test_a_write_that_fails_is_named_and_leaves_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -230,8 +254,7 @@ def no_ingest(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> list[str]:
     return [str(videos), "--sequence", str(tmp_path / "sequence.json")]
 
 
-def test_calibrate_checks_its_output_before_the_ingest(small: Path, tmp_path: Path, no_ingest, capsys,
-                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+def test_calibrate_checks_its_output_before_the_ingest(small: Path, tmp_path: Path, no_ingest, capsys) -> None:
     base = ["calibrate", *no_ingest, "--intrinsics", str(small / "intrinsics"), "--no-progress", "--out"]
     a_file = tmp_path / "results.txt"
     a_file.write_text("x")
@@ -243,24 +266,26 @@ def test_calibrate_checks_its_output_before_the_ingest(small: Path, tmp_path: Pa
     assert "another calibproj run is writing it" in one_error_line(capsys)
     holder.abort()
 
-    pretend_the_disk_is_full(monkeypatch)
-    assert main([*base, str(tmp_path / "full")]) == 2
-    assert f"{tmp_path / 'full'}: the disk is full" in one_error_line(capsys)
-    assert not (tmp_path / "full").exists()
+    assert main([*base, str(a_file / "results")]) == 2
+    assert one_error_line(capsys) == f"calibproj calibrate: error: {a_file / 'results'}: {a_file} is not a folder"
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
-def test_calibrate_into_a_read_only_folder(small: Path, tmp_path: Path, no_ingest, capsys) -> None:
+def test_calibrate_into_a_read_only_folder(small: Path, tmp_path: Path) -> None:
+    videos = tmp_path / "videos"
+    videos.mkdir()
+    (videos / "cam1.mp4").write_bytes(b"")  # never read: the output is checked first
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(0o555)
+    command = [sys.executable, "-m", "calibproj", "calibrate", str(videos), "--sequence", str(tmp_path / "sequence.json"),
+               "--intrinsics", str(small / "intrinsics"), "--out", str(locked / "results")]
     try:
-        status = main(["calibrate", *no_ingest, "--intrinsics", str(small / "intrinsics"), "--out",
-                       str(locked / "results")])
+        result = subprocess.run(without_privileges(command), capture_output=True, text=True, timeout=300)
     finally:
         locked.chmod(0o755)
-    assert status == 2
-    assert f"{locked / 'results'}: cannot write in {locked}" in one_error_line(capsys)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.strip() == (f"calibproj calibrate: error: {locked / 'results'}: cannot write in {locked} "
+                                     f"(permission denied)")
 
 
 def test_calibrate_interrupted_or_failing_keeps_the_previous_results(small: Path, tmp_path: Path, capsys,

@@ -9,7 +9,7 @@
 #include "calibproj/formats/earlier_observations.h"
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/intrinsics_file.h"
-#include "output_folder.h"
+#include "calibproj/formats/output_folder.h"
 #include "results_folder.h"
 #include "table_flags.h"
 #include "calibproj/formats/calibration.h"
@@ -20,10 +20,12 @@
 #include "calibproj/registration/option_table.h"
 #include "calibproj/registration/result.h"
 #include "calibproj/selfcal/option_table.h"
+#include "calibproj/selfcal/rounds.h"
 #include "calibproj/formats/tracks_file.h"
 
 namespace calibproj::app {
 
+using formats::OutputFolder;
 using formats::CameraIntrinsics;
 using formats::InputError;
 using formats::IntrinsicsDir;
@@ -85,10 +87,6 @@ void CheckRefinement(const std::optional<LensRefinement>& refinement, const std:
     throw InputError(error.what());
   }
 }
-
-namespace {
-
-}  // namespace
 
 // The MSM geometry of sequence.json, checked against the tracks it should belong to.
 formats::ProjectedMarkers MarkersOf(const std::string& sequence, std::optional<int> markers_per_array) {
@@ -161,62 +159,6 @@ void PrintSummary(const formats::Calibration& calibration, const std::string& ou
 
 }  // namespace
 
-namespace {
-
-// A refinement's outcome: the calibration registered again with the refined lenses, the
-// tracks (all of them, and those registered) re-expressed with them.
-struct RefinedLenses {
-  formats::Calibration calibration;
-  Tracks given, tracks;
-  std::map<std::string, CameraIntrinsics> intrinsics;
-  selfcal::SelfCalibration result;
-};
-
-// Self-calibration as `calibproj calibrate --refine-intrinsics` runs it: from the
-// closed-form start (registered again when it moved a focal length), rounds of lens
-// refinement each followed by a registration that takes the lenses' covariance in; a
-// camera whose focal length was held, or whose residuals keep a smooth pattern, is weak
-// (selfcal::WeakReason).
-RefinedLenses RefineLenses(const formats::Calibration& first, const Tracks& given, const Tracks& tracks,
-                           const std::map<std::string, CameraIntrinsics>& intrinsics,
-                           const std::vector<formats::NamedText>& left_out, const registration::Options& options,
-                           const std::optional<formats::ProjectedMarkers>& markers, const LensRefinement& refinement) {
-  const auto log = [](const std::string& line) { std::cerr << line << "\n"; };
-  const auto calibrate = [&](const Tracks& registered, const std::map<std::string, CameraIntrinsics>& lenses,
-                             const selfcal::JointLensCovariance* covariance) {
-    return formats::FromRegistration(Register(registered, lenses, options, markers, covariance), registered.cameras,
-                                     registered.point_ids, left_out, registration::ChoiceName(options.model));
-  };
-  RefinedLenses out{first, given, tracks, intrinsics, {}};
-  const auto start = selfcal::ClosedFormStart(given, intrinsics, first, refinement.request, refinement.options, log);
-  const bool moved = std::any_of(start.begin(), start.end(), [&](const auto& item) {
-    const CameraIntrinsics& was = intrinsics.at(item.first);
-    return item.second.K != was.K || item.second.dist != was.dist;
-  });
-  if (moved) {
-    out.given = selfcal::ConvertTracks(given, intrinsics, start);
-    out.tracks = selfcal::ConvertTracks(tracks, intrinsics, start);
-    out.intrinsics = start;
-    out.calibration = calibrate(out.tracks, start, nullptr);
-  }
-  for (int round = 0; round < refinement.options.rounds; ++round) {  // each from the registration the last one made
-    selfcal::SelfCalibration result =
-        selfcal::SelfCalibrate(out.given, out.intrinsics, out.calibration, refinement.request, refinement.options,
-                               options.num_threads, &intrinsics, round > 0 ? &out.result.reports : nullptr, log);
-    out.given = selfcal::ConvertTracks(out.given, out.intrinsics, result.intrinsics);
-    out.tracks = selfcal::ConvertTracks(out.tracks, out.intrinsics, result.intrinsics);
-    out.intrinsics = result.intrinsics;
-    out.result = std::move(result);
-    out.calibration = calibrate(out.tracks, out.intrinsics, &out.result.lens_covariance);
-  }
-  for (const auto& [name, reason] : selfcal::MarkUntrustedLensesWeak(out.result, out.calibration)) {
-    std::cerr << "camera " << name << " is weak: " << reason << "\n";
-  }
-  return out;
-}
-
-}  // namespace
-
 int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const registration::Options& options,
                   const std::vector<std::string>& exports, const std::optional<formats::ScaleMeasurement>& measurement,
                   const std::function<void(const fs::path& staging)>& extra,
@@ -244,11 +186,21 @@ int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const regi
                                 tracks.point_ids, left_out, registration::ChoiceName(options.model));
   std::optional<selfcal::SelfCalibration> self_calibration;
   if (refinement && !calibration.poses.empty()) {
-    RefinedLenses refined =
-        RefineLenses(calibration, given, tracks, intrinsics, left_out, options, inputs.markers, *refinement);
+    // The registration of the refinement's rounds, of the cameras that can enter it.
+    const auto register_tracks = [&](const Tracks& all, const std::map<std::string, CameraIntrinsics>& lenses,
+                                     const selfcal::JointLensCovariance* covariance) {
+      const Tracks registered = missing.empty() ? all : all.WithoutCameras(missing);
+      return formats::FromRegistration(Register(registered, lenses, options, inputs.markers, covariance),
+                                       registered.cameras, registered.point_ids, left_out,
+                                       registration::ChoiceName(options.model));
+    };
+    selfcal::RefinedCalibration refined = selfcal::RefineWithRegistrations(
+        calibration, given, intrinsics, refinement->request, refinement->options, options.num_threads,
+        register_tracks, [](const std::string& line) { std::cerr << line << "\n"; });
+    for (const auto& [name, reason] : refined.weak) std::cerr << "camera " << name << " is weak: " << reason << "\n";
     calibration = std::move(refined.calibration);
-    given = std::move(refined.given);
-    tracks = std::move(refined.tracks);
+    given = std::move(refined.tracks);
+    tracks = missing.empty() ? given : given.WithoutCameras(missing);
     intrinsics = std::move(refined.intrinsics);
     self_calibration = std::move(refined.result);
   }
@@ -305,7 +257,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   const std::optional<LensRefinement> refinement =
       RefinementOption(arguments.refine_intrinsics, arguments.self_calibration);
   // Checked and locked before the inputs are read, as the Python command does.
-  OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
+  OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, &interrupts);
   out.Open();
   const Tracks recorded = ReadTracks(arguments.tracks);
   CalibrationInputs inputs;

@@ -19,7 +19,7 @@
 #include "calibproj/registration/reconstruction.h"
 #include "calibproj/selfcal/refinement.h"
 #include "interrupts.h"
-#include "output_folder.h"
+#include "calibproj/formats/output_folder.h"
 
 namespace calibproj::app {
 
@@ -75,7 +75,7 @@ struct CalibrationInputs {
 // into `out` (open) with what `extra` writes into its staging folder; prints the
 // summary. 0 every camera calibrated, 1 not. InputError when the scale cannot be applied
 // (the results are then written unscaled).
-int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const registration::Options& options,
+int CalibrateInto(formats::OutputFolder& out, const CalibrationInputs& inputs, const registration::Options& options,
                   const std::vector<std::string>& exports, const std::optional<formats::ScaleMeasurement>& measurement,
                   const std::function<void(const std::filesystem::path& staging)>& extra = {},
                   const std::optional<LensRefinement>& refinement = std::nullopt);

@@ -20,6 +20,9 @@
 
 namespace calibproj::app {
 
+using formats::OutputBusyError;
+using formats::OutputFolder;
+using formats::PathlibPath;
 namespace fs = std::filesystem;
 using formats::InputError;
 
@@ -231,7 +234,7 @@ int RunCapture(const CaptureArguments& arguments, Interrupts& interrupts) {
   // The output checked and locked before anything is recorded.
   std::optional<OutputFolder> out;
   if (!arguments.out.empty()) {
-    out.emplace(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
+    out.emplace(arguments.out, arguments.force, formats::kCalibrationFiles, &interrupts);
     out->Open();
   }
   std::optional<StoredResults> stored;

@@ -13,12 +13,13 @@
 #include "calibproj/formats/tracks_file.h"
 #include "calibproj/registration/reconstruction.h"
 #include "calibproj/uncertainty/volume_map.h"
-#include "output_folder.h"
+#include "calibproj/formats/output_folder.h"
 #include "results_folder.h"
 #include "table_flags.h"
 
 namespace calibproj::app {
 
+using formats::OutputFolder;
 namespace fs = std::filesystem;
 using formats::InputError;
 
@@ -122,7 +123,7 @@ int RunCheck(const CheckArguments& arguments, Interrupts& interrupts) {
   // Claimed before the inputs are read, as the Python command does.
   std::optional<OutputFolder> out;
   if (!arguments.out.empty()) {
-    out.emplace(arguments.out, arguments.force, formats::kCalibrationFiles, interrupts);
+    out.emplace(arguments.out, arguments.force, formats::kCalibrationFiles, &interrupts);
     out->Open();
   }
   const StoredResults stored = ReadStored(arguments.results);

@@ -14,7 +14,7 @@
 #include "calibproj/formats/intrinsics_file.h"
 #include "calibproj/formats/tracks_file.h"
 #include "interrupts.h"
-#include "output_folder.h"
+#include "calibproj/formats/output_folder.h"
 
 namespace calibproj::app {
 
@@ -46,6 +46,6 @@ StoredResults ReadStored(const std::string& results);
 // with `out` (open), repaired into it (`repaired` says whether it was); prints the
 // table (or JSON); the exit status.
 int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, const std::string& source,
-                 const CheckArguments& arguments, std::optional<OutputFolder>& out, bool* repaired = nullptr);
+                 const CheckArguments& arguments, std::optional<formats::OutputFolder>& out, bool* repaired = nullptr);
 
 }  // namespace calibproj::app

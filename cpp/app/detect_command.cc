@@ -15,13 +15,14 @@
 #include "calibproj/formats/detect_report.h"
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/intrinsics_file.h"
-#include "output_folder.h"
+#include "calibproj/formats/output_folder.h"
 #include "table_flags.h"
 #include "calibproj/formats/sequence_file.h"
 #include "calibproj/formats/tracks_file.h"
 
 namespace calibproj::app {
 
+using formats::OutputFile;
 using formats::AtomicWrite;
 using formats::CameraOutcome;
 using formats::CameraIntrinsics;
@@ -320,7 +321,7 @@ std::shared_ptr<DetectArguments> AddDetectCommand(CLI::App& app, CLI::App** comm
 int RunDetect(const DetectArguments& arguments, Interrupts& interrupts) {
   // Checked and locked before the inputs are read and the long ingest, as the Python
   // command does.
-  OutputFile output(arguments.out, interrupts, arguments.force, {arguments.sequence});
+  OutputFile output(arguments.out, arguments.force, {arguments.sequence}, &interrupts);
   output.Open();
   const ingest::SequenceDescription sequence = ReadSequence(arguments.sequence);
   const auto videos = VideoPaths(arguments.videos);

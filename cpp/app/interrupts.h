@@ -17,9 +17,11 @@
 #include <string>
 #include <thread>
 
+#include "calibproj/formats/output_folder.h"
+
 namespace calibproj::app {
 
-class Interrupts {
+class Interrupts : public formats::InterruptionSections {
  public:
   // `prefix` starts the message an interruption prints ("calibproj-native calibrate").
   explicit Interrupts(std::string prefix);
@@ -28,11 +30,11 @@ class Interrupts {
   Interrupts& operator=(const Interrupts&) = delete;
 
   // A section that an interruption waits for.
-  std::unique_lock<std::mutex> Hold();
+  std::unique_lock<std::mutex> Hold() override;
 
   // What an interruption does before it exits (an empty function: nothing); set within
   // a section, so that it always matches what is on disk.
-  void SetCleanup(const std::unique_lock<std::mutex>& held, std::function<void()> cleanup);
+  void SetCleanup(const std::unique_lock<std::mutex>& held, std::function<void()> cleanup) override;
 
   // What an interruption stops before the cleanup (a capture's player and cameras, which
   // it waits for, so that their recordings are complete); set outside any section.

@@ -16,7 +16,7 @@
 #include "detect_command.h"
 #include "calibproj/formats/files.h"
 #include "interrupts.h"
-#include "output_folder.h"
+#include "calibproj/formats/output_folder.h"
 
 namespace {
 
@@ -57,7 +57,7 @@ int main(int argc, char** argv) {
     if (detect->parsed()) return calibproj::app::RunDetect(*detect_args, interrupts);
     if (check->parsed()) return calibproj::app::RunCheck(*check_args, interrupts);
     if (capture->parsed()) return calibproj::app::RunCapture(*capture_args, interrupts);
-  } catch (const calibproj::app::OutputBusyError& error) {
+  } catch (const calibproj::formats::OutputBusyError& error) {
     std::cerr << prefix << ": error: " << error.what() << "\n";
     return kExitFailure;
   } catch (const std::exception& error) {

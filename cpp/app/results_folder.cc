@@ -7,6 +7,7 @@
 
 namespace calibproj::app {
 
+using formats::OutputFolder;
 namespace fs = std::filesystem;
 using formats::CameraIntrinsics;
 using formats::Tracks;

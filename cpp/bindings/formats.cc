@@ -207,6 +207,7 @@ void register_formats(py::module_& m) {
       PyErr_SetObject(PyExc_OSError, os_error(e.code().value(), e.code().message(), e.path1().string()).ptr());
     }
   });
+  register_output_folder(m);
   register_tracks(m);
   register_camera_intrinsics(m);
   register_calibration(m);

@@ -27,6 +27,8 @@ void register_tracks(pybind11::module_& m);
 void register_calibration(pybind11::module_& m);
 // The CameraIntrinsics class, in the formats submodule.
 void register_camera_intrinsics(pybind11::module_& m);
+// The results-folder transaction (OutputFolder, OutputFile), in the formats submodule.
+void register_output_folder(pybind11::module_& m);
 void register_uncertainty(pybind11::module_& m);
 void register_capture(pybind11::module_& m);
 

@@ -20,6 +20,7 @@
 #include "calibproj/selfcal/planar_autocalibration.h"
 #include "calibproj/selfcal/planar_cost.h"
 #include "calibproj/selfcal/refinement.h"
+#include "calibproj/selfcal/rounds.h"
 #include "calibproj/selfcal/self_calibration.h"
 #include "checks.h"
 #include "convert.h"
@@ -205,6 +206,46 @@ selfcal::SelfCalibration SelfCalibrateFromPython(const formats::Tracks& tracks, 
                                 core_given ? &*core_given : nullptr, earlier ? &earlier->reports : nullptr, log);
 }
 
+// The rounds of a calibration's self-calibration (selfcal/rounds.h), each registration
+// made by register_tracks(tracks, intrinsics, lens_covariance or None), a Python callable
+// that returns a Calibration (the Python driver's).
+selfcal::RefinedCalibration RefineWithRegistrationsFromPython(
+    const py::object& calibration, const formats::Tracks& tracks, const py::dict& intrinsics,
+    const selfcal::RefineRequest& request, const py::dict& options, int num_threads,
+    const py::function& register_tracks, const py::function& log_line) {
+  const formats::Calibration first = CalibrationFromPython(calibration);
+  const auto core_intrinsics = IntrinsicsFromPython(intrinsics);
+  const auto settings = SelfCalibrationOptionsFrom(options);
+  const auto log = LogTo(log_line);  // made (and destroyed) with the GIL held
+  auto function = std::make_shared<py::function>(register_tracks);
+  const selfcal::RegisterFunction registered = [function](const formats::Tracks& all,
+                                                          const selfcal::IntrinsicsMap& lenses,
+                                                          const selfcal::JointLensCovariance* covariance) {
+    py::gil_scoped_acquire acquire;
+    const py::object result = (*function)(all, lenses, covariance != nullptr ? py::cast(*covariance) : py::none());
+    return CalibrationFromPython(result);
+  };
+  py::gil_scoped_release release;
+  return selfcal::RefineWithRegistrations(first, tracks, core_intrinsics, request, settings, num_threads, registered,
+                                          log);
+}
+
+void RegisterRefinedCalibration(py::module_& m) {
+  using selfcal::RefinedCalibration;
+  py::class_<RefinedCalibration>(m, "RefinedCalibration",
+                                 "A calibration registered again with the lenses its self-calibration refined.")
+      // Copies, as every Calibration and Tracks attribute reads.
+      .def_property_readonly(
+          "calibration", [](const RefinedCalibration& r) { return r.calibration; }, "registered with the refined lenses")
+      .def_property_readonly(
+          "tracks", [](const RefinedCalibration& r) { return r.tracks; }, "the input's tracks, re-expressed with them")
+      .def_readonly("intrinsics", &RefinedCalibration::intrinsics,
+                    "camera -> formats.CameraIntrinsics, every camera of the input")
+      .def_property_readonly(
+          "result", [](const RefinedCalibration& r) { return r.result; }, "the last round's SelfCalibration")
+      .def_readonly("weak", &RefinedCalibration::weak, "[(camera, reason)] of the cameras marked weak");
+}
+
 }  // namespace
 
 void register_selfcal(py::module_& m) {
@@ -227,6 +268,18 @@ held keeps its value in given (default: intrinsics). A later round passes the fi
 as intrinsics, the user's values as given and the first round's SelfCalibration as earlier: the
 entries it chose are refined again without choosing anew. options: {knob: value}
 (option_table()). Each camera's line goes to log(line). Releases the GIL.)doc");
+  RegisterRefinedCalibration(m);
+  m.def("refine_with_registrations", &RefineWithRegistrationsFromPython, py::arg("calibration"), py::arg("tracks"),
+        py::arg("intrinsics"), py::arg("request"), py::kw_only(), py::arg("options"), py::arg("num_threads") = 1,
+        py::arg("register"), py::arg("log"),
+        R"doc(Self-calibration as a calibration runs it (a RefinedCalibration): from the closed-form start,
+options["rounds"] rounds of lens refinement, each followed by register(tracks, intrinsics,
+lens_covariance) (a Calibration; lens_covariance None before any refinement); then every camera
+whose lens it cannot vouch for is marked weak.
+
+calibration: registered from tracks (undistorted with intrinsics, {name: Intrinsics}), with at
+least one camera registered. Each camera's line goes to log(line). Releases the GIL but for the
+calls of register and log.)doc");
   m.def(
       "mark_untrusted_lenses_weak",
       [](const selfcal::SelfCalibration& result, formats::Calibration& calibration) {

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import os
+from dataclasses import asdict
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -32,8 +33,7 @@ from calibproj.registration.driver import RegistrationOptions
 from calibproj.registration.driver import register
 from calibproj.formats.provenance import provenance, write_provenance
 from calibproj.selfcal.lenses import FILE_NAME as SELF_CALIBRATION_FILE
-from calibproj.selfcal.lenses import (RefineRequest, SelfCalibrationOptions, closed_form_start, convert_tracks,
-                                        nominal_intrinsics, self_calibrate, write_self_calibration)
+from calibproj.selfcal.lenses import RefineRequest, SelfCalibrationOptions, nominal_intrinsics, write_self_calibration
 from calibproj.formats.results import (CALIBRATION_FILES, DETECT_REPORT_FILE, FRAMES_DIR, INTRINSICS_DIR, RECORDINGS_DIR,
                                TRACKS_FILE)
 from calibproj.formats.tracks import Tracks
@@ -242,27 +242,25 @@ def _with_nominal(source: Any, videos: Path, fov_deg: float) -> tuple[dict[str, 
 def _self_calibrate(tracks: Tracks, given: Mapping[str, Intrinsics], calibration: Calibration,
                     request: RefineRequest, options: SelfCalibrationOptions | None,
                     registration: RegistrationOptions | None, left_out: Mapping[str, str], projector: Any = None):
-    """The calibration registered again with intrinsics refined from the first one:
+    """The calibration registered again with intrinsics refined from the first one, by
+    the core's rounds (``selfcal/rounds.h``, which calibproj-native runs too), each
+    registration made by this package's driver:
     ``(calibration, tracks, intrinsics, (self-calibration, given intrinsics, options))``."""
     options = options or SelfCalibrationOptions()
     if not calibration.registered:
         return calibration, tracks, given, None
-    threads = registration.num_threads if registration is not None else 1
-    intrinsics, result = closed_form_start(tracks, given, calibration, request, options), None
-    if any(intrinsics[name] is not given[name] for name in intrinsics):
-        tracks = convert_tracks(tracks, given, intrinsics)
-        calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector)
-    for _ in range(options.rounds):  # each round starts from the registration the last one made
-        refined, result = self_calibrate(tracks, intrinsics, calibration, request, options, num_threads=threads,
-                                         given=given, earlier=result)
-        tracks = convert_tracks(tracks, intrinsics, refined)
-        intrinsics = refined
-        calibration = register(tracks, intrinsics, registration, left_out=left_out, projector=projector,
-                               lens_covariance=result.lens_covariance)
-    # A pose resting on intrinsics nobody checked must not steer comparisons.
-    for name, reason in _core.selfcal.mark_untrusted_lenses_weak(result, calibration):
+
+    def register_tracks(tracks: Tracks, intrinsics: dict[str, Intrinsics], lens_covariance: Any) -> Calibration:
+        return register(tracks, intrinsics, registration, left_out=left_out, projector=projector,
+                        lens_covariance=lens_covariance)
+
+    refined = _core.selfcal.refine_with_registrations(
+        calibration, tracks, dict(given), request, options=asdict(options),
+        num_threads=registration.num_threads if registration is not None else 1, register=register_tracks,
+        log=logger.info)
+    for name, reason in refined.weak:
         logger.warning("camera %s is weak: %s", name, reason)
-    return calibration, tracks, intrinsics, (result, given, options)
+    return refined.calibration, refined.tracks, dict(refined.intrinsics), (refined.result, given, options)
 
 
 def _videos_folder(source: Tracks | str | os.PathLike) -> Path | None:

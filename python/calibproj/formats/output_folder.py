@@ -1,4 +1,7 @@
-"""Output folders written as one transaction, and output files checked before the work.
+"""Output folders written as one transaction, and output files checked before the work:
+the core's transaction (``_core.formats.OutputFolder``, the one calibproj-native uses),
+with what Python adds to it (failed writes reported as ``OutputError``, log messages
+naming the final folder).
 
 ``OutputFolder(path, force=...)`` is what every command that writes a folder goes
 through (``calibrate``, ``generate``, ``simulate``, ``demo``):
@@ -8,10 +11,10 @@ through (``calibrate``, ``generate``, ``simulate``, ``demo``):
    parent folder is not writable (permissions, read-only file system), the disk is
    full (less than ``MIN_FREE_BYTES`` free, or a probe write fails), the folder
    already holds results and ``force`` is off, or it holds other files (which
-   ``force`` never deletes). It takes a lock (``fcntl.flock``
+   ``force`` never deletes). It takes a lock (``flock``
    on ``.<name>.lock`` beside the folder), so that a second run on the same folder
    fails at once instead of mixing its files with the first one's, and creates
-   the staging folder ``.<name>.tmp-XXXXXXXX`` beside it;
+   the staging folder ``.<name>.tmp-XXXXXX`` beside it;
 2. the work writes into ``staging``;
 3. ``commit()`` moves the staging folder into place in two renames (the previous
    folder aside, the new one in), then deletes the previous folder: ``force`` replaces
@@ -28,39 +31,24 @@ single files (``detect``), whose files are each written atomically.
 
 from __future__ import annotations
 
-import array
 import errno
-import fcntl
 import logging
 import os
-import shutil
-import signal
-import tempfile
-import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
 from pathlib import Path
 from types import TracebackType
 
+from calibproj import _core
+
 # Below this much free space on the disk of the output, a run is refused before it
 # starts (the results of a calibration take a few megabytes).
-MIN_FREE_BYTES = 8 * 1024 * 1024
-PROBE_PREFIX = ".calibproj-probe-"
-PROBE_BYTES = 64 * 1024
-# Linux's inode flags (linux/fs.h): FS_IOC_GETFLAGS reads them.
-_FS_IOC_GETFLAGS = 0x80086601
-_FS_IMMUTABLE_FL = 0x10
-_FS_APPEND_FL = 0x20
-PREVIOUS = "previous"  # the previous folder, inside the folder it is moved aside to
+MIN_FREE_BYTES = _core.formats.min_free_bytes
 
-
-class OutputError(ValueError):
-    """An output path that cannot be written, with the path named in the message."""
-
-
-class OutputBusyError(RuntimeError):
-    """Another run holds the lock of the same output."""
-
+# An output path that cannot be written, with the path named in the message (a ValueError).
+OutputError = _core.formats.OutputError
+# Another run (Python or native) holds the lock of the same output (a RuntimeError).
+OutputBusyError = _core.formats.OutputBusyError
 
 # Errors of a write whatever the file: the disk or the quota is full, the file system
 # is read-only, the file too large.
@@ -82,149 +70,6 @@ def _described(error: OSError) -> str:
     return error.strerror or str(error)
 
 
-class _Lock:
-    """An exclusive ``flock`` on a lock file, taken without waiting."""
-
-    def __init__(self, path: Path, target: Path) -> None:
-        self.path = path
-        self.target = target
-        self.fd: int | None = None
-
-    def acquire(self) -> None:
-        while True:
-            try:
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
-            except OSError as error:
-                raise OutputError(f"{self.target}: cannot write in {self.target.parent} "
-                                  f"({_described(error)})") from None
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError as error:
-                os.close(fd)
-                if error.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-                    raise OutputBusyError(f"{self.target}: another calibproj run is writing it (lock held on "
-                                          f"{self.path}); wait for it to end or choose another output") from None
-                raise OutputError(f"{self.target}: cannot lock {self.path} ({_described(error)})") from None
-            # The file may have been unlinked by the run that held it just before:
-            # then the lock is on a file nobody else sees, and is taken again.
-            try:
-                same = os.path.samestat(os.fstat(fd), os.stat(self.path))
-            except FileNotFoundError:
-                same = False
-            if same:
-                self.fd = fd
-                return
-            os.close(fd)
-
-    def release(self) -> None:
-        if self.fd is None:
-            return
-        try:
-            self.path.unlink(missing_ok=True)
-        finally:
-            os.close(self.fd)
-            self.fd = None
-
-
-def _require_replaceable(path: Path) -> None:
-    """OutputError when ``path`` carries the immutable or append-only flag (chattr +i,
-    +a): it could not be renamed or replaced, which the final move of a run would find
-    only after all the work."""
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK)
-    except OSError:
-        return
-    try:
-        flags = array.array("i", [0])
-        fcntl.ioctl(fd, _FS_IOC_GETFLAGS, flags, True)
-    except OSError:  # a file system without these flags
-        return
-    finally:
-        os.close(fd)
-    if flags[0] & (_FS_IMMUTABLE_FL | _FS_APPEND_FL):
-        raise OutputError(f"{path}: cannot be replaced (it is immutable or append-only; chattr -i -a lifts that)")
-
-
-def _missing_folders(folder: Path) -> list[Path]:
-    """The folders on the way to ``folder`` that do not exist yet, deepest first: those a
-    run creates for its output, and removes again when it ends without writing into them."""
-    missing = []
-    while not folder.exists() and folder != folder.parent:
-        missing.append(folder)
-        folder = folder.parent
-    return missing
-
-
-def _remove_empty_folders(folders: list[Path]) -> None:
-    """Remove the folders that are still empty, deepest first (one that holds the output,
-    or anything else, stays, and so do those above it)."""
-    for folder in folders:
-        try:
-            folder.rmdir()
-        except OSError:
-            return
-
-
-def _check_parent_made(target: Path, created: list[Path]) -> Path:
-    """``_check_parent``, the folders it made (``created``) removed again when it fails."""
-    try:
-        return _check_parent(target)
-    except BaseException:
-        _remove_empty_folders(created)
-        raise
-
-
-def _check_parent(target: Path) -> Path:
-    """Create the parent folder if needed; OutputError when it cannot be written or the disk is full."""
-    parent = target.parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except FileExistsError:
-        raise OutputError(f"{target}: {parent} is not a folder") from None
-    except OSError as error:
-        raise OutputError(f"{target}: cannot create {parent} ({_described(error)})") from None
-    if not parent.is_dir():
-        raise OutputError(f"{target}: {parent} is not a folder")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputError(f"{target}: cannot write in {parent} (permission denied)")
-    try:
-        stats = os.statvfs(parent)
-    except OSError as error:
-        raise OutputError(f"{target}: cannot inspect {parent} ({_described(error)})") from None
-    if stats.f_flag & os.ST_RDONLY:
-        raise OutputError(f"{target}: cannot write in {parent} (read-only file system)")
-    free = stats.f_bavail * stats.f_frsize
-    if free < MIN_FREE_BYTES:
-        raise OutputError(f"{target}: the disk is full ({free / 2**20:.1f} MiB free in {parent}, "
-                          f"{MIN_FREE_BYTES / 2**20:.0f} MiB needed to start)")
-    return parent
-
-
-def _probe(folder: Path, target: Path) -> None:
-    """Write and delete a small file in ``folder``: OutputError naming ``target`` if it fails."""
-    try:
-        with tempfile.TemporaryFile(dir=folder, prefix=PROBE_PREFIX) as handle:
-            handle.write(b"\0" * PROBE_BYTES)
-            handle.flush()
-            os.fsync(handle.fileno())
-    except OSError as error:
-        raise OutputError(f"{target}: cannot write ({_described(error)})") from None
-
-
-@contextmanager
-def _signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM held back (delivered afterwards) around a few renames."""
-    held = {signal.SIGINT, signal.SIGTERM}
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
-
-
 class OutputFolder:
     """A folder written as one transaction (module docstring).
 
@@ -236,85 +81,40 @@ class OutputFolder:
             non-empty folder holding none of them is refused, with ``force`` or without
             (so that ``--force`` never deletes a folder of other files). Empty: any
             existing folder may be replaced with ``force``.
+        min_free_bytes: the free space below which ``open()`` refuses (default
+            ``MIN_FREE_BYTES``).
     """
 
-    def __init__(self, path: str | os.PathLike, *, force: bool = False, signature: Sequence[str] = ()) -> None:
-        self.path = Path(path)
-        self.force = force
-        self.signature = tuple(signature)
-        self.staging: Path | None = None
+    def __init__(self, path: str | os.PathLike, *, force: bool = False, signature: Sequence[str] = (),
+                 min_free_bytes: int = MIN_FREE_BYTES) -> None:
+        self._core = _core.formats.OutputFolder(path, force=force, signature=list(signature),
+                                                min_free_bytes=min_free_bytes)
         self.committed = False
-        self._lock: _Lock | None = None
-        self._created: list[Path] = []  # folders made for it, deepest first
 
-    # -- opening ----------------------------------------------------------------------
+    @property
+    def path(self) -> Path:
+        """The folder (where a symbolic link leads, once open)."""
+        return Path(self._core.path)
+
+    @property
+    def staging(self) -> Path | None:
+        """The staging folder while it is open, else None."""
+        staging = self._core.staging
+        return None if staging is None else Path(staging)
 
     def open(self) -> OutputFolder:
         """Check, lock, and create the staging folder (before any long work)."""
-        if self.path.is_symlink():
-            self.path = self.path.resolve()
-        if self.path.exists() and not self.path.is_dir():
-            raise OutputError(f"{self.path}: exists and is not a folder")
-        self._created = _missing_folders(self.path.parent)
-        parent = _check_parent_made(self.path, self._created)
-        self._lock = _Lock(parent / f".{self.path.name}.lock", self.path)
-        self._lock.acquire()
-        try:
-            self._recover(parent)
-            self._check_existing()
-            self.staging = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.tmp-", dir=parent))
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(self.staging, 0o777 & ~umask)  # mkdtemp makes 0700
-            _probe(self.staging, self.path)
-        except OSError as error:
-            self.abort()
-            raise OutputError(f"{self.path}: cannot write in {parent} ({_described(error)})") from None
-        except BaseException:
-            self.abort()
-            raise
+        self._core.open()
         return self
-
-    def _recover(self, parent: Path) -> None:
-        """Tidy what a run killed outright left (we hold the lock): its staging folders
-        go; a previous folder moved aside but never replaced goes back in place."""
-        for stale in parent.glob(f".{self.path.name}.tmp-*"):
-            shutil.rmtree(stale, ignore_errors=True)
-        for aside in sorted(parent.glob(f".{self.path.name}.old-*")):
-            if not self.path.exists() and (aside / PREVIOUS).is_dir():
-                os.rename(aside / PREVIOUS, self.path)
-            shutil.rmtree(aside, ignore_errors=True)
-
-    def _check_existing(self) -> None:
-        if not self.path.is_dir():
-            return
-        content = sorted(p.name for p in self.path.iterdir())
-        if not content:
-            _require_replaceable(self.path)
-            return
-        if self.signature:
-            found = [name for name in self.signature if (self.path / name).exists()]
-            if not found:
-                shown = ", ".join(content[:4]) + (", ..." if len(content) > 4 else "")
-                raise OutputError(f"{self.path}: is not empty ({shown}) and holds no output of this command; "
-                                  f"choose another folder")
-            if not self.force:
-                raise OutputError(f"{self.path}: already holds results ({', '.join(found)}); "
-                                  f"use --force to overwrite them")
-        elif not self.force:
-            raise OutputError(f"{self.path}: already exists; use --force to replace it")
-        _require_replaceable(self.path)
-
-    # -- writing ----------------------------------------------------------------------
 
     @contextmanager
     def writing(self) -> Iterator[Path]:
         """The staging folder; a write that fails in it (a full disk, ...) is reported as
         an ``OutputError`` naming the output folder. Other errors (an input file that
         cannot be read, ...) pass unchanged."""
-        if self.staging is None:
-            raise RuntimeError("OutputFolder.writing() before open()")
         staging = self.staging
+        if staging is None:
+            raise RuntimeError("OutputFolder.writing() before open()")
         try:
             with messages_naming(staging, self.path):
                 yield staging
@@ -325,47 +125,14 @@ class OutputFolder:
 
     def commit(self) -> Path:
         """Move the staging folder into place; returns the folder's path."""
-        if self.committed:
-            return self.path
-        if self.staging is None:
-            raise RuntimeError("OutputFolder.commit() before open()")
-        aside = None
-        try:
-            try:
-                with _signals_held():
-                    if self.path.exists():
-                        aside = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.old-", dir=self.path.parent))
-                        os.rename(self.path, aside / PREVIOUS)
-                    try:
-                        os.rename(self.staging, self.path)
-                    except OSError:
-                        if aside is not None:
-                            os.rename(aside / PREVIOUS, self.path)
-                        raise
-                    self.committed = True
-                    self.staging = None
-                    _sync_folder(self.path.parent)
-            except OSError as error:
-                raise OutputError(f"{self.path}: cannot move the output into place ({_described(error)})") from None
-            finally:
-                if aside is not None and (self.committed or not (aside / PREVIOUS).exists()):
-                    shutil.rmtree(aside, ignore_errors=True)
-        finally:
-            self.abort()
+        if not self.committed:
+            self._core.commit()
+            self.committed = True
         return self.path
 
     def abort(self) -> None:
         """Delete the staging folder and release the lock; the previous folder stays."""
-        if self.staging is not None and not self.committed:
-            shutil.rmtree(self.staging, ignore_errors=True)
-            self.staging = None
-        self._release()
-
-    def _release(self) -> None:
-        if self._lock is not None:
-            self._lock.release()
-            self._lock = None
-        _remove_empty_folders(self._created)
+        self._core.abort()
 
     def __enter__(self) -> OutputFolder:
         return self if self.staging is not None else self.open()
@@ -423,27 +190,6 @@ def messages_naming(staging: Path, final: Path) -> Iterator[None]:
             logging.setLogRecordFactory(previous)
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.samefile(b)
-    except OSError:  # b is gone or unreadable: not the same file
-        return False
-
-
-def _sync_folder(folder: Path) -> None:
-    """Make the renames in ``folder`` durable."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
 class OutputFile:
     """The checks and the lock of ``OutputFolder`` for commands that write single files.
 
@@ -454,31 +200,15 @@ class OutputFile:
     """
 
     def __init__(self, path: str | os.PathLike, *, force: bool = False,
-                 inputs: Sequence[str | os.PathLike] = ()) -> None:
-        self.path = Path(path)
-        self.force = force
-        self.inputs = [Path(p) for p in inputs]
-        self._lock: _Lock | None = None
-        self._created: list[Path] = []  # folders made for it, deepest first
+                 inputs: Sequence[str | os.PathLike] = (), min_free_bytes: int = MIN_FREE_BYTES) -> None:
+        self._core = _core.formats.OutputFile(path, force=force, inputs=list(inputs), min_free_bytes=min_free_bytes)
+
+    @property
+    def path(self) -> Path:
+        return Path(self._core.path)
 
     def open(self) -> OutputFile:
-        if self.path.is_dir():
-            raise OutputError(f"{self.path}: is a folder; give the path of a file")
-        if self.path.exists():
-            if any(_same_file(self.path, given) for given in self.inputs):
-                raise OutputError(f"{self.path}: is an input of this run; write the output elsewhere")
-            if not self.force:
-                raise OutputError(f"{self.path}: exists (use --force to replace it)")
-            _require_replaceable(self.path)
-        self._created = _missing_folders(self.path.parent)
-        parent = _check_parent_made(self.path, self._created)
-        self._lock = _Lock(parent / f".{self.path.name}.lock", self.path)
-        self._lock.acquire()
-        try:
-            _probe(parent, self.path)
-        except BaseException:
-            self.close()
-            raise
+        self._core.open()
         return self
 
     @contextmanager
@@ -493,10 +223,7 @@ class OutputFile:
             raise OutputError(f"{self.path}: cannot write ({_described(error)})") from None
 
     def close(self) -> None:
-        if self._lock is not None:
-            self._lock.release()
-            self._lock = None
-        _remove_empty_folders(self._created)
+        self._core.close()
 
     def __enter__(self) -> OutputFile:
         return self.open()

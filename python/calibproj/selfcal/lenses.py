@@ -33,7 +33,6 @@ from typing import Any
 import numpy as np
 
 from calibproj import _core
-from calibproj.formats.calibration import Calibration
 from calibproj.formats.intrinsics import Intrinsics, intrinsics_from_json
 from calibproj.formats.jsonio import FormatError, read_json
 from calibproj.common.option_tables import options_class
@@ -57,46 +56,6 @@ def _check_options(self) -> None:
 SelfCalibrationOptions = options_class(
     "SelfCalibrationOptions", _core.selfcal.option_table(), "Knobs of the self-calibration.", __name__,
     methods={"__post_init__": _check_options})
-
-
-def self_calibrate(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
-                   request: RefineRequest, options: Any = None, num_threads: int = 1,
-                   given: Mapping[str, Intrinsics] | None = None,
-                   earlier: Any = None) -> tuple[dict[str, Intrinsics], Any]:
-    """Refine the requested lens entries of the registered cameras of ``calibration``:
-    ``(intrinsics, result)``, the refined intrinsics of every camera and the core's
-    ``_core.selfcal.SelfCalibration`` (its ``reports`` per camera and the refined lenses'
-    ``lens_covariance``).
-
-    ``tracks`` are undistorted with ``intrinsics``, where the refinement starts; an entry
-    held keeps its value in ``given`` (default: ``intrinsics``). A later round passes the
-    first round's intrinsics, the user's values as ``given`` and the first round's result
-    as ``earlier``: the entries it chose are refined again, from the registration its
-    intrinsics allowed, without choosing anew. The intrinsics are to be used with tracks
-    converted by ``convert_tracks``.
-    """
-    options = options or SelfCalibrationOptions()
-    result = _core.selfcal.refine_lenses(tracks, dict(intrinsics), calibration, request, options=asdict(options),
-                                         num_threads=num_threads, given=None if given is None else dict(given),
-                                         earlier=earlier, log=logger.info)
-    return dict(result.intrinsics), result
-
-
-def closed_form_start(tracks: Tracks, intrinsics: Mapping[str, Intrinsics], calibration: Calibration,
-                      request: RefineRequest, options: Any) -> dict[str, Intrinsics]:
-    """Intrinsics to start the refinement from: the given ones, but for a camera whose
-    focal length is to be refined and disagrees by more than
-    ``options.closed_form_min_change`` with the closed-form planar autocalibration, that
-    one. Cameras whose focal length is not refined count as known."""
-    start = _core.selfcal.closed_form_start(tracks, dict(intrinsics), calibration, request, options=asdict(options),
-                                            log=logger.info)
-    return {name: value if same_intrinsics(value, start[name]) else start[name]
-            for name, value in intrinsics.items()}
-
-
-def same_intrinsics(a: Any, b: Any) -> bool:
-    """The same K and distortion."""
-    return np.array_equal(a.K, b.K) and np.array_equal(np.ravel(a.dist), np.ravel(b.dist))
 
 
 def nominal_intrinsics(name: str, resolution: tuple[int, int], fov_deg: float) -> Intrinsics:

@@ -1,7 +1,7 @@
 #pragma once
-// Outputs written as one transaction, as the Python package writes them
-// (calibproj/formats/output_folder.py), with its file names, its lock and its messages, so
-// that a Python run and a native run on the same output exclude each other.
+// Outputs written as one transaction: the one implementation both tools use (the Python
+// package binds it as formats.OutputFolder/OutputFile), with one set of file names, one
+// lock and one set of messages, so that any two runs on the same output exclude each other.
 //
 // OutputFolder(path):
 // 1. Open(), before any long work, checks that the folder can be written and says so in
@@ -18,20 +18,34 @@
 //
 // OutputFile(path) does the checks and the locking for a command that writes single
 // files (detect), each of them written atomically.
+//
+// An interruption handler (calibproj-native's) is given as InterruptionSections: the
+// writes and renames then happen inside its sections, and its cleanup always matches
+// what is on disk. Without one (Python, where a signal only sets a flag that the
+// interpreter reads after the call), each call is a whole step already.
 
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "calibproj/formats/files.h"
-#include "interrupts.h"
 
-namespace calibproj::app {
+namespace calibproj::formats {
 
-using formats::InputError;
+// What an interruption handler offers an output: sections it waits for before it acts,
+// and the cleanup it runs then (set inside a section).
+class InterruptionSections {
+ public:
+  virtual std::unique_lock<std::mutex> Hold() = 0;
+  virtual void SetCleanup(const std::unique_lock<std::mutex>& held, std::function<void()> cleanup) = 0;
+
+ protected:
+  ~InterruptionSections() = default;
+};
 
 // An output that cannot be written, named in the message: exit status 2.
 class OutputError : public InputError {
@@ -73,12 +87,31 @@ class OutputLock {
   int fd_ = -1;
 };
 
+// The sections of an optional interruption handler.
+class Sections {
+ public:
+  explicit Sections(InterruptionSections* interrupts) : interrupts_(interrupts) {}
+  // A section of the handler, or nothing to hold without one.
+  std::unique_lock<std::mutex> Hold() const {
+    return interrupts_ != nullptr ? interrupts_->Hold() : std::unique_lock<std::mutex>();
+  }
+  void SetCleanup(const std::unique_lock<std::mutex>& held, std::function<void()> cleanup) const {
+    if (interrupts_ != nullptr) interrupts_->SetCleanup(held, std::move(cleanup));
+  }
+
+ private:
+  InterruptionSections* interrupts_;
+};
+
 class OutputFolder {
  public:
   // signature: files of which at least one marks a folder this command wrote; a
   // non-empty folder holding none of them is refused, with force or without (force
   // never deletes a folder of other files).
-  OutputFolder(const std::string& path, bool force, std::vector<std::string> signature, Interrupts& interrupts);
+  // min_free_bytes: the free space below which Open() refuses (kMinFreeBytes unless a
+  // caller knows its output to be larger).
+  OutputFolder(const std::string& path, bool force, std::vector<std::string> signature,
+               InterruptionSections* interrupts = nullptr, std::uintmax_t min_free_bytes = kMinFreeBytes);
   ~OutputFolder() { Abort(); }
   OutputFolder(const OutputFolder&) = delete;
   OutputFolder& operator=(const OutputFolder&) = delete;
@@ -93,6 +126,8 @@ class OutputFolder {
   void Abort() noexcept;
 
   const std::filesystem::path& path() const { return path_; }
+  // The staging folder while one is open (empty before Open and after Commit or Abort).
+  const std::filesystem::path& staging() const { return staging_; }
 
  private:
   void Recover(const std::filesystem::path& parent);
@@ -105,7 +140,8 @@ class OutputFolder {
   std::filesystem::path path_;
   bool force_;
   std::vector<std::string> signature_;
-  Interrupts& interrupts_;
+  Sections sections_;
+  std::uintmax_t min_free_bytes_;
   OutputLock lock_;
   std::vector<std::filesystem::path> created_;  // folders made for it, deepest first
   std::filesystem::path staging_;  // empty when there is none
@@ -115,8 +151,8 @@ class OutputFile {
  public:
   // force: an existing file may be replaced; inputs: files of the run that the output
   // must never replace, force or not.
-  OutputFile(const std::string& path, Interrupts& interrupts, bool force = false,
-             std::vector<std::string> inputs = {});
+  OutputFile(const std::string& path, bool force = false, std::vector<std::string> inputs = {},
+             InterruptionSections* interrupts = nullptr, std::uintmax_t min_free_bytes = kMinFreeBytes);
   ~OutputFile() { Close(); }
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
@@ -136,11 +172,12 @@ class OutputFile {
   void Release() noexcept;
 
   std::filesystem::path path_;
-  Interrupts& interrupts_;
   bool force_;
   std::vector<std::string> inputs_;
+  Sections sections_;
+  std::uintmax_t min_free_bytes_;
   OutputLock lock_;
   std::vector<std::filesystem::path> created_;  // folders made for it, deepest first
 };
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats

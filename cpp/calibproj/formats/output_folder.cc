@@ -1,4 +1,4 @@
-#include "output_folder.h"
+#include "calibproj/formats/output_folder.h"
 
 #include <fcntl.h>
 #include <linux/fs.h>
@@ -14,9 +14,7 @@
 #include <sstream>
 #include <system_error>
 
-namespace calibproj::app {
-
-using formats::WriteFully;
+namespace calibproj::formats {
 
 namespace fs = std::filesystem;
 
@@ -84,7 +82,7 @@ mode_t CurrentUmask() {
 
 // Creates the parent folder if needed; OutputError when it cannot be written or the
 // disk is full.
-fs::path CheckParent(const fs::path& target) {
+fs::path CheckParent(const fs::path& target, std::uintmax_t min_free_bytes) {
   const fs::path parent = ParentOf(target);
   const std::string prefix = target.string() + ": ";
   std::error_code error;
@@ -105,19 +103,19 @@ fs::path CheckParent(const fs::path& target) {
     throw OutputError(prefix + "cannot write in " + parent.string() + " (read-only file system)");
   }
   const std::uintmax_t free = static_cast<std::uintmax_t>(stats.f_bavail) * stats.f_frsize;
-  if (free < kMinFreeBytes) {
+  if (free < min_free_bytes) {
     char line[160];
     std::snprintf(line, sizeof(line), "the disk is full (%.1f MiB free in %s, %.0f MiB needed to start)",
-                  free / 1048576.0, parent.c_str(), kMinFreeBytes / 1048576.0);
+                  free / 1048576.0, parent.c_str(), min_free_bytes / 1048576.0);
     throw OutputError(prefix + line);
   }
   return parent;
 }
 
 // CheckParent, the folders it made (`created`) removed again when it fails.
-fs::path CheckParentMade(const fs::path& target, const std::vector<fs::path>& created) {
+fs::path CheckParentMade(const fs::path& target, const std::vector<fs::path>& created, std::uintmax_t min_free_bytes) {
   try {
-    return CheckParent(target);
+    return CheckParent(target, min_free_bytes);
   } catch (...) {
     RemoveEmptyFolders(created);
     throw;
@@ -244,28 +242,32 @@ void OutputLock::Release() noexcept {
 // -- the folder ----------------------------------------------------------------------------
 
 OutputFolder::OutputFolder(const std::string& path, bool force, std::vector<std::string> signature,
-                           Interrupts& interrupts)
-    : path_(PathlibPath(path)), force_(force), signature_(std::move(signature)), interrupts_(interrupts) {}
+                           InterruptionSections* interrupts, std::uintmax_t min_free_bytes)
+    : path_(PathlibPath(path)),
+      force_(force),
+      signature_(std::move(signature)),
+      sections_(interrupts),
+      min_free_bytes_(min_free_bytes) {}
 
 void OutputFolder::Open() {
-  const auto held = interrupts_.Hold();
+  const auto held = sections_.Hold();
   if (fs::is_symlink(path_)) path_ = Resolved(path_);
   if (fs::exists(path_) && !fs::is_directory(path_)) throw OutputError(path_.string() + ": exists and is not a folder");
   created_ = MissingFolders(ParentOf(path_));
-  const fs::path parent = CheckParentMade(path_, created_);
+  const fs::path parent = CheckParentMade(path_, created_, min_free_bytes_);
   lock_.Acquire(LockFileOf(path_), path_);
-  interrupts_.SetCleanup(held, [this] { Discard(); });
+  sections_.SetCleanup(held, [this] { Discard(); });
   try {
     Recover(parent);
     CheckExisting();
     CreateStaging(parent);
   } catch (const fs::filesystem_error& error) {
     Discard();
-    interrupts_.SetCleanup(held, {});
+    sections_.SetCleanup(held, {});
     throw OutputError(path_.string() + ": cannot write in " + parent.string() + " (" + error.code().message() + ")");
   } catch (...) {
     Discard();
-    interrupts_.SetCleanup(held, {});
+    sections_.SetCleanup(held, {});
     throw;
   }
 }
@@ -311,7 +313,7 @@ void OutputFolder::CreateStaging(const fs::path& parent) {
 }
 
 void OutputFolder::Write(const std::function<void(const fs::path& staging)>& write) {
-  const auto held = interrupts_.Hold();
+  const auto held = sections_.Hold();
   if (staging_.empty()) throw std::logic_error("OutputFolder::Write before Open");
   try {
     write(staging_);
@@ -321,17 +323,17 @@ void OutputFolder::Write(const std::function<void(const fs::path& staging)>& wri
 }
 
 void OutputFolder::Commit() {
-  const auto held = interrupts_.Hold();
+  const auto held = sections_.Hold();
   if (staging_.empty()) throw std::logic_error("OutputFolder::Commit before Open");
   try {
     MoveIntoPlace();
   } catch (const fs::filesystem_error& error) {
     Discard();
-    interrupts_.SetCleanup(held, {});
+    sections_.SetCleanup(held, {});
     throw OutputError(path_.string() + ": cannot move the output into place (" + error.code().message() + ")");
   }
   Discard();
-  interrupts_.SetCleanup(held, {});
+  sections_.SetCleanup(held, {});
 }
 
 // Two renames (the previous folder aside, the staging folder in), then the previous
@@ -358,9 +360,9 @@ void OutputFolder::MoveIntoPlace() {
 }
 
 void OutputFolder::Abort() noexcept {
-  const auto held = interrupts_.Hold();
+  const auto held = sections_.Hold();
   Discard();
-  interrupts_.SetCleanup(held, {});
+  sections_.SetCleanup(held, {});
 }
 
 void OutputFolder::Discard() noexcept {
@@ -375,11 +377,16 @@ void OutputFolder::Discard() noexcept {
 
 // -- a single file ---------------------------------------------------------------------------
 
-OutputFile::OutputFile(const std::string& path, Interrupts& interrupts, bool force, std::vector<std::string> inputs)
-    : path_(PathlibPath(path)), interrupts_(interrupts), force_(force), inputs_(std::move(inputs)) {}
+OutputFile::OutputFile(const std::string& path, bool force, std::vector<std::string> inputs,
+                       InterruptionSections* interrupts, std::uintmax_t min_free_bytes)
+    : path_(PathlibPath(path)),
+      force_(force),
+      inputs_(std::move(inputs)),
+      sections_(interrupts),
+      min_free_bytes_(min_free_bytes) {}
 
 void OutputFile::Open() {
-  const auto held = interrupts_.Hold();
+  const auto held = sections_.Hold();
   if (fs::is_directory(path_)) throw OutputError(path_.string() + ": is a folder; give the path of a file");
   std::error_code error;
   if (fs::exists(path_, error)) {
@@ -392,20 +399,20 @@ void OutputFile::Open() {
     RequireReplaceable(path_);
   }
   created_ = MissingFolders(ParentOf(path_));
-  const fs::path parent = CheckParentMade(path_, created_);
+  const fs::path parent = CheckParentMade(path_, created_, min_free_bytes_);
   lock_.Acquire(LockFileOf(path_), path_);
-  interrupts_.SetCleanup(held, [this] { Release(); });
+  sections_.SetCleanup(held, [this] { Release(); });
   try {
     Probe(parent, path_);
   } catch (...) {
     Release();
-    interrupts_.SetCleanup(held, {});
+    sections_.SetCleanup(held, {});
     throw;
   }
 }
 
 void OutputFile::Write(const std::function<void(const fs::path& path)>& write) {
-  const auto held = interrupts_.Hold();
+  const auto held = sections_.Hold();
   try {
     write(path_);
   } catch (const fs::filesystem_error& error) {
@@ -414,9 +421,9 @@ void OutputFile::Write(const std::function<void(const fs::path& path)>& write) {
 }
 
 void OutputFile::Close() noexcept {
-  const auto held = interrupts_.Hold();
+  const auto held = sections_.Hold();
   Release();
-  interrupts_.SetCleanup(held, {});
+  sections_.SetCleanup(held, {});
 }
 
 void OutputFile::Release() noexcept {
@@ -424,4 +431,4 @@ void OutputFile::Release() noexcept {
   RemoveEmptyFolders(created_);
 }
 
-}  // namespace calibproj::app
+}  // namespace calibproj::formats
