@@ -187,10 +187,7 @@ def calibrate(
                     write_self_calibration(staging / SELF_CALIBRATION_FILE, *self_calibration)
                 write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,
                                ingest_result)
-            folder.commit()
-            if recordings is not None:
-                # After the commit: an interruption before it leaves them where they were.
-                os.replace(recordings, folder.path / RECORDINGS_DIR)
+            commit_results(folder, recordings)
             logger.info("results written to %s", folder.path)
         if scale_error is not None:
             raise ValueError(f"{scale_error}; results written to {out} in arbitrary units")
@@ -322,6 +319,15 @@ def _with_earlier(merge: str | os.PathLike, tracks: Tracks, intrinsics: Mapping[
     logger.info("merged the observations of %s: %d observations of %d points", merge, len(merged),
                 merged.num_points)
     return merged, still_failed
+
+
+def commit_results(folder: OutputFolder, recordings: str | os.PathLike | None) -> None:
+    """Move the results folder into place, then the recordings (a capture's videos) into
+    it as ``recordings/``: after the commit, so that an interruption before it leaves them
+    where they were."""
+    folder.commit()
+    if recordings is not None:
+        os.replace(recordings, folder.path / RECORDINGS_DIR)
 
 
 def video_files(ingest_result: Any) -> dict[str, str]:

@@ -148,11 +148,11 @@ def check(
     from calibproj.ingest.videos import ingest
     from calibproj.ingest.inputs import check_videos
     from calibproj.formats.output_folder import OutputFolder
-    from calibproj.pipeline import video_files, write_results
+    from calibproj.pipeline import commit_results, video_files, write_results
     from calibproj.formats.provenance import provenance, write_provenance
     from calibproj.registration.driver import RegistrationOptions
     from calibproj.formats.intrinsics import intrinsics_of_cameras
-    from calibproj.formats.results import CALIBRATION_FILES, INTRINSICS_DIR, RECORDINGS_DIR, TRACKS_FILE, load_results
+    from calibproj.formats.results import CALIBRATION_FILES, INTRINSICS_DIR, TRACKS_FILE, load_results
 
     from calibproj.formats.export import parse_formats
 
@@ -196,10 +196,7 @@ def check(
             write_check(staging / CHECK_FILE, result)
             write_results(staging, folder.path, fixed, fixed_tracks, fixed_intrinsics, formats, report,
                           ingest_result)
-        folder.commit()
-        if recordings is not None:
-            # After the commit: an interruption before it leaves them where they were.
-            os.replace(recordings, folder.path / RECORDINGS_DIR)
+        commit_results(folder, recordings)
         log.info("repaired results written to %s", folder.path)
         return result
     finally:
