@@ -62,6 +62,11 @@ def test_replace_copies_and_checks() -> None:
         calibration.replace(colour="red")
     with pytest.raises(TypeError, match="Calibration.poses"):
         calibration.replace(poses={"a": "not a pose"})
+    # The poses of a camera_poses.json are named as such.
+    with pytest.raises(TypeError, match="^CameraPoses.poses: "):
+        _core.formats.CameraPoses({"a": "not a pose"})
+    with pytest.raises(TypeError, match="^CameraPoses.failed: "):
+        _core.formats.CameraPoses({}, failed={"b": 3})
     with pytest.raises(ValueError, match="expected shape"):
         calibration.replace(points=np.zeros((4, 2)))
 

@@ -37,11 +37,11 @@ using registration::PoseUncertainty;
 
 // `convert()`, a value of the wrong type becoming a TypeError naming the attribute.
 template <typename Convert>
-auto Attribute(const char* name, Convert&& convert) {
+auto Attribute(const char* owner, const char* name, Convert&& convert) {
   try {
     return convert();
   } catch (const py::cast_error& error) {
-    throw py::type_error(std::string("Calibration.") + name + ": " + error.what());
+    throw py::type_error(std::string(owner) + "." + name + ": " + error.what());
   }
 }
 
@@ -62,8 +62,9 @@ py::dict PosesOf(const std::vector<CameraPose>& poses) {
   return out;
 }
 
-std::vector<CameraPose> PosesFrom(const py::dict& poses) {
-  return Attribute("poses", [&] {
+// owner: the class whose attribute it is, for the message.
+std::vector<CameraPose> PosesFrom(const char* owner, const py::dict& poses) {
+  return Attribute(owner, "poses", [&] {
     std::vector<CameraPose> out;
     for (const auto& [name, pose] : poses) {
       const auto R_t = pose.cast<std::pair<Eigen::Matrix3d, Eigen::Vector3d>>();
@@ -73,7 +74,7 @@ std::vector<CameraPose> PosesFrom(const py::dict& poses) {
   });
 }
 
-void SetPoses(Calibration& c, const py::dict& poses) { c.poses = PosesFrom(poses); }
+void SetPoses(Calibration& c, const py::dict& poses) { c.poses = PosesFrom("Calibration", poses); }
 
 std::vector<std::string> NamesOf(const std::vector<CameraPose>& poses) {
   std::vector<std::string> names;
@@ -87,8 +88,8 @@ py::dict FailedOf(const std::vector<NamedText>& failed) {
   return out;
 }
 
-std::vector<NamedText> NamedTexts(const char* what, const py::dict& texts) {
-  return Attribute(what, [&] {
+std::vector<NamedText> NamedTexts(const char* owner, const char* what, const py::dict& texts) {
+  return Attribute(owner, what, [&] {
     std::vector<NamedText> out;
     for (const auto& [name, text] : texts) out.emplace_back(name.cast<std::string>(), text.cast<std::string>());
     return out;
@@ -102,7 +103,7 @@ py::dict MetricsOf(const Calibration& c) {
 }
 
 void SetMetrics(Calibration& c, const py::dict& metrics) {
-  c.metrics = Attribute("metrics", [&] {
+  c.metrics = Attribute("Calibration", "metrics", [&] {
     std::vector<std::pair<std::string, CameraMetrics>> out;
     for (const auto& [name, m] : metrics) out.emplace_back(name.cast<std::string>(), m.cast<CameraMetrics>());
     return out;
@@ -127,7 +128,7 @@ Calibration NewCalibration(const py::dict& poses, const py::dict& failed, const 
                            std::vector<Plane> planes, const std::optional<PoseUncertainty>& uncertainty) {
   Calibration c;
   SetPoses(c, poses);
-  c.failed = NamedTexts("failed", failed);
+  c.failed = NamedTexts("Calibration", "failed", failed);
   SetMetrics(c, metrics);
   SetPoints(c, points);
   c.point_ids = point_ids;
@@ -281,7 +282,8 @@ void RegisterCameraPoses(py::module_& m) {
              if (unit != "arbitrary" && unit != "m") {
                throw py::value_error("unit must be one of ['arbitrary', 'm'], got " + formats::PythonRepr(unit));
              }
-             CameraPoses p{PosesFrom(poses), NamedTexts("failed", failed), unit, {}, source};
+             CameraPoses p{PosesFrom("CameraPoses", poses), NamedTexts("CameraPoses", "failed", failed), unit, {},
+                           source};
              for (const py::handle name : weak) p.weak.push_back(py::str(name).cast<std::string>());
              return p;
            }),
@@ -332,13 +334,13 @@ void register_calibration(py::module_& m) {
       .def_static(
           "nothing_registered",
           [](const py::dict& failed, const std::string& model) {
-            return formats::FromRegistration({}, {}, {}, NamedTexts("failed", failed), model);
+            return formats::FromRegistration({}, {}, {}, NamedTexts("Calibration", "failed", failed), model);
           },
           py::arg("failed"), py::arg("model"), "The result when no camera could even enter the registration.")
       .def_property(
           "poses", [](const Calibration& c) { return PosesOf(c.poses); }, &SetPoses, "{camera: (R, t)} of the registered cameras, in order")
       .def_property(
-          "failed", [](const Calibration& c) { return FailedOf(c.failed); }, [](Calibration& c, const py::dict& failed) { c.failed = NamedTexts("failed", failed); },
+          "failed", [](const Calibration& c) { return FailedOf(c.failed); }, [](Calibration& c, const py::dict& failed) { c.failed = NamedTexts("Calibration", "failed", failed); },
           "{camera: reason} of the cameras not calibrated")
       .def_property("metrics", &MetricsOf, &SetMetrics, "{camera: CameraMetrics} of every camera (copies)")
       .def_property(
