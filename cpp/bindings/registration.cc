@@ -269,7 +269,12 @@ of calibproj.registration.driver.RegistrationOptions.)doc")
              Eigen::Vector3d X;
              if (!r.ProjectorPrediction(point, &X)) return py::none();
              return py::cast(Eigen::VectorXd(X));
-           }, py::arg("point"), "Where the projector draws the point on the main plane, or None.")
+           }, py::arg("point"), "Where the projector draws the point (on the plane projected_plane names), or None.")
+      .def("projected_plane", &Reconstruction::ProjectedPlane, py::arg("point"),
+           "The plane the projector draws the point on: a raised surface (a table top) whose reconstructed\n"
+           "points surround its projector pixel, else the main plane (0); -1 without a projector pixel.")
+      .def_property_readonly("point_planes", &Reconstruction::point_plane,
+                             "Per point the plane it was placed on (0 the main plane, -1 off every plane or not placed).")
       .def_property_readonly("projector_lens", [](const Reconstruction& r) { return Eigen::VectorXd(r.projector_lens()); })
       .def_property_readonly("projector_sigma_px", &Reconstruction::projector_sigma_px,
                              "Per group of points the projector maps' noise (projector px, NaN until estimated).")

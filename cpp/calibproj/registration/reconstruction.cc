@@ -17,6 +17,7 @@
 #include <tuple>
 
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "calibproj/ba/rotation.h"
 #include "calibproj/common/limits.h"
@@ -75,6 +76,12 @@ constexpr double kReliefTestZ = 3.09;
 // points pin would raise the test's bar (a chi-square over every node) without adding
 // to its power.
 constexpr int kReliefTestCoarsening = 2;
+// Reconstructed points a raised surface needs before its outline decides where the
+// projector draws (ProjectedPlane): fewer outline too small a part of it.
+constexpr int kMinOutlinePoints = 6;
+// How many times better a plane's projector-to-camera homography must explain a point
+// seen once than every other plane's before the point is put on it.
+constexpr double kPlaneEvidence = 2.0;
 
 // Robust standard deviation of 2D residuals from the median of their norms
 // (for isotropic Gaussian noise, median |r| = sigma * sqrt(2 ln 2)).
@@ -352,17 +359,55 @@ std::vector<double> Reconstruction::projector_sigma_px() const {
   return std::vector<double>(projector_sigma_px_.size(), std::numeric_limits<double>::quiet_NaN());
 }
 
-bool Reconstruction::ProjectorPrediction(int point, Eigen::Vector3d* X) const {
-  if (!HasProjector() || projector_surfaces_.empty() || point < 0 || point >= num_points_) return false;
-  if (!projector_.row(point).allFinite()) return false;
-  return ba::ProjectorPoint(projector_surfaces_[0], projector_lens_, projector_.row(point).transpose(), X);
+void Reconstruction::OutlineSurfaces() {
+  // A raised surface (a table top) hides the floor under it from the projector: the
+  // projector pixels it receives are those inside the outline of its reconstructed points.
+  surface_outlines_.assign(more_planes_.size() + 1, {});
+  if (!HasProjector()) return;
+  for (size_t k = 1; k < surface_outlines_.size(); ++k) {
+    std::vector<cv::Point2f> pixels;
+    for (int p = 0; p < num_points_; ++p) {
+      if (reconstructed_[p] && point_plane_[p] == static_cast<int>(k) && projector_.row(p).allFinite()) {
+        pixels.emplace_back(static_cast<float>(projector_(p, 0)), static_cast<float>(projector_(p, 1)));
+      }
+    }
+    if (static_cast<int>(pixels.size()) < kMinOutlinePoints) continue;
+    cv::convexHull(pixels, surface_outlines_[k]);
+  }
 }
 
-bool Reconstruction::AllOnMainPlane(const std::vector<int>& observations, const std::vector<int>& subset) const {
+int Reconstruction::ProjectedPlane(int point) const {
+  if (!HasProjector() || point < 0 || point >= num_points_ || !projector_.row(point).allFinite()) return -1;
+  // The innermost outline holding the pixel: a box on the table is drawn on, not the table.
+  const cv::Point2f pixel(static_cast<float>(projector_(point, 0)), static_cast<float>(projector_(point, 1)));
+  int plane = 0;
+  double smallest = std::numeric_limits<double>::infinity();
+  for (size_t k = 1; k < surface_outlines_.size(); ++k) {
+    const std::vector<cv::Point2f>& outline = surface_outlines_[k];
+    if (outline.size() < 3 || cv::pointPolygonTest(outline, pixel, false) < 0) continue;
+    const double area = cv::contourArea(outline);
+    if (area < smallest) {
+      smallest = area;
+      plane = static_cast<int>(k);
+    }
+  }
+  return plane;
+}
+
+bool Reconstruction::ProjectorPrediction(int point, Eigen::Vector3d* X) const {
+  const int plane = ProjectedPlane(point);
+  if (plane < 0 || plane >= static_cast<int>(projector_surfaces_.size())) return false;
+  return ba::ProjectorPoint(projector_surfaces_[plane], projector_lens_, projector_.row(point).transpose(), X);
+}
+
+bool Reconstruction::AllOnOnePlane(const std::vector<int>& observations, const std::vector<int>& subset) const {
   if (options_.model != ba::Model::kCoplanar || subset.empty()) return false;
+  int plane = -1;
   for (const int k : subset) {
     const int p = point_index_(observations[k]);
-    if (reconstructed_[p] ? point_plane_[p] != 0 : !projector_.rows()) return false;
+    const int on = reconstructed_[p] ? point_plane_[p] : ProjectedPlane(p);
+    if (on < 0 || (plane >= 0 && on != plane)) return false;
+    plane = on;
   }
   return true;
 }
@@ -482,6 +527,7 @@ void Reconstruction::ResetStructure() {
   std::fill(point_plane_.begin(), point_plane_.end(), -1);
   std::fill(single_view_.begin(), single_view_.end(), false);
   more_planes_.clear();
+  surface_outlines_.clear();
   order_.clear();
   gauge_camera_ = -1;
 }
@@ -695,7 +741,7 @@ RegisterResult Reconstruction::RegisterCamera(int camera) {
   }
   // Points on one plane seen nearly affinely fit two mirror poses; RANSAC's solver may
   // return the worse one. IPPE gives both: the one that fits the inliers best is kept.
-  if (AllOnMainPlane(observations, estimate.inliers)) {
+  if (AllOnOnePlane(observations, estimate.inliers)) {
     std::vector<cv::Point3d> object;
     std::vector<cv::Point2d> image;
     for (const int k : estimate.inliers) {
@@ -807,6 +853,29 @@ bool BestPointOnPlane(const std::vector<geometry::View>& views, const std::vecto
   return true;
 }
 
+// The plane whose homography (projector pixel to camera pixel; empty: not known) maps
+// `projector` nearest `observed`, when it does so at least twice as well as any other;
+// -1 otherwise.
+int PlaneExplaining(const std::vector<cv::Mat>& maps, const cv::Point2d& projector, const cv::Point2d& observed) {
+  int best = -1;
+  double best_error = std::numeric_limits<double>::infinity(), second = best_error;
+  for (size_t k = 0; k < maps.size(); ++k) {
+    if (maps[k].empty()) continue;
+    std::vector<cv::Point2d> mapped;
+    cv::perspectiveTransform(std::vector<cv::Point2d>{projector}, mapped, maps[k]);
+    const double error = cv::norm(mapped[0] - observed);
+    if (!std::isfinite(error)) continue;
+    if (error < best_error) {
+      second = best_error;
+      best_error = error;
+      best = static_cast<int>(k);
+    } else {
+      second = std::min(second, error);
+    }
+  }
+  return best >= 0 && kPlaneEvidence * best_error < second ? best : -1;
+}
+
 }  // namespace
 
 bool Reconstruction::PlanePointByConsensus(const std::vector<geometry::View>& views,
@@ -841,7 +910,7 @@ bool Reconstruction::TriangulatePoint(const std::vector<geometry::View>& views, 
   return true;
 }
 
-bool Reconstruction::ReconstructPoint(int point) {
+bool Reconstruction::ReconstructPoint(int point, int alone_on) {
   std::vector<geometry::View> views;
   std::vector<double> focal;  // pixels per unit of normalised image coordinates, per view
   for (int i : point_observations_[point]) {
@@ -854,11 +923,12 @@ bool Reconstruction::ReconstructPoint(int point) {
   Eigen::Vector3d X;
   if (options_.model == ba::Model::kCoplanar) {
     // On the main plane, else on another plane found, else off every plane: a point
-    // of a table left in the projection, triangulated when seen twice.
+    // of a table left in the projection, triangulated when seen twice. Seen once, on
+    // the plane given, else the main plane.
     int on = -1;
     for (int k = 0; k <= static_cast<int>(more_planes_.size()) && on < 0; ++k) {
       const Eigen::Vector4d& plane = k == 0 ? plane_ : more_planes_[k - 1];
-      if ((k == 0 || views.size() > 1) && PlanePointByConsensus(views, focal, plane, &X)) on = k;
+      if ((views.size() > 1 || k == std::max(alone_on, 0)) && PlanePointByConsensus(views, focal, plane, &X)) on = k;
     }
     if (on < 0 && !TriangulatePoint(views, &X)) return false;
     point_plane_[point] = on;
@@ -1230,7 +1300,44 @@ int Reconstruction::FindPlanes() {
     candidates = rest;
     ++found;
   }
+  OutlineSurfaces();
+  PlaceSingleViewPointsOnTheirSurfaces();
   return found;
+}
+
+void Reconstruction::PlaceSingleViewPointsOnTheirSurfaces() {
+  // A point one camera alone sees was put on the main plane. Across one plane, the map
+  // from projector pixels to a camera's pixels is a homography, different per plane
+  // wherever the camera is not at the projector: the plane whose homography (fitted to
+  // the camera's points placed by other cameras too) explains the point is the one it
+  // lies on (a table top only a zoomed camera sees there).
+  if (!HasProjector() || more_planes_.empty()) return;
+  for (int c = 0; c < num_cameras(); ++c) {
+    if (!registered_[c]) continue;
+    std::vector<std::vector<cv::Point2d>> from(more_planes_.size() + 1), to(more_planes_.size() + 1);
+    std::vector<int> single;
+    for (const int i : camera_observations_[c]) {
+      const int p = point_index_(i);
+      if (!active_[i] || !reconstructed_[p] || !projector_.row(p).allFinite()) continue;
+      if (single_view_[p]) {
+        single.push_back(i);
+      } else if (point_plane_[p] >= 0) {
+        from[point_plane_[p]].emplace_back(projector_(p, 0), projector_(p, 1));
+        to[point_plane_[p]].emplace_back(observed_(i, 0), observed_(i, 1));
+      }
+    }
+    if (single.empty()) continue;
+    std::vector<cv::Mat> maps(from.size());
+    for (size_t k = 0; k < from.size(); ++k) {
+      if (static_cast<int>(from[k].size()) >= kMinOutlinePoints) maps[k] = cv::findHomography(from[k], to[k], 0);
+    }
+    for (const int i : single) {
+      const int p = point_index_(i);
+      const int plane = PlaneExplaining(maps, {projector_(p, 0), projector_(p, 1)}, {observed_(i, 0), observed_(i, 1)});
+      if (plane < 0 || plane == point_plane_[p]) continue;
+      if (!ReconstructPoint(p, plane)) reconstructed_[p] = false;
+    }
+  }
 }
 
 std::string ReliefTest::Describe() const {

@@ -8,6 +8,7 @@
 // methods, so every algorithmic step exists once.
 
 #include <Eigen/Core>
+#include <opencv2/core/types.hpp>
 #include <algorithm>
 #include <cstdint>
 #include <limits>
@@ -212,8 +213,13 @@ class Reconstruction {
   // whose diagonal blocks are the lenses' own covariances (std::invalid_argument naming
   // the problem otherwise, or when it is not symmetric positive semi-definite).
   void SetLensCrossCovariances(const std::vector<int>& cameras, const Eigen::MatrixXd& joint);
-  // Where the projector draws point `point` on the main plane (false without a map).
+  // Where the projector draws point `point`: on the surface ProjectedPlane names (false
+  // without a map).
   bool ProjectorPrediction(int point, Eigen::Vector3d* X) const;
+  // The plane the projector draws point `point` on: a raised surface (a table top) whose
+  // reconstructed points' projector pixels surround the point's, else the main plane (0);
+  // -1 without a projector pixel.
+  int ProjectedPlane(int point) const;
 
   // State.
   int num_cameras() const { return static_cast<int>(cameras_.size()); }
@@ -285,7 +291,9 @@ class Reconstruction {
   void SetInitialStructure(int camera1, int camera2, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                            const Eigen::Vector3d& n);
   void ResetStructure();
-  bool ReconstructPoint(int point);
+  // Places `point` from its registered views (coplanar: on a plane when they agree; seen
+  // once, on plane `alone_on`, the main plane when -1).
+  bool ReconstructPoint(int point, int alone_on = -1);
   std::vector<Eigen::Matrix3d> Rotations() const;  // per camera, from the poses
   bool InFront(int observation, const std::vector<Eigen::Matrix3d>& rotations) const;
   int ThirdCamera(int camera1, int camera2) const;
@@ -295,8 +303,15 @@ class Reconstruction {
   // Data::lens_block and lens_jacobians of an adjustment of `cameras`.
   void AddLenses(const std::vector<int>& cameras, ba::Data* data) const;
   bool KnownPoint(int point, Eigen::Vector3d* X) const;
-  // True when the points of observations[k], k in subset, all lie on the main plane.
-  bool AllOnMainPlane(const std::vector<int>& observations, const std::vector<int>& subset) const;
+  // True when the points of observations[k], k in subset, all lie on one plane (placed on
+  // it, or drawn on it by the projector).
+  bool AllOnOnePlane(const std::vector<int>& observations, const std::vector<int>& subset) const;
+  // The projector-pixel outline of every raised surface's reconstructed points
+  // (surface_outlines_), once the planes are found.
+  void OutlineSurfaces();
+  // Points seen by one camera placed again on the plane whose projector-to-camera
+  // homography explains them.
+  void PlaceSingleViewPointsOnTheirSurfaces();
   int MinPnpPoints() const {
     return HasProjector() && !projector_surfaces_.empty()
                ? std::min(options_.min_pnp_points, options_.min_projector_pnp_points)
@@ -349,6 +364,9 @@ class Reconstruction {
   double projector_width_ = 1.0;
   Eigen::Vector2d projector_lens_ = Eigen::Vector2d::Zero();
   std::vector<ba::ProjectorSurface> projector_surfaces_;
+  // Per plane, the convex hull (normalised projector pixels) of its reconstructed points;
+  // empty for the main plane and for planes with too few points.
+  std::vector<std::vector<cv::Point2f>> surface_outlines_;
   std::vector<int> projector_group_;           // per point, -1: no projector pixel
   std::vector<double> projector_group_side_px_;  // per group
   std::vector<double> projector_sigma_px_;       // per group
