@@ -22,6 +22,8 @@
 #include "calibproj/selfcal/option_table.h"
 #include "calibproj/selfcal/rounds.h"
 #include "calibproj/formats/tracks_file.h"
+#include "calibproj/formats/detect_report.h"
+#include "calibproj/formats/sequence_file.h"
 
 namespace calibproj::app {
 
@@ -42,7 +44,8 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
       "Calibrate the cameras: register every camera and refine, then write camera_poses.json, metrics.json and "
       "points.ply (floor frame: z up, floor z = 0), the tracks.json and intrinsics/ they came from, and the exports "
       "asked for. An existing results folder is only overwritten with --force.");
-  SharedFlag(cmd, "--tracks", args->tracks)->required();
+  cmd->add_option("videos", args->videos, "folder of camera videos (<camera>.mp4)")->type_name("VIDEOS_DIR");
+  SharedFlag(cmd, "--tracks", args->tracks);
   SharedFlag(cmd, "--intrinsics", args->intrinsics)->required();
   SharedFlag(cmd, "--out", args->out)->required();
   SharedFlag(cmd, "--force", args->force);
@@ -54,6 +57,9 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   // so that both commands take the same command lines with the same defaults.
   registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));
   AddRefinementFlags(cmd, &args->refine_intrinsics, &args->self_calibration);
+  // The ingest of VIDEOS_DIR, as detect takes it; the homography threshold is the
+  // registration's here (the ingest keeps its default), as in the Python command.
+  AddVideoIngestFlags(cmd, &args->ingest, {"homography_threshold_px"});
   *command = cmd;
   return args;
 }
@@ -249,6 +255,25 @@ void CheckScale(const std::optional<formats::ScaleMeasurement>& measurement, con
   }
 }
 
+namespace {
+
+// Videos or tracks, and what applies to each, with the Python command's messages.
+void CheckSource(const CalibrateArguments& arguments) {
+  if (arguments.videos.empty() == arguments.tracks.empty()) {
+    throw InputError("give either VIDEOS_DIR (with --sequence) or --tracks FILE");
+  }
+  if (!arguments.videos.empty() && arguments.sequence.empty()) {
+    throw InputError(arguments.videos + ": calibrating from videos needs --sequence sequence.json");
+  }
+  if (!arguments.videos.empty()) return;
+  if (!arguments.ingest.exposures.empty()) throw InputError("--exposure applies to videos, not to --tracks");
+  if (arguments.ingest.AnyKnobGiven() || !arguments.ingest.detector_options.empty()) {
+    throw InputError("ingest and detector options apply to videos, not to --tracks");
+  }
+}
+
+}  // namespace
+
 int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   const std::vector<std::string> exports =
       arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
@@ -256,11 +281,28 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   RequireValidOptions(arguments.options);
   const std::optional<LensRefinement> refinement =
       RefinementOption(arguments.refine_intrinsics, arguments.self_calibration);
+  CheckSource(arguments);
   // Checked and locked before the inputs are read, as the Python command does.
   OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, &interrupts);
   out.Open();
-  const Tracks recorded = ReadTracks(arguments.tracks);
   CalibrationInputs inputs;
+  std::function<void(const fs::path& staging)> write_report;
+  Tracks recorded;
+  if (arguments.videos.empty()) {
+    recorded = ReadTracks(arguments.tracks);
+  } else {
+    const ingest::SequenceDescription sequence = formats::ReadSequence(arguments.sequence);
+    const std::vector<formats::CameraOutcome> outcomes =
+        IngestVideos(arguments.videos, arguments.intrinsics, sequence, arguments.ingest);
+    recorded = formats::TracksOf(outcomes, sequence.markers_per_array);
+    for (const formats::CameraOutcome& camera : outcomes) {
+      if (!camera.ok()) inputs.left_out.emplace_back(camera.name, camera.error);
+    }
+    const nlohmann::ordered_json report = formats::DetectReport(outcomes, arguments.sequence, sequence);
+    write_report = [report](const fs::path& staging) {
+      formats::AtomicWrite(staging / "detect_report.json", formats::DumpSchemaJson("detect_report", 1, report));
+    };
+  }
   inputs.intrinsics = LoadIntrinsicsDir(arguments.intrinsics);
   inputs.given = arguments.merge.empty()
                      ? recorded
@@ -271,7 +313,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   inputs.missing_reason = [&](const std::string& camera) {
     return formats::MissingIntrinsicsFile(arguments.intrinsics, camera);
   };
-  return CalibrateInto(out, inputs, arguments.options, exports, measurement, {}, refinement);
+  return CalibrateInto(out, inputs, arguments.options, exports, measurement, write_report, refinement);
 }
 
 }  // namespace calibproj::app

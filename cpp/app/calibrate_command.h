@@ -1,8 +1,8 @@
 #pragma once
-// `calibproj-native calibrate`: tracks + intrinsics -> camera_poses.json, metrics.json,
-// points.ply and the exports, with the same registration steps
-// (calibproj::registration::Run), options, metric scale and file writers as
-// `calibproj calibrate --tracks`.
+// `calibproj-native calibrate`: camera videos (with sequence.json) or tracks, and
+// intrinsics -> camera_poses.json, metrics.json, points.ply and the exports, with the
+// same ingest (video_ingest.h), registration steps (calibproj::registration::Run),
+// options, metric scale and file writers as `calibproj calibrate`.
 
 #include <CLI/CLI.hpp>
 #include <filesystem>
@@ -19,11 +19,13 @@
 #include "calibproj/registration/reconstruction.h"
 #include "calibproj/selfcal/refinement.h"
 #include "interrupts.h"
+#include "video_ingest.h"
 #include "calibproj/formats/output_folder.h"
 
 namespace calibproj::app {
 
 struct CalibrateArguments {
+  std::string videos;  // a folder of camera videos to ingest, or empty with --tracks
   std::string tracks, intrinsics, out;
   std::string scale;     // one metric measurement (formats/scale.h); empty: arbitrary unit
   std::string sequence;  // sequence.json, for a marker-size measurement
@@ -33,6 +35,7 @@ struct CalibrateArguments {
   registration::Options options;
   std::vector<std::string> refine_intrinsics;  // [CAMERA=]ENTRIES items; empty: the intrinsics as given
   selfcal::SelfCalibrationOptions self_calibration;
+  VideoIngestArguments ingest;  // with VIDEOS_DIR
 };
 
 // What to refine of the intrinsics, and how (calibrate --refine-intrinsics).

@@ -10,22 +10,15 @@
 
 #include "calibproj/ingest/camera_ingest.h"
 #include "interrupts.h"
+#include "video_ingest.h"
 
 namespace calibproj::app {
 
-// Cameras processed at once, as in the Python command (each camera decodes with FFmpeg's
-// own threads too).
-constexpr int kDefaultDetectWorkers = 2;
-
 struct DetectArguments {
   std::string videos, sequence, intrinsics, out;
-  int workers = kDefaultDetectWorkers;
-  bool no_progress = false;
   bool json = false;
   bool force = false;  // replace an existing --out
-  std::vector<std::string> detector_options;  // NAME=VALUE, as calibproj.detect_markers takes them
-  std::vector<std::string> exposures;         // CAMERA=SECONDS
-  ingest::IngestOptions options;
+  VideoIngestArguments ingest;
 };
 
 // Adds the subcommand and its options (one flag per ingest option, named and defaulted

@@ -33,6 +33,9 @@ std::vector<CommandFlag> MakeTable() {
        "come from a projection planned by `calibproj generate --densify RESULTS`, and --sequence is that densified "
        "sequence.json; same intrinsics as RESULTS"},
       {"calibrate", "--export", "FORMATS", kExportHelp},
+      {"calibrate", "--exposure", "CAMERA=SECONDS", kExposureHelp},
+      {"calibrate", "--detector-option", "NAME=VALUE", kDetectorOptionHelp},
+      {"calibrate", "--no-progress", "", "no progress bars"},
       {"detect", "--sequence", "FILE", "sequence.json of the projection"},
       {"detect", "--intrinsics", "DIR", kIntrinsicsHelp},
       {"detect", "--out", "FILE", "tracks file to write (tracks.json)"},

@@ -60,7 +60,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     output = parser.add_argument_group("output and progress")
     output.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
     output.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
-    output.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_shared_argument(output, "calibrate", "--no-progress")
 
     more = parser.add_argument_group("more observations and lenses")
     add_shared_argument(more, "calibrate", "--merge")
@@ -71,10 +71,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     videos = parser.add_argument_group("ingest of the videos (as calibproj detect)")
     videos.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")
-    # The ingest's own flags, as calibproj detect takes them (calibproj-native calibrate
-    # takes tracks only).
-    add_exposure_argument(videos, "detect", " (with videos)")
-    add_detector_option_argument(videos, "detect")
+    # The ingest's own flags, as calibproj detect takes them.
+    add_exposure_argument(videos, "calibrate", " (with videos)")
+    add_detector_option_argument(videos, "calibrate")
     add_dataclass_arguments(parser, RegistrationOptions, "registration options")
     add_dataclass_arguments(parser, SelfCalibrationOptions, "self-calibration options (with --refine-intrinsics)")
     # --homography-threshold-px is the registration's here; the ingest keeps its default
