@@ -170,7 +170,7 @@ def test_the_native_capture_checks_and_repairs_a_moved_camera(room):
     stored = base / "native_results"
     if not (stored / "camera_poses.json").is_file():
         pytest.skip("needs the native capture's results (the test above)")
-    # Native results keep no provenance.json: the sequence is named.
+    # The check projection is planned for the stored results' sequence, named here.
     assert main(["generate", "--check", str(stored), "--sequence", str(base / "sequence" / "sequence.json"),
                  "--out", str(base / "native_check")]) == 0
     live.change({"near1": CameraChange(pan_deg=0.5)})

@@ -393,6 +393,13 @@ def test_the_native_check_prints_writes_and_exits_as_the_python_command(room, tm
     for name in ("check.json", "camera_poses.json", "metrics.json", "points.ply", "tracks.json",
                  "intrinsics/ceiling.json", "intrinsics/far2.json", "uncertainty.json"):
         assert (tmp_path / "native" / name).read_bytes() == (tmp_path / "python" / name).read_bytes(), name
+    # Both record where the repair came from, with the core's writer: the same record but
+    # for when, by which command, and the Python version.
+    records = [json.loads((tmp_path / tool / "provenance.json").read_text()) for tool in ("python", "native")]
+    for record in records:
+        for key in ("created", "command", "python"):
+            record.pop(key, None)
+    assert records[0] == records[1] and records[1]["inputs"]["checked"]["path"] == str(results.absolute())
     # Tracks of other points than the calibrated ones: one line naming the file, status 2.
     from calibproj.formats.tracks import Tracks
 

@@ -61,8 +61,12 @@ EXPORT_FILES = ["calibration_opencv.yaml", "calibration.toml", "colmap/cameras.t
 
 
 def assert_same_bytes(a: Path, b: Path, names: list[str]) -> None:
+    """The files of both folders byte for byte; provenance.json as assert_same_provenance."""
     for name in names:
-        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+        if name == "provenance.json":
+            assert_same_provenance(a, b)
+        else:
+            assert (a / name).read_bytes() == (b / name).read_bytes(), name
 
 
 def files_below(folder: Path) -> list[str]:
@@ -84,6 +88,19 @@ def test_native_and_python_give_the_same_calibration(simulation: Path, tmp_path:
     assert poses["unit"] == "arbitrary" and len(poses["cameras"]) == 10
 
 
+def assert_same_provenance(python: Path, native: Path) -> None:
+    """Both provenance.json the core's: the same record but for when and by which command
+    it was made, and the Python version Python adds."""
+    documents = [json.loads((folder / "provenance.json").read_text()) for folder in (python, native)]
+    assert documents[0]["command"][0] == "calibproj" and documents[1]["command"][0] == "calibproj-native"
+    assert "python" in documents[0] and "python" not in documents[1]
+    for document in documents:
+        for key in ("created", "command", "python"):
+            document.pop(key, None)
+    assert documents[0] == documents[1]
+    assert documents[1]["options"] and documents[1]["inputs"]["source"]["sha256"]
+
+
 def test_native_scales_and_exports_as_python_does(simulation: Path, tmp_path: Path) -> None:
     common = ["--tracks", str(simulation / "tracks.json"), "--intrinsics", str(simulation / "intrinsics"),
               "--scale", "distance:far1,near2=3.25", "--export", "anipose,yaml,colmap,yaml"]
@@ -91,11 +108,11 @@ def test_native_scales_and_exports_as_python_does(simulation: Path, tmp_path: Pa
     assert python.returncode == 0, python.stderr
     native = run_native("calibrate", *common, "--out", str(tmp_path / "native"))
     assert native.returncode == 0, native.stderr
-    # Every file of the native folder, the Python one's too (which adds provenance.json):
-    # the results, the exports, and the tracks and intrinsics they came from.
+    # Every file of both folders: the results, the exports, and the tracks and intrinsics
+    # they came from, and where they came from.
     written = files_below(tmp_path / "native")
     assert set(CALIBRATION_FILES + EXPORT_FILES + ["tracks.json", "intrinsics/far1.json"]) <= set(written)
-    assert sorted(set(files_below(tmp_path / "python")) - set(written)) == ["provenance.json"]
+    assert files_below(tmp_path / "python") == written
     assert_same_bytes(tmp_path / "python", tmp_path / "native", written)
     poses = json.loads((tmp_path / "native" / "camera_poses.json").read_text())
     centres = {name: np.array(pose["center"]) for name, pose in poses["cameras"].items()}
@@ -123,7 +140,7 @@ def test_native_refines_intrinsics_as_python_does(simulation: Path, tmp_path: Pa
     native = run_native("calibrate", *common, "--out", str(tmp_path / "native"))
     assert native.returncode == 0, native.stderr
     written = files_below(tmp_path / "native")
-    assert sorted(set(files_below(tmp_path / "python")) - set(written)) == ["provenance.json"]
+    assert files_below(tmp_path / "python") == written
     assert_same_bytes(tmp_path / "python", tmp_path / "native", written)
     reports = json.loads((tmp_path / "native" / "self_calibration.json").read_text())
     assert reports["options"]["rounds"] == 1

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from calibproj import pipeline
 from calibproj.cli.main import main
 from calibproj.formats import jsonio
 from calibproj.formats.output_folder import OutputBusyError, OutputError, OutputFile, OutputFolder
@@ -306,13 +307,12 @@ def test_calibrate_interrupted_or_failing_keeps_the_previous_results(small: Path
     assert snapshot(out) == before and siblings(out) == []
 
     calls = []
-    write = jsonio.atomic_write_bytes
 
-    def disk_full(path, data):  # provenance.json, the one file Python writes itself here
-        calls.append(path)
-        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+    def disk_full(staging, folder, record):  # provenance.json, the first file written
+        calls.append(staging)
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(staging / "provenance.json"))
 
-    monkeypatch.setattr(jsonio, "atomic_write_bytes", disk_full)
+    monkeypatch.setattr(pipeline, "write_provenance", disk_full)
     assert main(calibrate_args(small, out, "--force", "--no-report")) == 2
     assert one_error_line(capsys) == (f"calibproj calibrate: error: {out}: cannot write the output "
                                       f"(No space left on device)")

@@ -9,7 +9,8 @@ from pathlib import Path
 
 from calibproj.cli.main import main
 from calibproj.formats.file_names import path_as_recorded, safe_file_names
-from calibproj.formats.provenance import file_identity, read_provenance
+from calibproj.formats.provenance import provenance, read_provenance, write_provenance
+from calibproj.version import __version__
 from calibproj.simulate import simulate_tracks
 
 
@@ -22,9 +23,34 @@ def test_inputs_beside_the_results_are_recorded_relative_to_them(tmp_path: Path)
 def test_a_file_is_identified_by_its_hash(tmp_path: Path) -> None:
     path = tmp_path / "sequence.json"
     path.write_bytes(b"{}")
-    entry = file_identity(path, tmp_path / "results")
-    assert entry == {"path": "../sequence.json", "bytes": 2, "sha256": hashlib.sha256(b"{}").hexdigest()}
-    assert file_identity(tmp_path / "absent.json", tmp_path / "results") == {"path": "../absent.json"}
+    record = provenance(command=None, source=tmp_path / "absent.json", sequence=path, intrinsics=tmp_path)
+    (tmp_path / "staging").mkdir()
+    write_provenance(tmp_path / "staging", tmp_path / "results", record)
+    inputs = json.loads((tmp_path / "staging" / "provenance.json").read_text())["inputs"]
+    assert inputs["sequence"] == {"path": "../sequence.json", "bytes": 2, "sha256": hashlib.sha256(b"{}").hexdigest()}
+    assert inputs["source"] == {"path": "../absent.json"}
+    assert inputs["intrinsics"] == {"path": ".."}
+
+
+def test_a_large_file_is_identified_by_size_and_time(tmp_path: Path) -> None:
+    import os
+
+    from calibproj import _core
+
+    video = tmp_path / "far1.mp4"
+    with video.open("wb") as stream:
+        stream.truncate(_core.formats.max_hashed_bytes + 1)
+    os.utime(video, (0, 86400))
+    record = provenance(command=["calibproj"], source=tmp_path,
+                        videos={"far1": video, "ip": "rtsp://127.0.0.1:8554/far2"})
+    (tmp_path / "staging").mkdir()
+    write_provenance(tmp_path / "staging", tmp_path / "results", record)
+    document = json.loads((tmp_path / "staging" / "provenance.json").read_text())
+    assert document["inputs"]["videos"] == {
+        "far1": {"path": "../far1.mp4", "bytes": _core.formats.max_hashed_bytes + 1,
+                 "modified": "1970-01-02T00:00:00+00:00"},
+        "ip": {"source": "rtsp://127.0.0.1:8554/far2"}}
+    assert document["calibproj"] == __version__ and document["python"] and document["command"] == ["calibproj"]
 
 
 def test_camera_names_become_distinct_safe_file_names() -> None:

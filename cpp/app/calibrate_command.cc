@@ -211,16 +211,26 @@ int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const regi
     self_calibration = std::move(refined.result);
   }
   std::string scale_error;
+  formats::ProvenanceRecord provenance = inputs.provenance;
+  provenance.model = calibration.model;
+  provenance.options = options;
   if (measurement && !calibration.poses.empty()) {
+    provenance.scale = formats::ScaleSource{measurement->Label(), std::nullopt, ""};
     try {
       const formats::ScaleFit fit = formats::ScaleFactor(calibration, *measurement, markers);
       std::cerr << "scale from " << measurement->Label() << ": " << fit.metres_per_unit << " m per unit\n";
       calibration = formats::Scaled(calibration, fit.metres_per_unit);
+      provenance.scale->metres_per_unit = fit.metres_per_unit;
     } catch (const std::invalid_argument& error) {
       scale_error = error.what();
+      provenance.scale->error = scale_error;
     }
   }
   const auto write_extra = [&](const fs::path& staging) {
+    // First, as the self-calibration: the report shows them.
+    formats::WriteProvenance(staging, formats::ProvenanceDocument(provenance, out.path(), [](const std::string& line) {
+                               std::cerr << line << "\n";
+                             }));
     if (self_calibration) {
       formats::AtomicWrite(staging / selfcal::kSelfCalibrationFile,
                            selfcal::SelfCalibrationJson(*self_calibration, inputs.intrinsics.cameras,
@@ -272,6 +282,17 @@ void CheckSource(const CalibrateArguments& arguments) {
   }
 }
 
+// What provenance.json records of the command line's inputs.
+formats::ProvenanceRecord ProvenanceOf(const CalibrateArguments& arguments) {
+  formats::ProvenanceRecord record;
+  record.command = arguments.command_line;
+  record.source = formats::ProvenanceInput{arguments.videos.empty() ? arguments.tracks : arguments.videos, ""};
+  if (!arguments.sequence.empty()) record.sequence = formats::ProvenanceInput{arguments.sequence, ""};
+  record.intrinsics = formats::ProvenanceInput{arguments.intrinsics, ""};
+  if (!arguments.merge.empty()) record.merged = formats::ProvenanceInput{arguments.merge, ""};
+  return record;
+}
+
 }  // namespace
 
 int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
@@ -286,6 +307,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   OutputFolder out(arguments.out, arguments.force, formats::kCalibrationFiles, &interrupts);
   out.Open();
   CalibrationInputs inputs;
+  inputs.provenance = ProvenanceOf(arguments);
   std::function<void(const fs::path& staging)> write_report;
   Tracks recorded;
   if (arguments.videos.empty()) {
@@ -297,7 +319,9 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
     recorded = formats::TracksOf(outcomes, sequence.markers_per_array);
     for (const formats::CameraOutcome& camera : outcomes) {
       if (!camera.ok()) inputs.left_out.emplace_back(camera.name, camera.error);
+      inputs.provenance.videos.emplace_back(camera.name, camera.video);
     }
+    inputs.provenance.markers = sequence.markers;
     const nlohmann::ordered_json report = formats::DetectReport(outcomes, arguments.sequence, sequence);
     write_report = [report](const fs::path& staging) {
       formats::AtomicWrite(staging / "detect_report.json", formats::DumpSchemaJson("detect_report", 1, report));

@@ -14,6 +14,7 @@
 
 #include "calibproj/formats/calibration.h"
 #include "calibproj/formats/intrinsics_file.h"
+#include "calibproj/formats/provenance.h"
 #include "calibproj/formats/scale.h"
 #include "calibproj/formats/tracks_file.h"
 #include "calibproj/registration/reconstruction.h"
@@ -36,6 +37,7 @@ struct CalibrateArguments {
   std::vector<std::string> refine_intrinsics;  // [CAMERA=]ENTRIES items; empty: the intrinsics as given
   selfcal::SelfCalibrationOptions self_calibration;
   VideoIngestArguments ingest;  // with VIDEOS_DIR
+  std::vector<std::string> command_line;  // recorded in provenance.json
 };
 
 // What to refine of the intrinsics, and how (calibrate --refine-intrinsics).
@@ -71,6 +73,9 @@ struct CalibrationInputs {
   std::optional<formats::ProjectedMarkers> markers;
   // Why a camera of the tracks has no intrinsics, when the folder does not say.
   std::function<std::string(const std::string& camera)> missing_reason;
+  // What provenance.json records of the inputs; CalibrateInto adds the model, options
+  // and scale.
+  formats::ProvenanceRecord provenance;
 };
 
 // Registers, refines (the lenses too with `refinement`: self_calibration.json, and

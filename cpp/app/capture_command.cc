@@ -167,6 +167,19 @@ capture::CaptureRun Recorded(const capture::Site& site, const Projection& projec
   return run;
 }
 
+// What provenance.json records of a capture: the site file, the projection's sequence,
+// each camera's recording and the markers.
+formats::ProvenanceRecord CaptureProvenance(const Projection& projection, const capture::CaptureRun& run,
+                                            const CaptureArguments& arguments) {
+  formats::ProvenanceRecord record;
+  record.command = arguments.command_line;
+  record.source = formats::ProvenanceInput{arguments.site, ""};
+  record.sequence = formats::ProvenanceInput{projection.sequence_file.string(), ""};
+  for (const formats::CameraOutcome& camera : run.cameras) record.videos.emplace_back(camera.name, camera.video);
+  record.markers = projection.sequence.markers;
+  return record;
+}
+
 int Calibrated(const capture::Site& site, const Projection& projection, const capture::CaptureRun& run,
                OutputFolder& out, const CaptureArguments& arguments, const fs::path& recordings) {
   CalibrationInputs inputs;
@@ -177,6 +190,8 @@ int Calibrated(const capture::Site& site, const Projection& projection, const ca
   }
   inputs.markers = formats::ProjectedMarkers::FromSequence(projection.sequence);
   inputs.missing_reason = [](const std::string& camera) { return "no intrinsics for camera " + camera; };
+  inputs.provenance = CaptureProvenance(projection, run, arguments);
+  inputs.provenance.intrinsics = formats::ProvenanceInput{"", "the site file's intrinsics files"};
   const auto measurement = ScaleOption(arguments.scale, true);
   CheckScale(measurement, inputs.given, inputs.markers);
   const std::vector<std::string> exports =
@@ -199,9 +214,12 @@ int Checked(const Projection& projection, const capture::CaptureRun& run, std::o
   check.results = arguments.check;
   check.out = arguments.out;
   check.exports = arguments.exports;
+  check.command_line = arguments.command_line;
   const formats::Tracks tracks = formats::TracksOf(run.cameras, projection.sequence.markers_per_array);
+  formats::ProvenanceRecord provenance = CaptureProvenance(projection, run, arguments);
   bool repaired = false;
-  const int status = CheckAgainst(stored, tracks, projection.sequence_file.string(), check, out, &repaired);
+  const int status =
+      CheckAgainst(stored, tracks, projection.sequence_file.string(), check, out, provenance, &repaired);
   if (repaired) fs::rename(recordings, out->path() / "recordings");  // after the commit, as Calibrated
   return status;
 }

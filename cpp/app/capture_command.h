@@ -25,6 +25,7 @@ struct CaptureArguments {
   registration::Options options;
   std::vector<std::string> refine_intrinsics;  // as calibrate's
   selfcal::SelfCalibrationOptions self_calibration;
+  std::vector<std::string> command_line;  // recorded in provenance.json
 };
 
 std::shared_ptr<CaptureArguments> AddCaptureCommand(CLI::App& app, CLI::App** command);

@@ -78,7 +78,8 @@ StoredResults ReadStored(const std::string& folder) {
 }
 
 int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, const std::string& source,
-                 const CheckArguments& arguments, std::optional<OutputFolder>& out, bool* repaired) {
+                 const CheckArguments& arguments, std::optional<OutputFolder>& out,
+                 const formats::ProvenanceRecord& provenance, bool* repaired) {
   const std::vector<std::string> exports =
       arguments.exports.empty() ? std::vector<std::string>{} : formats::ParseExportFormats(arguments.exports);
   const check::CheckInputs inputs{&stored.calibration, &stored.intrinsics, stored.unusable, &tracks, &stored.tracks,
@@ -99,8 +100,17 @@ int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, con
   if (repair) {
     const check::Repair repaired =
         check::Repaired(inputs, result, registration::Options{}.weak_rotation_sigma_deg);
+    formats::ProvenanceRecord record = provenance;
+    record.command = arguments.command_line;
+    record.intrinsics = formats::ProvenanceInput{(fs::path(arguments.results) / "intrinsics").string(), ""};
+    record.model = stored.calibration.model;
+    record.checked = formats::ProvenanceInput{arguments.results, ""};
     SaveResults(*out, repaired.calibration, repaired.intrinsics, repaired.tracks, repaired.tracks, exports,
                 [&](const fs::path& staging) {
+                  formats::WriteProvenance(staging, formats::ProvenanceDocument(record, out->path(),
+                                                                                [](const std::string& line) {
+                                                                                  std::cerr << line << "\n";
+                                                                                }));
                   formats::AtomicWrite(staging / "check.json", check::CheckJson(result));
                 });
   } else if (out) {
@@ -128,7 +138,9 @@ int RunCheck(const CheckArguments& arguments, Interrupts& interrupts) {
   }
   const StoredResults stored = ReadStored(arguments.results);
   const formats::Tracks tracks = formats::ReadTracks(arguments.tracks);
-  return CheckAgainst(stored, tracks, arguments.tracks, arguments, out);
+  formats::ProvenanceRecord provenance;
+  provenance.source = formats::ProvenanceInput{arguments.tracks, ""};
+  return CheckAgainst(stored, tracks, arguments.tracks, arguments, out, provenance);
 }
 
 }  // namespace calibproj::app

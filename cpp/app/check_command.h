@@ -15,6 +15,7 @@
 #include "calibproj/formats/tracks_file.h"
 #include "interrupts.h"
 #include "calibproj/formats/output_folder.h"
+#include "calibproj/formats/provenance.h"
 
 namespace calibproj::app {
 
@@ -24,6 +25,7 @@ struct CheckArguments {
   bool force = false;
   bool json = false;
   check::CheckOptions options;
+  std::vector<std::string> command_line;  // recorded in provenance.json
 };
 
 std::shared_ptr<CheckArguments> AddCheckCommand(CLI::App& app, CLI::App** command);
@@ -43,9 +45,11 @@ struct StoredResults {
 StoredResults ReadStored(const std::string& results);
 
 // The stored calibration checked against `tracks` (named `source` in messages) and,
-// with `out` (open), repaired into it (`repaired` says whether it was); prints the
-// table (or JSON); the exit status.
+// with `out` (open), repaired into it (`repaired` says whether it was), its
+// provenance.json from `provenance` (the inputs; the command, stored intrinsics, model
+// and checked folder are added); prints the table (or JSON); the exit status.
 int CheckAgainst(const StoredResults& stored, const formats::Tracks& tracks, const std::string& source,
-                 const CheckArguments& arguments, std::optional<formats::OutputFolder>& out, bool* repaired = nullptr);
+                 const CheckArguments& arguments, std::optional<formats::OutputFolder>& out,
+                 const formats::ProvenanceRecord& provenance, bool* repaired = nullptr);
 
 }  // namespace calibproj::app

@@ -9,6 +9,8 @@
 #include <csignal>
 #include <exception>
 #include <iostream>
+#include <string>
+#include <vector>
 
 #include "calibrate_command.h"
 #include "capture_command.h"
@@ -46,6 +48,10 @@ int main(int argc, char** argv) {
     // CLI11 has an exit status per kind of error; the project has one for them all.
     return app.exit(error) == 0 ? 0 : kExitUsage;
   }
+  // Recorded in the outputs that say how they were made (provenance.json).
+  std::vector<std::string> command_line = {"calibproj-native"};
+  for (int k = 1; k < argc; ++k) command_line.emplace_back(argv[k]);
+  calibrate_args->command_line = check_args->command_line = capture_args->command_line = command_line;
   const std::string command = calibrate->parsed() ? "calibrate" : detect->parsed() ? "detect"
                               : check->parsed()   ? "check"
                               : capture->parsed() ? "capture"

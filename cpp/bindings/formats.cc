@@ -208,6 +208,7 @@ void register_formats(py::module_& m) {
     }
   });
   register_output_folder(m);
+  register_provenance(m);
   register_tracks(m);
   register_camera_intrinsics(m);
   register_calibration(m);

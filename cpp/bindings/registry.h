@@ -29,6 +29,8 @@ void register_calibration(pybind11::module_& m);
 void register_camera_intrinsics(pybind11::module_& m);
 // The results-folder transaction (OutputFolder, OutputFile), in the formats submodule.
 void register_output_folder(pybind11::module_& m);
+// provenance.json's record and writer, in the formats submodule.
+void register_provenance(pybind11::module_& m);
 void register_uncertainty(pybind11::module_& m);
 void register_capture(pybind11::module_& m);
 

@@ -177,12 +177,12 @@ def calibrate(
                 scale_source = {"measurement": str(measurement), "error": str(error)}
         if folder is not None:
             markers_spec = ingest_result.markers if ingest_result is not None else None
-            record = provenance(folder.path, command=command, source=source, sequence=sequence,
+            record = provenance(command=command, source=source, sequence=sequence,
                                 intrinsics=intrinsics_source, markers=markers_spec, model=calibration.model,
                                 options=options, scale=scale_source, videos=video_files(ingest_result),
                                 merged=merge)
             with folder.writing() as staging:
-                write_provenance(staging, record)  # first, as the self-calibration: the report shows them
+                write_provenance(staging, folder.path, record)  # first, as the self-calibration: the report shows them
                 if self_calibration is not None:
                     write_self_calibration(staging / SELF_CALIBRATION_FILE, *self_calibration)
                 write_results(staging, folder.path, calibration, tracks, intrinsics, formats, report,

@@ -5,8 +5,9 @@ standalone executable: `calibproj-native detect` on DEMO/room/videos, then
 `calibproj-native calibrate` from those tracks with the demo's metric scale (read from
 DEMO/results/provenance.json), its model and every export. Then compares, byte for
 byte, every file the executable wrote (camera_poses.json, metrics.json, points.ply,
-tracks.json, intrinsics/*.json and the exports) with the demo's, and prints one line
-per file, then
+tracks.json, intrinsics/*.json and the exports; provenance.json by what it records of
+the calibration: version, platform, model, options and scale) with the demo's, and
+prints one line per file, then
 
   native-parity: identical=K/N
 
@@ -83,12 +84,27 @@ def room_settings(room: Path) -> str:
     return f"camera-height:{name}={cameras[name]['center'][2]!r}"
 
 
+# What provenance.json says of the calibration itself (its inputs and the command are
+# each tool's own here: the executable calibrates its own tracks in a scratch folder).
+PROVENANCE_FIELDS = ("calibproj", "platform", "model", "options", "scale")
+
+
+def same_file(name: str, out: Path, reference: Path) -> bool:
+    if not (reference / name).is_file():
+        return False
+    if name == "provenance.json":
+        documents = [json.loads((folder / name).read_text()) for folder in (out, reference)]
+        return all(documents[0].get(key) == documents[1].get(key) for key in PROVENANCE_FIELDS)
+    return (out / name).read_bytes() == (reference / name).read_bytes()
+
+
 def compare_files(out: Path, reference: Path) -> None:
-    """One line per file the executable wrote, then the summary line."""
+    """One line per file the executable wrote, then the summary line (provenance.json is
+    compared by PROVENANCE_FIELDS)."""
     written = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
     identical = 0
     for name in written:
-        same = (reference / name).is_file() and (out / name).read_bytes() == (reference / name).read_bytes()
+        same = same_file(name, out, reference)
         identical += same
         print(f"{name:<26} {'identical' if same else 'DIFFERENT'}")
     print(f"native-parity: identical={identical}/{len(written)}")

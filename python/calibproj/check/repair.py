@@ -188,11 +188,11 @@ def check(
             raise UntrustedReference(result, f"{result.message} ({Path(out)} not written)")
         fixed, fixed_intrinsics, fixed_tracks = repaired(calibration, intrinsics, stored_tracks, tracks, result,
                                                          RegistrationOptions().weak_rotation_sigma_deg)
-        record = provenance(folder.path, command=command, source=source, sequence=sequence,
+        record = provenance(command=command, source=source, sequence=sequence,
                             intrinsics=folder_in / INTRINSICS_DIR, model=calibration.model, checked=folder_in,
                             videos=video_files(ingest_result))
         with folder.writing() as staging:
-            write_provenance(staging, record)
+            write_provenance(staging, folder.path, record)
             write_check(staging / CHECK_FILE, result)
             write_results(staging, folder.path, fixed, fixed_tracks, fixed_intrinsics, formats, report,
                           ingest_result)

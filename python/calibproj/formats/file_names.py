@@ -28,8 +28,8 @@ def path_as_recorded(path: str | os.PathLike, folder: str | os.PathLike) -> str:
     """How a results folder records an input's path: relative to the folder when the
     input lies beside it (under the folder's parent), so that the record survives when
     both are moved or renamed together (the demo writes everything in a staging folder
-    renamed at the end); absolute otherwise."""
-    path, folder = Path(os.path.abspath(path)), Path(os.path.abspath(folder))
-    if path.is_relative_to(folder.parent):
-        return Path(os.path.relpath(path, folder)).as_posix()
-    return str(path)
+    renamed at the end); absolute otherwise. The core's rule, which provenance.json
+    follows in both tools."""
+    from calibproj import _core
+
+    return _core.formats.path_as_recorded(Path(path), Path(folder))
