@@ -340,6 +340,8 @@ def prepare(root: Path, inputs: Inputs, fmt: str, index: int, mutation: Mutation
     sequence.write_bytes(dumps(inputs.sequence))
     target = sequence if fmt == "sequence" else intrinsics / "cam0.json"
     target.write_bytes(mutation.data)
-    return Run(fmt, mutation, target, ["detect", str(inputs.videos), "--sequence", str(sequence), "--intrinsics",
-                                       str(intrinsics), "--out", str(folder / "out" / "tracks.json"),
-                                       "--no-progress", "--workers", "1"])
+    # Every other run calibrates the videos instead of detecting them: the same ingest.
+    out = ["--out", str(folder / "out")] if index % 2 else ["--out", str(folder / "out" / "tracks.json")]
+    return Run(fmt, mutation, target, ["calibrate" if index % 2 else "detect", str(inputs.videos), "--sequence",
+                                       str(sequence), "--intrinsics", str(intrinsics), *out, "--no-progress",
+                                       "--workers", "1"])

@@ -53,6 +53,7 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   SharedFlag(cmd, "--sequence", args->sequence);
   SharedFlag(cmd, "--merge", args->merge);
   SharedFlag(cmd, "--export", args->exports);
+  SharedFlag(cmd, "--json", args->json);
   // One flag per registration knob, from the table the Python options are made from,
   // so that both commands take the same command lines with the same defaults.
   registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));
@@ -168,7 +169,7 @@ void PrintSummary(const formats::Calibration& calibration, const std::string& ou
 int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const registration::Options& options,
                   const std::vector<std::string>& exports, const std::optional<formats::ScaleMeasurement>& measurement,
                   const std::function<void(const fs::path& staging)>& extra,
-                  const std::optional<LensRefinement>& refinement) {
+                  const std::optional<LensRefinement>& refinement, bool json) {
   std::map<std::string, CameraIntrinsics> intrinsics = inputs.intrinsics.cameras;
   const formats::ProjectedMarkers* markers = inputs.markers ? &*inputs.markers : nullptr;
   Tracks given = inputs.given;
@@ -239,7 +240,11 @@ int CalibrateInto(OutputFolder& out, const CalibrationInputs& inputs, const regi
     if (extra) extra(staging);
   };
   SaveResults(out, calibration, intrinsics, given, tracks, exports, write_extra);
-  PrintSummary(calibration, out.path().string());
+  if (json) {
+    std::cout << formats::SummaryJson(calibration) << "\n";
+  } else {
+    PrintSummary(calibration, out.path().string());
+  }
   if (!scale_error.empty()) {
     throw InputError(scale_error + "; results written to " + out.path().string() + " in arbitrary units");
   }
@@ -322,6 +327,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
       inputs.provenance.videos.emplace_back(camera.name, camera.video);
     }
     inputs.provenance.markers = sequence.markers;
+    inputs.markers = formats::ProjectedMarkers::FromSequence(sequence);
     const nlohmann::ordered_json report = formats::DetectReport(outcomes, arguments.sequence, sequence);
     write_report = [report](const fs::path& staging) {
       formats::AtomicWrite(staging / "detect_report.json", formats::DumpSchemaJson("detect_report", 1, report));
@@ -331,13 +337,16 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   inputs.given = arguments.merge.empty()
                      ? recorded
                      : formats::WithEarlierObservations(arguments.merge, recorded, inputs.intrinsics.cameras);
-  if (!arguments.sequence.empty()) inputs.markers = MarkersOf(arguments.sequence, inputs.given.markers_per_array);
+  if (!arguments.sequence.empty() && !inputs.markers) {
+    inputs.markers = MarkersOf(arguments.sequence, inputs.given.markers_per_array);
+  }
   CheckScale(measurement, inputs.given, inputs.markers);
   CheckRefinement(refinement, inputs.given.cameras);
   inputs.missing_reason = [&](const std::string& camera) {
     return formats::MissingIntrinsicsFile(arguments.intrinsics, camera);
   };
-  return CalibrateInto(out, inputs, arguments.options, exports, measurement, write_report, refinement);
+  return CalibrateInto(out, inputs, arguments.options, exports, measurement, write_report, refinement,
+                       arguments.json);
 }
 
 }  // namespace calibproj::app

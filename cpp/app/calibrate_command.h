@@ -38,6 +38,7 @@ struct CalibrateArguments {
   selfcal::SelfCalibrationOptions self_calibration;
   VideoIngestArguments ingest;  // with VIDEOS_DIR
   std::vector<std::string> command_line;  // recorded in provenance.json
+  bool json = false;                      // the summary as JSON (formats::SummaryJson)
 };
 
 // What to refine of the intrinsics, and how (calibrate --refine-intrinsics).
@@ -81,12 +82,12 @@ struct CalibrationInputs {
 // Registers, refines (the lenses too with `refinement`: self_calibration.json, and
 // intrinsics/ and tracks.json follow the refined lenses), scales and writes the results
 // into `out` (open) with what `extra` writes into its staging folder; prints the
-// summary. 0 every camera calibrated, 1 not. InputError when the scale cannot be applied
+// summary (as JSON with `json`). 0 every camera calibrated, 1 not. InputError when the scale cannot be applied
 // (the results are then written unscaled).
 int CalibrateInto(formats::OutputFolder& out, const CalibrationInputs& inputs, const registration::Options& options,
                   const std::vector<std::string>& exports, const std::optional<formats::ScaleMeasurement>& measurement,
                   const std::function<void(const std::filesystem::path& staging)>& extra = {},
-                  const std::optional<LensRefinement>& refinement = std::nullopt);
+                  const std::optional<LensRefinement>& refinement = std::nullopt, bool json = false);
 
 // --scale MEASUREMENT parsed (none when empty); marker-size needs the projection's sequence.
 std::optional<formats::ScaleMeasurement> ScaleOption(const std::string& scale, bool has_sequence);

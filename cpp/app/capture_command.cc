@@ -46,6 +46,7 @@ std::shared_ptr<CaptureArguments> AddCaptureCommand(CLI::App& app, CLI::App** co
   SharedFlag(cmd, "--force", args->force);
   SharedFlag(cmd, "--export", args->exports);
   SharedFlag(cmd, "--no-progress", args->no_progress);
+  SharedFlag(cmd, "--json", args->json);
   registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));
   AddRefinementFlags(cmd, &args->refine_intrinsics, &args->self_calibration);
   *command = cmd;
@@ -202,7 +203,8 @@ int Calibrated(const capture::Site& site, const Projection& projection, const ca
   const auto write_report = [&](const fs::path& staging) {
     formats::AtomicWrite(staging / "detect_report.json", formats::DumpSchemaJson("detect_report", 1, report));
   };
-  const int status = CalibrateInto(out, inputs, arguments.options, exports, measurement, write_report, refinement);
+  const int status =
+      CalibrateInto(out, inputs, arguments.options, exports, measurement, write_report, refinement, arguments.json);
   // After the commit: an interruption before it leaves the recordings where they were.
   fs::rename(recordings, out.path() / "recordings");
   return status;
@@ -215,6 +217,7 @@ int Checked(const Projection& projection, const capture::CaptureRun& run, std::o
   check.out = arguments.out;
   check.exports = arguments.exports;
   check.command_line = arguments.command_line;
+  check.json = arguments.json;
   const formats::Tracks tracks = formats::TracksOf(run.cameras, projection.sequence.markers_per_array);
   formats::ProvenanceRecord provenance = CaptureProvenance(projection, run, arguments);
   bool repaired = false;

@@ -26,6 +26,7 @@ struct CaptureArguments {
   std::vector<std::string> refine_intrinsics;  // as calibrate's
   selfcal::SelfCalibrationOptions self_calibration;
   std::vector<std::string> command_line;  // recorded in provenance.json
+  bool json = false;                      // the summary as JSON (formats::SummaryJson)
 };
 
 std::shared_ptr<CaptureArguments> AddCaptureCommand(CLI::App& app, CLI::App** command);

@@ -142,17 +142,6 @@ Calibration NewCalibration(const py::dict& poses, const py::dict& failed, const 
   return c;
 }
 
-// "reference" (the first registered camera: the others' sigmas are relative to it),
-// "ok", "weak" (its rotation known worse than the registration's limit) or "failed".
-std::string StatusOf(const Calibration& c, const std::string& name) {
-  if (c.PoseOf(name) == nullptr) return "failed";
-  if (!c.registration_order.empty() && c.registration_order.front() == name) return "reference";
-  for (const auto& [camera, metrics] : c.metrics) {
-    if (camera == name) return metrics.weak ? "weak" : "ok";
-  }
-  return "ok";
-}
-
 const CameraPose& RegisteredPose(const Calibration& c, const std::string& name) {
   const CameraPose* pose = c.PoseOf(name);
   if (pose == nullptr) throw std::invalid_argument("camera " + name + ": not registered in this calibration");
@@ -360,9 +349,11 @@ void register_calibration(py::module_& m) {
                     "adjustment; None when not known (uncertainty.json holds it)")
       .def_property_readonly(
           "registered", [](const Calibration& c) { return NamesOf(c.poses); }, "the registered cameras, in order")
-      .def("status", &StatusOf, py::arg("name"),
+      .def("status", &Calibration::Status, py::arg("name"),
            "reference (the first registered camera: the others' sigmas are relative to it), ok, weak (its "
            "rotation known worse than the registration's limit) or failed")
+      .def("summary_json", &formats::SummaryJson,
+           "The per-camera summary both calibrate commands print with --json (JSON text).")
       .def(
           "pose", [](const Calibration& c, const std::string& name) { return RegisteredPose(c, name); },
           py::arg("name"), "The CameraPose of a registered camera (ValueError otherwise)")

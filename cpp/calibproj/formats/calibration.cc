@@ -33,6 +33,38 @@ const CameraPose* Calibration::PoseOf(const std::string& name) const {
   return nullptr;
 }
 
+std::string Calibration::Status(const std::string& name) const {
+  if (PoseOf(name) == nullptr) return "failed";
+  if (!registration_order.empty() && registration_order.front() == name) return "reference";
+  for (const auto& [camera, camera_metrics] : metrics) {
+    if (camera == name) return camera_metrics.weak ? "weak" : "ok";
+  }
+  return "ok";
+}
+
+std::string SummaryJson(const Calibration& calibration) {
+  const auto or_null = [](const auto& value) {
+    return value ? nlohmann::ordered_json(*value) : nlohmann::ordered_json(nullptr);
+  };
+  nlohmann::ordered_json rows = nlohmann::ordered_json::array();
+  for (const auto& [name, m] : calibration.metrics) {
+    rows.push_back({{"camera", name},
+                    {"registered", calibration.PoseOf(name) != nullptr},
+                    {"mean_px", or_null(m.mean_px)},
+                    {"std_px", or_null(m.std_px)},
+                    {"inliers", m.inliers},
+                    {"observations", m.observations},
+                    {"track2", m.track2_observations},
+                    {"view_score", m.view_score},
+                    {"rotation_sigma_deg", or_null(m.rotation_sigma_deg)},
+                    {"centre_sigma", or_null(m.centre_sigma)},
+                    {"weak", m.weak},
+                    {"failure", or_null(m.failure)},
+                    {"status", calibration.Status(name)}});
+  }
+  return PythonJson(rows);
+}
+
 const CameraPose* CameraPoses::PoseOf(const std::string& name) const {
   for (const auto& pose : poses) {
     if (pose.name == name) return &pose;

@@ -70,6 +70,9 @@ struct Calibration {
   const CameraPose* PoseOf(const std::string& name) const;
   // Why the camera failed; empty when it did not.
   std::string FailureOf(const std::string& name) const;
+  // "reference" (the first registered camera: the others' sigmas are relative to it),
+  // "ok", "weak" (its rotation known worse than the registration's limit) or "failed".
+  std::string Status(const std::string& name) const;
 };
 
 // The calibration of a registration: `cameras` and `point_ids` name the registration's
@@ -82,6 +85,11 @@ Calibration FromRegistration(const registration::RegistrationResult& result, con
 // The same calibration with every length multiplied by `factor`, in metres.
 // std::invalid_argument when the factor is not positive and finite.
 Calibration Scaled(const Calibration& calibration, double factor);
+
+// The per-camera summary both calibrate commands print with --json: per camera its
+// name, whether registered, mean and std residual (px), inliers, observations, those of
+// points two cameras see, view score, rotation and centre sigma, weak, failure, status.
+std::string SummaryJson(const Calibration& calibration);
 
 // The files' text.
 std::string CameraPosesJson(const Calibration& calibration);

@@ -36,6 +36,7 @@ std::vector<CommandFlag> MakeTable() {
       {"calibrate", "--exposure", "CAMERA=SECONDS", kExposureHelp},
       {"calibrate", "--detector-option", "NAME=VALUE", kDetectorOptionHelp},
       {"calibrate", "--no-progress", "", "no progress bars"},
+      {"calibrate", "--json", "", "print the per-camera summary as JSON"},
       {"detect", "--sequence", "FILE", "sequence.json of the projection"},
       {"detect", "--intrinsics", "DIR", kIntrinsicsHelp},
       {"detect", "--out", "FILE", "tracks file to write (tracks.json)"},
@@ -65,6 +66,7 @@ std::vector<CommandFlag> MakeTable() {
       {"capture", "--scale", "MEASUREMENT", kScaleHelp},
       {"capture", "--export", "FORMATS", kExportHelp},
       {"capture", "--no-progress", "", "no status lines while recording"},
+      {"capture", "--json", "", "print the per-camera summary as JSON"},
   };
 }
 

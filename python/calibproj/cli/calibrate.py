@@ -58,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_shared_argument(parser, "calibrate", "--tracks", ", instead of videos")
 
     output = parser.add_argument_group("output and progress")
-    output.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
+    add_shared_argument(output, "calibrate", "--json")
     output.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
     add_shared_argument(output, "calibrate", "--no-progress")
 
@@ -126,17 +126,12 @@ def run(args: argparse.Namespace) -> int:
 def print_results(calibration, args: argparse.Namespace) -> int:
     """The per-camera table (or ``--json``), the planes, the expected error and where
     the results are; exit status 1 when a camera failed."""
-    import json
     import sys
 
-    from calibproj.formats.calibration import calibration_summary
-    from calibproj.cli.summary import expected_error, format_cameras, row_status, unit_words
+    from calibproj.cli.summary import expected_error, format_cameras, unit_words
 
     if args.json:
-        rows = calibration_summary(calibration)
-        for row in rows:
-            row["status"] = row_status(calibration, row["camera"])
-        print(json.dumps(rows, indent=1))
+        print(calibration.summary_json())
     else:
         from calibproj.report.page import plane_text
 

@@ -45,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         add_shared_argument(parser, "capture", name)
     add_refine_argument(parser)
     output = parser.add_argument_group("output and progress")
-    output.add_argument("--json", action="store_true", help="print the per-camera summary as JSON")
+    add_shared_argument(output, "capture", "--json")
     output.add_argument("--no-report", action="store_true", help="do not write report.html and report/*.png")
     add_shared_argument(output, "capture", "--no-progress")
     add_dataclass_arguments(parser, RegistrationOptions, "registration options")

@@ -81,8 +81,3 @@ def unit_words(calibration: Any) -> str:
     if calibration.unit == "m":
         return "in metres"
     return "unit: the reference camera's height above the floor; --scale gives metres"
-
-
-def row_status(calibration: Any, name: str) -> str:
-    """The status as the JSON summary gives it (lower case)."""
-    return calibration.status(name)

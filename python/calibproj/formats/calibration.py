@@ -10,31 +10,6 @@ measurement the unit is arbitrary and the first registered camera is at height 1
 
 from __future__ import annotations
 
-from typing import Any
-
 from calibproj._core.formats import Calibration, CameraMetrics, CameraPose, Plane
 
-__all__ = ["Calibration", "CameraMetrics", "CameraPose", "Plane", "calibration_summary"]
-
-
-def calibration_summary(calibration: Calibration) -> list[dict[str, Any]]:
-    """One row per camera: name, status, mean/std error, inliers, view score."""
-    rows = []
-    for name, m in calibration.metrics.items():
-        rows.append(
-            {
-                "camera": name,
-                "registered": name in calibration.poses,
-                "mean_px": m.mean_px,
-                "std_px": m.std_px,
-                "inliers": m.inliers,
-                "observations": m.observations,
-                "track2": m.track2_observations,
-                "view_score": m.view_score,
-                "rotation_sigma_deg": m.rotation_sigma_deg,
-                "centre_sigma": m.centre_sigma,
-                "weak": m.weak,
-                "failure": m.failure,
-            }
-        )
-    return rows
+__all__ = ["Calibration", "CameraMetrics", "CameraPose", "Plane"]
