@@ -102,7 +102,7 @@ def assert_same_provenance(python: Path, native: Path) -> None:
         for key in ("created", "command", "python"):
             document.pop(key, None)
     assert documents[0] == documents[1]
-    assert documents[1]["options"] and documents[1]["inputs"]["source"]["sha256"]
+    assert documents[1]["options"] and documents[1]["inputs"]["source"]["path"]
 
 
 def test_native_scales_and_exports_as_python_does(simulation: Path, tmp_path: Path) -> None:
@@ -404,6 +404,38 @@ def test_native_calibrates_videos_as_python_does(room: Path, tmp_path: Path) -> 
         assert error_line(python) == error_line(native), args
 
 
+def test_native_starts_cameras_without_intrinsics_from_a_nominal_field_of_view(room: Path, tmp_path: Path) -> None:
+    """calibrate VIDEOS_DIR --nominal-fov: a camera without an intrinsics file starts
+    from a centred pinhole of that field of view and the video's frame size, refined by
+    the self-calibration; both tools give the same files, and refuse the same misuses."""
+    videos, sequence = room / "room" / "videos", room / "sequence" / "sequence.json"
+    given = tmp_path / "intrinsics"
+    given.mkdir()
+    first = sorted((room / "room" / "intrinsics").iterdir())[0]
+    shutil.copy(first, given / first.name)  # one camera with its file, the others nominal
+    common = [str(videos), "--sequence", str(sequence), "--intrinsics", str(given), "--nominal-fov", "60",
+              "--refine-intrinsics", "focal", "--no-progress"]
+    python = run_python("calibrate", *common, "--out", str(tmp_path / "python"), "--no-report")
+    native = run_native("calibrate", *common, "--out", str(tmp_path / "native"))
+    assert python.returncode == native.returncode, (python.stderr, native.stderr)
+    assert native.returncode in (0, 1), native.stderr
+    written = [name for name in files_below(tmp_path / "native") if name != "detect_report.json"]
+    assert {"self_calibration.json", "provenance.json", "intrinsics/cam2.json"} <= set(written)
+    assert_same_bytes(tmp_path / "python", tmp_path / "native", written)
+    assert "deg field of view" in native.stderr
+    misuses = [[str(videos), "--sequence", str(sequence), "--nominal-fov", "60"],
+               [str(videos), "--sequence", str(sequence), "--refine-intrinsics", "focal"],
+               ["--tracks", str(tmp_path / "native" / "tracks.json"), "--nominal-fov", "60", "--refine-intrinsics",
+                "focal"],
+               [*common[:5], "--nominal-fov", "5", "--refine-intrinsics", "focal"],
+               [*common[:5], "--nominal-fov", "nan", "--refine-intrinsics", "focal"]]
+    for args in misuses:
+        python = run_python("calibrate", *args, "--out", str(tmp_path / "p"))
+        native = run_native("calibrate", *args, "--out", str(tmp_path / "n"))
+        assert python.returncode == native.returncode == 2, (args, python.stderr, native.stderr)
+        assert error_line(python) == error_line(native), args
+
+
 def test_native_detect_bad_inputs_fail_with_the_same_messages(room: Path, tmp_path: Path) -> None:
     videos = room / "room" / "videos"
     not_a_sequence = tmp_path / "tracks_as_sequence.json"
@@ -489,10 +521,8 @@ def test_both_check_commands_take_the_same_options() -> None:
     assert native - python == set()
 
 
-# What only the Python calibrate has (README, "OR PCs"): --nominal-fov (which takes a
-# camera's image size from its video for a lens the self-calibration starts from) and
-# the report.
-PYTHON_ONLY_CALIBRATE = {"--no-report", "--nominal-fov"}
+# What only the Python calibrate has (README, "OR PCs"): the report.
+PYTHON_ONLY_CALIBRATE = {"--no-report"}
 
 
 # What only the Python capture has (README, "Running a room"): the report, as for

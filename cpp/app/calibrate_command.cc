@@ -23,7 +23,7 @@
 #include "calibproj/selfcal/rounds.h"
 #include "calibproj/formats/tracks_file.h"
 #include "calibproj/formats/detect_report.h"
-#include "calibproj/formats/sequence_file.h"
+#include "calibproj/video/video_reader.h"
 
 namespace calibproj::app {
 
@@ -46,7 +46,7 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
       "asked for. An existing results folder is only overwritten with --force.");
   cmd->add_option("videos", args->videos, "folder of camera videos (<camera>.mp4)")->type_name("VIDEOS_DIR");
   SharedFlag(cmd, "--tracks", args->tracks);
-  SharedFlag(cmd, "--intrinsics", args->intrinsics)->required();
+  SharedFlag(cmd, "--intrinsics", args->intrinsics);
   SharedFlag(cmd, "--out", args->out)->required();
   SharedFlag(cmd, "--force", args->force);
   SharedFlag(cmd, "--scale", args->scale);
@@ -54,6 +54,7 @@ std::shared_ptr<CalibrateArguments> AddCalibrateCommand(CLI::App& app, CLI::App*
   SharedFlag(cmd, "--merge", args->merge);
   SharedFlag(cmd, "--export", args->exports);
   SharedFlag(cmd, "--json", args->json);
+  SharedFlag(cmd, "--nominal-fov", args->nominal_fov);
   // One flag per registration knob, from the table the Python options are made from,
   // so that both commands take the same command lines with the same defaults.
   registration::VisitRegistrationOptions(args->options, TableFlags(cmd, "registration options"));
@@ -272,6 +273,31 @@ void CheckScale(const std::optional<formats::ScaleMeasurement>& measurement, con
 
 namespace {
 
+// The nominal fields of view a camera may start from (calibrate --nominal-fov), degrees.
+constexpr double kMinNominalFovDeg = 10.0;
+constexpr double kMaxNominalFovDeg = 170.0;
+
+// Whether a nominal field of view, if given, can be used; intrinsics otherwise.
+void CheckNominalFov(const CalibrateArguments& arguments) {
+  if (!arguments.nominal_fov) {
+    if (arguments.intrinsics.empty()) {
+      throw InputError("no intrinsics: give --intrinsics DIR, or --nominal-fov DEG with --refine-intrinsics");
+    }
+    return;
+  }
+  if (arguments.refine_intrinsics.empty()) {
+    throw InputError("--nominal-fov needs --refine-intrinsics: a guessed focal length must be refined");
+  }
+  if (arguments.videos.empty()) {
+    throw InputError("--nominal-fov needs videos (their frame size); calibrating from tracks needs --intrinsics");
+  }
+  const double fov = *arguments.nominal_fov;
+  if (!(fov >= kMinNominalFovDeg && fov <= kMaxNominalFovDeg)) {
+    throw InputError("--nominal-fov must be a horizontal field of view in [10, 170] degrees, got " +
+                     formats::PythonFloat(fov));
+  }
+}
+
 // Videos or tracks, and what applies to each, with the Python command's messages.
 void CheckSource(const CalibrateArguments& arguments) {
   if (arguments.videos.empty() == arguments.tracks.empty()) {
@@ -280,11 +306,57 @@ void CheckSource(const CalibrateArguments& arguments) {
   if (!arguments.videos.empty() && arguments.sequence.empty()) {
     throw InputError(arguments.videos + ": calibrating from videos needs --sequence sequence.json");
   }
-  if (!arguments.videos.empty()) return;
-  if (!arguments.ingest.exposures.empty()) throw InputError("--exposure applies to videos, not to --tracks");
-  if (arguments.ingest.AnyKnobGiven() || !arguments.ingest.detector_options.empty()) {
-    throw InputError("ingest and detector options apply to videos, not to --tracks");
+  if (arguments.videos.empty()) {
+    if (!arguments.ingest.exposures.empty()) throw InputError("--exposure applies to videos, not to --tracks");
+    if (arguments.ingest.AnyKnobChanged() || !arguments.ingest.detector_options.empty()) {
+      throw InputError("ingest and detector options apply to videos, not to --tracks");
+    }
   }
+  CheckNominalFov(arguments);
+}
+
+// The intrinsics of the videos' cameras: from their file where there is one (a bad file
+// still fails its camera), else a pinhole of the nominal field of view and the video's
+// frame size.
+IntrinsicsDir WithNominal(const CalibrateArguments& arguments, std::map<std::string, std::string>* sources) {
+  std::map<std::string, std::vector<fs::path>> files;
+  if (!arguments.intrinsics.empty()) {
+    try {
+      files = formats::IntrinsicsFilesIn(arguments.intrinsics);
+    } catch (const InputError&) {  // no folder, or no intrinsics file in it: every camera nominal
+    }
+  }
+  IntrinsicsDir out;
+  for (const auto& [name, video] : VideoPaths(arguments.videos)) {
+    try {
+      if (files.count(name)) {
+        const fs::path file = formats::IntrinsicsFileOf(arguments.intrinsics, name);
+        (*sources)[name] = file.string();
+        out.cameras[name] = formats::ReadIntrinsics(file);
+        continue;
+      }
+      const std::string fov = formats::FormatNumber("%g", *arguments.nominal_fov);
+      (*sources)[name] = "a nominal " + fov + " deg field of view";
+      const video::VideoInfo info = video::ProbeVideo(video.string());
+      out.cameras[name] = formats::NominalIntrinsics(name, info.width, info.height, *arguments.nominal_fov);
+      std::cerr << "camera " << name << ": no intrinsics file; starting from a " << fov << " deg field of view\n";
+    } catch (const std::exception& error) {
+      out.unusable[name] = error.what();
+    }
+  }
+  return out;
+}
+
+// The ingest's lookup of the intrinsics WithNominal gathered, with where each came from
+// (`sources`); a camera whose file is bad fails with its problem.
+IntrinsicsLookup IntrinsicsOf(const IntrinsicsDir& intrinsics, const std::map<std::string, std::string>& sources) {
+  return [&intrinsics, &sources](const std::string& name, std::string* source) {
+    if (const auto bad = intrinsics.unusable.find(name); bad != intrinsics.unusable.end()) {
+      throw InputError(bad->second);
+    }
+    *source = sources.at(name);
+    return intrinsics.cameras.at(name);
+  };
 }
 
 // What provenance.json records of the command line's inputs.
@@ -293,7 +365,7 @@ formats::ProvenanceRecord ProvenanceOf(const CalibrateArguments& arguments) {
   record.command = arguments.command_line;
   record.source = formats::ProvenanceInput{arguments.videos.empty() ? arguments.tracks : arguments.videos, ""};
   if (!arguments.sequence.empty()) record.sequence = formats::ProvenanceInput{arguments.sequence, ""};
-  record.intrinsics = formats::ProvenanceInput{arguments.intrinsics, ""};
+  if (!arguments.intrinsics.empty()) record.intrinsics = formats::ProvenanceInput{arguments.intrinsics, ""};
   if (!arguments.merge.empty()) record.merged = formats::ProvenanceInput{arguments.merge, ""};
   return record;
 }
@@ -313,14 +385,23 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
   out.Open();
   CalibrationInputs inputs;
   inputs.provenance = ProvenanceOf(arguments);
+  std::map<std::string, std::string> intrinsics_sources;
+  if (arguments.nominal_fov) inputs.intrinsics = WithNominal(arguments, &intrinsics_sources);
   std::function<void(const fs::path& staging)> write_report;
   Tracks recorded;
   if (arguments.videos.empty()) {
     recorded = ReadTracks(arguments.tracks);
   } else {
     const ingest::SequenceDescription sequence = formats::ReadSequence(arguments.sequence);
+    // With lenses to refine and no ingest knob changed, the ingest's local check is off,
+    // as in the Python command (pipeline.calibrate): it compares each centre with its
+    // neighbours to a fraction of a pixel, which a lens still to be refined does not allow.
+    VideoIngestArguments ingest = arguments.ingest;
+    if (refinement && !ingest.AnyKnobChanged()) ingest.options.consistency.local_neighbours = 0;
     const std::vector<formats::CameraOutcome> outcomes =
-        IngestVideos(arguments.videos, arguments.intrinsics, sequence, arguments.ingest);
+        arguments.nominal_fov
+            ? IngestVideos(arguments.videos, IntrinsicsOf(inputs.intrinsics, intrinsics_sources), sequence, ingest)
+            : IngestVideos(arguments.videos, arguments.intrinsics, sequence, ingest);
     recorded = formats::TracksOf(outcomes, sequence.markers_per_array);
     for (const formats::CameraOutcome& camera : outcomes) {
       if (!camera.ok()) inputs.left_out.emplace_back(camera.name, camera.error);
@@ -333,7 +414,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
       formats::AtomicWrite(staging / "detect_report.json", formats::DumpSchemaJson("detect_report", 1, report));
     };
   }
-  inputs.intrinsics = LoadIntrinsicsDir(arguments.intrinsics);
+  if (!arguments.nominal_fov) inputs.intrinsics = LoadIntrinsicsDir(arguments.intrinsics);
   inputs.given = arguments.merge.empty()
                      ? recorded
                      : formats::WithEarlierObservations(arguments.merge, recorded, inputs.intrinsics.cameras);

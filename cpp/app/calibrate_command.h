@@ -39,6 +39,9 @@ struct CalibrateArguments {
   VideoIngestArguments ingest;  // with VIDEOS_DIR
   std::vector<std::string> command_line;  // recorded in provenance.json
   bool json = false;                      // the summary as JSON (formats::SummaryJson)
+  // With videos and --refine-intrinsics: the horizontal field of view (deg) a camera
+  // without an intrinsics file starts from.
+  std::optional<double> nominal_fov;
 };
 
 // What to refine of the intrinsics, and how (calibrate --refine-intrinsics).

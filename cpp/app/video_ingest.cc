@@ -7,6 +7,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <sstream>
 #include <thread>
 #include <type_traits>
 #include <vector>
@@ -177,23 +178,6 @@ bool HasSuffix(const fs::path& path, const std::vector<std::string>& suffixes) {
   return std::find(suffixes.begin(), suffixes.end(), Lower(path.extension().string())) != suffixes.end();
 }
 
-// Camera name (file stem) -> video, sorted by name.
-std::map<std::string, fs::path> VideoPaths(const fs::path& folder) {
-  if (!fs::is_directory(folder)) throw InputError(folder.string() + ": no such videos folder");
-  std::map<std::string, fs::path> paths;
-  for (const auto& entry : fs::directory_iterator(folder)) {
-    if (!entry.is_regular_file() || !HasSuffix(entry.path(), kVideoSuffixes)) continue;
-    const std::string name = entry.path().stem().string();
-    if (paths.count(name)) throw InputError(entry.path().string() + ": a second video for camera '" + name + "'");
-    paths[name] = entry.path();
-  }
-  if (paths.empty()) {
-    std::string patterns;
-    for (const auto& suffix : kVideoSuffixes) patterns += (patterns.empty() ? "*" : ", *") + suffix;
-    throw InputError(folder.string() + ": no videos (" + patterns + ")");
-  }
-  return paths;
-}
 
 // The camera's intrinsics file, read; InputError with the message the camera reports.
 CameraIntrinsics IntrinsicsFor(const fs::path& folder, const std::string& name, std::string* source) {
@@ -240,12 +224,12 @@ struct IngestSetup {
   }
 };
 
-CameraOutcome IngestOne(const std::string& name, const fs::path& video, const fs::path& intrinsics_dir,
+CameraOutcome IngestOne(const std::string& name, const fs::path& video, const IntrinsicsLookup& intrinsics_of,
                         const IngestSetup& setup, const ingest::SequenceDescription& sequence,
                         ProgressPrinter& printer) {
   CameraOutcome outcome{name, video.string(), "", "", {}};
   try {
-    const CameraIntrinsics intrinsics = IntrinsicsFor(intrinsics_dir, name, &outcome.intrinsics);
+    const CameraIntrinsics intrinsics = intrinsics_of(name, &outcome.intrinsics);
     const ingest::CameraModel camera = formats::CameraModelOf(intrinsics, outcome.intrinsics);
     outcome.result = ingest::IngestCamera(video.string(), sequence, camera, setup.For(name), printer.For(name));
   } catch (const std::exception& error) {
@@ -260,7 +244,7 @@ CameraOutcome IngestOne(const std::string& name, const fs::path& video, const fs
 }
 
 // Every camera through the ingest, `workers` at a time; results in name order.
-std::vector<CameraOutcome> IngestAll(const std::map<std::string, fs::path>& videos, const fs::path& intrinsics_dir,
+std::vector<CameraOutcome> IngestAll(const std::map<std::string, fs::path>& videos, const IntrinsicsLookup& intrinsics_of,
                                      const VideoIngestArguments& arguments, const IngestSetup& setup,
                                      const ingest::SequenceDescription& sequence) {
   const std::vector<std::pair<std::string, fs::path>> jobs(videos.begin(), videos.end());
@@ -269,7 +253,7 @@ std::vector<CameraOutcome> IngestAll(const std::map<std::string, fs::path>& vide
   std::atomic<size_t> next{0};
   const auto work = [&] {
     for (size_t k = next++; k < jobs.size(); k = next++) {
-      outcomes[k] = IngestOne(jobs[k].first, jobs[k].second, intrinsics_dir, setup, sequence, printer);
+      outcomes[k] = IngestOne(jobs[k].first, jobs[k].second, intrinsics_of, setup, sequence, printer);
     }
   };
   const size_t threads = std::min(jobs.size(), static_cast<size_t>(std::max(1, arguments.workers)));
@@ -281,6 +265,44 @@ std::vector<CameraOutcome> IngestAll(const std::map<std::string, fs::path>& vide
 
 }  // namespace
 
+std::map<std::string, fs::path> VideoPaths(const fs::path& folder) {
+  if (!fs::is_directory(folder)) throw InputError(folder.string() + ": no such videos folder");
+  std::map<std::string, fs::path> paths;
+  for (const auto& entry : fs::directory_iterator(folder)) {
+    if (!entry.is_regular_file() || !HasSuffix(entry.path(), kVideoSuffixes)) continue;
+    const std::string name = entry.path().stem().string();
+    if (paths.count(name)) throw InputError(entry.path().string() + ": a second video for camera '" + name + "'");
+    paths[name] = entry.path();
+  }
+  if (paths.empty()) {
+    std::string patterns;
+    for (const auto& suffix : kVideoSuffixes) patterns += (patterns.empty() ? "*" : ", *") + suffix;
+    throw InputError(folder.string() + ": no videos (" + patterns + ")");
+  }
+  return paths;
+}
+
+bool VideoIngestArguments::AnyKnobChanged() const {
+  // Both tables walked in the same order: the k-th knob of one is the k-th of the other.
+  std::vector<std::string> values, defaults;
+  const auto text_into = [](std::vector<std::string>* texts) {
+    return [texts](const std::string&, const auto& field, const std::string&) {
+      std::ostringstream text;
+      text.precision(17);
+      if constexpr (std::is_enum_v<std::decay_t<decltype(field)>>) {
+        text << static_cast<int>(field);
+      } else {
+        text << field;
+      }
+      texts->push_back(text.str());
+    };
+  };
+  ingest::IngestOptions unchanged;
+  ingest::VisitIngestOptions(options, text_into(&values));
+  ingest::VisitIngestOptions(unchanged, text_into(&defaults));
+  return values != defaults;
+}
+
 void AddVideoIngestFlags(CLI::App* command, VideoIngestArguments* arguments, const std::vector<std::string>& exclude) {
   command->add_option("--workers", arguments->workers, "cameras processed at once")->capture_default_str();
   SharedFlag(command, "--detector-option", arguments->detector_options)->allow_extra_args(false);
@@ -290,13 +312,19 @@ void AddVideoIngestFlags(CLI::App* command, VideoIngestArguments* arguments, con
   // its flags are made too: both commands take the same command lines.
   const auto flag = TableFlags(command, "ingest options");
   ingest::VisitIngestOptions(arguments->options, [&](const std::string& name, auto& field, const std::string& help) {
-    if (std::find(exclude.begin(), exclude.end(), name) != exclude.end()) return;
-    flag(name, field, help);
-    arguments->knob_flags.push_back(command->get_options().back());
+    if (std::find(exclude.begin(), exclude.end(), name) == exclude.end()) flag(name, field, help);
   });
 }
 
 std::vector<CameraOutcome> IngestVideos(const std::string& videos, const std::string& intrinsics,
+                                        const ingest::SequenceDescription& sequence,
+                                        const VideoIngestArguments& arguments) {
+  return IngestVideos(
+      videos, [&](const std::string& name, std::string* source) { return IntrinsicsFor(intrinsics, name, source); },
+      sequence, arguments);
+}
+
+std::vector<CameraOutcome> IngestVideos(const std::string& videos, const IntrinsicsLookup& intrinsics_of,
                                         const ingest::SequenceDescription& sequence,
                                         const VideoIngestArguments& arguments) {
   const auto paths = VideoPaths(videos);
@@ -304,7 +332,7 @@ std::vector<CameraOutcome> IngestVideos(const std::string& videos, const std::st
   IngestSetup setup{arguments.options, ParseExposures(arguments.exposures, paths)};
   ApplyDetectorOptions(arguments.detector_options, sequence.markers.substr(0, sequence.markers.find(':')),
                        &setup.options.detector);
-  return IngestAll(paths, intrinsics, arguments, setup, sequence);
+  return IngestAll(paths, intrinsics_of, arguments, setup, sequence);
 }
 
 }  // namespace calibproj::app

@@ -149,6 +149,10 @@ void register_camera_intrinsics(py::module_& m) {
       "14 (None or empty: five zeros). Values are checked: ValueError naming the camera and the problem. "
       "Read-only; arrays are read-only copies; two objects are equal only when they are the same object.")
       .def(py::init(&Make), py::arg("name"), py::arg("resolution"), py::arg("K"), py::arg("dist") = py::none())
+      .def_static("nominal", &formats::NominalIntrinsics, py::arg("name"), py::arg("width"), py::arg("height"),
+                  py::arg("fov_deg"),
+                  "A pinhole with the horizontal field of view fov_deg, square pixels, the principal point at the\n"
+                  "image centre and no distortion: where a camera without any calibration starts.")
       .def_readonly("name", &CameraIntrinsics::name)
       .def_property_readonly("resolution", &ResolutionTuple, "(width, height), or None when not known")
       .def_property_readonly("K", [](const CameraIntrinsics& in) { return ReadOnly(in.K); }, "3x3 camera matrix")

@@ -148,7 +148,6 @@ def calibrate(
                 intrinsics_source, names + [name for name in earlier_cameras if name not in names])
         else:
             intrinsics, unusable = _with_nominal(intrinsics_source, videos, nominal_fov_deg)
-            intrinsics_source = intrinsics if intrinsics_source is None else intrinsics_source
         tracks, ingest_failed, ingest_result = _tracks_of(given, sequence,
                                                           intrinsics if nominal_fov_deg is not None else intrinsics_source,
                                                           ingest_options, detector_options, exposures,

@@ -193,4 +193,11 @@ CameraIntrinsics MakeIntrinsics(const std::string& name, std::optional<std::pair
   return in;
 }
 
+CameraIntrinsics NominalIntrinsics(const std::string& name, int width, int height, double fov_deg) {
+  const double focal = 0.5 * width / std::tan(fov_deg * M_PI / 180.0 / 2.0);
+  Eigen::Matrix3d K;
+  K << focal, 0.0, (width - 1) / 2.0, 0.0, focal, (height - 1) / 2.0, 0.0, 0.0, 1.0;
+  return MakeIntrinsics(name, std::make_pair(double(width), double(height)), K, {});
+}
+
 }  // namespace calibproj::formats

@@ -64,4 +64,9 @@ std::string IntrinsicsProblem(const CameraIntrinsics& intrinsics);
 CameraIntrinsics MakeIntrinsics(const std::string& name, std::optional<std::pair<double, double>> resolution,
                                 const Eigen::Matrix3d& K, std::vector<double> dist);
 
+// A pinhole with the horizontal field of view `fov_deg`, square pixels, the principal
+// point at the image centre and no distortion: where a camera without any calibration
+// starts (calibrate --nominal-fov).
+CameraIntrinsics NominalIntrinsics(const std::string& name, int width, int height, double fov_deg);
+
 }  // namespace calibproj::formats

@@ -37,6 +37,9 @@ std::vector<CommandFlag> MakeTable() {
       {"calibrate", "--detector-option", "NAME=VALUE", kDetectorOptionHelp},
       {"calibrate", "--no-progress", "", "no progress bars"},
       {"calibrate", "--json", "", "print the per-camera summary as JSON"},
+      {"calibrate", "--nominal-fov", "DEG",
+       "with videos and --refine-intrinsics: a camera without an intrinsics file starts from a pinhole with this "
+       "horizontal field of view (centred, no distortion)"},
       {"detect", "--sequence", "FILE", "sequence.json of the projection"},
       {"detect", "--intrinsics", "DIR", kIntrinsicsHelp},
       {"detect", "--out", "FILE", "tracks file to write (tracks.json)"},

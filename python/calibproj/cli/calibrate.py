@@ -65,9 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     more = parser.add_argument_group("more observations and lenses")
     add_shared_argument(more, "calibrate", "--merge")
     add_refine_argument(more)
-    more.add_argument("--nominal-fov", type=float, metavar="DEG",
-                      help="with videos and --refine-intrinsics: a camera without an intrinsics file starts "
-                           "from a pinhole with this horizontal field of view (centred, no distortion)")
+    add_shared_argument(more, "calibrate", "--nominal-fov", type=float)
 
     videos = parser.add_argument_group("ingest of the videos (as calibproj detect)")
     videos.add_argument("--workers", type=int, default=2, help="cameras ingested at once (default 2)")

@@ -30,8 +30,6 @@ from collections.abc import Mapping
 from dataclasses import asdict
 from typing import Any
 
-import numpy as np
-
 from calibproj import _core
 from calibproj.formats.intrinsics import Intrinsics, intrinsics_from_json
 from calibproj.formats.jsonio import FormatError, read_json
@@ -62,10 +60,7 @@ def nominal_intrinsics(name: str, resolution: tuple[int, int], fov_deg: float) -
     """A pinhole with the horizontal field of view ``fov_deg``, square pixels, the
     principal point at the image centre and no distortion: where a camera without any
     calibration starts."""
-    width, height = resolution
-    focal = 0.5 * width / np.tan(np.radians(fov_deg) / 2.0)
-    K = np.array([[focal, 0.0, (width - 1) / 2.0], [0.0, focal, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
-    return Intrinsics(name, (width, height), K, np.zeros(5))
+    return Intrinsics.nominal(name, *resolution, fov_deg)
 
 
 def convert_tracks(tracks: Tracks, given: Mapping[str, Intrinsics], refined: Mapping[str, Intrinsics]) -> Tracks:
