@@ -79,6 +79,9 @@ constexpr int kReliefTestCoarsening = 2;
 // Reconstructed points a raised surface needs before its outline decides where the
 // projector draws (ProjectedPlane): fewer outline too small a part of it.
 constexpr int kMinOutlinePoints = 6;
+// Points of one plane a camera needs before its projector-to-camera homography on that
+// plane is fitted (PlaceSingleViewPointsOnTheirSurfaces): a few beyond the four it takes.
+constexpr int kMinPlaneMapPoints = 6;
 // How many times better a plane's projector-to-camera homography must explain a point
 // seen once than every other plane's before the point is put on it.
 constexpr double kPlaneEvidence = 2.0;
@@ -1329,7 +1332,7 @@ void Reconstruction::PlaceSingleViewPointsOnTheirSurfaces() {
     if (single.empty()) continue;
     std::vector<cv::Mat> maps(from.size());
     for (size_t k = 0; k < from.size(); ++k) {
-      if (static_cast<int>(from[k].size()) >= kMinOutlinePoints) maps[k] = cv::findHomography(from[k], to[k], 0);
+      if (static_cast<int>(from[k].size()) >= kMinPlaneMapPoints) maps[k] = cv::findHomography(from[k], to[k], 0);
     }
     for (const int i : single) {
       const int p = point_index_(i);
