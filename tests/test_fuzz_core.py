@@ -428,6 +428,16 @@ class Baselines:
         output.open()
         return output
 
+    @staticmethod
+    def provenance_record() -> Any:
+        record = _core.formats.ProvenanceRecord()
+        record.command = ["calibproj", "calibrate"]
+        record.source = _core.formats.ProvenanceInput(path="tracks.json")
+        record.videos = [("a", "rtsp://127.0.0.1:8554/a")]
+        record.scale = _core.formats.ScaleSource("marker-size:0.1", None, "no marker")
+        record.set_options(model="free")
+        return record
+
     def specs(self) -> dict[str, Spec | None]:
         """Valid calls by qualified name (None: a property or a method without arguments
         whose receivers are listed in receivers())."""
@@ -520,6 +530,7 @@ class Baselines:
             "_core.registration.Reconstruction.set_lens_cross_covariances": Spec(
                 [("cameras", []), ("joint", np.zeros((0, 0)))]),
             "_core.registration.Reconstruction.projector_prediction": Spec([("point", 0)]),
+            "_core.registration.Reconstruction.projected_plane": Spec([("point", 0)]),
             "_core.registration.Reconstruction.run": Spec([("log", lambda message: None)]),
             "_core.registration.PairCandidate": Spec([]),
             "_core.registration.InitialPairResult": Spec([]),
@@ -588,6 +599,7 @@ class Baselines:
                                             ("use_timestamps", True), ("max_frame_gap_s", 2.0)]),
             "_core.sync.option_table": Spec([]),
             "_core.ingest.valid_known_exposure": Spec([("seconds", 0.01)]),
+            "_core.ingest.unrefined_lens_changes": Spec([]),
             "_core.registration.option_table": Spec([]),
             "_core.check.option_table": Spec([]),
             "_core.selfcal.option_table": Spec([]),
@@ -766,6 +778,15 @@ class Baselines:
             "_core.formats.Calibration.replace": Spec([], {"unit": "m", "points": points[:3],
                                                            "point_ids": [4, 5, 6]}),
             "_core.formats.Calibration.status": Spec([("name", "b")]),
+            "_core.formats.path_as_recorded": Spec([("path", folder / "results" / "tracks.json"),
+                                                    ("folder", folder / "saved")]),
+            "_core.formats.ProvenanceInput": Spec([], {"path": str(folder / "results"), "given": ""}),
+            "_core.formats.ScaleSource": Spec([("measurement", "camera-height:a=2.5")],
+                                              {"metres_per_unit": 2.0, "error": ""}),
+            "_core.formats.ProvenanceRecord": Spec([]),
+            "_core.formats.ProvenanceRecord.set_options": Spec([], {"model": "free", "seed": 3}),
+            "_core.formats.ProvenanceRecord.write": Spec([("staging", folder / "results"), ("folder", folder / "saved")],
+                                                         {"log": logging.getLogger("fuzz").info}),
             "_core.formats.Calibration.pose": Spec([("name", "a")]),
             "_core.formats.Calibration.center": Spec([("name", "b")]),
             "_core.selfcal.mark_untrusted_lenses_weak": Spec([("result", self.refinement()),
@@ -787,6 +808,8 @@ class Baselines:
             "_core.formats.CameraIntrinsics.contains": Spec([("pixels", [[1.0, 2.0], [70.0, 40.0]])],
                                                              {"margin_px": 1.0}),
             "_core.formats.CameraIntrinsics.max_monotonic_radius": Spec([], {"limit": 2.0, "step": 0.01}),
+            "_core.formats.CameraIntrinsics.nominal": Spec([("name", "a"), ("width", 64), ("height", 48),
+                                                            ("fov_deg", 60.0)]),
             "_core.formats.Tracks": Spec([]),
             "_core.check.CalibrationCheck": Spec([]),
             "_core.check.CameraVerdict": Spec([]),
@@ -925,6 +948,10 @@ class Baselines:
             "_core.selfcal.RefineRequest": {"parsed": lambda: self.request},
             "_core.selfcal.SelfCalibration": {"refined": lambda: self.refinement()},
             "_core.selfcal.RefinedCalibration": {"refined": lambda: self.refined_calibration()},
+            "_core.formats.ProvenanceRecord": {"empty": _core.formats.ProvenanceRecord,
+                                               "filled": lambda: self.provenance_record()},
+            "_core.formats.ProvenanceInput": {"path": lambda: _core.formats.ProvenanceInput(path="tracks.json")},
+            "_core.formats.ScaleSource": {"scaled": lambda: _core.formats.ScaleSource("marker-size:0.1", 2.0)},
             "_core.formats.OutputFolder": {"fresh": lambda: self.output_folder(),
                                            "open": lambda: self.opened(self.output_folder())},
             "_core.formats.OutputFile": {"fresh": lambda: self.output_file(),

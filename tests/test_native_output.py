@@ -66,7 +66,7 @@ def test_force_replaces_the_whole_folder(small: Path, tmp_path: Path) -> None:
     forced = run_native(*calibrate_args(small, out, "--force"))
     assert forced.returncode == 0, forced.stderr
     assert sorted(p.name for p in out.iterdir()) == ["camera_poses.json", "intrinsics", "metrics.json", "points.ply",
-                                                     "tracks.json", "uncertainty.json"]
+                                                     "provenance.json", "tracks.json", "uncertainty.json"]
     assert snapshot(out)["camera_poses.json"] == before["camera_poses.json"]  # the same calibration again
     assert siblings(out) == []
 

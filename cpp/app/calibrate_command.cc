@@ -393,11 +393,10 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
     recorded = ReadTracks(arguments.tracks);
   } else {
     const ingest::SequenceDescription sequence = formats::ReadSequence(arguments.sequence);
-    // With lenses to refine and no ingest knob changed, the ingest's local check is off,
-    // as in the Python command (pipeline.calibrate): it compares each centre with its
-    // neighbours to a fraction of a pixel, which a lens still to be refined does not allow.
+    // With lenses to refine and no ingest knob changed, the core's options for lenses
+    // still to be refined (the Python command takes the same).
     VideoIngestArguments ingest = arguments.ingest;
-    if (refinement && !ingest.AnyKnobChanged()) ingest.options.consistency.local_neighbours = 0;
+    if (refinement && !ingest.AnyKnobChanged()) ingest.options = ingest::OptionsForUnrefinedLenses();
     const std::vector<formats::CameraOutcome> outcomes =
         arguments.nominal_fov
             ? IngestVideos(arguments.videos, IntrinsicsOf(inputs.intrinsics, intrinsics_sources), sequence, ingest)

@@ -14,6 +14,7 @@
 #include "calibproj/formats/detect_report.h"
 #include "calibproj/formats/sequence_file.h"
 #include "calibproj/ingest/camera_ingest.h"
+#include "calibproj/ingest/option_table.h"
 #include "checks.h"
 #include "ingest_options.h"
 #include "json_convert.h"
@@ -139,6 +140,23 @@ void register_ingest(py::module_& m) {
         "accepts a marker at its predicted place without the detector).");
   m.def("valid_known_exposure", &ingest::ValidKnownExposure, py::arg("seconds"),
         "Whether a camera's known exposure time (--exposure CAMERA=SECONDS) is one: 0 < seconds <= 1.");
+  m.def(
+      "unrefined_lens_changes",
+      [] {
+        // The knobs where OptionsForUnrefinedLenses differs from the defaults, in table order.
+        const std::vector<Knob> defaults = IngestOptionTable();
+        std::vector<std::pair<std::string, py::object>> changes;
+        ingest::IngestOptions relaxed = ingest::OptionsForUnrefinedLenses();
+        size_t k = 0;
+        ingest::VisitIngestOptions(relaxed, [&](const char* name, const auto& field, const char*) {
+          const py::object value = py::cast(field);
+          if (!value.equal(defaults.at(k++).default_value)) changes.emplace_back(name, value);
+        });
+        return changes;
+      },
+      "(name, value) of the ingest knobs a calibration that refines lenses changes when no ingest options are "
+      "given: the local consistency check off (a lens still to be refined does not allow its fraction of a "
+      "pixel).");
   m.def("option_table", &IngestOptionTable,
         "Every ingest knob as a Knob (name, default, help), in order: the one declaration "
         "calibproj.ingest.options.IngestOptions and both command lines are made from.");

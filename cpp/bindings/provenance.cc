@@ -6,9 +6,12 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <cmath>
 #include <functional>
+#include <stdexcept>
 #include <string>
 
+#include "calibproj/formats/files.h"
 #include "calibproj/formats/provenance.h"
 #include "calibproj/registration/option_table.h"
 #include "knob_setter.h"
@@ -41,7 +44,13 @@ void register_provenance(py::module_& m) {
   py::class_<ScaleSource>(m, "ScaleSource", "Where the metric scale came from: the measurement, and its factor or "
                                             "why none applied.")
       .def(py::init([](const std::string& measurement, std::optional<double> metres_per_unit,
-                       const std::string& error) { return ScaleSource{measurement, metres_per_unit, error}; }),
+                       const std::string& error) {
+             if (metres_per_unit && !(std::isfinite(*metres_per_unit) && *metres_per_unit > 0.0)) {
+               throw std::invalid_argument("metres_per_unit: expected a positive finite number, got " +
+                                           formats::PythonFloat(*metres_per_unit));
+             }
+             return ScaleSource{measurement, metres_per_unit, error};
+           }),
            py::arg("measurement"), py::arg("metres_per_unit") = std::nullopt, py::arg("error") = "")
       .def_readwrite("measurement", &ScaleSource::measurement)
       .def_readwrite("metres_per_unit", &ScaleSource::metres_per_unit)

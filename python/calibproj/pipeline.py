@@ -115,7 +115,7 @@ def calibrate(
     formats = parse_formats(",".join(exports)) if exports else []
     request = _refine_request(refine_intrinsics) if refine_intrinsics else None
     if request is not None and ingest_options is None:
-        ingest_options = IngestOptions(consistency_local_neighbours=0)
+        ingest_options = IngestOptions(**dict(_core.ingest.unrefined_lens_changes()))
     measurement = parse_scale(scale) if scale else None
     if measurement is not None and measurement.kind == "marker-size" and sequence is None:
         raise ValueError(f"--scale {scale}: marker-size needs --sequence (the projection's sequence.json)")

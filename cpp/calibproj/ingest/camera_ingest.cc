@@ -788,6 +788,12 @@ class CameraIngest {
 
 bool ValidKnownExposure(double seconds) { return seconds > 0.0 && seconds <= kMaxExposureS; }
 
+IngestOptions OptionsForUnrefinedLenses() {
+  IngestOptions options;
+  options.consistency.local_neighbours = 0;
+  return options;
+}
+
 void IngestOptions::Check() const {
   sync.Check();
   pick.Check();

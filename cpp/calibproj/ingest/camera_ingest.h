@@ -132,6 +132,11 @@ struct IngestOptions {
   void Check() const;
 };
 
+// The ingest options of a calibration that refines lenses when none are given: the
+// local consistency check off, as it compares each centre with its neighbours to a
+// fraction of a pixel, which a lens still to be refined does not allow.
+IngestOptions OptionsForUnrefinedLenses();
+
 // A camera's known exposure time (--exposure CAMERA=SECONDS): more than 0 and at most
 // kMaxExposureS (no video camera exposes a frame longer; one longer than its frame is
 // taken as the whole frame). The one check of both tools' command lines.

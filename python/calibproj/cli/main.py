@@ -66,12 +66,7 @@ def build_parser() -> SuggestingArgumentParser:
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
                                        help="the stage to run; calibproj COMMAND --help lists its options")
     for name, module_name in COMMANDS.items():
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as error:
-            if error.name != module_name:
-                raise
-            continue  # a stage not built yet
+        module = importlib.import_module(module_name)
         doc = (module.__doc__ or "").strip()
         summary = doc.splitlines()[0] if doc else name
         sub = subparsers.add_parser(
