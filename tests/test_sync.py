@@ -95,6 +95,32 @@ def test_clock_drift_is_measured():
         assert (result.map.rate / nominal - 1.0) == pytest.approx(drift, abs=6e-5)
 
 
+def test_bands_fitted_together_give_each_band_its_own_fit():
+    """The readout's band fits share the light predicted for the frames bands have in
+    common, scanned along with the first band of their group; a band with gaps of its
+    own is fitted apart. Whatever the order of the bands, and so whichever band leads a
+    group, each band's fit is the same to the last bit."""
+    sequence = short_sequence()
+    rng = np.random.default_rng(11)
+    light = projector_light(sequence, rng)
+    rate = 25.0 / PROJECTOR_FPS
+    frames = int(9.0 + rate * len(light) + 20)
+    bands = np.stack([camera_signal(light, 9.0 + 0.03 * b, rate, 0.5, frames, rng) for b in range(4)])
+    bands[2, ::7] = np.nan
+    codes = sequence.to_dict()["codes"]
+    levels = np.asarray(_core.ingest.light_levels(sequence.core()))
+    start_map = _core.sync.FrameMap(9.0, rate, 0.5)
+
+    def fits(order):
+        estimate = _core.sync.estimate_readout(bands[order], levels, codes["start"], codes["end"], start_map)
+        return [(band.offset, band.sigma, band.rms) for band in estimate.bands]
+
+    in_order = fits([0, 1, 2, 3])
+    assert len(in_order) == 4
+    for order in ([3, 2, 1, 0], [2, 0, 1, 3], [1, 3, 0, 2]):
+        assert fits(order) == [in_order[b] for b in order], order
+
+
 @pytest.mark.parametrize("missing", [0.02, 0.1])
 def test_codes_are_found_over_frames_the_camera_dropped(missing):
     """Dropped frames are NaN on the frame grid: codes are searched and fitted over the

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -90,58 +91,116 @@ struct WindowSums {
   }
 };
 
-// Sum of squares of the best (a + a' tau) + (b + b' tau) W fit to the samples of one
-// window: a camera adjusting its gain during the code scales both levels alike. The
-// normal equations of the basis (1, tau, W, tau W): what does not depend on W comes
-// from `sums`, the rest is summed here (the grid search calls this thousands of times).
-double DriftFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const WindowSums& sums,
-                    const FrameMap& map) {
-  double w_sum = 0, tw_sum = 0, t_tw = 0, w_w = 0, w_tw = 0, tw_tw = 0, w_value = 0, tw_value = 0;
-  const double duration = map.ProjectorExposure();
-  for (const Sample& s : samples) {
-    const double w = timeline.Average(map.ProjectorTime(s.frame), duration);
-    const double tw = s.tau * w;
-    w_sum += w;
-    tw_sum += tw;
-    t_tw += s.tau * tw;
-    w_w += w * w;
-    w_tw += w * tw;
-    tw_tw += tw * tw;
-    w_value += w * s.value;
-    tw_value += tw * s.value;
-  }
-  Eigen::Matrix4d normal;
-  normal << sums.count, sums.tau, w_sum, tw_sum,  //
-      sums.tau, sums.tau_tau, tw_sum, t_tw,       //
-      w_sum, tw_sum, w_w, w_tw,                   //
-      tw_sum, t_tw, w_tw, tw_tw;
-  const Eigen::Vector4d right(sums.value, sums.tau_value, w_value, tw_value);
-  const Eigen::LDLT<Eigen::Matrix4d> solver(normal);
-  if (solver.info() != Eigen::Success || !(solver.rcond() > 1e-12)) return std::numeric_limits<double>::infinity();
-  const Eigen::Vector4d theta = solver.solve(right);
-  return std::max(0.0, sums.value_value - theta.dot(right));
-}
+// The light W_j each sample saw at one (offset, exposure), and what the fit's normal
+// equations take from it alone. Signals measured on the same frames (the bands of one
+// camera's frames) share it: the light is looked up once, the fit is then solved per
+// signal from its own values.
+class Prediction {
+ public:
+  Prediction(const LightTimeline& timeline, bool gain_drift) : timeline_(timeline), gain_drift_(gain_drift) {}
 
-// Sum of squares of the best a + b * W fit to the samples of one window.
-double LinearFitCost(const LightTimeline& timeline, const std::vector<Sample>& samples, const WindowSums& sums,
-                     const FrameMap& map, bool gain_drift) {
-  if (gain_drift) return DriftFitCost(timeline, samples, sums, map);
-  double sw = 0, sww = 0, sm = 0, swm = 0, smm = 0;
-  const double duration = map.ProjectorExposure();
-  for (const Sample& s : samples) {
-    const double w = timeline.Average(map.ProjectorTime(s.frame), duration);
-    sw += w;
-    sww += w * w;
-    sm += s.value;
-    swm += w * s.value;
-    smm += s.value * s.value;
+  // `sums` are those of `windows`, of any of the signals: the terms without values are
+  // alike for all of them.
+  void Evaluate(const std::vector<std::vector<Sample>>& windows, const std::vector<WindowSums>& sums,
+                const FrameMap& map) {
+    const double duration = map.ProjectorExposure();
+    windows_.resize(windows.size());
+    for (std::size_t k = 0; k < windows.size(); ++k) {
+      Window& window = windows_[k];
+      window.light.resize(windows[k].size());
+      for (std::size_t i = 0; i < windows[k].size(); ++i) {
+        window.light[i] = timeline_.Average(map.ProjectorTime(windows[k][i].frame), duration);
+      }
+      if (gain_drift_) {
+        SumDrift(windows[k], sums[k], &window);
+      } else {
+        SumLinear(&window);
+      }
+    }
   }
-  const double n = static_cast<double>(samples.size());
-  const double denominator = n * sww - sw * sw;
-  const double b = denominator > 1e-12 * n * n ? (n * swm - sw * sm) / denominator : 0.0;
-  const double a = (sm - b * sw) / n;
-  return std::max(0.0, smm - a * sm - b * swm);
-}
+
+  // Sum of squares of the best fit to `windows` (the samples evaluated, with one
+  // signal's values).
+  double Cost(const std::vector<std::vector<Sample>>& windows, const std::vector<WindowSums>& sums) const {
+    double total = 0.0;
+    for (std::size_t k = 0; k < windows.size(); ++k) {
+      total += gain_drift_ ? DriftCost(windows_[k], windows[k], sums[k]) : LinearCost(windows_[k], windows[k], sums[k]);
+    }
+    return total;
+  }
+
+ private:
+  struct Window {
+    std::vector<double> light;
+    double w_sum = 0, tw_sum = 0, t_tw = 0, w_w = 0, w_tw = 0, tw_tw = 0;
+    Eigen::LDLT<Eigen::Matrix4d> solver;
+    bool solvable = false;
+  };
+
+  // (a + a' tau) + (b + b' tau) W: a camera adjusting its gain during the code scales
+  // both levels alike. The normal equations of the basis (1, tau, W, tau W): what does
+  // not depend on W comes from the window's sums.
+  static void SumDrift(const std::vector<Sample>& samples, const WindowSums& sums, Window* window) {
+    double w_sum = 0, tw_sum = 0, t_tw = 0, w_w = 0, w_tw = 0, tw_tw = 0;
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+      const double w = window->light[i];
+      const double tw = samples[i].tau * w;
+      w_sum += w;
+      tw_sum += tw;
+      t_tw += samples[i].tau * tw;
+      w_w += w * w;
+      w_tw += w * tw;
+      tw_tw += tw * tw;
+    }
+    window->w_sum = w_sum, window->tw_sum = tw_sum, window->t_tw = t_tw;
+    window->w_w = w_w, window->w_tw = w_tw, window->tw_tw = tw_tw;
+    Eigen::Matrix4d normal;
+    normal << sums.count, sums.tau, w_sum, tw_sum,  //
+        sums.tau, sums.tau_tau, tw_sum, t_tw,       //
+        w_sum, tw_sum, w_w, w_tw,                   //
+        tw_sum, t_tw, w_tw, tw_tw;
+    window->solver.compute(normal);
+    window->solvable = window->solver.info() == Eigen::Success && window->solver.rcond() > 1e-12;
+  }
+
+  static double DriftCost(const Window& window, const std::vector<Sample>& samples, const WindowSums& sums) {
+    if (!window.solvable) return std::numeric_limits<double>::infinity();
+    double w_value = 0, tw_value = 0;
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+      const double w = window.light[i];
+      w_value += w * samples[i].value;
+      tw_value += samples[i].tau * w * samples[i].value;
+    }
+    const Eigen::Vector4d right(sums.value, sums.tau_value, w_value, tw_value);
+    const Eigen::Vector4d theta = window.solver.solve(right);
+    return std::max(0.0, sums.value_value - theta.dot(right));
+  }
+
+  // a + b W, constant levels.
+  static void SumLinear(Window* window) {
+    double sw = 0, sww = 0;
+    for (const double w : window->light) {
+      sw += w;
+      sww += w * w;
+    }
+    window->w_sum = sw, window->w_w = sww;
+  }
+
+  static double LinearCost(const Window& window, const std::vector<Sample>& samples, const WindowSums& sums) {
+    double swm = 0;
+    for (std::size_t i = 0; i < samples.size(); ++i) swm += window.light[i] * samples[i].value;
+    const double n = static_cast<double>(samples.size()), sw = window.w_sum, sww = window.w_w;
+    const double sm = sums.value, smm = sums.value_value;
+    const double denominator = n * sww - sw * sw;
+    const double b = denominator > 1e-12 * n * n ? (n * swm - sw * sm) / denominator : 0.0;
+    const double a = (sm - b * sw) / n;
+    return std::max(0.0, smm - a * sm - b * swm);
+  }
+
+  const LightTimeline& timeline_;
+  bool gain_drift_;
+  std::vector<Window> windows_;
+};
 
 double SampleVariance(const std::vector<std::vector<Sample>>& windows) {
   double total = 0.0;
@@ -215,22 +274,40 @@ struct FeasibleSet {
   double latest_end = 0.0;  // largest exposure - offset in the set (end of the latest window)
 };
 
+// The cost of one signal's windows over (offset, exposure) at a fixed rate.
 class CostSurface {
  public:
   CostSurface(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows, double rate,
               bool gain_drift)
-      : timeline_(timeline), windows_(windows), rate_(rate), gain_drift_(gain_drift) {
+      : windows_(windows), rate_(rate), prediction_(timeline, gain_drift) {
     for (const auto& samples : windows_) sums_.emplace_back(samples);
   }
 
   double operator()(double offset, double exposure) const {
-    const FrameMap map{offset, rate_, exposure};
-    double total = 0.0;
-    for (std::size_t k = 0; k < windows_.size(); ++k) {
-      total += LinearFitCost(timeline_, windows_[k], sums_[k], map, gain_drift_);
-    }
-    return total;
+    prediction_.Evaluate(windows_, sums_, FrameMap{offset, rate_, exposure});
+    return prediction_.Cost(windows_, sums_);
   }
+
+  // The cost of this surface from a prediction evaluated on the same frames.
+  double CostOf(const Prediction& prediction) const { return prediction.Cost(windows_, sums_); }
+
+  // Whether `other` holds the same frames at the same places in their windows: one
+  // prediction then serves both.
+  bool SameFrames(const CostSurface& other) const {
+    if (windows_.size() != other.windows_.size()) return false;
+    for (std::size_t k = 0; k < windows_.size(); ++k) {
+      const auto& mine = windows_[k];
+      const auto& theirs = other.windows_[k];
+      if (mine.size() != theirs.size()) return false;
+      for (std::size_t i = 0; i < mine.size(); ++i) {
+        if (mine[i].frame != theirs[i].frame || mine[i].tau != theirs[i].tau) return false;
+      }
+    }
+    return true;
+  }
+
+  const std::vector<std::vector<Sample>>& windows() const { return windows_; }
+  const std::vector<WindowSums>& sums() const { return sums_; }
 
   // Minimum over offsets in [low, high] (golden-section search).
   std::pair<double, double> MinimiseOffset(double low, double high, double exposure) const {
@@ -260,36 +337,73 @@ class CostSurface {
   }
 
  private:
-  const LightTimeline& timeline_;
   const std::vector<std::vector<Sample>>& windows_;
   std::vector<WindowSums> sums_;
   double rate_;
-  bool gain_drift_;
+  mutable Prediction prediction_;  // scratch of operator()
 };
+
+// The offsets and exposures searched around an initial map.
+struct Grid {
+  Grid(const FrameMap& initial, const CodeFitOptions& options)
+      : initial(initial),
+        step(options.offset_step),
+        offsets(2 * static_cast<int>(std::round(options.offset_range / options.offset_step)) + 1),
+        exposures(ExposureGrid(options)) {}
+
+  double OffsetAt(int i) const { return initial.offset + (i - offsets / 2) * step; }
+
+  FrameMap initial;
+  double step;
+  int offsets;
+  std::vector<double> exposures;
+};
+
+// The grid offset of lowest cost at one exposure.
+struct GridMinimum {
+  int index = 0;
+  double cost = std::numeric_limits<double>::infinity();
+};
+
+// Every surface's lowest cost over the grid's offsets, per exposure of the grid. Surfaces
+// on the same frames as the first share its prediction: this scan is most of a fit's
+// work, and the light each frame saw is the same for every band of a frame.
+std::vector<std::vector<GridMinimum>> ScanGrid(const LightTimeline& timeline,
+                                               const std::vector<const CostSurface*>& surfaces, const Grid& grid,
+                                               bool gain_drift) {
+  std::vector<std::vector<GridMinimum>> minima(surfaces.size(), std::vector<GridMinimum>(grid.exposures.size()));
+  Prediction prediction(timeline, gain_drift);
+  const CostSurface& first = *surfaces.front();
+  for (std::size_t e = 0; e < grid.exposures.size(); ++e) {
+    for (int i = 0; i < grid.offsets; ++i) {
+      prediction.Evaluate(first.windows(), first.sums(),
+                          FrameMap{grid.OffsetAt(i), grid.initial.rate, grid.exposures[e]});
+      for (std::size_t s = 0; s < surfaces.size(); ++s) {
+        const double c = surfaces[s]->CostOf(prediction);
+        if (c < minima[s][e].cost) minima[s][e] = {i, c};
+      }
+    }
+  }
+  return minima;
+}
 
 // Profiles the cost over offsets for every exposure of the grid, then bounds the set
 // of points within the tolerance of the best: on each feasible exposure, the offsets
 // are followed outwards on the grid and the edges located by bisection.
-FeasibleSet ExploreCost(const LightTimeline& timeline, const std::vector<std::vector<Sample>>& windows,
-                        const FrameMap& initial, const CodeFitOptions& options) {
-  const CostSurface cost(timeline, windows, initial.rate, options.gain_drift);
-  const int offsets = 2 * static_cast<int>(std::round(options.offset_range / options.offset_step)) + 1;
-  const int half = offsets / 2;
-  const auto offset_at = [&](int i) { return initial.offset + (i - half) * options.offset_step; };
-  const std::vector<double> exposures = ExposureGrid(options);
+FeasibleSet ExploreCost(const CostSurface& cost, const Grid& grid, const std::vector<GridMinimum>& minima,
+                        const CodeFitOptions& options) {
+  const std::vector<std::vector<Sample>>& windows = cost.windows();
+  const FrameMap& initial = grid.initial;
+  const std::vector<double>& exposures = grid.exposures;
   std::vector<double> best_offset(exposures.size()), best_cost(exposures.size());
   FeasibleSet set;
   double minimum = std::numeric_limits<double>::infinity();
   for (std::size_t e = 0; e < exposures.size(); ++e) {
-    int best_index = 0;
-    double lowest = std::numeric_limits<double>::infinity();
-    for (int i = 0; i < offsets; ++i) {
-      const double c = cost(offset_at(i), exposures[e]);
-      if (c < lowest) lowest = c, best_index = i;
-    }
-    const auto [offset, refined] = cost.MinimiseOffset(offset_at(std::max(best_index - 1, 0)),
-                                                       offset_at(std::min(best_index + 1, offsets - 1)), exposures[e]);
-    best_offset[e] = refined <= lowest ? offset : offset_at(best_index);
+    const auto [best_index, lowest] = minima[e];
+    const auto [offset, refined] = cost.MinimiseOffset(grid.OffsetAt(std::max(best_index - 1, 0)),
+                                                       grid.OffsetAt(std::min(best_index + 1, grid.offsets - 1)),
+                                                       exposures[e]);
+    best_offset[e] = refined <= lowest ? offset : grid.OffsetAt(best_index);
     best_cost[e] = std::min(refined, lowest);
     if (best_cost[e] < minimum) {
       minimum = best_cost[e];
@@ -377,39 +491,28 @@ FrameMap Refine(const LightTimeline& timeline, const std::vector<std::vector<Sam
   return FrameMap{map[0], map[1], map[2]};
 }
 
-}  // namespace
-
-void CodeFitOptions::Check() const {
-  Require(offset_range > 0.0 && std::isfinite(offset_range), "offset_range must be positive");
-  Require(offset_step > 0.0 && offset_step <= offset_range, "offset_step must be in (0, offset_range]");
-  Require(offset_range <= kMaxOffsetSteps * offset_step,
-          "offset_step is too small for offset_range (more than " + std::to_string(kMaxOffsetSteps) + " offsets)");
-  Require(min_exposure > 0.0 && min_exposure <= max_exposure && max_exposure <= 1.0,
-          "exposures must satisfy 0 < min_exposure <= max_exposure <= 1");
-  Require(exposure_steps >= 1 && exposure_steps <= kMaxExposureSteps,
-          "exposure_steps must be in [1, " + std::to_string(kMaxExposureSteps) + "]");
-  Require(fixed_exposure >= 0.0 && std::isfinite(fixed_exposure), "fixed_exposure must be non-negative (0: fit it)");
-  Require(feasible_chi2 >= 0.0 && std::isfinite(feasible_chi2), "feasible_chi2 must be non-negative");
-  Require(plateau_tolerance >= 0.0 && std::isfinite(plateau_tolerance), "plateau_tolerance must be non-negative");
-  Require(max_iterations >= 1 && max_iterations <= kMaxFitIterations,
-          "max_iterations must be in [1, " + std::to_string(kMaxFitIterations) + "]");
-}
-
-CodeFit FitCodeWindows(const std::vector<double>& signal, const LightTimeline& timeline,
-                       const std::vector<FrameWindow>& windows, const FrameMap& initial, bool fit_rate,
-                       const CodeFitOptions& options) {
-  options.Check();
-  CheckFitInputs(signal, timeline, windows, initial);
+// The samples of `signal` in each window, or an error when a window holds too few.
+std::vector<std::vector<Sample>> SamplesOf(const std::vector<double>& signal, const std::vector<FrameWindow>& windows,
+                                           const FrameMap& initial, const CodeFitOptions& options,
+                                           std::string* error) {
   std::vector<std::vector<Sample>> samples;
   for (const FrameWindow& window : windows) {
     samples.push_back(WindowSamples(signal, window, initial, options));
     if (samples.back().size() < 4) {
-      throw std::runtime_error("light code window of projector frames " + std::to_string(window.begin) + ".." +
-                               std::to_string(window.end - 1) + " holds only " +
-                               std::to_string(samples.back().size()) + " measured camera frames");
+      *error = "light code window of projector frames " + std::to_string(window.begin) + ".." +
+               std::to_string(window.end - 1) + " holds only " + std::to_string(samples.back().size()) +
+               " measured camera frames";
+      return {};
     }
   }
-  const FeasibleSet set = ExploreCost(timeline, samples, initial, options);
+  return samples;
+}
+
+// The fit of one signal from its surface and its grid scan.
+CodeFit FitSurface(const CostSurface& surface, const LightTimeline& timeline, const Grid& grid,
+                   const std::vector<GridMinimum>& minima, bool fit_rate, const CodeFitOptions& options) {
+  const std::vector<std::vector<Sample>>& samples = surface.windows();
+  const FeasibleSet set = ExploreCost(surface, grid, minima, options);
   double rms = 0.0, contrast = 0.0;
   const FrameMap refined = Refine(timeline, samples, set.best, fit_rate, options, &rms, &contrast);
   CodeFit fit;
@@ -435,6 +538,75 @@ CodeFit FitCodeWindows(const std::vector<double>& signal, const LightTimeline& t
   fit.contrast = contrast;
   for (const auto& window : samples) fit.samples += static_cast<int>(window.size());
   return fit;
+}
+
+}  // namespace
+
+void CodeFitOptions::Check() const {
+  Require(offset_range > 0.0 && std::isfinite(offset_range), "offset_range must be positive");
+  Require(offset_step > 0.0 && offset_step <= offset_range, "offset_step must be in (0, offset_range]");
+  Require(offset_range <= kMaxOffsetSteps * offset_step,
+          "offset_step is too small for offset_range (more than " + std::to_string(kMaxOffsetSteps) + " offsets)");
+  Require(min_exposure > 0.0 && min_exposure <= max_exposure && max_exposure <= 1.0,
+          "exposures must satisfy 0 < min_exposure <= max_exposure <= 1");
+  Require(exposure_steps >= 1 && exposure_steps <= kMaxExposureSteps,
+          "exposure_steps must be in [1, " + std::to_string(kMaxExposureSteps) + "]");
+  Require(fixed_exposure >= 0.0 && std::isfinite(fixed_exposure), "fixed_exposure must be non-negative (0: fit it)");
+  Require(feasible_chi2 >= 0.0 && std::isfinite(feasible_chi2), "feasible_chi2 must be non-negative");
+  Require(plateau_tolerance >= 0.0 && std::isfinite(plateau_tolerance), "plateau_tolerance must be non-negative");
+  Require(max_iterations >= 1 && max_iterations <= kMaxFitIterations,
+          "max_iterations must be in [1, " + std::to_string(kMaxFitIterations) + "]");
+}
+
+CodeFit FitCodeWindows(const std::vector<double>& signal, const LightTimeline& timeline,
+                       const std::vector<FrameWindow>& windows, const FrameMap& initial, bool fit_rate,
+                       const CodeFitOptions& options) {
+  options.Check();
+  CheckFitInputs(signal, timeline, windows, initial);
+  std::string error;
+  const std::vector<std::vector<Sample>> samples = SamplesOf(signal, windows, initial, options, &error);
+  if (!error.empty()) throw std::runtime_error(error);
+  const CostSurface surface(timeline, samples, initial.rate, options.gain_drift);
+  const Grid grid(initial, options);
+  const auto minima = ScanGrid(timeline, {&surface}, grid, options.gain_drift);
+  return FitSurface(surface, timeline, grid, minima.front(), fit_rate, options);
+}
+
+std::vector<std::optional<CodeFit>> FitCodeWindowsOfSignals(const std::vector<std::vector<double>>& signals,
+                                                            const LightTimeline& timeline,
+                                                            const std::vector<FrameWindow>& windows,
+                                                            const FrameMap& initial, bool fit_rate,
+                                                            const CodeFitOptions& options) {
+  options.Check();
+  for (const auto& signal : signals) CheckFitInputs(signal, timeline, windows, initial);
+  std::vector<std::vector<std::vector<Sample>>> samples(signals.size());
+  std::vector<std::unique_ptr<CostSurface>> surfaces(signals.size());
+  for (std::size_t s = 0; s < signals.size(); ++s) {
+    std::string error;
+    samples[s] = SamplesOf(signals[s], windows, initial, options, &error);
+    if (error.empty()) surfaces[s] = std::make_unique<CostSurface>(timeline, samples[s], initial.rate, options.gain_drift);
+  }
+  const Grid grid(initial, options);
+  std::vector<std::optional<CodeFit>> fits(signals.size());
+  std::vector<bool> done(signals.size(), false);
+  for (std::size_t s = 0; s < signals.size(); ++s) {
+    if (!surfaces[s] || done[s]) continue;
+    // This signal and every later one measured on the same frames, scanned together.
+    std::vector<std::size_t> group;
+    std::vector<const CostSurface*> members;
+    for (std::size_t t = s; t < signals.size(); ++t) {
+      if (surfaces[t] && !done[t] && surfaces[t]->SameFrames(*surfaces[s])) {
+        group.push_back(t);
+        members.push_back(surfaces[t].get());
+        done[t] = true;
+      }
+    }
+    const auto minima = ScanGrid(timeline, members, grid, options.gain_drift);
+    for (std::size_t m = 0; m < group.size(); ++m) {
+      fits[group[m]] = FitSurface(*members[m], timeline, grid, minima[m], fit_rate, options);
+    }
+  }
+  return fits;
 }
 
 }  // namespace calibproj::sync

@@ -18,6 +18,7 @@
 // uncertainty. It also reports a conservative map whose exposure window covers the
 // window of every point of the set (for picking clean frames).
 
+#include <optional>
 #include <vector>
 
 #include "calibproj/sync/frame_map.h"
@@ -71,5 +72,15 @@ struct CodeFit {
 CodeFit FitCodeWindows(const std::vector<double>& signal, const LightTimeline& timeline,
                        const std::vector<FrameWindow>& windows, const FrameMap& initial, bool fit_rate,
                        const CodeFitOptions& options);
+
+// The fit of each of several signals, as FitCodeWindows gives it, or none for a signal
+// whose windows hold fewer than 4 measured frames. Signals measured on the same frames
+// (the bands of one camera's frames) share the search's predictions of the light, most
+// of a fit's work.
+std::vector<std::optional<CodeFit>> FitCodeWindowsOfSignals(const std::vector<std::vector<double>>& signals,
+                                                            const LightTimeline& timeline,
+                                                            const std::vector<FrameWindow>& windows,
+                                                            const FrameMap& initial, bool fit_rate,
+                                                            const CodeFitOptions& options);
 
 }  // namespace calibproj::sync

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -111,29 +112,29 @@ ReadoutEstimate EstimateInWindow(const std::vector<std::vector<double>>& band_si
   band_options.offset_range = options.offset_range + 1.0;
   std::vector<double> rows, offsets, weights, exposures;
   std::vector<BandInterval> intervals;  // every band that shows the codes
+  const std::vector<std::optional<CodeFit>> fits =
+      FitCodeWindowsOfSignals(band_signals, timeline, windows, map, false, band_options);
   for (int b = 0; b < bands; ++b) {
-    try {
-      const CodeFit fit = FitCodeWindows(band_signals[b], timeline, windows, map, false, band_options);
-      // The half-width of the offsets that fit as a uniform interval's sigma, and
-      // never below the fit's grid.
-      const double sigma = std::max(fit.offset_uncertainty / std::sqrt(3.0), options.offset_step / std::sqrt(12.0));
-      BandFit band{(b + 0.5) / bands, fit.map.offset, sigma, fit.rms, false};
-      // A band that sees little of the projection (walls, the image's edge) fits noise.
-      const bool shows_codes = fit.contrast > 0.0 && fit.rms <= kMaxBandRms;
-      band.used = shows_codes && fit.offset_uncertainty <= kMaxBandUncertainty;
-      estimate.bands.push_back(band);
-      // An interval cut by the offsets searched bounds nothing.
-      if (shows_codes && fit.offset_uncertainty < band_options.offset_range) {
-        intervals.push_back({band.row, fit.map.offset, fit.offset_uncertainty});
-      }
-      if (!band.used) continue;
-      rows.push_back((b + 0.5) / bands);
-      offsets.push_back(fit.map.offset);
-      weights.push_back(1.0 / (sigma * sigma));
-      exposures.push_back(fit.map.exposure);
-    } catch (const std::runtime_error&) {
-      // Too few measured frames in this band's windows: it gives nothing.
+    // Too few measured frames in this band's windows: it gives nothing.
+    if (!fits[b]) continue;
+    const CodeFit& fit = *fits[b];
+    // The half-width of the offsets that fit as a uniform interval's sigma, and
+    // never below the fit's grid.
+    const double sigma = std::max(fit.offset_uncertainty / std::sqrt(3.0), options.offset_step / std::sqrt(12.0));
+    BandFit band{(b + 0.5) / bands, fit.map.offset, sigma, fit.rms, false};
+    // A band that sees little of the projection (walls, the image's edge) fits noise.
+    const bool shows_codes = fit.contrast > 0.0 && fit.rms <= kMaxBandRms;
+    band.used = shows_codes && fit.offset_uncertainty <= kMaxBandUncertainty;
+    estimate.bands.push_back(band);
+    // An interval cut by the offsets searched bounds nothing.
+    if (shows_codes && fit.offset_uncertainty < band_options.offset_range) {
+      intervals.push_back({band.row, fit.map.offset, fit.offset_uncertainty});
     }
+    if (!band.used) continue;
+    rows.push_back((b + 0.5) / bands);
+    offsets.push_back(fit.map.offset);
+    weights.push_back(1.0 / (sigma * sigma));
+    exposures.push_back(fit.map.exposure);
   }
   if (!intervals.empty()) {
     double sum = 0.0;
