@@ -314,12 +314,18 @@ class CostSurface {
     constexpr double kInverseGolden = 0.6180339887498949;
     constexpr int kIterations = 24;
     double a = low, b = high;
+    // Each step keeps one inner point, and its cost, for the next.
+    double x1 = b - kInverseGolden * (b - a), x2 = a + kInverseGolden * (b - a);
+    double f1 = (*this)(x1, exposure), f2 = (*this)(x2, exposure);
     for (int i = 0; i < kIterations; ++i) {
-      const double x1 = b - kInverseGolden * (b - a), x2 = a + kInverseGolden * (b - a);
-      if ((*this)(x1, exposure) <= (*this)(x2, exposure)) {
-        b = x2;
+      if (f1 <= f2) {
+        b = x2, x2 = x1, f2 = f1;
+        x1 = b - kInverseGolden * (b - a);
+        f1 = (*this)(x1, exposure);
       } else {
-        a = x1;
+        a = x1, x1 = x2, f1 = f2;
+        x2 = a + kInverseGolden * (b - a);
+        f2 = (*this)(x2, exposure);
       }
     }
     const double offset = 0.5 * (a + b);
@@ -359,38 +365,68 @@ struct Grid {
   std::vector<double> exposures;
 };
 
-// The grid offset of lowest cost at one exposure.
-struct GridMinimum {
-  int index = 0;
-  double cost = std::numeric_limits<double>::infinity();
+// One surface's cost at every point of the grid.
+class GridCosts {
+ public:
+  explicit GridCosts(const Grid& grid) : offsets_(grid.offsets), costs_(grid.exposures.size() * grid.offsets) {}
+
+  double& at(std::size_t exposure, int offset) { return costs_[exposure * offsets_ + offset]; }
+  double at(std::size_t exposure, int offset) const { return costs_[exposure * offsets_ + offset]; }
+
+  // The first offset index of lowest cost at one exposure, and that cost.
+  std::pair<int, double> Minimum(std::size_t exposure) const {
+    int index = 0;
+    double lowest = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < offsets_; ++i) {
+      if (at(exposure, i) < lowest) lowest = at(exposure, i), index = i;
+    }
+    return {index, lowest};
+  }
+
+ private:
+  int offsets_;
+  std::vector<double> costs_;
 };
 
-// Every surface's lowest cost over the grid's offsets, per exposure of the grid. Surfaces
-// on the same frames as the first share its prediction: this scan is most of a fit's
-// work, and the light each frame saw is the same for every band of a frame.
-std::vector<std::vector<GridMinimum>> ScanGrid(const LightTimeline& timeline,
-                                               const std::vector<const CostSurface*>& surfaces, const Grid& grid,
-                                               bool gain_drift) {
-  std::vector<std::vector<GridMinimum>> minima(surfaces.size(), std::vector<GridMinimum>(grid.exposures.size()));
+// Every surface's cost over the grid. Surfaces on the same frames as the first share
+// its prediction: this scan is most of a fit's work, and the light each frame saw is the
+// same for every band of a frame.
+std::vector<GridCosts> ScanGrid(const LightTimeline& timeline, const std::vector<const CostSurface*>& surfaces,
+                                const Grid& grid, bool gain_drift) {
+  std::vector<GridCosts> costs(surfaces.size(), GridCosts(grid));
   Prediction prediction(timeline, gain_drift);
   const CostSurface& first = *surfaces.front();
   for (std::size_t e = 0; e < grid.exposures.size(); ++e) {
     for (int i = 0; i < grid.offsets; ++i) {
       prediction.Evaluate(first.windows(), first.sums(),
                           FrameMap{grid.OffsetAt(i), grid.initial.rate, grid.exposures[e]});
-      for (std::size_t s = 0; s < surfaces.size(); ++s) {
-        const double c = surfaces[s]->CostOf(prediction);
-        if (c < minima[s][e].cost) minima[s][e] = {i, c};
-      }
+      for (std::size_t s = 0; s < surfaces.size(); ++s) costs[s].at(e, i) = surfaces[s]->CostOf(prediction);
     }
   }
-  return minima;
+  return costs;
+}
+
+// From `start` (inside the set) along the grid's offsets in `direction`: the last offset
+// whose cost stays under `threshold` and the first beyond it (a step past the grid's
+// end when the set reaches it).
+std::pair<double, double> LastInside(const Grid& grid, const GridCosts& costs, std::size_t exposure, double start,
+                                     int direction, double threshold) {
+  // The first grid offset strictly beyond `start`.
+  const double position = (start - grid.OffsetAt(0)) / grid.step;
+  int i = static_cast<int>(direction < 0 ? std::ceil(position) - 1 : std::floor(position) + 1);
+  i = std::clamp(i, -1, grid.offsets);
+  double inside = start;
+  while (i >= 0 && i < grid.offsets && costs.at(exposure, i) <= threshold) {
+    inside = grid.OffsetAt(i);
+    i += direction;
+  }
+  return {inside, grid.OffsetAt(i)};
 }
 
 // Profiles the cost over offsets for every exposure of the grid, then bounds the set
 // of points within the tolerance of the best: on each feasible exposure, the offsets
 // are followed outwards on the grid and the edges located by bisection.
-FeasibleSet ExploreCost(const CostSurface& cost, const Grid& grid, const std::vector<GridMinimum>& minima,
+FeasibleSet ExploreCost(const CostSurface& cost, const Grid& grid, const GridCosts& costs,
                         const CodeFitOptions& options) {
   const std::vector<std::vector<Sample>>& windows = cost.windows();
   const FrameMap& initial = grid.initial;
@@ -399,7 +435,7 @@ FeasibleSet ExploreCost(const CostSurface& cost, const Grid& grid, const std::ve
   FeasibleSet set;
   double minimum = std::numeric_limits<double>::infinity();
   for (std::size_t e = 0; e < exposures.size(); ++e) {
-    const auto [best_index, lowest] = minima[e];
+    const auto [best_index, lowest] = costs.Minimum(e);
     const auto [offset, refined] = cost.MinimiseOffset(grid.OffsetAt(std::max(best_index - 1, 0)),
                                                        grid.OffsetAt(std::min(best_index + 1, grid.offsets - 1)),
                                                        exposures[e]);
@@ -419,15 +455,13 @@ FeasibleSet ExploreCost(const CostSurface& cost, const Grid& grid, const std::ve
   set.offset_low = set.exposure_low = set.latest_end = std::numeric_limits<double>::infinity();
   set.offset_high = set.exposure_high = -set.offset_low;
   set.latest_end = -set.offset_low;
-  const double step = options.offset_step;
   for (std::size_t e = 0; e < exposures.size(); ++e) {
     if (best_cost[e] > threshold) continue;
     const double exposure = exposures[e];
-    double low = best_offset[e], high = best_offset[e];
-    while (low - initial.offset > -options.offset_range && cost(low - step, exposure) <= threshold) low -= step;
-    while (high - initial.offset < options.offset_range && cost(high + step, exposure) <= threshold) high += step;
-    low = cost.Boundary(low, low - step, exposure, threshold);
-    high = cost.Boundary(high, high + step, exposure, threshold);
+    const auto [low_inside, low_outside] = LastInside(grid, costs, e, best_offset[e], -1, threshold);
+    const auto [high_inside, high_outside] = LastInside(grid, costs, e, best_offset[e], +1, threshold);
+    const double low = cost.Boundary(low_inside, low_outside, exposure, threshold);
+    const double high = cost.Boundary(high_inside, high_outside, exposure, threshold);
     set.offset_low = std::min(set.offset_low, low);
     set.offset_high = std::max(set.offset_high, high);
     set.exposure_low = std::min(set.exposure_low, exposure);
@@ -510,9 +544,9 @@ std::vector<std::vector<Sample>> SamplesOf(const std::vector<double>& signal, co
 
 // The fit of one signal from its surface and its grid scan.
 CodeFit FitSurface(const CostSurface& surface, const LightTimeline& timeline, const Grid& grid,
-                   const std::vector<GridMinimum>& minima, bool fit_rate, const CodeFitOptions& options) {
+                   const GridCosts& costs, bool fit_rate, const CodeFitOptions& options) {
   const std::vector<std::vector<Sample>>& samples = surface.windows();
-  const FeasibleSet set = ExploreCost(surface, grid, minima, options);
+  const FeasibleSet set = ExploreCost(surface, grid, costs, options);
   double rms = 0.0, contrast = 0.0;
   const FrameMap refined = Refine(timeline, samples, set.best, fit_rate, options, &rms, &contrast);
   CodeFit fit;
@@ -568,8 +602,8 @@ CodeFit FitCodeWindows(const std::vector<double>& signal, const LightTimeline& t
   if (!error.empty()) throw std::runtime_error(error);
   const CostSurface surface(timeline, samples, initial.rate, options.gain_drift);
   const Grid grid(initial, options);
-  const auto minima = ScanGrid(timeline, {&surface}, grid, options.gain_drift);
-  return FitSurface(surface, timeline, grid, minima.front(), fit_rate, options);
+  const std::vector<GridCosts> costs = ScanGrid(timeline, {&surface}, grid, options.gain_drift);
+  return FitSurface(surface, timeline, grid, costs.front(), fit_rate, options);
 }
 
 std::vector<std::optional<CodeFit>> FitCodeWindowsOfSignals(const std::vector<std::vector<double>>& signals,
@@ -601,9 +635,9 @@ std::vector<std::optional<CodeFit>> FitCodeWindowsOfSignals(const std::vector<st
         done[t] = true;
       }
     }
-    const auto minima = ScanGrid(timeline, members, grid, options.gain_drift);
+    const std::vector<GridCosts> costs = ScanGrid(timeline, members, grid, options.gain_drift);
     for (std::size_t m = 0; m < group.size(); ++m) {
-      fits[group[m]] = FitSurface(*members[m], timeline, grid, minima[m], fit_rate, options);
+      fits[group[m]] = FitSurface(*members[m], timeline, grid, costs[m], fit_rate, options);
     }
   }
   return fits;
