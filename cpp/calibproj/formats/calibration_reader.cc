@@ -52,12 +52,11 @@ Eigen::Vector3d VectorOf(const json& value, const std::string& where) {
 
 // The keys of the document's object `member` in the file's order (nlohmann::json sorts
 // them; the cameras keep the order they were written in, as Python's reader keeps it).
-std::vector<std::string> KeysInFileOrder(const fs::path& path, const std::string& member) {
-  std::ifstream in(path, std::ios::binary);
-  const nlohmann::ordered_json document = nlohmann::ordered_json::parse(in, nullptr, false);
+std::vector<std::string> KeysInFileOrder(const nlohmann::ordered_json& document, const std::string& member) {
   std::vector<std::string> keys;
-  if (!document.is_object() || !document.contains(member) || !document[member].is_object()) return keys;
-  for (const auto& item : document[member].items()) keys.push_back(item.key());
+  const auto found = document.find(member);
+  if (found == document.end() || !found->is_object()) return keys;
+  for (const auto& item : found->items()) keys.push_back(item.key());
   return keys;
 }
 
@@ -85,10 +84,12 @@ CameraPose PoseOf(const std::string& name, const json& entry, bool* weak) {
   return pose;
 }
 
-// The poses of a file of `kind` (camera_poses or truth: both write {unit, frame,
-// cameras: {name: {R, t, center}}, failed}).
-CameraPoses PosesOfFile(const fs::path& path, const std::string& kind) {
-  const json document = ReadSchemaJson(path, kind, 1);
+// The poses of a file of `kind` (or of a kind `also_accepted`: camera_poses and truth
+// both write {unit, frame, cameras: {name: {R, t, center}}, failed}).
+CameraPoses PosesOfFile(const fs::path& path, const std::string& kind,
+                        const std::vector<std::string>& also_accepted = {}) {
+  const nlohmann::ordered_json ordered = ReadOrderedSchemaJson(path, kind, 1, also_accepted);
+  const json document(ordered);
   CameraPoses out;
   out.source = path.string();
   try {
@@ -103,14 +104,14 @@ CameraPoses PosesOfFile(const fs::path& path, const std::string& kind) {
       throw std::invalid_argument("frame must be 'floor', got " + Describe(*frame));
     }
     const json& cameras = Member(document, "cameras", "an object {name: {R, t, center}}");
-    for (const auto& name : KeysInFileOrder(path, "cameras")) {
+    for (const auto& name : KeysInFileOrder(ordered, "cameras")) {
       bool weak = false;
       out.poses.push_back(PoseOf(name, cameras[name], &weak));
       if (weak) out.weak.push_back(name);
     }
     if (document.contains("failed")) {
       const json& failed = Member(document, "failed", "an object {name: reason}");
-      for (const auto& name : KeysInFileOrder(path, "failed")) {
+      for (const auto& name : KeysInFileOrder(ordered, "failed")) {
         out.failed.emplace_back(name, StringValue(failed[name], "failed." + name));
       }
     }
@@ -172,10 +173,11 @@ Plane PlaneOf(const std::string& where, const json& entry) {
 }
 
 void ReadMetrics(const fs::path& path, Calibration* calibration) {
-  const json document = ReadSchemaJson(path, "metrics", 1);
+  const nlohmann::ordered_json ordered = ReadOrderedSchemaJson(path, "metrics", 1);
+  const json document(ordered);
   try {
     const json& cameras = Member(document, "cameras", "an object {name: metrics}");
-    for (const auto& name : KeysInFileOrder(path, "cameras")) {
+    for (const auto& name : KeysInFileOrder(ordered, "cameras")) {
       calibration->metrics.emplace_back(name, MetricsOf("cameras." + name, cameras[name]));
     }
     const json model = document.value("model", json("coplanar"));
@@ -312,17 +314,7 @@ void ReadPoints(const fs::path& path, Calibration* calibration) {
 
 CameraPoses ReadCameraPoses(const fs::path& path) {
   // A simulation's truth.json holds its cameras as camera_poses.json does.
-  std::string kind = "camera_poses";
-  try {
-    const json document = ReadJson(path);
-    const auto tag = document.is_object() ? document.find("schema") : document.end();
-    if (document.is_object() && tag != document.end() && tag->is_string() &&
-        tag->get<std::string>().rfind("calibproj.truth/", 0) == 0) {
-      kind = "truth";
-    }
-  } catch (const std::exception&) {  // ReadSchemaJson names the problem
-  }
-  return PosesOfFile(path, kind);
+  return PosesOfFile(path, "camera_poses", {"truth"});
 }
 
 Calibration ReadCalibration(const fs::path& directory) {

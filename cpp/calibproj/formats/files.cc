@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <algorithm>
 #include <cstdio>
 #include <charconv>
 #include <cmath>
@@ -172,7 +173,10 @@ std::string KindGivenHint(const std::string& found, const std::string& expected)
 
 }  // namespace
 
-nlohmann::json ReadJson(const fs::path& path) {
+namespace {
+
+template <typename Json>
+Json ParseJsonFile(const fs::path& path) {
   if (!fs::is_regular_file(path)) throw InputError(path.string() + ": no such file");
   std::ifstream in(path, std::ios::binary);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -186,7 +190,7 @@ nlohmann::json ReadJson(const fs::path& path) {
                      " in position " + std::to_string(bad) + ")");
   }
   // Refused while parsing: freeing a much deeper document would overflow the stack.
-  const auto limit_depth = [&path](int depth, nlohmann::json::parse_event_t, nlohmann::json&) {
+  const auto limit_depth = [&path](int depth, typename Json::parse_event_t, Json&) {
     if (depth > kMaxJsonDepth) {
       throw InputError(path.string() + ": not valid JSON (arrays and objects nested deeper than " +
                        std::to_string(kMaxJsonDepth) + " levels)");
@@ -194,47 +198,63 @@ nlohmann::json ReadJson(const fs::path& path) {
     return true;
   };
   try {
-    return nlohmann::json::parse(text, limit_depth);
-  } catch (const nlohmann::json::parse_error& error) {
+    return Json::parse(text, limit_depth);
+  } catch (const typename Json::parse_error& error) {
     throw InputError(path.string() + ": not valid JSON (" + JsonProblem(text, error, error.byte) + ")");
-  } catch (const nlohmann::json::exception& error) {
+  } catch (const typename Json::exception& error) {
     throw InputError(path.string() + ": not valid JSON (" + JsonProblem(text, error, text.size()) + ")");
   }
 }
 
-nlohmann::json ReadSchemaJson(const fs::path& path, const std::string& kind, int major) {
+template <typename Json>
+Json ParseSchemaJsonFile(const fs::path& path, const std::string& kind, int major,
+                         const std::vector<std::string>& also_accepted) {
   if (const std::string container = VideoContainerOfFile(path); !container.empty()) {
     throw InputError(path.string() + ": is a video (" + container + "), not a calibproj " + kind + " file" +
                      VideoGivenHint(path, kind));
   }
-  const nlohmann::json document = ReadJson(path);
+  Json document = ParseJsonFile<Json>(path);
   if (!document.is_object()) throw InputError(path.string() + ": expected a JSON object at the top level");
   const std::string expected = "calibproj." + kind + "/" + std::to_string(major);
   const auto tag_it = document.find("schema");
-  const std::string tag = (tag_it != document.end() && tag_it->is_string()) ? tag_it->get<std::string>() : "";
+  const std::string tag = (tag_it != document.end() && tag_it->is_string()) ? tag_it->template get<std::string>() : "";
   const std::string prefix = "calibproj.";
   const auto slash = tag.find('/');
   if (tag.rfind(prefix, 0) != 0 || slash == std::string::npos) {
     const std::string found = tag_it == document.end() ? "None"
                               : tag_it->is_string() ? PythonRepr(tag)
                               : tag_it->is_null()   ? "None"
-                              : tag_it->is_boolean() ? (tag_it->get<bool>() ? "True" : "False")
+                              : tag_it->is_boolean() ? (tag_it->template get<bool>() ? "True" : "False")
                                                      : tag_it->dump();
     throw InputError(path.string() + ": not a calibproj " + kind + " file (schema " + found + ", expected '" +
                      expected + "')");
   }
   const std::string found_kind = tag.substr(prefix.size(), slash - prefix.size());
   const std::string found_major = tag.substr(slash + 1);
-  if (found_kind != kind) {
+  if (found_kind != kind &&
+      std::find(also_accepted.begin(), also_accepted.end(), found_kind) == also_accepted.end()) {
     throw InputError(path.string() + ": is a calibproj " + found_kind + " file, expected " + kind + " ('" + expected +
                      "')" + KindGivenHint(found_kind, kind));
   }
   if (found_major.empty() || found_major.find_first_not_of("0123456789") != std::string::npos ||
       std::stoi(found_major) > major) {
-    throw InputError(path.string() + ": schema '" + tag + "' is newer than this calibproj reads ('" + expected +
-                     "'); upgrade calibproj");
+    throw InputError(path.string() + ": schema '" + tag + "' is newer than this calibproj reads ('" + prefix +
+                     found_kind + "/" + std::to_string(major) + "'); upgrade calibproj");
   }
   return document;
+}
+
+}  // namespace
+
+nlohmann::json ReadJson(const fs::path& path) { return ParseJsonFile<nlohmann::json>(path); }
+
+nlohmann::json ReadSchemaJson(const fs::path& path, const std::string& kind, int major) {
+  return ParseSchemaJsonFile<nlohmann::json>(path, kind, major, {});
+}
+
+nlohmann::ordered_json ReadOrderedSchemaJson(const fs::path& path, const std::string& kind, int major,
+                                             const std::vector<std::string>& also_accepted) {
+  return ParseSchemaJsonFile<nlohmann::ordered_json>(path, kind, major, also_accepted);
 }
 
 bool WriteFully(int fd, std::string_view data) {

@@ -21,6 +21,11 @@ class InputError : public std::runtime_error {
 // its "schema" tag; InputError names the file and the problem.
 nlohmann::json ReadSchemaJson(const std::filesystem::path& path, const std::string& kind, int major);
 
+// The same with every object's members in the file's order (where the order means
+// something: a results file's cameras), accepting the kinds `also_accepted` too.
+nlohmann::ordered_json ReadOrderedSchemaJson(const std::filesystem::path& path, const std::string& kind, int major,
+                                             const std::vector<std::string>& also_accepted = {});
+
 // Parses any JSON file (InputError naming the file when it is not JSON, or nests
 // arrays and objects deeper than kMaxJsonDepth).
 nlohmann::json ReadJson(const std::filesystem::path& path);
