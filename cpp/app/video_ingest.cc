@@ -230,8 +230,8 @@ CameraOutcome IngestOne(const std::string& name, const fs::path& video, const In
   CameraOutcome outcome{name, video.string(), "", "", {}};
   try {
     const CameraIntrinsics intrinsics = intrinsics_of(name, &outcome.intrinsics);
-    const ingest::CameraModel camera = formats::CameraModelOf(intrinsics, outcome.intrinsics);
-    outcome.result = ingest::IngestCamera(video.string(), sequence, camera, setup.For(name), printer.For(name));
+    outcome.result = ingest::IngestCamera(video.string(), sequence, intrinsics, outcome.intrinsics, setup.For(name),
+                                          printer.For(name));
   } catch (const std::exception& error) {
     outcome.error = error.what();
     // Without a readable intrinsics file the message stands where its path would.

@@ -60,7 +60,7 @@ py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, 
                          int passes) {
   const cv::Mat gray = GrayView(image);
   const detect::Quad quad = QuadFromArray(corners);
-  const ingest::CameraModel camera = formats::CameraModelOf(intrinsics, "lens");
+  detect::CheckLens(intrinsics);
   detect::UndistortedEdgeOptions options;
   options.outward_fraction = outward_fraction;
   options.passes = passes;
@@ -68,7 +68,7 @@ py::object RefineCorners(const py::array_t<uint8_t, py::array::c_style>& image, 
   std::optional<detect::Quad> refined;
   {
     py::gil_scoped_release release;
-    const detect::LensTables tables(camera.lens, gray.size());
+    const detect::LensTables tables(intrinsics, gray.size());
     refined = detect::RefineUndistortedCorners(gray, cv::Point(0, 0), tables, cells, quad, options);
   }
   if (!refined) return py::none();
@@ -84,11 +84,11 @@ bool ShowsMarker(const py::array_t<uint8_t, py::array::c_style>& image, const Do
                  const formats::CameraIntrinsics& intrinsics, const std::string& spec, int id, bool inverted) {
   const cv::Mat gray = GrayView(image);
   const detect::Quad quad = QuadFromArray(corners);
-  const ingest::CameraModel camera = formats::CameraModelOf(intrinsics, "lens");
+  detect::CheckLens(intrinsics);
   const detect::MarkerFamily family = detect::ParseMarkerFamily(spec);
   const cv::Mat bits = detect::ProjectedCells(family, id, inverted);
   py::gil_scoped_release release;
-  const detect::LensTables tables(camera.lens, gray.size());
+  const detect::LensTables tables(intrinsics, gray.size());
   return detect::ShowsMarker(gray, cv::Point(0, 0), tables, quad, bits, detect::GetMarkerGeometry(family).quad_cells,
                              detect::VerificationOptions{});
 }
@@ -109,8 +109,8 @@ ingest::IngestOptions IngestOptionsFromKwargs(const detect::ArucoOptions& aruco,
 py::array_t<double> MapWithTables(const formats::CameraIntrinsics& intrinsics, std::pair<int, int> resolution,
                                   const DoubleArray& points, bool undistort) {
   RequireShape(points, {-1, 2}, "points");
-  const ingest::CameraModel camera = formats::CameraModelOf(intrinsics, "lens");
-  const detect::LensTables tables(camera.lens, cv::Size(resolution.first, resolution.second));
+  detect::CheckLens(intrinsics);
+  const detect::LensTables tables(intrinsics, cv::Size(resolution.first, resolution.second));
   std::vector<cv::Point2d> in;
   for (py::ssize_t i = 0; i < points.shape(0); ++i) in.emplace_back(points.at(i, 0), points.at(i, 1));
   const auto out = undistort ? tables.Undistort(in) : tables.Distort(in);
@@ -186,7 +186,6 @@ void register_ingest(py::module_& m) {
          const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag,
          const std::optional<py::function>& progress, const std::optional<video::SourceOptions>& live,
          const py::kwargs& kwargs) {
-        const ingest::CameraModel camera = formats::CameraModelOf(intrinsics, source);
         const ingest::IngestOptions options = IngestOptionsFromKwargs(aruco, apriltag, kwargs);
         ingest::ProgressCallback callback;
         if (progress) {
@@ -198,7 +197,8 @@ void register_ingest(py::module_& m) {
         ingest::CameraIngestResult result;
         {
           py::gil_scoped_release release;
-          result = ingest::IngestCamera(video, description, camera, options, callback, live.value_or(video::SourceOptions{}));
+          result = ingest::IngestCamera(video, description, intrinsics, source, options, callback,
+                                        live.value_or(video::SourceOptions{}));
         }
         return BoundIngestResult(result, description);
       },

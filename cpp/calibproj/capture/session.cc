@@ -101,12 +101,12 @@ class Session {
     outcome.name = camera.name;
     outcome.video = camera.source;
     try {
-      ingest::CameraModel model;
+      formats::CameraIntrinsics intrinsics;
       try {
         const fs::path file = plan_.intrinsics_folder.empty()
                                   ? camera.intrinsics
                                   : formats::IntrinsicsFileOf(plan_.intrinsics_folder, camera.name);
-        model = formats::CameraModelOf(formats::ReadIntrinsics(file, camera.name), file.string());
+        intrinsics = formats::ReadIntrinsics(file, camera.name);
         outcome.intrinsics = file.string();
       } catch (const std::exception& error) {
         outcome.intrinsics = error.what();  // the message stands where its path would
@@ -114,7 +114,7 @@ class Session {
       }
       ingest::IngestOptions options = plan_.options;
       if (camera.exposure_s > 0.0) options.exposure_s = camera.exposure_s;
-      outcome.result = ingest::IngestCamera(camera.source, plan_.sequence, model, options,
+      outcome.result = ingest::IngestCamera(camera.source, plan_.sequence, intrinsics, outcome.intrinsics, options,
                                             [this, k](int decoded, int) { Delivered(k, decoded); }, sources_[k]);
     } catch (const std::exception& error) {
       outcome.error = error.what();

@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <nlohmann/json.hpp>
-#include <opencv2/core/eigen.hpp>
 #include <set>
 #include <stdexcept>
 
@@ -266,8 +265,8 @@ formats::Tracks Reundistorted(formats::Tracks tracks, const std::string& name, c
     pixels.emplace_back(tracks.xy(k, 0), tracks.xy(k, 1));
   }
   const auto lens = [&](const Eigen::Matrix3d& K) {
-    detect::LensModel model;
-    cv::eigen2cv(K, model.K);
+    formats::CameraIntrinsics model;
+    model.K = K;
     model.dist = dist;
     return model;
   };

@@ -53,8 +53,8 @@ Lens LensOf(const std::vector<double>& dist) {
 // Undistorted pixels (of K) back to the distorted pixels they were made from.
 Eigen::Matrix2Xd Distorted(const ba::Intrinsics& K, const std::vector<double>& dist, const Eigen::Matrix2Xd& pixels) {
   if (pixels.cols() == 0) return pixels;
-  detect::LensModel model;
-  model.K = cv::Matx33d(K.fx, K.skew, K.cx, 0.0, K.fy, K.cy, 0.0, 0.0, 1.0);
+  formats::CameraIntrinsics model;
+  model.K << K.fx, K.skew, K.cx, 0.0, K.fy, K.cy, 0.0, 0.0, 1.0;
   model.dist = dist;
   std::vector<cv::Point2d> points(pixels.cols());
   for (int i = 0; i < pixels.cols(); ++i) points[i] = {pixels(0, i), pixels(1, i)};

@@ -1,6 +1,7 @@
 #include "calibproj/detect/lens.h"
 
 #include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -19,39 +20,31 @@ constexpr double kUndistortEpsilonPx = 1e-9;
 // image is larger than this is not one of a real lens.
 constexpr double kMaxTableNodes = 1 << 26;
 
+cv::Matx33d CvMatrix(const Eigen::Matrix3d& K) {
+  cv::Matx33d out;
+  cv::eigen2cv(K, out);
+  return out;
+}
+
 }  // namespace
 
-void LensModel::Check() const {
-  const std::size_t n = dist.size();
-  if (n != 0 && n != 4 && n != 5 && n != 8 && n != 12 && n != 14) {
-    throw std::invalid_argument("lens: distortion must have 4, 5, 8, 12 or 14 coefficients, got " +
-                                std::to_string(n));
-  }
-  if (!(K(0, 0) > 0.0) || !(K(1, 1) > 0.0) || K(2, 2) != 1.0) {
-    throw std::invalid_argument("lens: K must have positive focal lengths and K[2][2] = 1");
-  }
-  if (!cv::checkRange(K) || K(1, 0) != 0.0 || K(2, 0) != 0.0 || K(2, 1) != 0.0) {
-    throw std::invalid_argument("lens: K must be finite and [[fx, s, cx], [0, fy, cy], [0, 0, 1]]");
-  }
-  for (const double c : dist) {
-    if (!std::isfinite(c)) throw std::invalid_argument("lens: distortion coefficients must be finite");
+void CheckLens(const CameraIntrinsics& lens) {
+  if (const std::string problem = formats::IntrinsicsProblem(lens); !problem.empty()) {
+    throw std::invalid_argument("lens: " + problem);
   }
 }
 
-bool LensModel::HasDistortion() const {
-  return std::any_of(dist.begin(), dist.end(), [](double c) { return c != 0.0; });
-}
-
-std::vector<cv::Point2d> UndistortPixels(const LensModel& lens, const std::vector<cv::Point2d>& distorted) {
+std::vector<cv::Point2d> UndistortPixels(const CameraIntrinsics& lens, const std::vector<cv::Point2d>& distorted) {
   if (distorted.empty() || !lens.HasDistortion()) return distorted;
   std::vector<cv::Point2d> out;
   const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, kUndistortMaxIterations,
                                   kUndistortEpsilonPx);
-  cv::undistortPoints(distorted, out, lens.K, lens.dist, cv::noArray(), lens.K, criteria);
+  const cv::Matx33d K = CvMatrix(lens.K);
+  cv::undistortPoints(distorted, out, K, lens.dist, cv::noArray(), K, criteria);
   return out;
 }
 
-std::vector<cv::Point2d> DistortPixels(const LensModel& lens, const std::vector<cv::Point2d>& undistorted) {
+std::vector<cv::Point2d> DistortPixels(const CameraIntrinsics& lens, const std::vector<cv::Point2d>& undistorted) {
   if (undistorted.empty() || !lens.HasDistortion()) return undistorted;
   std::vector<cv::Point3d> rays;
   rays.reserve(undistorted.size());
@@ -59,7 +52,7 @@ std::vector<cv::Point2d> DistortPixels(const LensModel& lens, const std::vector<
     rays.emplace_back((p.x - lens.K(0, 2)) / lens.K(0, 0), (p.y - lens.K(1, 2)) / lens.K(1, 1), 1.0);
   }
   std::vector<cv::Point2d> out;
-  cv::projectPoints(rays, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), lens.K, lens.dist, out);
+  cv::projectPoints(rays, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), CvMatrix(lens.K), lens.dist, out);
   return out;
 }
 
@@ -95,7 +88,7 @@ bool LensTables::Grid::Interpolate(const cv::Point2d& p, cv::Point2d* out) const
   return true;
 }
 
-LensTables::LensTables(const LensModel& lens, cv::Size image_size, double step_px, double margin_px)
+LensTables::LensTables(const CameraIntrinsics& lens, cv::Size image_size, double step_px, double margin_px)
     : lens_(lens), identity_(!lens.HasDistortion()) {
   if (identity_) return;
   if (!(step_px > 0.0) || !(margin_px >= 0.0)) throw std::invalid_argument("lens tables: bad step or margin");

@@ -26,7 +26,7 @@ int AlignDown(int value, int alignment) {
 // Points along the edges of the square of side `side` centred on `centre`, mapped to
 // distorted image pixels with the homography of the surface the centre lands on; the
 // first four are the corners (top-left, top-right, bottom-right, bottom-left).
-std::vector<cv::Point2d> SquareOutline(const ProjectorHomography& homography, const LensModel& lens,
+std::vector<cv::Point2d> SquareOutline(const ProjectorHomography& homography, const CameraIntrinsics& lens,
                                        const cv::Point2d& centre, double side, int edge_points) {
   const cv::Matx33d& H = homography.SurfaceAt(centre);
   const double h = 0.5 * side;
@@ -100,7 +100,7 @@ struct Assessment {
 };
 
 // Whether a marker drawn with `side` projector pixels around `centre` is worth searching.
-Assessment Assess(const ProjectorHomography& homography, const LensModel& lens, const cv::Rect& inner,
+Assessment Assess(const ProjectorHomography& homography, const CameraIntrinsics& lens, const cv::Rect& inner,
                   const cv::Point2d& centre, double side, int grid_cells, const RoiOptions& options,
                   const ResolutionLimit* limit) {
   Assessment a;
@@ -121,7 +121,7 @@ Assessment Assess(const ProjectorHomography& homography, const LensModel& lens, 
 }
 
 // True when `max_scales` larger scales of the same MSM are worth searching too.
-bool LargerScalesSuffice(const ProjectorHomography& homography, const LensModel& lens, const cv::Rect& inner,
+bool LargerScalesSuffice(const ProjectorHomography& homography, const CameraIntrinsics& lens, const cv::Rect& inner,
                          const cv::Point2d& centre, int id, int grid_cells, const ScaleSelection& selection,
                          const RoiOptions& options, const ResolutionLimit* limit) {
   if (selection.max_scales <= 0) return false;
@@ -139,7 +139,7 @@ bool LargerScalesSuffice(const ProjectorHomography& homography, const LensModel&
 
 }  // namespace
 
-PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
+PatternPlan PlanPattern(const ProjectorHomography& homography, const CameraIntrinsics& lens, cv::Size image_size,
                         const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit,
                         const ScaleSelection* selection) {
   options.Check();

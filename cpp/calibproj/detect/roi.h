@@ -109,7 +109,7 @@ struct ScaleSelection {
 // `limit` (may be null) leaves out markers of sizes the camera does not resolve;
 // `selection` (may be null) a marker when max_scales larger scales of its MSM are
 // worth searching (larger markers give better centres).
-PatternPlan PlanPattern(const ProjectorHomography& homography, const LensModel& lens, cv::Size image_size,
+PatternPlan PlanPattern(const ProjectorHomography& homography, const CameraIntrinsics& lens, cv::Size image_size,
                         const PatternMarkers& markers, const RoiOptions& options, const ResolutionLimit* limit,
                         const ScaleSelection* selection = nullptr);
 

@@ -23,18 +23,6 @@ Tracks TracksOf(const std::vector<CameraOutcome>& outcomes, int markers_per_arra
   return MakeTracks(names, camera, ids, xy, markers_per_array);
 }
 
-ingest::CameraModel CameraModelOf(const CameraIntrinsics& intrinsics, const std::string& source) {
-  ingest::CameraModel camera;
-  for (int i = 0; i < 9; ++i) camera.lens.K(i / 3, i % 3) = intrinsics.K(i / 3, i % 3);
-  camera.lens.dist = intrinsics.dist;
-  if (intrinsics.has_resolution) {
-    camera.resolution = cv::Size(static_cast<int>(intrinsics.width), static_cast<int>(intrinsics.height));
-  }
-  camera.source = source;
-  camera.lens.Check();
-  return camera;
-}
-
 namespace {
 
 using nlohmann::ordered_json;

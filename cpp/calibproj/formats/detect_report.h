@@ -14,11 +14,6 @@
 namespace calibproj::formats {
 
 // What the ingest of one camera gave, or why it failed.
-// The camera model a camera's frames are read with, from its intrinsics file's
-// contents; `source` names the file in messages. std::invalid_argument for a lens the
-// ingest cannot use.
-ingest::CameraModel CameraModelOf(const CameraIntrinsics& intrinsics, const std::string& source);
-
 struct CameraOutcome {
   std::string name;        // the video's file stem
   std::string video;       // path of the video

@@ -65,11 +65,13 @@ double MeanSide(const detect::Quad& quad) {
 
 class CameraIngest {
  public:
-  CameraIngest(const std::string& path, const SequenceDescription& sequence, const CameraModel& camera,
+  CameraIngest(const std::string& path, const SequenceDescription& sequence, const formats::CameraIntrinsics& camera,
+               const std::string& intrinsics_source,
                const IngestOptions& options, const ProgressCallback& progress, const video::SourceOptions& source)
       : path_(path),
         sequence_(sequence),
         camera_(camera),
+        intrinsics_source_(intrinsics_source),
         reader_(path, source),
         options_(Prepared(options, sequence, reader_.info().fps)),
         progress_(progress),
@@ -84,7 +86,7 @@ class CameraIngest {
         resolution_(options_.resolution),
         pipeline_(family_, options_.detector, options_.roi,
                   CornerOptions{std::make_shared<const detect::LensTables>(
-                                    camera.lens, cv::Size(reader_.info().width, reader_.info().height)),
+                                    camera, cv::Size(reader_.info().width, reader_.info().height)),
                                 geometry_.quad_cells, options_.refine_undistorted, options_.edges,
                                 options_.refine_undistorted && options_.verify_predicted,
                                 options_.verification,
@@ -179,11 +181,12 @@ class CameraIngest {
   }
 
   void CheckResolution() const {
-    const cv::Size expected = camera_.resolution;
+    if (!camera_.has_resolution) return;
+    const cv::Size expected(static_cast<int>(camera_.width), static_cast<int>(camera_.height));
     const auto& info = reader_.info();
-    if (expected.area() > 0 && (expected.width != info.width || expected.height != info.height)) {
+    if (expected.width != info.width || expected.height != info.height) {
       throw std::invalid_argument(path_ + ": frames are " + std::to_string(info.width) + "x" +
-                                  std::to_string(info.height) + " but the intrinsics (" + camera_.source +
+                                  std::to_string(info.height) + " but the intrinsics (" + intrinsics_source_ +
                                   ") are for " + std::to_string(expected.width) + "x" +
                                   std::to_string(expected.height));
     }
@@ -405,7 +408,7 @@ class CameraIngest {
     }
     job.has_plan = true;
     const detect::ScaleSelection selection = Selection(index);
-    job.plan = detect::PlanPattern(homography_, camera_.lens, whole.size(), markers, options_.roi,
+    job.plan = detect::PlanPattern(homography_, camera_, whole.size(), markers, options_.roi,
                                    options_.learn_resolution ? &resolution_ : nullptr, &selection);
     stats.too_small += job.plan.too_small;
     stats.outside += job.plan.outside;
@@ -737,7 +740,8 @@ class CameraIngest {
 
   std::string path_;
   const SequenceDescription& sequence_;
-  CameraModel camera_;
+  formats::CameraIntrinsics camera_;
+  std::string intrinsics_source_;
   video::VideoReader reader_;
   IngestOptions options_;
   ProgressCallback progress_;
@@ -836,12 +840,13 @@ void IngestOptions::Check() const {
 }
 
 CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,
-                                const CameraModel& camera, const IngestOptions& options,
-                                const ProgressCallback& progress, const video::SourceOptions& source) {
-  camera.lens.Check();
+                                const formats::CameraIntrinsics& camera, const std::string& intrinsics_source,
+                                const IngestOptions& options, const ProgressCallback& progress,
+                                const video::SourceOptions& source) {
+  detect::CheckLens(camera);
   sequence.Check();
   options.Check();
-  return CameraIngest(video_path, sequence, camera, options, progress, source).Run();
+  return CameraIngest(video_path, sequence, camera, intrinsics_source, options, progress, source).Run();
 }
 
 }  // namespace calibproj::ingest

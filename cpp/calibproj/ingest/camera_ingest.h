@@ -31,12 +31,6 @@
 
 namespace calibproj::ingest {
 
-struct CameraModel {
-  detect::LensModel lens;
-  cv::Size resolution;     // expected frame size; 0 x 0 = not checked
-  std::string source;      // where the intrinsics come from, for messages
-};
-
 struct IngestOptions {
   sync::SyncOptions sync;
   video::PickOptions pick;
@@ -204,8 +198,11 @@ using ProgressCallback = std::function<void(int decoded, int total)>;
 // its frames arrive (and recorded, when the source says where): the ingest ends
 // once the frames of the end light code are in, and a source that stalls or is
 // stopped before then fails with the reason.
+// `camera`'s image size, when it has one, is the frame size expected; `intrinsics_source`
+// names where its intrinsics come from, for messages.
 CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,
-                                const CameraModel& camera, const IngestOptions& options,
-                                const ProgressCallback& progress = {}, const video::SourceOptions& source = {});
+                                const formats::CameraIntrinsics& camera, const std::string& intrinsics_source,
+                                const IngestOptions& options, const ProgressCallback& progress = {},
+                                const video::SourceOptions& source = {});
 
 }  // namespace calibproj::ingest

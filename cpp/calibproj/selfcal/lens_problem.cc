@@ -53,15 +53,6 @@ bool Contains(const std::vector<std::string>& names, const std::string& name) {
   return std::find(names.begin(), names.end(), name) != names.end();
 }
 
-detect::LensModel LensModelOf(const formats::CameraIntrinsics& in) {
-  detect::LensModel lens;
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) lens.K(r, c) = in.K(r, c);
-  }
-  lens.dist = in.dist;
-  return lens;
-}
-
 std::vector<cv::Point2d> PointsOf(const ba::PixelMatrix& xy, const std::vector<int>& rows) {
   std::vector<cv::Point2d> out;
   out.reserve(rows.size());
@@ -183,7 +174,7 @@ Problem::Problem(const formats::Tracks& tracks, const IntrinsicsMap& intrinsics,
   observed = xy;
   for (int c = 0; c < num_cameras; ++c) {
     const std::vector<int> mine = RowsOfCamera(camera_index, c);
-    const auto distorted = detect::DistortPixels(LensModelOf(intrinsics.at(cameras[c])), PointsOf(xy, mine));
+    const auto distorted = detect::DistortPixels(intrinsics.at(cameras[c]), PointsOf(xy, mine));
     for (size_t k = 0; k < mine.size(); ++k) observed.row(mine[k]) << distorted[k].x, distorted[k].y;
   }
   poses.resize(num_cameras, 6);

@@ -39,7 +39,6 @@ const Refinable* FindRefinable(const std::string& name);
 const Refinable& RefinableOf(const std::string& name);
 
 bool Contains(const std::vector<std::string>& names, const std::string& name);
-detect::LensModel LensModelOf(const formats::CameraIntrinsics& in);
 std::vector<cv::Point2d> PointsOf(const ba::PixelMatrix& xy, const std::vector<int>& rows);
 std::vector<int> RowsOfCamera(const Eigen::VectorXi& camera_index, int camera);
 

@@ -712,8 +712,8 @@ formats::Tracks ConvertTracks(const formats::Tracks& tracks, const IntrinsicsMap
     if (from == given.end() || to == refined.end()) continue;
     if (from->second.K == to->second.K && from->second.dist == to->second.dist) continue;
     const std::vector<int> rows = RowsOfCamera(tracks.camera_index, static_cast<int>(c));
-    const auto raw = detect::DistortPixels(LensModelOf(from->second), PointsOf(tracks.xy, rows));
-    const auto undistorted = detect::UndistortPixels(LensModelOf(to->second), raw);
+    const auto raw = detect::DistortPixels(from->second, PointsOf(tracks.xy, rows));
+    const auto undistorted = detect::UndistortPixels(to->second, raw);
     for (size_t k = 0; k < rows.size(); ++k) out.xy.row(rows[k]) << undistorted[k].x, undistorted[k].y;
   }
   return out;

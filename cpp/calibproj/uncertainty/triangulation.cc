@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "calibproj/ba/rotation.h"
+#include "calibproj/detect/lens.h"
 
 namespace calibproj::uncertainty {
 
@@ -49,9 +50,7 @@ UncertaintyModel::UncertaintyModel(const formats::Calibration& calibration,
     camera.K = lens->second.K;
     camera.R = pose->R;
     camera.t = pose->t;
-    const Eigen::Matrix3d& K = lens->second.K;
-    camera.lens.K = cv::Matx33d(K(0, 0), K(0, 1), K(0, 2), K(1, 0), K(1, 1), K(1, 2), K(2, 0), K(2, 1), K(2, 2));
-    camera.lens.dist = lens->second.dist;
+    camera.lens = lens->second;
     camera.width = lens->second.ImageWidth();
     camera.height = lens->second.ImageHeight();
     camera.noise_px = poses.noise_px[k];

@@ -27,7 +27,6 @@
 #include <vector>
 
 #include "calibproj/formats/calibration.h"
-#include "calibproj/detect/lens.h"
 #include "calibproj/formats/intrinsics_file.h"
 #include "calibproj/selfcal/lens.h"
 
@@ -75,7 +74,7 @@ class UncertaintyModel {
     Eigen::Matrix3d K;
     Eigen::Matrix3d R;
     Eigen::Vector3d t;
-    detect::LensModel lens;  // K and distortion, to tell whether a pixel is in the image
+    formats::CameraIntrinsics lens;  // to tell whether a pixel is in the image
     double width = 0.0, height = 0.0;
     double noise_px = 1.0;
   };
