@@ -61,6 +61,13 @@ def site_file(room, name: str, **changes) -> Path:
     return path
 
 
+def recorded_from(results: Path) -> tuple[str, str]:
+    """The source and intrinsics provenance.json records: a path, or what was given."""
+    inputs = json.loads((results / "provenance.json").read_text())["inputs"]
+    entries = (inputs["source"], inputs["intrinsics"])
+    return tuple(entry["path"] if isinstance(entry, dict) else entry for entry in entries)
+
+
 @pytest.fixture(scope="module")
 def calibrated(room):
     """The room captured, with a fifth camera in the site file that never answers."""
@@ -84,6 +91,9 @@ def test_every_camera_is_calibrated_live_and_one_that_never_answers_is_named(roo
     assert comparison.registered == ["far1", "far4", "near1", "ceiling"] and not comparison.missing
     assert comparison.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
     assert comparison.translation_rmse_pct < MAX_CENTRE_RMSE_PCT
+
+    # Where the results came from: the site file, its cameras' intrinsics files.
+    assert recorded_from(out) == ("../site.json", "the site file's intrinsics files")
 
     # The recordings are in the results, each the whole projection as the camera sent it.
     log = json.loads((out / "recordings" / "capture.json").read_text())
@@ -133,6 +143,7 @@ def test_a_moved_camera_is_found_and_repaired_by_a_live_check(room, calibrated, 
     comparison = compare(repaired / "camera_poses.json", base / "room" / "truth.json")
     assert comparison.cameras["far4"].rotation_deg < MAX_ROTATION_RMSE_DEG
     assert (repaired / "check.json").is_file()
+    assert recorded_from(repaired) == ("../check.json", "../results/intrinsics")
     assert sorted(p.name for p in (repaired / "recordings").iterdir()) == [
         "capture.json", "ceiling.mkv", "far1.mkv", "far4.mkv", "near1.mkv"]
 
@@ -155,6 +166,7 @@ def test_the_native_capture_calibrates_the_room_and_names_the_dead_camera(room):
     assert comparison.rotation_rmse_deg < MAX_ROTATION_RMSE_DEG
     assert comparison.translation_rmse_pct < MAX_CENTRE_RMSE_PCT
     assert (out / "calibration_opencv.yaml").is_file() and (out / "detect_report.json").is_file()
+    assert recorded_from(out) == ("../native.json", "the site file's intrinsics files")
     log = json.loads((out / "recordings" / "capture.json").read_text())
     assert log["cameras"]["dead"]["frames"] == 0 and log["cameras"]["far4"]["frames"] > 400
     assert log["projection"]["frames_logged"] > 200 and log["projection"]["cameras_done_after_end_s"] < 10
@@ -186,6 +198,7 @@ def test_the_native_capture_checks_and_repairs_a_moved_camera(room):
                         "dead": "unknown"}
     comparison = compare(repaired / "camera_poses.json", base / "room" / "truth.json")
     assert comparison.cameras["near1"].rotation_deg < MAX_ROTATION_RMSE_DEG
+    assert recorded_from(repaired) == ("../native_check.json", "../native_results/intrinsics")
     assert sorted(p.name for p in (repaired / "recordings").iterdir()) == [
         "capture.json", "ceiling.mkv", "far1.mkv", "far4.mkv", "near1.mkv"]
 

@@ -580,6 +580,7 @@ class Baselines:
             "_core.capture.Site": Spec([]),
             "_core.capture.SiteCamera": Spec([]),
             "_core.capture.read_site": Spec([("path", f["site.json"])]),
+            "_core.capture.site_intrinsics_provenance": Spec([]),
             "_core.capture.CapturePlan": Spec(self.capture_plan_arguments()),
             "_core.capture.CaptureRun": Spec([]),
             "_core.capture.CameraOutcome": Spec([]),

@@ -192,7 +192,7 @@ int Calibrated(const capture::Site& site, const Projection& projection, const ca
   inputs.markers = formats::ProjectedMarkers::FromSequence(projection.sequence);
   inputs.missing_reason = [](const std::string& camera) { return "no intrinsics for camera " + camera; };
   inputs.provenance = CaptureProvenance(projection, run, arguments);
-  inputs.provenance.intrinsics = formats::ProvenanceInput{"", "the site file's intrinsics files"};
+  inputs.provenance.intrinsics = capture::SiteIntrinsicsProvenance();
   const auto measurement = ScaleOption(arguments.scale, true);
   CheckScale(measurement, inputs.given, inputs.markers);
   const std::vector<std::string> exports =

@@ -110,6 +110,8 @@ void register_capture(py::module_& m) {
       .def_readonly("ready_s", &capture::Site::ready_s, "every camera delivers frames within this")
       .def_readonly("end_s", &capture::Site::end_s, "a camera still ingesting this long after the end is stopped");
   py::register_exception<capture::CaptureInterrupted>(m, "CaptureInterrupted", PyExc_RuntimeError);
+  m.def("site_intrinsics_provenance", &capture::SiteIntrinsicsProvenance,
+        "What provenance.json records as a capture's intrinsics: the files its site file names.");
   py::class_<capture::CapturePlan>(m, "CapturePlan", "What a capture projects and how it reads the cameras.")
       .def(py::init(&MakePlan), py::arg("site"), py::arg("sequence_file"), py::arg("sequence"), py::arg("video"),
            py::arg("intrinsics_folder"), py::arg("recordings"), py::arg("aruco"), py::arg("apriltag"),

@@ -63,6 +63,7 @@ def calibrate(
     nominal_fov_deg: float | None = None,
     merge: str | os.PathLike | None = None,
     recordings: str | os.PathLike | None = None,
+    site: str | os.PathLike | None = None,
 ) -> Calibration:
     """Calibrate a camera network and, with ``out``, write its results folder.
 
@@ -108,6 +109,9 @@ def calibrate(
             must be the ones the earlier results used. None (default): nothing merged.
         recordings: a folder (the capture's recorded videos) moved into the results folder
             as ``recordings/`` when the results are written; left where it is otherwise.
+        site: the site file of the capture that recorded ``source``
+            (``calibproj.capture``): ``provenance.json`` names it as the source, and the
+            site file's intrinsics files as the intrinsics. None (default): not a capture.
     """
     from calibproj.formats.export import parse_formats
     from calibproj.scale.metric import check_measurement, parse_scale, scale_factor, scaled
@@ -176,8 +180,10 @@ def calibrate(
                 scale_source = {"measurement": str(measurement), "error": str(error)}
         if folder is not None:
             markers_spec = ingest_result.markers if ingest_result is not None else None
-            record = provenance(command=command, source=source, sequence=sequence,
-                                intrinsics=intrinsics_source, markers=markers_spec, model=calibration.model,
+            recorded = (source, intrinsics_source) if site is None else (
+                site, _core.capture.site_intrinsics_provenance())
+            record = provenance(command=command, source=recorded[0], sequence=sequence,
+                                intrinsics=recorded[1], markers=markers_spec, model=calibration.model,
                                 options=options, scale=scale_source, videos=video_files(ingest_result),
                                 merged=merge)
             with folder.writing() as staging:

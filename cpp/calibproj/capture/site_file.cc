@@ -141,4 +141,8 @@ Site ReadSite(const fs::path& path) {
   }
 }
 
+formats::ProvenanceInput SiteIntrinsicsProvenance() {
+  return formats::ProvenanceInput{"", "the site file's intrinsics files"};
+}
+
 }  // namespace calibproj::capture

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "calibproj/capture/projector.h"
+#include "calibproj/formats/provenance.h"
 #include "calibproj/video/video_reader.h"
 
 namespace calibproj::capture {
@@ -47,5 +48,8 @@ struct Site {
 
 // Reads and checks a site file: formats::InputError naming the file and the entry.
 Site ReadSite(const std::filesystem::path& path);
+
+// What provenance.json records as a capture's intrinsics: the files its site file names.
+formats::ProvenanceInput SiteIntrinsicsProvenance();
 
 }  // namespace calibproj::capture

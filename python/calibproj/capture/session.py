@@ -107,7 +107,7 @@ def capture(
     def calibrated(ingest_result: Any, kept: Path) -> Calibration:
         return calibrate(ingest_result, _intrinsics_of(projection.intrinsics), sequence=str(projection.sequence),
                          out=out, force=force, progress=progress, command=command, recordings=kept,
-                         **calibrate_options)
+                         site=site, **calibrate_options)
 
     out = Path(out)
     return _captured(spec, projection, out, force, _recordings(recordings, out), progress, calibrated)
@@ -148,7 +148,7 @@ def capture_check(
     def checked(ingest_result: Any, kept: Path) -> Any:
         return check(results, ingest_result, sequence=str(plan.sequence), out=out, options=options, force=force,
                      exports=exports, report=report, progress=progress, command=command,
-                     recordings=kept if out is not None else None)
+                     recordings=kept if out is not None else None, site=site)
 
     beside = Path(out) if out is not None else Path(results).parent / f"{Path(results).name}-check"
     return _captured(spec, plan, Path(out) if out is not None else None, force, _recordings(recordings, beside),

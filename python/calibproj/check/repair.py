@@ -124,6 +124,7 @@ def check(
     progress: bool = True,
     command: list[str] | None = None,
     recordings: str | os.PathLike | None = None,
+    site: str | os.PathLike | None = None,
 ) -> CheckResult:
     """Check the calibration in the folder ``results`` with a check projection and, with
     ``out``, write the repaired results folder there.
@@ -139,6 +140,8 @@ def check(
         options: ``CheckOptions`` (defaults documented there).
         force: replace an existing ``out`` (the whole folder).
         exports, report, workers, progress, command, recordings: as ``calibrate`` takes them.
+        site: the site file of the capture that recorded ``source``: ``provenance.json``
+            names it as the source. None (default): not a capture.
 
     Raises:
         UntrustedReference: with ``out``, when the stored calibration cannot be trusted
@@ -188,7 +191,7 @@ def check(
             raise UntrustedReference(result, f"{result.message} ({Path(out)} not written)")
         fixed, fixed_intrinsics, fixed_tracks = repaired(calibration, intrinsics, stored_tracks, tracks, result,
                                                          RegistrationOptions().weak_rotation_sigma_deg)
-        record = provenance(command=command, source=source, sequence=sequence,
+        record = provenance(command=command, source=source if site is None else site, sequence=sequence,
                             intrinsics=folder_in / INTRINSICS_DIR, model=calibration.model, checked=folder_in,
                             videos=video_files(ingest_result))
         with folder.writing() as staging:

@@ -31,9 +31,10 @@ ProvenanceRecord = _core.formats.ProvenanceRecord
 
 
 def _input(value: Any) -> _core.formats.ProvenanceInput | None:
-    """A path, identified when the record is written; an object given in memory by its kind."""
-    if value is None:
-        return None
+    """A path, identified when the record is written; an object given in memory by its kind
+    (a ``ProvenanceInput`` as it is)."""
+    if value is None or isinstance(value, _core.formats.ProvenanceInput):
+        return value
     if isinstance(value, (str, os.PathLike)):
         return _core.formats.ProvenanceInput(path=os.fspath(value))
     return _core.formats.ProvenanceInput(given=f"{type(value).__name__} given in memory")
