@@ -121,6 +121,15 @@ def test_bands_fitted_together_give_each_band_its_own_fit():
         assert fits(order) == [in_order[b] for b in order], order
 
 
+def test_a_search_grid_too_fine_to_keep_is_refused():
+    """The fit keeps every band's cost at every (offset, exposure) point searched: a grid
+    of more than two million points is refused before any work, with the knobs named."""
+    sequence = short_sequence()
+    signal, _ = record(sequence, 25.0, 10.0, 0.5, np.random.default_rng(1))
+    with pytest.raises(ValueError, match="offset_step and exposure_steps make more than 2000000"):
+        synchronise(signal, sequence, 25.0, IngestOptions(offset_step=0.0001))
+
+
 @pytest.mark.parametrize("missing", [0.02, 0.1])
 def test_codes_are_found_over_frames_the_camera_dropped(missing):
     """Dropped frames are NaN on the frame grid: codes are searched and fitted over the

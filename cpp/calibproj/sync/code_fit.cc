@@ -23,8 +23,11 @@ namespace {
 // Bounds of the fit's grid and iterations, far above the defaults (50 offsets, 50
 // exposures, 50 iterations), so that a bad option cannot make it loop without limit.
 constexpr int kMaxOffsetSteps = 100'000;
-constexpr int kMaxExposureSteps = 10'000;
+constexpr int kMaxExposureSteps = 5'000;
 constexpr int kMaxFitIterations = 10'000;
+// Points of the (offset, exposure) grid at most: the search keeps each signal's cost at
+// every point (8 bytes each).
+constexpr double kMaxGridPoints = 2'000'000;
 
 // A starting map that places the windows on camera frames an int can count, and
 // windows inside the timeline.
@@ -585,6 +588,11 @@ void CodeFitOptions::Check() const {
           "exposures must satisfy 0 < min_exposure <= max_exposure <= 1");
   Require(exposure_steps >= 1 && exposure_steps <= kMaxExposureSteps,
           "exposure_steps must be in [1, " + std::to_string(kMaxExposureSteps) + "]");
+  // The readout's band fits search a frame further.
+  const double offsets = 2.0 * std::round((offset_range + 1.0) / offset_step) + 1.0;
+  Require(offsets * (fixed_exposure > 0.0 ? 1 : exposure_steps) <= kMaxGridPoints,
+          "offset_range / offset_step and exposure_steps make more than 2000000 (offset, exposure) points to "
+          "search (with the frame more that a rolling shutter's bands search)");
   Require(fixed_exposure >= 0.0 && std::isfinite(fixed_exposure), "fixed_exposure must be non-negative (0: fit it)");
   Require(feasible_chi2 >= 0.0 && std::isfinite(feasible_chi2), "feasible_chi2 must be non-negative");
   Require(plateau_tolerance >= 0.0 && std::isfinite(plateau_tolerance), "plateau_tolerance must be non-negative");
