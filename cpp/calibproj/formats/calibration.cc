@@ -15,6 +15,16 @@ using ordered_json = nlohmann::ordered_json;
 
 const std::vector<std::string> kCalibrationFiles = {"camera_poses.json", "metrics.json", "points.ply"};
 
+namespace {
+
+// A value, or null when there is none.
+template <typename T>
+ordered_json Optional(const std::optional<T>& value) {
+  return value ? ordered_json(*value) : ordered_json(nullptr);
+}
+
+}  // namespace
+
 void Calibration::Check() const {
   if (static_cast<size_t>(points.rows()) != point_ids.size()) {
     throw std::invalid_argument("calibration: " + std::to_string(points.rows()) + " points but " +
@@ -43,23 +53,20 @@ std::string Calibration::Status(const std::string& name) const {
 }
 
 std::string SummaryJson(const Calibration& calibration) {
-  const auto or_null = [](const auto& value) {
-    return value ? nlohmann::ordered_json(*value) : nlohmann::ordered_json(nullptr);
-  };
   nlohmann::ordered_json rows = nlohmann::ordered_json::array();
   for (const auto& [name, m] : calibration.metrics) {
     rows.push_back({{"camera", name},
                     {"registered", calibration.PoseOf(name) != nullptr},
-                    {"mean_px", or_null(m.mean_px)},
-                    {"std_px", or_null(m.std_px)},
+                    {"mean_px", Optional(m.mean_px)},
+                    {"std_px", Optional(m.std_px)},
                     {"inliers", m.inliers},
                     {"observations", m.observations},
                     {"track2", m.track2_observations},
                     {"view_score", m.view_score},
-                    {"rotation_sigma_deg", or_null(m.rotation_sigma_deg)},
-                    {"centre_sigma", or_null(m.centre_sigma)},
+                    {"rotation_sigma_deg", Optional(m.rotation_sigma_deg)},
+                    {"centre_sigma", Optional(m.centre_sigma)},
                     {"weak", m.weak},
-                    {"failure", or_null(m.failure)},
+                    {"failure", Optional(m.failure)},
                     {"status", calibration.Status(name)}});
   }
   return PythonJson(rows);
@@ -173,11 +180,6 @@ ordered_json Matrix(const Eigen::Matrix3d& R) {
   ordered_json rows = ordered_json::array();
   for (int i = 0; i < 3; ++i) rows.push_back(Vector(R.row(i).transpose()));
   return rows;
-}
-
-template <typename T>
-ordered_json Optional(const std::optional<T>& value) {
-  return value ? ordered_json(*value) : ordered_json(nullptr);
 }
 
 ordered_json Failures(const Calibration& calibration) {
