@@ -63,6 +63,21 @@ def test_luma_is_the_grey_level_of_the_encoded_frames(tmp_path: Path, name: str)
     np.testing.assert_allclose(ours, encoded, rtol=0, atol=0.75 / 255.0)
 
 
+@pytest.mark.parametrize("name", sorted(ENCODINGS))
+def test_luma_measured_on_the_decoded_plane_is_that_of_the_grey_image(tmp_path: Path, name: str) -> None:
+    """The sync measures limited-range luma without stretching the frame first (its table
+    does it): the same linearised mean as the grey image the detection gets."""
+    path = encode(tmp_path, name, frames())
+    gamma = 2.2
+    ours = _core.video.luma_signal(str(path), gamma, 1, use_timestamps=False)
+    reader = _core.video.VideoReader(str(path))
+    expected = []
+    while (grabbed := reader.grab()) is not None:
+        expected.append(np.mean((grabbed[1] / 255.0) ** gamma))
+    assert len(ours) == len(expected) == FRAMES
+    np.testing.assert_allclose(ours, expected, rtol=1e-6, atol=0)
+
+
 def test_probe_reads_size_rate_and_frame_count(tmp_path: Path) -> None:
     path = encode(tmp_path, "x264_yuv420p", frames(), rate="30000/1001")
     info = _core.video.probe(str(path))

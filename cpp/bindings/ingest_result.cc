@@ -158,7 +158,7 @@ void register_ingest_result(py::module_& m) {
       .def_property_readonly("timing", field(&R::timing), "frames on the frame grid")
       .def_property_readonly("frames_decoded", field(&R::frames_decoded))
       .def_property_readonly("frames_converted", field(&R::frames_converted),
-                             "decoded frames whose grey image was made (for luma or detection)")
+                             "decoded frames whose grey image was made (to detect on)")
       .def_property_readonly("frames_detected", field(&R::frames_detected), "frames that went into a detection")
       .def_property_readonly("patterns_whole_frame", field(&R::patterns_whole_frame))
       .def_property_readonly("patterns_in_regions", field(&R::patterns_in_regions))

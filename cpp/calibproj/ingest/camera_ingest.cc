@@ -203,9 +203,9 @@ class CameraIngest {
   }
 
   void OnFrameBeforeStart(int frame) {
-    cv::Mat gray = Gray();
-    Measure(gray);
-    ring_.Push(frame, std::move(gray));
+    const video::LumaPlane luma = reader_.Luma();
+    Measure(luma);
+    ring_.Push(frame, luma);
     // Every search_interval slots (slot 0, search_interval, ... when no frame is dropped).
     if (frame >= last_search_ + options_.search_interval) {
       last_search_ = frame - frame % options_.search_interval;
@@ -214,8 +214,8 @@ class CameraIngest {
   }
 
   // Mean luma of the frame (and of its bands) appended to the signals.
-  void Measure(const cv::Mat& gray) {
-    result_.signal.push_back(luma_.Mean(gray, &band_means_));
+  void Measure(const video::LumaPlane& luma) {
+    result_.signal.push_back(luma_.Mean(luma, &band_means_));
     for (std::size_t b = 0; b < band_means_.size(); ++b) band_signals_[b].push_back(band_means_[b]);
   }
 
@@ -235,9 +235,14 @@ class CameraIngest {
     last_needed_frame_ = end_means_last_;
     if (!frame_pattern_.empty()) last_needed_frame_ = std::max(last_needed_frame_, frame_pattern_.rbegin()->first);
     started_ = true;
-    for (const auto& [index, gray] : ring_.frames()) {
+    for (const auto& [index, luma] : ring_.frames()) {
       const auto pick = frame_pattern_.find(index);
-      if (pick != frame_pattern_.end()) HandlePick(index, pick->second, [&]() -> const cv::Mat& { return gray; });
+      if (pick != frame_pattern_.end()) {
+        HandlePick(index, pick->second, [&]() {
+          ++result_.frames_converted;
+          return video::FullRangeGray(luma);
+        });
+      }
     }
     ring_.Clear();
   }
@@ -246,7 +251,7 @@ class CameraIngest {
     const bool measure = frame >= end_means_first_ && frame <= end_means_last_;
     const auto pick = frame_pattern_.find(frame);
     if (measure) {
-      Measure(Gray());
+      Measure(reader_.Luma());  // the grey image is made only for the frames detected on
     } else {
       result_.signal.push_back(kNaN);
       for (auto& band : band_signals_) band.push_back(kNaN);

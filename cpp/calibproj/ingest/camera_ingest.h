@@ -164,7 +164,7 @@ struct CameraIngestResult {
   // numbers everywhere (signal, sync, records) are grid slots.
   video::FrameClockStats timing;
   int frames_decoded = 0;
-  int frames_converted = 0;    // decoded frames whose grey image was made (for luma or detection)
+  int frames_converted = 0;    // decoded frames whose grey image was made (to detect on)
   int frames_detected = 0;     // frames that went into a detection
   int patterns_whole_frame = 0;
   int patterns_in_regions = 0;

@@ -1,5 +1,5 @@
 #pragma once
-// The last few decoded grey frames, kept while the start light code is being looked
+// The last few decoded frames' luma, kept while the start light code is being looked
 // for: once it is found, frames that show patterns shortly after it are taken from
 // here. Memory stays bounded by the capacity whatever the video length.
 
@@ -8,25 +8,34 @@
 #include <deque>
 #include <utility>
 
+#include "calibproj/video/luma.h"
+
 namespace calibproj::video {
 
 class FrameRing {
  public:
   explicit FrameRing(int capacity) : capacity_(capacity) {}
 
-  // Keeps `gray` (taken over, not copied) as frame `index`, dropping the oldest frame.
-  void Push(int index, cv::Mat gray) {
+  // Keeps a copy of `luma` as frame `index`, in the oldest frame's buffer once full
+  // (the luma is only stretched to full range for the frames that are used).
+  void Push(int index, const LumaPlane& luma) {
     if (capacity_ <= 0) return;
-    if (static_cast<int>(frames_.size()) == capacity_) frames_.pop_front();
-    frames_.emplace_back(index, std::move(gray));
+    LumaPlane copy;
+    if (static_cast<int>(frames_.size()) == capacity_) {
+      copy = std::move(frames_.front().second);
+      frames_.pop_front();
+    }
+    luma.image.copyTo(copy.image);  // reuses the buffer when the size is the same
+    copy.limited_range = luma.limited_range;
+    frames_.emplace_back(index, std::move(copy));
   }
 
-  const std::deque<std::pair<int, cv::Mat>>& frames() const { return frames_; }
+  const std::deque<std::pair<int, LumaPlane>>& frames() const { return frames_; }
   void Clear() { frames_.clear(); }
 
  private:
   int capacity_;
-  std::deque<std::pair<int, cv::Mat>> frames_;
+  std::deque<std::pair<int, LumaPlane>> frames_;
 };
 
 }  // namespace calibproj::video

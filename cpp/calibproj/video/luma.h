@@ -4,9 +4,23 @@
 #include <opencv2/core.hpp>
 
 #include <array>
+#include <cstdint>
 #include <vector>
 
 namespace calibproj::video {
+
+// Limited-range ("TV", 16 black, 235 white) luma to full range, rounded and clipped as
+// FFmpeg's YUV to RGB conversion does.
+std::uint8_t LimitedToFull(int value);
+
+// A frame's 8-bit luma as decoded: the plane and whether it is limited range.
+struct LumaPlane {
+  cv::Mat image;
+  bool limited_range = false;
+};
+
+// The full-range grey image of `luma`: a new image, stretched where it is limited range.
+cv::Mat FullRangeGray(const LumaPlane& luma);
 
 // Mean brightness of frames for synchronisation. Each pixel's luma is first linearised
 // by the video's display gamma (value^gamma), so that a frame exposed across a light
@@ -27,8 +41,13 @@ class LumaMeter {
   // readout. An empty `bands` measures the mean only.
   double Mean(const cv::Mat& image, std::vector<double>* bands) const;
 
+  // The same of a decoded luma plane, stretched to full range first where it is
+  // limited range (the same values as Mean of the grey image VideoReader::Gray makes).
+  double Mean(const LumaPlane& luma, std::vector<double>* bands) const;
+
  private:
-  std::array<float, 256> linear_;
+  std::array<float, 256> linear_;          // full-range value -> linear
+  std::array<float, 256> linear_limited_;  // limited-range value -> linear
   int row_step_;
 };
 

@@ -18,7 +18,7 @@ std::vector<double> ReadLumaSignal(const std::string& path, double gamma, int ro
     const int slot = clock.Place(reader.timestamp());
     if (slot < 0) continue;
     signal.resize(slot, std::numeric_limits<double>::quiet_NaN());
-    signal.push_back(meter.Mean(reader.Gray()));
+    signal.push_back(meter.Mean(reader.Luma(), nullptr));
   }
   return signal;
 }

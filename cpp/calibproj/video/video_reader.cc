@@ -65,14 +65,6 @@ bool FullRange(const AVFrame& frame) {
   }
 }
 
-// Limited-range luma (16 black, 235 white) to full range, rounded and clipped as
-// FFmpeg's YUV to RGB conversion does.
-cv::Mat LimitedToFullTable() {
-  cv::Mat table(1, 256, CV_8U);
-  for (int v = 0; v < 256; ++v) table.at<uchar>(v) = cv::saturate_cast<uchar>((v - 16) * 255.0 / 219.0);
-  return table;
-}
-
 }  // namespace
 
 struct VideoReader::Decoder {
@@ -84,7 +76,6 @@ struct VideoReader::Decoder {
   int stream = -1;
   bool draining = false;
   std::deque<AVPacket*> peeked;  // read ahead at opening, decoded first
-  const cv::Mat limited_to_full = LimitedToFullTable();
   SourceOptions source;
   std::unique_ptr<PacketRecorder> recorder;
   // A live read blocked past this moment is interrupted (FFmpeg polls Interrupted).
@@ -302,24 +293,35 @@ bool VideoReader::Grab() {
   return true;
 }
 
-cv::Mat VideoReader::Gray() {
-  if (frame_index_ < 0) throw std::logic_error("VideoReader::Gray() before Grab()");
-  if (gray_index_ == frame_index_) return gray_;
+void VideoReader::CheckFrameSize() const {
+  if (frame_index_ < 0) throw std::logic_error("VideoReader: a frame asked for before Grab()");
   const AVFrame& frame = *decoder_->frame;
   if (frame.width != info_.width || frame.height != info_.height) {
     throw std::runtime_error(info_.path + ": frame " + std::to_string(frame_index_) + " is " +
                              std::to_string(frame.width) + "x" + std::to_string(frame.height) + ", expected " +
                              std::to_string(info_.width) + "x" + std::to_string(info_.height));
   }
+}
+
+LumaPlane VideoReader::Luma() {
+  CheckFrameSize();
+  if (gray_index_ == frame_index_) return {gray_, false};
+  const AVFrame& frame = *decoder_->frame;
+  const auto format = static_cast<AVPixelFormat>(frame.format);
+  if (!LumaPlaneFirst(format) || frame.linesize[0] <= 0) return {Gray(), false};
+  const cv::Mat plane(frame.height, frame.width, CV_8UC1, frame.data[0], static_cast<size_t>(frame.linesize[0]));
+  return {plane, !FullRange(frame)};
+}
+
+cv::Mat VideoReader::Gray() {
+  CheckFrameSize();
+  if (gray_index_ == frame_index_) return gray_;
+  const AVFrame& frame = *decoder_->frame;
   const auto format = static_cast<AVPixelFormat>(frame.format);
   gray_ = cv::Mat();  // a new buffer: images handed out before keep theirs
   if (LumaPlaneFirst(format) && frame.linesize[0] > 0) {
     const cv::Mat luma(frame.height, frame.width, CV_8UC1, frame.data[0], static_cast<size_t>(frame.linesize[0]));
-    if (FullRange(frame)) {
-      luma.copyTo(gray_);
-    } else {
-      cv::LUT(luma, decoder_->limited_to_full, gray_);
-    }
+    gray_ = FullRangeGray({luma, !FullRange(frame)});
   } else {
     // RGB, paletted or deep formats: FFmpeg's scaler makes the grey image.
     decoder_->scaler = sws_getCachedContext(decoder_->scaler, frame.width, frame.height, format, frame.width,

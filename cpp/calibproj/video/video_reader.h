@@ -10,6 +10,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "calibproj/video/luma.h"
+
 #include <atomic>
 #include <map>
 #include <memory>
@@ -80,6 +82,10 @@ class VideoReader {
   // std::runtime_error naming the file when the frame is not of the declared size.
   cv::Mat Gray();
 
+  // The grabbed frame's luma for measuring it: the decoded plane itself where it is
+  // 8-bit luma (no copy, valid until the next Grab), else the grey image.
+  LumaPlane Luma();
+
   // Why Grab() returned false: "" at the end of the stream, else "stopped" or, for a
   // live source, "stalled: no data for N s".
   const std::string& end_reason() const;
@@ -89,6 +95,7 @@ class VideoReader {
 
  private:
   struct Decoder;
+  void CheckFrameSize() const;  // throws for a frame of another size than the video's
   VideoInfo info_;
   std::unique_ptr<Decoder> decoder_;
   cv::Mat gray_;
