@@ -600,6 +600,7 @@ class Baselines:
                                             ("use_timestamps", True), ("max_frame_gap_s", 2.0)]),
             "_core.sync.option_table": Spec([]),
             "_core.ingest.valid_known_exposure": Spec([("seconds", 0.01)]),
+            "_core.ingest.shared_decode_threads": Spec([("decode_threads", 0), ("cameras_at_once", 2)]),
             "_core.ingest.unrefined_lens_changes": Spec([]),
             "_core.registration.option_table": Spec([]),
             "_core.check.option_table": Spec([]),

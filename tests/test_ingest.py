@@ -5,6 +5,7 @@ picking, scale merging, the report and command line, and failing cameras."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 from dataclasses import replace
@@ -222,6 +223,30 @@ def test_merged_centre_is_the_mean_of_the_kept_scales(aruco_results):
             assert np.allclose(records.centre[kept].mean(axis=0), xy)
             assert np.all(records.deviation_px[kept] <= options.max_deviation_px)
             assert np.all(records.deviation_px[mine & ~records.kept] > options.max_deviation_px)
+
+
+def test_cameras_ingested_together_share_the_cores_for_decoding():
+    shared = _core.ingest.shared_decode_threads
+    cores = os.cpu_count() or 1
+    assert shared(3, 8) == 3  # asked for: kept
+    assert shared(0, 1) == 0  # one camera: FFmpeg's own choice
+    assert shared(0, cores) == 1
+    assert shared(0, 4 * cores) == 1  # never none
+    assert shared(0, 2) == max(1, cores // 2)
+
+
+def test_the_decoding_threads_do_not_change_the_ingest(aruco):
+    """One decoding thread per camera (as cameras ingested side by side get) decodes the
+    same frames as FFmpeg's frame threads: the same sync and centres to the last bit."""
+    out, sequence, _ = aruco
+    results = [ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(decode_threads=threads),
+                      progress=False, workers=1) for threads in (1, 3)]
+    for name, camera in results[0].cameras.items():
+        other = results[1].cameras[name].raw
+        assert camera.raw.sync.map.offset == other.sync.map.offset, name
+        assert np.array_equal(camera.raw.signal, other.signal, equal_nan=True), name
+        np.testing.assert_array_equal(camera.raw.centres.xy, other.centres.xy)
+        assert len(camera.raw.centres.xy) > 0
 
 
 def test_averaged_frames_stay_accurate(aruco):

@@ -217,21 +217,23 @@ struct IngestSetup {
   ingest::IngestOptions options;
   std::map<std::string, double> exposures;
 
-  ingest::IngestOptions For(const std::string& camera) const {
+  // Its options for one of `cameras_at_once` cameras ingested together.
+  ingest::IngestOptions For(const std::string& camera, int cameras_at_once) const {
     ingest::IngestOptions own = options;
     if (const auto exposure = exposures.find(camera); exposure != exposures.end()) own.exposure_s = exposure->second;
+    own.decode_threads = ingest::SharedDecodeThreads(own.decode_threads, cameras_at_once);
     return own;
   }
 };
 
 CameraOutcome IngestOne(const std::string& name, const fs::path& video, const IntrinsicsLookup& intrinsics_of,
-                        const IngestSetup& setup, const ingest::SequenceDescription& sequence,
+                        const ingest::IngestOptions& options, const ingest::SequenceDescription& sequence,
                         ProgressPrinter& printer) {
   CameraOutcome outcome{name, video.string(), "", "", {}};
   try {
     const CameraIntrinsics intrinsics = intrinsics_of(name, &outcome.intrinsics);
-    outcome.result = ingest::IngestCamera(video.string(), sequence, intrinsics, outcome.intrinsics, setup.For(name),
-                                          printer.For(name));
+    outcome.result =
+        ingest::IngestCamera(video.string(), sequence, intrinsics, outcome.intrinsics, options, printer.For(name));
   } catch (const std::exception& error) {
     outcome.error = error.what();
     // Without a readable intrinsics file the message stands where its path would.
@@ -251,12 +253,13 @@ std::vector<CameraOutcome> IngestAll(const std::map<std::string, fs::path>& vide
   std::vector<CameraOutcome> outcomes(jobs.size());
   ProgressPrinter printer(!arguments.no_progress);
   std::atomic<size_t> next{0};
+  const size_t threads = std::min(jobs.size(), static_cast<size_t>(std::max(1, arguments.workers)));
   const auto work = [&] {
     for (size_t k = next++; k < jobs.size(); k = next++) {
-      outcomes[k] = IngestOne(jobs[k].first, jobs[k].second, intrinsics_of, setup, sequence, printer);
+      const ingest::IngestOptions options = setup.For(jobs[k].first, static_cast<int>(threads));
+      outcomes[k] = IngestOne(jobs[k].first, jobs[k].second, intrinsics_of, options, sequence, printer);
     }
   };
-  const size_t threads = std::min(jobs.size(), static_cast<size_t>(std::max(1, arguments.workers)));
   std::vector<std::thread> pool;
   for (size_t t = 0; t < threads; ++t) pool.emplace_back(work);
   for (auto& thread : pool) thread.join();

@@ -138,6 +138,9 @@ void register_ingest(py::module_& m) {
         "Whether a grey image shows marker `id` of family `spec` on the quad whose undistorted corners "
         "are `corners` (4, 2): every cell read through them on its expected side (the check that "
         "accepts a marker at its predicted place without the detector).");
+  m.def("shared_decode_threads", &ingest::SharedDecodeThreads, py::arg("decode_threads"), py::arg("cameras_at_once"),
+        "FFmpeg's decoding threads for each of `cameras_at_once` cameras ingested together: `decode_threads` "
+        "when set, else the machine's cores shared among them (0, FFmpeg's own choice, for one camera).");
   m.def("valid_known_exposure", &ingest::ValidKnownExposure, py::arg("seconds"),
         "Whether a camera's known exposure time (--exposure CAMERA=SECONDS) is one: 0 < seconds <= 1.");
   m.def(

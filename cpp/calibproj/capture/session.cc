@@ -114,6 +114,8 @@ class Session {
       }
       ingest::IngestOptions options = plan_.options;
       if (camera.exposure_s > 0.0) options.exposure_s = camera.exposure_s;
+      options.decode_threads =
+          ingest::SharedDecodeThreads(options.decode_threads, static_cast<int>(plan_.site.cameras.size()));
       outcome.result = ingest::IngestCamera(camera.source, plan_.sequence, intrinsics, outcome.intrinsics, options,
                                             [this, k](int decoded, int) { Delivered(k, decoded); }, sources_[k]);
     } catch (const std::exception& error) {

@@ -10,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <stdexcept>
+#include <thread>
 #include <unordered_map>
 #include <unordered_set>
 #include <utility>
@@ -57,6 +58,11 @@ struct PendingPattern {
   std::vector<int> frames;
 };
 
+video::SourceOptions Decoding(video::SourceOptions source, int decode_threads) {
+  source.decode_threads = decode_threads;
+  return source;
+}
+
 double MeanSide(const detect::Quad& quad) {
   double total = 0.0;
   for (int k = 0; k < 4; ++k) total += cv::norm(quad[k] - quad[(k + 1) % 4]);
@@ -72,7 +78,7 @@ class CameraIngest {
         sequence_(sequence),
         camera_(camera),
         intrinsics_source_(intrinsics_source),
-        reader_(path, source),
+        reader_(path, Decoding(source, options.decode_threads)),
         options_(Prepared(options, sequence, reader_.info().fps)),
         progress_(progress),
         family_(detect::ParseMarkerFamily(sequence.markers)),
@@ -827,6 +833,8 @@ void IngestOptions::Check() const {
   Require(lookback_frames >= 0 && lookback_frames <= kMaxHeldFrames,
           "lookback_frames must be in [0, " + std::to_string(kMaxHeldFrames) + "]");
   Require(search_interval >= 1, "search_interval must be at least 1");
+  Require(decode_threads >= 0 && decode_threads <= limits::kMaxThreads,
+          "decode_threads must be in [0, " + std::to_string(limits::kMaxThreads) + "]");
   Require(detection_threads >= 1 && detection_threads <= limits::kMaxThreads,
           "detection_threads must be in [1, " + std::to_string(limits::kMaxThreads) + "]");
   Require(max_pending_jobs >= 1 && max_pending_jobs <= kMaxHeldFrames,
@@ -842,6 +850,12 @@ void IngestOptions::Check() const {
   consistency.Check();
   Require(edge_gap_share > 0.0 && edge_gap_share <= 1.0, "edge_gap_share must be in (0, 1]");
   VisitIngestOptions(*this, limits::OptionChecker{"ingest options: "});
+}
+
+int SharedDecodeThreads(int decode_threads, int cameras_at_once) {
+  if (decode_threads > 0 || cameras_at_once <= 1) return decode_threads;
+  const int cores = static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
+  return std::max(1, cores / cameras_at_once);
 }
 
 CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDescription& sequence,

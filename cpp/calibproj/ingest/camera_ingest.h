@@ -112,6 +112,9 @@ struct IngestOptions {
   int lookback_frames = 16;
   // Frames decoded between two incremental searches of the start code.
   int search_interval = 4;
+  // FFmpeg's decoding threads per camera; 0: the machine's cores shared among the
+  // cameras ingested at once (SharedDecodeThreads), FFmpeg's own choice for one camera.
+  int decode_threads = 0;
   int detection_threads = 1;
   int max_pending_jobs = 4;
   // The homography and the resolution limit used to plan a pattern come from the
@@ -204,5 +207,12 @@ CameraIngestResult IngestCamera(const std::string& video_path, const SequenceDes
                                 const formats::CameraIntrinsics& camera, const std::string& intrinsics_source,
                                 const IngestOptions& options, const ProgressCallback& progress = {},
                                 const video::SourceOptions& source = {});
+
+// The decoding threads each of `cameras_at_once` cameras ingested together gets:
+// `decode_threads` when it is set, else the machine's cores shared among them (at least
+// one each; 0, FFmpeg's own choice, for a single camera). FFmpeg's frame threads cost
+// CPU to keep in step, so cameras decoded side by side on one thread each do the same
+// work in less time than each on every core.
+int SharedDecodeThreads(int decode_threads, int cameras_at_once);
 
 }  // namespace calibproj::ingest

@@ -260,6 +260,9 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "decoded frames kept while the start code is searched.");
   visit("search_interval", o.search_interval,
         "frames between two searches of the start code.");
+  visit("decode_threads", o.decode_threads,
+        "FFmpeg's decoding threads per camera (0: the machine's cores shared among the cameras ingested "
+        "at once, one each when there are as many cameras as cores).");
   visit("detection_threads", o.detection_threads,
         "detection threads per camera.");
   visit("max_pending_jobs", o.max_pending_jobs,

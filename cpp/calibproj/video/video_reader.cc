@@ -1,5 +1,6 @@
 #include "calibproj/video/video_reader.h"
 
+#include "calibproj/common/limits.h"
 #include "calibproj/video/ffmpeg_log.h"
 #include "calibproj/video/recording.h"
 
@@ -230,7 +231,7 @@ VideoReader::VideoReader(const std::string& path, const SourceOptions& source)
   d.frame = av_frame_alloc();
   if (d.codec == nullptr || d.packet == nullptr || d.frame == nullptr) throw std::bad_alloc();
   if (avcodec_parameters_to_context(d.codec, stream->codecpar) < 0) throw unreadable();
-  d.codec->thread_count = 0;  // one per core, as the ffmpeg program decodes
+  d.codec->thread_count = source.decode_threads;
   d.codec->thread_type = FF_THREAD_FRAME | FF_THREAD_SLICE;
   if (avcodec_open2(d.codec, codec, nullptr) < 0) throw unreadable();
   FfmpegSaid();  // what it said while opening a video it then read is not this video's error
@@ -275,6 +276,8 @@ void SourceOptions::Check() const {
   };
   require(open_timeout_s > 0.0 && open_timeout_s <= 3600.0, "open_timeout_s must be in (0, 3600]");
   require(stall_timeout_s > 0.0 && stall_timeout_s <= 3600.0, "stall_timeout_s must be in (0, 3600]");
+  require(decode_threads >= 0 && decode_threads <= limits::kMaxThreads,
+          "decode_threads must be in [0, " + std::to_string(limits::kMaxThreads) + "]");
   require(live || (format.empty() && ffmpeg_options.empty()), "a format and FFmpeg options are for live sources");
   for (const auto& [key, value] : ffmpeg_options) {
     require(!key.empty() && key.find('\0') == std::string::npos && value.find('\0') == std::string::npos,

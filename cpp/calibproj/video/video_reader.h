@@ -2,7 +2,7 @@
 // Streaming decode of one video with FFmpeg's libraries (libavformat, libavcodec).
 //
 // Frames are visited once, in order: Grab() decodes the next frame (FFmpeg's frame
-// threads on every core, as `ffmpeg -f null` decodes) and Gray() gives its luma only
+// threads, as many as SourceOptions says) and Gray() gives its luma only
 // when asked. Camera videos are YUV: the luma plane is the grey image, so nothing is
 // converted to colour and back (OpenCV's VideoCapture converts every retrieved frame
 // to BGR). Limited-range ("TV", 16-235) luma is stretched to full range, so the grey
@@ -48,6 +48,8 @@ struct SourceOptions {
   // Every packet of the video stream, as read (not re-encoded, timestamps kept), is
   // written to this Matroska file; empty: nothing recorded.
   std::string record_path;
+  // FFmpeg's decoding threads; 0: its own choice, one per core (as `ffmpeg` decodes).
+  int decode_threads = 0;
   // Set from another thread: reading ends at once, as at the end of the stream, blocking
   // network reads included.
   std::shared_ptr<std::atomic<bool>> stop = std::make_shared<std::atomic<bool>>(false);

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from calibproj import _core
 from calibproj.ingest.options import IngestOptions
 from calibproj.formats.file_names import path_as_recorded, safe_file_names
 from calibproj.formats.intrinsics import Intrinsics, intrinsics_file, read_intrinsics
@@ -209,7 +210,7 @@ def ingest(
         detector_options: marker detector options as ``calibproj.detect_markers`` takes
             them (``corner_refinement``, ``quad_decimate``, ...); ``inverted`` comes from
             the sequence.
-        workers: cameras processed at once (each also uses FFmpeg's decoding threads).
+        workers: cameras processed at once (sharing the cores for decoding: ``options.decode_threads``).
         progress: show a progress bar per camera (on terminals).
         exposures: known exposure times in seconds of some cameras (camera name ->
             seconds), overriding ``options.exposure_s`` (see there when it matters).
@@ -240,8 +241,12 @@ def ingest(
     exposures = dict(exposures or {})
     check_exposures(exposures, names)
 
+    at_once = min(len(names), max(1, workers, len(live)))
+    decode_threads = _core.ingest.shared_decode_threads(options.decode_threads, at_once)
+
     def run(name: str) -> CameraIngest:
-        camera_options = options.replace(exposure_s=exposures.get(name, options.exposure_s))
+        camera_options = options.replace(exposure_s=exposures.get(name, options.exposure_s),
+                                         decode_threads=decode_threads)
         job = _CameraJob(core_sequence, camera_options, aruco, apriltag, bars, live.get(name))
         return job.run(name, paths[name], _intrinsics_for(intrinsics, name))
 
@@ -291,8 +296,6 @@ class _CameraJob:
         self.live = live
 
     def run(self, name: str, video: Path | str, intrinsics: tuple[Intrinsics | None, str]) -> CameraIngest:
-        from calibproj import _core
-
         camera_intrinsics, source = intrinsics
         report = CameraIngest(name, str(video), source)
         try:
@@ -383,8 +386,6 @@ class _Progress:
 def _brightness_trace(video: Path, kwargs: Mapping[str, Any]) -> tuple[np.ndarray | None, int]:
     """The video's mean brightness per frame, averaged down to at most
     BRIGHTNESS_VALUES values (a second decoding pass, made only for a failed sync)."""
-    from calibproj import _core
-
     try:
         signal = _core.video.luma_signal(str(video), kwargs["luma_gamma"], kwargs["mean_row_step"])
     except (ValueError, RuntimeError, OSError) as error:
@@ -400,8 +401,6 @@ def _brightness_trace(video: Path, kwargs: Mapping[str, Any]) -> tuple[np.ndarra
 def luma_signal(video: str | os.PathLike, options: IngestOptions | None = None) -> np.ndarray:
     """Mean linearised luma of every frame of a video (one decoding pass), as the
     synchronisation measures it (``luma_gamma``, ``mean_row_step``)."""
-    from calibproj import _core
-
     options = options or IngestOptions()
     return _core.video.luma_signal(str(video), options.luma_gamma, options.mean_row_step)
 
@@ -419,7 +418,6 @@ def synchronise(signal: np.ndarray, sequence: Any, camera_fps: float, options: I
     naming ``source`` when a code is not found (with the best correlation seen) or the
     two codes disagree.
     """
-    from calibproj import _core
     from calibproj.ingest.options import sync_kwargs
 
     sequence, _ = _load_sequence(sequence)
