@@ -13,10 +13,12 @@ rendering's truth (RMS over MSMs whose detected markers are at least 20 px wide)
 
 The last line is
 
-  ingest: ratio_to_ffmpeg_decode=X aruco_ms_per_frame=A apriltag_ms_per_frame=B
+  ingest: ratio_to_ffmpeg_decode=X together_cpu_ratio=T aruco_ms_per_frame=A apriltag_ms_per_frame=B
 
 with X the summed ingest time over the summed ffmpeg decode time (every camera of
-every marker system), and A, B the detection time per detected pattern frame
+every marker system), T the CPU time of ingesting every camera together (as many at
+once as there are cores, as an operating-room PC runs its cameras) over that of the
+ffmpeg decodes, and A, B the detection time per detected pattern frame
 (detection-thread time over frames handed to detection) for each system.
 """
 
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import shutil
 import subprocess
@@ -143,7 +146,20 @@ def measure(system: str, folder: Path, sequence: Sequence, cameras: list[str] | 
           f"ratio {totals['ingest'] / max(totals['ffmpeg'], 1e-9):.2f} "
           f"(CPU {totals['ingest_cpu'] / max(totals['ffmpeg_cpu'], 1e-9):.2f}), "
           f"detection {1e3 * totals['detection'] / max(totals['frames'], 1):.1f} ms per pattern frame")
+    totals["together_cpu"] = together(sim, sequence, names)
+    print(f"{system}: every camera ingested together ({os.cpu_count()} at once, sharing the cores): "
+          f"CPU {totals['together_cpu']:.1f} s, {totals['together_cpu'] / max(totals['ffmpeg_cpu'], 1e-9):.2f}x "
+          "the separate ffmpeg decodes")
     return totals
+
+
+def together(sim: Path, sequence: Sequence, names: list[str]) -> float:
+    """CPU seconds of one ingest of every camera, as many at once as there are cores (as
+    an operating-room PC runs its cameras): FFmpeg's threads are then shared among them."""
+    cpu = cpu_seconds(resource.RUSAGE_SELF)
+    ingest({name: sim / "videos" / f"{name}.mp4" for name in names}, sequence, sim / "intrinsics",
+           options=IngestOptions(), workers=os.cpu_count() or 1, progress=False)
+    return cpu_seconds(resource.RUSAGE_SELF) - cpu
 
 
 def main() -> int:
@@ -165,8 +181,11 @@ def main() -> int:
             shutil.rmtree(temporary, ignore_errors=True)
     ingest_s = sum(t["ingest"] for t in totals.values())
     ffmpeg_s = sum(t["ffmpeg"] for t in totals.values())
+    ffmpeg_cpu = sum(t["ffmpeg_cpu"] for t in totals.values())
+    together_ratio = sum(t["together_cpu"] for t in totals.values()) / max(ffmpeg_cpu, 1e-9)
     per_frame = {s: 1e3 * t["detection"] / max(t["frames"], 1) for s, t in totals.items()}
     print(f"ingest: ratio_to_ffmpeg_decode={ingest_s / max(ffmpeg_s, 1e-9):.3f} "
+          f"together_cpu_ratio={together_ratio:.3f} "
           f"aruco_ms_per_frame={per_frame.get('aruco', float('nan')):.2f} "
           f"apriltag_ms_per_frame={per_frame.get('apriltag', float('nan')):.2f}")
     return 0
