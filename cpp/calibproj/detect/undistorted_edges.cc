@@ -195,6 +195,9 @@ std::optional<Quad> RefineUndistortedCorners(const cv::Mat& gray, const cv::Poin
   std::optional<Quad> quad = Quad{corners[0], corners[1], corners[2], corners[3]};
   // Profiles are measured in image pixels: their length follows the detected module.
   const double image_module = MeanSide(distorted) / cells;
+  // The moves shrink geometrically: once the next is predicted below tolerance_px, it
+  // is not made.
+  double previous = 0.0;
   for (int pass = 0; pass < options.passes; ++pass) {
     const std::optional<Quad> next =
         RefinePass(gray, cv::Point2d(origin.x, origin.y), lens, cells, *quad, image_module, options);
@@ -202,7 +205,10 @@ std::optional<Quad> RefineUndistortedCorners(const cv::Mat& gray, const cv::Poin
     double moved = 0.0;
     for (int k = 0; k < 4; ++k) moved = std::max(moved, cv::norm((*next)[k] - (*quad)[k]));
     quad = next;
-    if (moved <= options.tolerance_px) break;
+    const bool next_below_tolerance =
+        pass > 0 && moved < 0.5 * previous && moved * (moved / previous) <= options.tolerance_px;
+    if (moved <= options.tolerance_px || next_below_tolerance) break;
+    previous = moved;
   }
   return quad;
 }

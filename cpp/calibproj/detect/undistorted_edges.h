@@ -39,7 +39,8 @@ struct UndistortedEdgeOptions {
   // Profiles with less contrast than this share of their edge's median are ignored.
   double min_contrast = 0.5;
   // Fits repeated from their own result (each profile is centred better on its edge)
-  // until no corner moves by more than tolerance_px, at most max_passes times.
+  // until no corner moves, or is predicted to move next (the moves shrink
+  // geometrically), by more than tolerance_px, at most `passes` times.
   int passes = 6;
   double tolerance_px = 0.002;
 

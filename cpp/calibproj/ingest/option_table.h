@@ -141,7 +141,8 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "edge fits at most, each from the previous result (profiles centre on their edges over the "
         "passes).");
   visit("edge_tolerance_px", o.edges.tolerance_px,
-        "... stopping once no corner moves by more than this.");
+        "... stopping once no corner moves, or is predicted to move at the next pass (the moves shrink "
+        "geometrically), by more than this.");
   visit("roi_padding_fraction", o.roi.padding_fraction,
         "padding around a predicted marker, as a share of its side (the larger of this and "
         "roi_padding_px).");
