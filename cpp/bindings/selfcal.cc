@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <optional>
@@ -16,6 +17,7 @@
 
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/tracks.h"
+#include "calibproj/selfcal/lens_problem.h"
 #include "calibproj/selfcal/option_table.h"
 #include "calibproj/selfcal/planar_autocalibration.h"
 #include "calibproj/selfcal/planar_cost.h"
@@ -110,15 +112,6 @@ std::function<void(const std::string&)> LogTo(const py::function& log) {
   };
 }
 
-py::dict LensDict(const std::optional<Eigen::Matrix<double, selfcal::kLensSize, 1>>& lens) {
-  static const char* const names[selfcal::kLensSize] = {"focal", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
-  py::dict out;
-  if (lens) {
-    for (int k = 0; k < selfcal::kLensSize; ++k) out[names[k]] = (*lens)(k);
-  }
-  return out;
-}
-
 void RegisterRefinement(py::module_& m) {
   using selfcal::LensReport;
   using selfcal::RefineRequest;
@@ -159,8 +152,9 @@ void RegisterRefinement(py::module_& m) {
       .def_property_readonly("weak_reason", &selfcal::WeakReason,
                              "why its pose is weak after the self-calibration (focal length held, or a misfit), "
                              "or None")
-      .def_property_readonly("given", [](const LensReport& r) { return LensDict(r.given); }, "lens entries given")
-      .def_property_readonly("result", [](const LensReport& r) { return LensDict(r.result); }, "lens entries found");
+      .def_readonly("given", &LensReport::given,
+                    "the lens entries given, in the order of lens_entries (None before a solve)")
+      .def_readonly("result", &LensReport::result, "the lens entries found, in that order (None before a solve)");
   using selfcal::JointLensCovariance;
   py::class_<JointLensCovariance>(m, "LensCovariance",
                                   "How the refined lenses err together: their joint covariance over\n"
@@ -250,6 +244,8 @@ void RegisterRefinedCalibration(py::module_& m) {
 
 void register_selfcal(py::module_& m) {
   m.attr("lens_size") = selfcal::kLensSize;
+  m.attr("lens_entries") = py::tuple(py::cast(std::vector<std::string>(std::begin(selfcal::kLensEntries),
+                                                                       std::end(selfcal::kLensEntries))));
   RegisterResult(m);
   RegisterRefinement(m);
   m.attr("refine_intrinsics_help") = selfcal::kRefineIntrinsicsHelp;
