@@ -601,6 +601,8 @@ class Baselines:
             "_core.sync.option_table": Spec([]),
             "_core.ingest.valid_known_exposure": Spec([("seconds", 0.01)]),
             "_core.ingest.shared_decode_threads": Spec([("decode_threads", 0), ("cameras_at_once", 2)]),
+            "_core.ingest.check_options": Spec([("aruco", _core.detect.ArucoOptions()),
+                                                ("apriltag", _core.detect.AprilTagOptions())]),
             "_core.ingest.unrefined_lens_changes": Spec([]),
             "_core.registration.option_table": Spec([]),
             "_core.check.option_table": Spec([]),

@@ -314,6 +314,24 @@ def test_detect_command_writes_tracks_and_report(aruco, tmp_path, capsys):
     assert "cam2: offset" in printed and "markers found/searched per scale" in printed
 
 
+@pytest.mark.parametrize("flag,value,message", [
+    ("--decode-threads", "-1", "decode_threads must be in [0, 256]"),
+    ("--detection-threads", "0", "detection_threads must be in [1, 256]")])
+def test_a_bad_ingest_option_stops_the_command_before_any_camera(aruco, tmp_path, capsys, flag, value, message):
+    """Found by probing: a bad value failed every camera on its own (one line each) and
+    still wrote a tracks file without cameras; calibproj-native refused it up front."""
+    out, sequence, _ = aruco
+    sequence_file = tmp_path / "sequence.json"
+    sequence.save(sequence_file)
+    tracks_file = tmp_path / "results" / "tracks.json"
+    status = main(["detect", str(out / "videos"), "--sequence", str(sequence_file), "--intrinsics",
+                   str(out / "intrinsics"), "--out", str(tracks_file), "--no-progress", flag, value])
+    captured = capsys.readouterr()
+    assert status != 0 and not tracks_file.exists()
+    assert captured.err.strip() == f"calibproj detect: error: ingest options: {message}"
+    assert "FAILED" not in captured.out
+
+
 # ------------------------------------------------------- corners under distortion
 
 # A GoPro-like wide-angle lens on a 960 x 540 image.

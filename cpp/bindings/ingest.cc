@@ -138,6 +138,14 @@ void register_ingest(py::module_& m) {
         "Whether a grey image shows marker `id` of family `spec` on the quad whose undistorted corners "
         "are `corners` (4, 2): every cell read through them on its expected side (the check that "
         "accepts a marker at its predicted place without the detector).");
+  m.def(
+      "check_options",
+      [](const detect::ArucoOptions& aruco, const detect::AprilTagOptions& apriltag, const py::kwargs& kwargs) {
+        IngestOptionsFromKwargs(aruco, apriltag, kwargs).Check();
+      },
+      py::arg("aruco"), py::arg("apriltag"),
+      "ValueError naming the first bad ingest option (keyword options as ingest_camera takes them), so that "
+      "bad options stop an ingest before any camera, as calibproj-native's do.");
   m.def("shared_decode_threads", &ingest::SharedDecodeThreads, py::arg("decode_threads"), py::arg("cameras_at_once"),
         "FFmpeg's decoding threads for each of `cameras_at_once` cameras ingested together: `decode_threads` "
         "when set, else the machine's cores shared among them (0, FFmpeg's own choice, for one camera).");

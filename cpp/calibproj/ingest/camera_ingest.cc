@@ -853,7 +853,7 @@ void IngestOptions::Check() const {
 }
 
 int SharedDecodeThreads(int decode_threads, int cameras_at_once) {
-  if (decode_threads > 0 || cameras_at_once <= 1) return decode_threads;
+  if (decode_threads != 0 || cameras_at_once <= 1) return decode_threads;  // a bad value stays for Check
   const int cores = static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
   return std::max(1, cores / cameras_at_once);
 }

@@ -235,6 +235,7 @@ def ingest(
     if unknown:
         raise ValueError(f"live sources given for camera(s) without a source: {', '.join(unknown)}")
     aruco, apriltag = core_detector_options(sequence.markers.system, detector_options or {})
+    _core.ingest.check_options(aruco, apriltag, **options.to_kwargs())  # not once per camera
     core_sequence = sequence.core()  # read by the core once, for every camera
     names = list(paths)
     bars = _Progress(names, enabled=progress, observer=observer, live=live, cancel=cancel)
