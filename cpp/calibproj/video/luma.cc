@@ -64,11 +64,8 @@ cv::Mat FullRangeGray(const LumaPlane& luma) {
     luma.image.copyTo(gray);
     return gray;
   }
-  static const cv::Mat table = [] {
-    cv::Mat values(1, 256, CV_8U);
-    for (int v = 0; v < 256; ++v) values.at<std::uint8_t>(v) = LimitedToFull(v);
-    return values;
-  }();
+  cv::Mat table(1, 256, CV_8U);  // 256 values: nothing next to the frame's million
+  for (int v = 0; v < 256; ++v) table.at<std::uint8_t>(v) = LimitedToFull(v);
   cv::LUT(luma.image, table, gray);
   return gray;
 }
