@@ -135,11 +135,12 @@ def test_a_moved_camera_is_found_and_repaired_by_a_live_check(room, calibrated, 
     status = main(["capture", str(site), "--check", str(stored), "--sequence",
                    str(base / "check_sequence" / "sequence.json"), "--out", str(repaired), "--no-report",
                    "--no-progress", "--json"])
-    verdicts = {name: verdict["status"] for name, verdict in json.loads(capsys.readouterr().out)["cameras"].items()}
+    cameras = json.loads(capsys.readouterr().out)["cameras"]
+    verdicts = {name: verdict["status"] for name, verdict in cameras.items()}
     # Exit status 3, "not confirmed": the stored calibration's dead camera is unknown.
     assert status == 3
     assert verdicts == {"far1": "unchanged", "far4": "moved", "near1": "unchanged", "ceiling": "unchanged",
-                        "dead": "unknown"}
+                        "dead": "unknown"}, cameras  # with each verdict's reason
     comparison = compare(repaired / "camera_poses.json", base / "room" / "truth.json")
     assert comparison.cameras["far4"].rotation_deg < MAX_ROTATION_RMSE_DEG
     assert (repaired / "check.json").is_file()
@@ -192,10 +193,10 @@ def test_the_native_capture_checks_and_repairs_a_moved_camera(room):
                       str(base / "native_check" / "sequence.json"), "--out", str(repaired), "--no-progress")
     # Exit status 3, "not confirmed": the stored calibration's dead camera is unknown.
     assert done.returncode == 3, done.stdout + done.stderr
-    verdicts = {name: verdict["status"]
-                for name, verdict in json.loads((repaired / "check.json").read_text())["cameras"].items()}
+    cameras = json.loads((repaired / "check.json").read_text())["cameras"]
+    verdicts = {name: verdict["status"] for name, verdict in cameras.items()}
     assert verdicts == {"far1": "unchanged", "far4": "unchanged", "near1": "moved", "ceiling": "unchanged",
-                        "dead": "unknown"}
+                        "dead": "unknown"}, (cameras, done.stdout)  # with each verdict's reason
     comparison = compare(repaired / "camera_poses.json", base / "room" / "truth.json")
     assert comparison.cameras["near1"].rotation_deg < MAX_ROTATION_RMSE_DEG
     assert recorded_from(repaired) == ("../native_check.json", "../native_results/intrinsics")
