@@ -78,6 +78,20 @@ def test_luma_measured_on_the_decoded_plane_is_that_of_the_grey_image(tmp_path: 
     np.testing.assert_allclose(ours, expected, rtol=1e-6, atol=0)
 
 
+def test_limited_range_luma_is_stretched_to_full_range_value_by_value(tmp_path: Path) -> None:
+    """Every limited-range luma value becomes the full-range grey level FFmpeg's
+    conversion gives it, (v - 16) * 255 / 219 rounded and clipped."""
+    luma = np.tile(np.arange(256, dtype=np.uint8).reshape(16, 16), (SIZE[1] // 16, SIZE[0] // 16))
+    chroma = np.full((SIZE[1] // 2, SIZE[0]), 128, np.uint8)  # both quarter-size planes
+    path = tmp_path / "ramp.mp4"
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "yuv420p", "-s",
+                    f"{SIZE[0]}x{SIZE[1]}", "-i", "-", "-c:v", "libx264", "-qp", "0", str(path)],
+                   input=np.concatenate([luma, chroma]).tobytes(), check=True)
+    grabbed = _core.video.VideoReader(str(path)).grab()
+    expected = np.clip(np.rint((luma.astype(float) - 16.0) * 255.0 / 219.0), 0, 255)
+    np.testing.assert_array_equal(grabbed[1], expected)
+
+
 def test_probe_reads_size_rate_and_frame_count(tmp_path: Path) -> None:
     path = encode(tmp_path, "x264_yuv420p", frames(), rate="30000/1001")
     info = _core.video.probe(str(path))

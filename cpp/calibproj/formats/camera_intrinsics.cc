@@ -28,18 +28,6 @@ std::string PythonMatrix(const Eigen::Matrix3d& K) {
   return out + "]";
 }
 
-// Coefficient `k` of OpenCV's order, zero beyond the vector's length.
-double Coefficient(const std::vector<double>& dist, std::size_t k) { return k < dist.size() ? dist[k] : 0.0; }
-
-// OpenCV's radial factor (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6).
-double RadialFactor(const std::vector<double>& dist, double r2) {
-  const double numerator =
-      1.0 + r2 * (Coefficient(dist, 0) + r2 * (Coefficient(dist, 1) + r2 * Coefficient(dist, 4)));
-  const double denominator =
-      1.0 + r2 * (Coefficient(dist, 5) + r2 * (Coefficient(dist, 6) + r2 * Coefficient(dist, 7)));
-  return numerator / denominator;
-}
-
 bool Tilted(const std::vector<double>& dist) {
   return dist.size() == 14 && (dist[12] != 0.0 || dist[13] != 0.0);
 }
@@ -103,21 +91,17 @@ Points2d CameraIntrinsics::ProjectNormalized(const Points2d& normalized) const {
     cv::projectPoints(rays, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), CvMatrix(K), dist, out);
     return Rows(out);
   }
-  // OpenCV's radial, tangential and thin-prism distortion, written out.
-  const double p1 = Coefficient(dist, 2), p2 = Coefficient(dist, 3);
-  const double s1 = Coefficient(dist, 8), s2 = Coefficient(dist, 9), s3 = Coefficient(dist, 10),
-               s4 = Coefficient(dist, 11);
+  const DistortionModel model(*this);
   Points2d out(normalized.rows(), 2);
   for (Eigen::Index i = 0; i < normalized.rows(); ++i) {
-    const double x = normalized(i, 0), y = normalized(i, 1);
-    const double r2 = x * x + y * y;
-    const double radial = RadialFactor(dist, r2);
-    const double xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2);
-    const double yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y + r2 * (s3 + s4 * r2);
-    out(i, 0) = (K(0, 0) * xd + K(0, 1) * yd) + K(0, 2);
-    out(i, 1) = (K(1, 0) * xd + K(1, 1) * yd) + K(1, 2);
+    model.Project(normalized(i, 0), normalized(i, 1), &out(i, 0), &out(i, 1));
   }
   return out;
+}
+
+DistortionModel::DistortionModel(const CameraIntrinsics& intrinsics)
+    : tilted(Tilted(intrinsics.dist)), K(intrinsics.K) {
+  std::copy_n(intrinsics.dist.begin(), std::min(intrinsics.dist.size(), c.size()), c.begin());
 }
 
 double CameraIntrinsics::MaxMonotonicRadius(double limit, double step) const {
@@ -128,11 +112,12 @@ double CameraIntrinsics::MaxMonotonicRadius(double limit, double step) const {
   // The radii step, 2 step, ... up to limit, as numpy.arange(step, limit + step, step).
   const double delta = (step + step) - step;
   const auto count = static_cast<std::size_t>(std::ceil(((limit + step) - step) / step));
+  const DistortionModel model(*this);
   bool finite = true;
   double previous = 0.0;
   for (std::size_t i = 0; i < count; ++i) {
     const double radius = step + static_cast<double>(i) * delta;
-    const double distorted = radius * RadialFactor(dist, radius * radius);
+    const double distorted = radius * model.Radial(radius * radius);
     finite = finite && std::isfinite(distorted);
     if (i > 0 && !(distorted > previous)) return step + static_cast<double>(i - 1) * delta;
     previous = distorted;

@@ -59,6 +59,31 @@ struct CameraIntrinsics {
 // 12 or 14 finite coefficients, the image at most limits::kMaxImageSide per side.
 std::string IntrinsicsProblem(const CameraIntrinsics& intrinsics);
 
+// OpenCV's radial, tangential and thin-prism distortion of one camera, written out with
+// its coefficients read once, for code that maps points one at a time. The tilted-sensor
+// model is not written out (`tilted`: use ProjectNormalized, through OpenCV).
+struct DistortionModel {
+  explicit DistortionModel(const CameraIntrinsics& intrinsics);
+
+  // (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6).
+  double Radial(double r2) const {
+    return (1.0 + r2 * (c[0] + r2 * (c[1] + r2 * c[4]))) / (1.0 + r2 * (c[5] + r2 * (c[6] + r2 * c[7])));
+  }
+
+  // Distorted pixel (u, v) of the normalised point (x, y).
+  void Project(double x, double y, double* u, double* v) const {
+    const double r2 = x * x + y * y, radial = Radial(r2);
+    const double xd = x * radial + 2.0 * c[2] * x * y + c[3] * (r2 + 2.0 * x * x) + r2 * (c[8] + c[9] * r2);
+    const double yd = y * radial + c[2] * (r2 + 2.0 * y * y) + 2.0 * c[3] * x * y + r2 * (c[10] + c[11] * r2);
+    *u = (K(0, 0) * xd + K(0, 1) * yd) + K(0, 2);
+    *v = (K(1, 0) * xd + K(1, 1) * yd) + K(1, 2);
+  }
+
+  std::array<double, 12> c{};  // k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4, zero beyond dist
+  bool tilted = false;
+  Eigen::Matrix3d K;
+};
+
 // Checked intrinsics (an empty dist means none: five zeros); std::invalid_argument
 // "intrinsics of '<name>': <problem>".
 CameraIntrinsics MakeIntrinsics(const std::string& name, std::optional<std::pair<double, double>> resolution,
