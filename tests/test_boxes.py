@@ -264,3 +264,21 @@ def test_the_ingest_finds_the_markers_on_the_table_top(small_table_videos) -> No
     on_floor_only = ingest(out / "videos", sequence, out / "intrinsics", options=IngestOptions(explore_interval=0),
                            progress=False)
     assert _table_top_centres(on_floor_only, truth)[0] == 0
+
+
+def test_markers_missed_where_the_floor_plans_them_have_whole_frames_explored(small_table_videos) -> None:
+    """With only the first array explored on schedule, the table top's markers, missed
+    where the floor's homography plans them, have the next arrays explored: they are
+    found as with exploring on schedule, and not without the misses' exploring."""
+    from calibproj.ingest.videos import ingest
+    from calibproj.ingest.options import IngestOptions
+
+    out, sequence, truth = small_table_videos
+    kept = {}
+    for after_misses in (2, 0):
+        arrays = 1 + max(pattern.array for pattern in sequence.patterns)
+        options = IngestOptions(explore_interval=arrays, explore_after_misses=after_misses)
+        result = ingest(out / "videos", sequence, out / "intrinsics", options=options, progress=False)
+        kept[after_misses], shown, worst = _table_top_centres(result, truth)
+    assert kept[2] >= 0.25 * shown and worst < 1.0
+    assert kept[0] < 0.6 * kept[2]

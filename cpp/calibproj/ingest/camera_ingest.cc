@@ -427,6 +427,7 @@ class CameraIngest {
     stats.unresolvable += job.plan.unresolvable;
     stats.redundant += job.plan.redundant;
     job.explore = Explores(index);
+    if (job.explore) misses_since_exploring_ = 0;
     if (job.plan.markers.empty() && !job.explore) {
       pending_.skip = true;
       status_[index] = PatternStatus::kSkipped;
@@ -455,15 +456,20 @@ class CameraIngest {
   // known (a table top, planned where the floor would have put them) are found. The
   // explored arrays take the explore_scales largest scales in turn: the largest are
   // found from afar, smaller ones fit on a narrow table.
+  // Misses of planned markers since the last exploration (explore_after_misses) have one
+  // of the next largest patterns explored too.
   bool Explores(int index) const {
     if (options_.explore_interval <= 0) return false;
     const PatternSpec& pattern = sequence_.patterns[index];
-    if (pattern.array % options_.explore_interval != 0) return false;
     int larger = 0;
     for (const PatternSpec& other : sequence_.patterns) {
       if (other.array == pattern.array && other.marker_side_px > pattern.marker_side_px) ++larger;
     }
-    return larger == (pattern.array / options_.explore_interval) % options_.explore_scales;
+    if (pattern.array % options_.explore_interval == 0) {
+      return larger == (pattern.array / options_.explore_interval) % options_.explore_scales;
+    }
+    const int misses = options_.explore_after_misses;
+    return misses > 0 && misses_since_exploring_ >= misses && larger < options_.explore_scales;
   }
 
   // Shrinking of a whole frame searched before the homography (adaptive_bootstrap).
@@ -590,6 +596,10 @@ class CameraIngest {
         // hidden by a table, in its shadow or moved onto it is missed at every size.
         const long long key = static_cast<long long>(pattern.array) * sequence_.markers_per_array + marker.id;
         if (found || found_msms_.count(key) > 0) resolution_.Record(marker.module_px, found);
+        // Whole frames miss small markers that regions find: only regions' misses count.
+        if (!found && !output.whole_frame && marker.module_px >= options_.explore_missed_module_px) {
+          ++misses_since_exploring_;
+        }
       }
       for (const int id : output.detections.ids) {
         found_msms_.insert(static_cast<long long>(pattern.array) * sequence_.markers_per_array + id);
@@ -770,6 +780,7 @@ class CameraIngest {
   detect::ProjectorHomography homography_;
   detect::ResolutionLimit resolution_;
   std::unordered_set<long long> found_msms_;  // array * markers_per_array + marker, at any scale
+  int misses_since_exploring_ = 0;  // large planned markers missed since a pattern was explored
   // Smallest image side over projector side of the MSMs found at two scales so far.
   double min_magnification_ = std::numeric_limits<double>::infinity();
   struct Sighting {
@@ -845,6 +856,9 @@ void IngestOptions::Check() const {
   Require(bootstrap_downscale >= 1 && bootstrap_downscale <= 8, "bootstrap_downscale must be in [1, 8]");
   Require(explore_interval >= 0, "explore_interval must be non-negative (0: never)");
   Require(explore_scales >= 1, "explore_scales must be at least 1");
+  Require(explore_after_misses >= 0, "explore_after_misses must be non-negative (0: never)");
+  Require(explore_missed_module_px >= 0.0 && std::isfinite(explore_missed_module_px),
+          "explore_missed_module_px must be non-negative");
   edges.Check();
   verification.Check();
   consistency.Check();
