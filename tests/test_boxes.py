@@ -266,19 +266,28 @@ def test_the_ingest_finds_the_markers_on_the_table_top(small_table_videos) -> No
     assert _table_top_centres(on_floor_only, truth)[0] == 0
 
 
-def test_markers_missed_where_the_floor_plans_them_have_whole_frames_explored(small_table_videos) -> None:
-    """With only the first array explored on schedule, the table top's markers, missed
-    where the floor's homography plans them, have the next arrays explored: they are
-    found as with exploring on schedule, and not without the misses' exploring."""
+def test_explorations_space_out_only_while_nothing_beyond_the_floor_is_found(small_table_videos, tmp_path) -> None:
+    """Whole frames cost far more than regions: in a room with nothing but the floor the
+    explorations space out (fewer whole frames, no fewer MSMs); with a table top in view
+    they stay as frequent as exploring every array (its MSMs all kept)."""
     from calibproj.ingest.videos import ingest
     from calibproj.ingest.options import IngestOptions
+    from calibproj.sequence import build_sequence
+    from calibproj.simulate.render import simulate_videos
+
+    every_array = IngestOptions(explore_max_interval=1)
+    floor = tmp_path / "floor"
+    sequence = build_sequence(markers="aruco:4X4_50", arrays=24, scales=(1.0, 1.5, 2.0), marker_px=80.0,
+                              code_degree=4, reference_frames=8)
+    simulate_videos(scene_from_json(preset_document("small")), sequence, floor, seed=7)
+    spaced, dense = (ingest(floor / "videos", sequence, floor / "intrinsics", options=options, progress=False)
+                     for options in (IngestOptions(), every_array))
+    for name, camera in spaced.cameras.items():
+        assert camera.raw.patterns_whole_frame < dense.cameras[name].raw.patterns_whole_frame
+        assert len(camera.raw.centres.array) >= 0.98 * len(dense.cameras[name].raw.centres.array)
 
     out, sequence, truth = small_table_videos
-    kept = {}
-    for after_misses in (2, 0):
-        arrays = 1 + max(pattern.array for pattern in sequence.patterns)
-        options = IngestOptions(explore_interval=arrays, explore_after_misses=after_misses)
-        result = ingest(out / "videos", sequence, out / "intrinsics", options=options, progress=False)
-        kept[after_misses], shown, worst = _table_top_centres(result, truth)
-    assert kept[2] >= 0.25 * shown and worst < 1.0
-    assert kept[0] < 0.6 * kept[2]
+    with_table = {options.explore_max_interval: _table_top_centres(
+        ingest(out / "videos", sequence, out / "intrinsics", options=options, progress=False), truth)[0]
+        for options in (IngestOptions(), every_array)}
+    assert with_table[IngestOptions().explore_max_interval] >= 0.95 * with_table[1] > 0

@@ -18,6 +18,7 @@
 #include "calibproj/common/limits.h"
 #include "calibproj/detect/floor_consistency.h"
 #include "calibproj/detect/marker_centre.h"
+#include "calibproj/detect/surface_fit.h"
 #include "calibproj/ingest/detection_pipeline.h"
 #include "calibproj/ingest/option_table.h"
 #include "calibproj/sync/code_search.h"
@@ -427,7 +428,10 @@ class CameraIngest {
     stats.unresolvable += job.plan.unresolvable;
     stats.redundant += job.plan.redundant;
     job.explore = Explores(index);
-    if (job.explore) misses_since_exploring_ = 0;
+    if (job.explore) {
+      last_explored_array_ = sequence_.patterns[index].array;
+      ++explorations_;
+    }
     if (job.plan.markers.empty() && !job.explore) {
       pending_.skip = true;
       status_[index] = PatternStatus::kSkipped;
@@ -456,20 +460,46 @@ class CameraIngest {
   // known (a table top, planned where the floor would have put them) are found. The
   // explored arrays take the explore_scales largest scales in turn: the largest are
   // found from afar, smaller ones fit on a narrow table.
-  // Misses of planned markers since the last exploration (explore_after_misses) have one
-  // of the next largest patterns explored too.
+  // True for one of the explore_scales largest scales of an array explore_gap_ arrays
+  // after the last explored one: its whole frame is searched and every marker found kept
+  // wherever it is, so that markers on a surface not yet known (a table top, planned
+  // where the floor would have put them) are found. The explorations take the largest
+  // scales in turn: the largest are found from afar, smaller ones fit on a narrow table.
   bool Explores(int index) const {
     if (options_.explore_interval <= 0) return false;
     const PatternSpec& pattern = sequence_.patterns[index];
+    if (pattern.array < last_explored_array_ + std::max(explore_gap_, options_.explore_interval)) return false;
     int larger = 0;
     for (const PatternSpec& other : sequence_.patterns) {
       if (other.array == pattern.array && other.marker_side_px > pattern.marker_side_px) ++larger;
     }
-    if (pattern.array % options_.explore_interval == 0) {
-      return larger == (pattern.array / options_.explore_interval) % options_.explore_scales;
+    return larger == explorations_ % options_.explore_scales;
+  }
+
+  // After an explored pattern: markers found off the known surfaces, or on any but the
+  // dominant one (the floor; a table top's markers are planned well only where its own
+  // correspondences are dense), keep the explorations frequent; none, in explore_scales
+  // explorations in a row, spaces them out (doubling the interval each time, up to
+  // explore_max_interval): a room with nothing but the floor stops paying whole frames.
+  void AdaptExploring(const DetectionOutput& output) {
+    const PatternSpec& pattern = sequence_.patterns[output.pattern];
+    bool beyond_floor = false;
+    for (std::size_t k = 0; k < output.detections.size() && !beyond_floor; ++k) {
+      const cv::Point2d& projector =
+          sequence_.centres[pattern.array * sequence_.markers_per_array + output.detections.ids[k]];
+      const cv::Point2d planned = detect::ApplyHomography(homography_.SurfaceAt(projector), projector);
+      const cv::Point2d found = detect::DiagonalIntersection(output.undistorted[k]);
+      const double side = MeanSide(output.detections.corners[k]);
+      beyond_floor = homography_.SurfaceIndexAt(projector) != 0 ||
+                     !(cv::norm(found - planned) <= detect::AllowedOffset(side, options_.roi));
     }
-    const int misses = options_.explore_after_misses;
-    return misses > 0 && misses_since_exploring_ >= misses && larger < options_.explore_scales;
+    // Every one of the largest scales gets its chance before the explorations space out.
+    floor_only_explorations_ = beyond_floor ? 0 : floor_only_explorations_ + 1;
+    const int doublings = std::min(floor_only_explorations_ - options_.explore_scales + 1, 30);
+    explore_gap_ = doublings <= 0 ? options_.explore_interval
+                                  : static_cast<int>(std::min<long long>(
+                                        static_cast<long long>(options_.explore_interval) << doublings,
+                                        options_.explore_max_interval));
   }
 
   // Shrinking of a whole frame searched before the homography (adaptive_bootstrap).
@@ -589,6 +619,7 @@ class CameraIngest {
       result_.detections_rejected += output.rejected;
       result_.markers_verified += output.verified;
       const PatternSpec& pattern = sequence_.patterns[output.pattern];
+      if (output.explored && homography_.valid()) AdaptExploring(output);
       for (const detect::MarkerPrediction& marker : output.searched) {
         const auto& ids = output.detections.ids;
         const bool found = std::find(ids.begin(), ids.end(), marker.id) != ids.end();
@@ -596,10 +627,6 @@ class CameraIngest {
         // hidden by a table, in its shadow or moved onto it is missed at every size.
         const long long key = static_cast<long long>(pattern.array) * sequence_.markers_per_array + marker.id;
         if (found || found_msms_.count(key) > 0) resolution_.Record(marker.module_px, found);
-        // Whole frames miss small markers that regions find: only regions' misses count.
-        if (!found && !output.whole_frame && marker.module_px >= options_.explore_missed_module_px) {
-          ++misses_since_exploring_;
-        }
       }
       for (const int id : output.detections.ids) {
         found_msms_.insert(static_cast<long long>(pattern.array) * sequence_.markers_per_array + id);
@@ -780,7 +807,12 @@ class CameraIngest {
   detect::ProjectorHomography homography_;
   detect::ResolutionLimit resolution_;
   std::unordered_set<long long> found_msms_;  // array * markers_per_array + marker, at any scale
-  int misses_since_exploring_ = 0;  // large planned markers missed since a pattern was explored
+  // Exploring: arrays from one explored to the next (at least explore_interval), the last
+  // explored, how many so far, and how many in a row found nothing beyond the floor.
+  int explore_gap_ = 0;
+  int floor_only_explorations_ = 0;
+  int last_explored_array_ = std::numeric_limits<int>::min() / 2;
+  int explorations_ = 0;
   // Smallest image side over projector side of the MSMs found at two scales so far.
   double min_magnification_ = std::numeric_limits<double>::infinity();
   struct Sighting {
@@ -856,9 +888,7 @@ void IngestOptions::Check() const {
   Require(bootstrap_downscale >= 1 && bootstrap_downscale <= 8, "bootstrap_downscale must be in [1, 8]");
   Require(explore_interval >= 0, "explore_interval must be non-negative (0: never)");
   Require(explore_scales >= 1, "explore_scales must be at least 1");
-  Require(explore_after_misses >= 0, "explore_after_misses must be non-negative (0: never)");
-  Require(explore_missed_module_px >= 0.0 && std::isfinite(explore_missed_module_px),
-          "explore_missed_module_px must be non-negative");
+  Require(explore_max_interval >= 1, "explore_max_interval must be at least 1");
   edges.Check();
   verification.Check();
   consistency.Check();

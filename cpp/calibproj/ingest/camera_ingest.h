@@ -50,21 +50,16 @@ struct IngestOptions {
   // Detect in regions of interest once the homography is known (false: whole frames
   // at full resolution, with the same filtering; for verification).
   bool use_roi = true;
-  // One scale of every explore_interval-th array is searched in the whole frame (shrunk
-  // as its markers allow) and its markers kept wherever they are found: markers moved
-  // by a surface whose homography is not known yet (a table top) are found there, and
-  // that surface's homography then plans the later patterns (0: never, not even on
-  // misses). The explored arrays take the explore_scales largest scales in turn.
-  int explore_interval = 4;
+  // One scale of an array every explore_interval arrays is searched in the whole frame
+  // (shrunk as its markers allow) and its markers kept wherever they are found: markers
+  // moved by a surface whose homography is not known yet (a table top) are found there,
+  // and that surface's homography then plans the later patterns (0: never). The explored
+  // arrays take the explore_scales largest scales in turn. Whole frames cost far more
+  // than regions: an exploration that finds no marker off the known surfaces doubles the
+  // interval, up to explore_max_interval arrays; one that finds some brings it back.
+  int explore_interval = 1;
+  int explore_max_interval = 8;
   int explore_scales = 3;
-  // explore_after_misses planned markers missed in their regions since the last
-  // exploration (moved by a surface not known yet, or hidden), each with modules of at
-  // least explore_missed_module_px, have the next pattern among the explore_scales largest
-  // of an array explored too (0: only every explore_interval-th array). Whole frames cost
-  // far more than regions: once every surface is known and the markers are where they
-  // are planned, exploring only now and then saves most of the detection time.
-  int explore_after_misses = 2;
-  double explore_missed_module_px = 2.0;
   // Whole frames searched before the homography is known are shrunk by this factor
   // (libapriltag takes ~300 ms on a full 1080p frame); markers too small to survive
   // the shrinking are then only found once regions of interest take over.

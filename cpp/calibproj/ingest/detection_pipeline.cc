@@ -131,6 +131,7 @@ DetectionOutput DetectionPipeline::Run(const detect::MarkerDetector& detector, c
   DetectionOutput output;
   output.pattern = job.pattern;
   output.whole_frame = job.whole_frame;
+  output.explored = job.explore;
   output.first_frame = job.first_frame;
   output.frame_count = job.frame_count;
   if (job.has_plan) output.searched = job.plan.markers;

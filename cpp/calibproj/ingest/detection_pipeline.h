@@ -44,6 +44,7 @@ struct DetectionJob {
 struct DetectionOutput {
   int pattern = -1;
   bool whole_frame = true;
+  bool explored = false;          // the job explored (markers kept wherever found)
   int first_frame = -1;
   int frame_count = 0;
   detect::Detections detections;  // whole-image distorted pixels, filtered

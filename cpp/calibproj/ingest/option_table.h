@@ -88,15 +88,11 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "detect in predicted regions once the projector-to-image homography is known (false: whole frames "
         "at full resolution, for verification).");
   visit("explore_interval", o.explore_interval,
-        "one scale of every n-th array is searched in whole frames for markers on other surfaces (0: never, "
-        "not even after misses)");
-  visit("explore_after_misses", o.explore_after_misses,
-        "this many planned markers missed in their regions since the last exploration (moved by a surface "
-        "not known yet, or hidden) have the next array's pattern explored too (0: only every "
-        "explore_interval-th array).");
-  visit("explore_missed_module_px", o.explore_missed_module_px,
-        "... counting only markers with modules of at least this many pixels (smaller ones are missed for "
-        "their size).");
+        "one scale of an array every n arrays is searched in whole frames for markers on other surfaces "
+        "(0: never).");
+  visit("explore_max_interval", o.explore_max_interval,
+        "... an exploration that finds no marker off the known surfaces doubles that interval, up to this "
+        "many arrays; one that finds some brings it back.");
   visit("explore_scales", o.explore_scales,
         "the explored arrays take this many of the largest scales in turn: the largest are found from "
         "afar, smaller ones fit on a narrow table.");
