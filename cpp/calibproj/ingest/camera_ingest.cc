@@ -455,11 +455,6 @@ class CameraIngest {
     }
   }
 
-  // True for one scale of every explore_interval-th array: its whole frame is searched
-  // and every marker found kept wherever it is, so that markers on a surface not yet
-  // known (a table top, planned where the floor would have put them) are found. The
-  // explored arrays take the explore_scales largest scales in turn: the largest are
-  // found from afar, smaller ones fit on a narrow table.
   // True for one of the explore_scales largest scales of an array explore_gap_ arrays
   // after the last explored one: its whole frame is searched and every marker found kept
   // wherever it is, so that markers on a surface not yet known (a table top, planned

@@ -55,8 +55,10 @@ struct IngestOptions {
   // moved by a surface whose homography is not known yet (a table top) are found there,
   // and that surface's homography then plans the later patterns (0: never). The explored
   // arrays take the explore_scales largest scales in turn. Whole frames cost far more
-  // than regions: an exploration that finds no marker off the known surfaces doubles the
-  // interval, up to explore_max_interval arrays; one that finds some brings it back.
+  // than regions: after explore_scales explorations in a row whose markers all lie on the
+  // floor where it plans them, each further one doubles the interval, up to
+  // explore_max_interval arrays; one marker on another surface or off the plan brings it
+  // back.
   int explore_interval = 1;
   int explore_max_interval = 8;
   int explore_scales = 3;

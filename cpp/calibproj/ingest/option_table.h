@@ -91,8 +91,9 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "one scale of an array every n arrays is searched in whole frames for markers on other surfaces "
         "(0: never).");
   visit("explore_max_interval", o.explore_max_interval,
-        "... an exploration that finds no marker off the known surfaces doubles that interval, up to this "
-        "many arrays; one that finds some brings it back.");
+        "... after explore_scales explorations in a row whose markers all lie on the floor where it plans "
+        "them, each further one doubles that interval, up to this many arrays; a marker on another "
+        "surface or off the plan brings it back.");
   visit("explore_scales", o.explore_scales,
         "the explored arrays take this many of the largest scales in turn: the largest are found from "
         "afar, smaller ones fit on a narrow table.");
