@@ -13,7 +13,8 @@ a 960x540 projector) is
 Both are compared with the room's truth (Sim(3) alignment, ``calibproj.evaluation.comparison``).
 Per seed it prints both RMSEs, when the poses were written after the projection ended,
 the frames every camera recorded, and the CPU time of ingesting the recordings (as
-files) against a plain decode of the same recordings (``ffmpeg -f null``). The last line:
+files, every camera at once as the capture ingests them) against a plain decode of the
+same recordings (``ffmpeg -f null``). The last line:
 
   capture: poses_after_end_s=.. rot_ratio_vs_files=.. centre_ratio_vs_files=.. ingest_cpu_ratio=..
 
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import resource
 import shutil
 import subprocess
@@ -92,16 +94,14 @@ def run_files(base: Path, seed: int) -> object:
 
 
 def ingest_cpu(base: Path) -> tuple[float, float]:
-    """CPU seconds of ingesting the recordings one by one, and of decoding them."""
-    recordings = base / "live" / "recordings"
-    ingested = decoded = 0.0
-    for video in sorted(recordings.glob("*.mkv")):
-        before = cpu_seconds(resource.RUSAGE_SELF)
-        ingest({video.stem: video}, base / "sequence" / "sequence.json", base / "room" / "intrinsics", workers=1,
-               progress=False)
-        ingested += cpu_seconds(resource.RUSAGE_SELF) - before
-        decoded += decode_cpu(video)
-    return ingested, decoded
+    """CPU seconds of ingesting the recordings, every camera at once as the capture does
+    (as many at a time as there are cores), and of decoding them one by one."""
+    videos = {video.stem: video for video in sorted((base / "live" / "recordings").glob("*.mkv"))}
+    before = cpu_seconds(resource.RUSAGE_SELF)
+    ingest(videos, base / "sequence" / "sequence.json", base / "room" / "intrinsics", workers=os.cpu_count() or 1,
+           progress=False)
+    ingested = cpu_seconds(resource.RUSAGE_SELF) - before
+    return ingested, sum(decode_cpu(video) for video in videos.values())
 
 
 def main() -> int:
