@@ -148,7 +148,7 @@ void register_ingest(py::module_& m) {
       "bad options stop an ingest before any camera, as calibproj-native's do.");
   m.def("shared_decode_threads", &ingest::SharedDecodeThreads, py::arg("decode_threads"), py::arg("cameras_at_once"),
         "FFmpeg's decoding threads for each of `cameras_at_once` cameras ingested together: `decode_threads` "
-        "when set, else the machine's cores shared among them (0, FFmpeg's own choice, for one camera).");
+        "when set, else the machine's cores shared among them (all but one for one camera).");
   m.def("valid_known_exposure", &ingest::ValidKnownExposure, py::arg("seconds"),
         "Whether a camera's known exposure time (--exposure CAMERA=SECONDS) is one: 0 < seconds <= 1.");
   m.def(

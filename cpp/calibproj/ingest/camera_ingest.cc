@@ -892,8 +892,10 @@ void IngestOptions::Check() const {
 }
 
 int SharedDecodeThreads(int decode_threads, int cameras_at_once) {
-  if (decode_threads != 0 || cameras_at_once <= 1) return decode_threads;  // a bad value stays for Check
+  if (decode_threads != 0) return decode_threads;  // a bad value stays for Check
   const int cores = static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
+  // A camera alone leaves a core to its detection thread.
+  if (cameras_at_once <= 1) return std::max(1, cores - 1);
   return std::max(1, cores / cameras_at_once);
 }
 

@@ -268,7 +268,7 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "frames between two searches of the start code.");
   visit("decode_threads", o.decode_threads,
         "FFmpeg's decoding threads per camera (0: the machine's cores shared among the cameras ingested "
-        "at once, one each when there are as many cameras as cores).");
+        "at once, one each when there are as many cameras as cores, all but one for a camera alone).");
   visit("detection_threads", o.detection_threads,
         "detection threads per camera.");
   visit("max_pending_jobs", o.max_pending_jobs,
