@@ -67,7 +67,8 @@ def make_inputs(folder: Path, seed: int) -> Inputs:
     for name in ("cam0", "cam1"):
         write_video(videos / f"{name}.mkv", rng)
     sequence = build_sequence(arrays=3, scales=(1.0, 2.0), grid=(2, 4), code_degree=4, reference_frames=8)
-    document = {"schema": "calibproj.sequence/1", **json.loads(json.dumps(sequence.to_dict()))}
+    sequence.save(folder / "sequence_document.json")
+    document = json.loads((folder / "sequence_document.json").read_text())
     return Inputs(tracks_document(rng), intrinsics_document(640, 480, 500.0), document,
                   intrinsics_document(64, 48, 80.0), videos)
 

@@ -146,7 +146,6 @@ def test_a_texture_that_moves_large_markers_more_leaves_the_small_ones_their_wei
     first projection's markers, 0.07 px for the extra projection's small ones. The
     registration estimates the projector's noise per marker size, and the zoomed camera,
     whose points the small markers tie to the projector, keeps their weight."""
-    import dataclasses
 
     from calibproj.evaluation.comparison import rotation_errors_to_reference
     from calibproj.registration.driver import RegistrationDriver, RegistrationOptions
@@ -157,7 +156,7 @@ def test_a_texture_that_moves_large_markers_more_leaves_the_small_ones_their_wei
 
     def displaced(seq):
         sides = np.nan_to_num(projected_markers(seq).largest_side_px)
-        return dataclasses.replace(seq, centres=seq.centres + rng.normal(size=seq.centres.shape) * 0.002 * sides[..., None])
+        return seq.replaced(centres=seq.centres + rng.normal(size=seq.centres.shape) * 0.002 * sides[..., None])
 
     first = simulate_tracks(scene, None, noise_px=0.05, seed=31, layout=displaced(sequence)).tracks
     extra = simulate_tracks(scene, None, noise_px=0.05, seed=131, layout=displaced(dense)).tracks

@@ -45,8 +45,9 @@ MIN_TOTAL_CALLS = 1400
 CALL_TIMEOUT_S = 20.0
 CHILD_ADDRESS_SPACE_BYTES = 6 << 30  # an allocation without limit fails instead of swapping
 # OSError: a file the system refuses (a name too long, a folder that cannot be made),
-# raised as open() raises it.
-ALLOWED_OUTCOMES = {"ok", "ValueError", "TypeError", "RuntimeError", "OSError"}
+# raised as open() raises it; IndexError: a frame or pattern index outside a sequence, as
+# a list's index raises it.
+ALLOWED_OUTCOMES = {"ok", "ValueError", "TypeError", "RuntimeError", "OSError", "IndexError"}
 MODULES = {"_core": _core, "_bench": _bench}
 # Where every keyword option meets every absurd value (the others sample them).
 EVERY_OPTION = {"_core.ba.bundle_adjust", "_core.registration.Reconstruction", "_core.sync.synchronise",
@@ -372,15 +373,15 @@ class Baselines:
         self.files = files
         self.scene = plane_scene()
         sequence = build_sequence(arrays=3, scales=(1.0, 2.0), grid=(2, 4), code_degree=4, reference_frames=8)
-        self.sequence = json.loads(json.dumps(sequence.to_dict()))
-        self.core_sequence = _core.ingest.Sequence(self.sequence)
+        self.built_sequence = sequence
+        self.core_sequence = _core.ingest.Sequence(sequence)
         self.levels = np.asarray(_core.ingest.light_levels(self.core_sequence))
-        self.start_code = self.sequence["codes"]["start"]
-        self.end_code = self.sequence["codes"]["end"]
+        self.start_code = sequence.start_code
+        self.end_code = sequence.end_code
         light = self.levels.copy()
         light[np.isnan(light)] = 0.2
         rng = np.random.default_rng(7)
-        self.rate = 25.0 / self.sequence["projector"]["fps"]
+        self.rate = 25.0 / sequence.fps
         frames = int(9.0 + self.rate * len(light) + 20)
         self.signal = camera_signal(light, 9.0, self.rate, 0.5, frames, rng)
         self.bands = np.stack([camera_signal(light, 9.0 + 0.02 * b, self.rate, 0.5, frames, rng) for b in range(4)])
@@ -457,7 +458,6 @@ class Baselines:
         H = np.linalg.lstsq(np.column_stack([x1, np.ones(len(x1))]), np.column_stack([x2, np.ones(len(x2))]),
                             rcond=None)[0].T
         corners = np.array([[[10.0, 10], [50, 10], [50, 50], [10, 50]], [[60.0, 10], [90, 12], [88, 40], [62, 38]]])
-        sequence = self.sequence
         sync_options = {knob.name: knob.default for knob in _core.sync.option_table()}
         ingest_options = {knob.name: knob.default for knob in _core.ingest.option_table()}
         marker_corners = np.array([[20.0, 20], [80, 20], [80, 80], [20, 80]])
@@ -623,7 +623,17 @@ class Baselines:
                                                 ("start_code", self.start_code), ("end_code", self.end_code),
                                                 ("map", _core.sync.FrameMap(9.0, self.rate, 0.5))],
                                                options=sync_options),
-            "_core.ingest.Sequence": Spec([("document", sequence)]),
+            "_core.ingest.Sequence": Spec([(name, np.array(value) if name == "centres" else value)
+                                          for name, value in self.built_sequence.parts().items()]),
+            "_core.ingest.MarkerSystem": Spec([("spec", "aruco:4X4_50"), ("inverted", True)]),
+            "_core.ingest.Pattern": Spec([("array", 1), ("scale_index", 0), ("scale", 1.0), ("marker_side_px", 24.0),
+                                          ("first_frame", 3), ("last_frame", 5), ("omitted", [2])]),
+            "_core.ingest.Segment": Spec([("kind", "white"), ("first_frame", 0), ("last_frame", 7)]),
+            "_core.sync.LightCode": Spec([("bits", [1, 0, 1, 1]), ("frames_per_bit", 3), ("first_frame", 8)]),
+            "_core.ingest.Sequence.segment_at": Spec([("frame", 20)]),
+            "_core.ingest.Sequence.pattern_index_at": Spec([("frame", 40)]),
+            "_core.ingest.Sequence.markers_shown": Spec([("pattern_index", 1)]),
+            "_core.ingest.Sequence.save": Spec([("path", f["recordings"] + "/sequence.json")]),
             "_core.ingest.light_levels": Spec([("sequence", self.core_sequence)]),
             "_core.sync.FrameMap": Spec([("offset", 9.0), ("rate", 1.0), ("exposure", 0.5)]),
             "_core.Knob": Spec([]),
@@ -683,7 +693,7 @@ class Baselines:
         folder = Path(self.files["tiny.mkv"]).parent / "formats"
         tracks.write(folder / "valid_tracks.json")
         write_intrinsics(folder / "a.json", intrinsics["a"])
-        (folder / "sequence.json").write_text(json.dumps({"schema": "calibproj.sequence/1", **self.sequence}))
+        self.built_sequence.save(folder / "sequence.json")
         # A stored calibration and a check of it (read by the receivers below).
         calibration.save(folder / "results")
         self.results_folder = folder / "results"
@@ -932,6 +942,10 @@ class Baselines:
                 "apriltag": lambda: _core.detect.MarkerDetector(self.apriltag_spec)},
             "_core.detect.ArucoOptions": {"default": _core.detect.ArucoOptions},
             "_core.ingest.Sequence": {"read": lambda: self.core_sequence},
+            "_core.ingest.MarkerSystem": {"of the sequence": lambda: self.core_sequence.markers},
+            "_core.ingest.Pattern": {"first": lambda: self.core_sequence.patterns[0]},
+            "_core.ingest.Segment": {"first": lambda: self.core_sequence.segments[0]},
+            "_core.sync.LightCode": {"start": lambda: self.core_sequence.start_code},
             "_core.ingest.CameraIngestResult": {"empty": _core.ingest.CameraIngestResult},
             "_core.Knob": {name: (lambda table=table: table()[0]) for name, table in (
                 ("registration", _core.registration.option_table), ("check", _core.check.option_table))},

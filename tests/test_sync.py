@@ -29,7 +29,7 @@ def short_sequence(**overrides):
 
 def projector_light(sequence, rng) -> np.ndarray:
     """Level of every projector frame; patterns get random brightness of their own."""
-    levels = _core.ingest.light_levels(sequence.core())
+    levels = _core.ingest.light_levels(sequence)
     for pattern in sequence.patterns:
         levels[pattern.first_frame:pattern.last_frame + 1] = rng.uniform(0.05, 0.3)
     return levels
@@ -107,12 +107,11 @@ def test_bands_fitted_together_give_each_band_its_own_fit():
     frames = int(9.0 + rate * len(light) + 20)
     bands = np.stack([camera_signal(light, 9.0 + 0.03 * b, rate, 0.5, frames, rng) for b in range(4)])
     bands[2, ::7] = np.nan
-    codes = sequence.to_dict()["codes"]
-    levels = np.asarray(_core.ingest.light_levels(sequence.core()))
+    levels = np.asarray(_core.ingest.light_levels(sequence))
     start_map = _core.sync.FrameMap(9.0, rate, 0.5)
 
     def fits(order):
-        estimate = _core.sync.estimate_readout(bands[order], levels, codes["start"], codes["end"], start_map)
+        estimate = _core.sync.estimate_readout(bands[order], levels, sequence.start_code, sequence.end_code, start_map)
         return [(band.offset, band.sigma, band.rms) for band in estimate.bands]
 
     in_order = fits([0, 1, 2, 3])
@@ -166,8 +165,8 @@ def test_correlation_peaks_at_the_code():
     sequence = short_sequence()
     rng = np.random.default_rng(2)
     signal, _ = record(sequence, 25.0, 12.4, 0.5, rng)
-    levels = _core.ingest.light_levels(sequence.core())
-    start = _core.sync.locate_code(signal, levels, sequence.start_code.to_dict(), 25.0 / PROJECTOR_FPS)
+    levels = _core.ingest.light_levels(sequence)
+    start = _core.sync.locate_code(signal, levels, sequence.start_code, 25.0 / PROJECTOR_FPS)
     expected = 12.4 + 25.0 / PROJECTOR_FPS * sequence.start_code.first_frame
     assert start.correlation > 0.99
     assert abs(start.frame - expected) < MAX_SYNC_ERROR_FRAMES

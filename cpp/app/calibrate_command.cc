@@ -406,7 +406,7 @@ int RunCalibrate(const CalibrateArguments& arguments, Interrupts& interrupts) {
       if (!camera.ok()) inputs.left_out.emplace_back(camera.name, camera.error);
       inputs.provenance.videos.emplace_back(camera.name, camera.video);
     }
-    inputs.provenance.markers = sequence.markers;
+    inputs.provenance.markers = sequence.markers.spec;
     inputs.markers = formats::ProjectedMarkers::FromSequence(sequence);
     const nlohmann::ordered_json report = formats::DetectReport(outcomes, arguments.sequence, sequence);
     write_report = [report](const fs::path& staging) {

@@ -177,7 +177,7 @@ formats::ProvenanceRecord CaptureProvenance(const Projection& projection, const 
   record.source = formats::ProvenanceInput{arguments.site, ""};
   record.sequence = formats::ProvenanceInput{projection.sequence_file.string(), ""};
   for (const formats::CameraOutcome& camera : run.cameras) record.videos.emplace_back(camera.name, camera.video);
-  record.markers = projection.sequence.markers;
+  record.markers = projection.sequence.markers.spec;
   return record;
 }
 

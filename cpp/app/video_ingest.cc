@@ -333,7 +333,7 @@ std::vector<CameraOutcome> IngestVideos(const std::string& videos, const Intrins
   const auto paths = VideoPaths(videos);
   RequireValidOptions(arguments.options);
   IngestSetup setup{arguments.options, ParseExposures(arguments.exposures, paths)};
-  ApplyDetectorOptions(arguments.detector_options, sequence.markers.substr(0, sequence.markers.find(':')),
+  ApplyDetectorOptions(arguments.detector_options, sequence.markers.system,
                        &setup.options.detector);
   return IngestAll(paths, intrinsics_of, arguments, setup, sequence);
 }

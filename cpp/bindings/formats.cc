@@ -278,9 +278,8 @@ void register_formats(py::module_& m) {
         "for any other NAME.json");
   m.def(
       "read_sequence",
-      [](const std::filesystem::path& path) { return JsonToPython(formats::ReadSequenceFile(path).document); },
-      py::arg("path"),
-      "The document of a sequence.json that the core accepts (the one reader of the format); InputError "
+      &formats::ReadSequence, py::arg("path"),
+      "The Sequence a sequence.json holds (the one reader of the format); InputError "
       "naming the file and the problem");
   m.def(
       "with_earlier_observations",

@@ -1,5 +1,5 @@
-// Bindings of calibproj::ingest: one camera's video to MSM centres. The sequence comes
-// as the body of sequence.json (Sequence.to_dict()); results come back as numpy arrays.
+// Bindings of calibproj::ingest: one camera's video to MSM centres. The sequence is a
+// bound Sequence (sequence.cc); results come back as numpy arrays.
 
 #include <pybind11/functional.h>
 #include <pybind11/numpy.h>
@@ -17,28 +17,15 @@
 #include "calibproj/ingest/option_table.h"
 #include "checks.h"
 #include "ingest_options.h"
-#include "json_convert.h"
 #include "calibproj/video/video_reader.h"
 #include "images.h"
 #include "registry.h"
-#include "sync_convert.h"
 
 namespace py = pybind11;
 
 namespace calibproj::bindings {
 
 namespace {
-
-// The body of sequence.json as Sequence.to_dict() gives it, read by the one reader of
-// the format (the messages say "sequence: at patterns/0: ...").
-ingest::SequenceDescription SequenceFromDict(const py::dict& d) {
-  const nlohmann::json document = PythonToJson(d, "sequence");
-  try {
-    return formats::SequenceFromDocument(document);
-  } catch (const std::invalid_argument& error) {
-    throw std::invalid_argument(std::string("sequence: ") + error.what());
-  }
-}
 
 // A grey image array as an OpenCV image sharing its pixels.
 cv::Mat GrayView(const py::array_t<uint8_t, py::array::c_style>& image) {
@@ -123,6 +110,7 @@ py::array_t<double> MapWithTables(const formats::CameraIntrinsics& intrinsics, s
 }
 
 void register_ingest(py::module_& m) {
+  register_sequence(m);
   register_ingest_result(m);
   m.def("lens_tables_map", &MapWithTables, py::arg("intrinsics"), py::arg("resolution"), py::arg("points"),
         py::arg("undistort") = true,
@@ -171,16 +159,6 @@ void register_ingest(py::module_& m) {
   m.def("option_table", &IngestOptionTable,
         "Every ingest knob as a Knob (name, default, help), in order: the one declaration "
         "calibproj.ingest.options.IngestOptions and both command lines are made from.");
-  py::class_<ingest::SequenceDescription>(
-      m, "Sequence",
-      "A projection sequence as the core holds it: the body of sequence.json (Sequence.to_dict()) read and "
-      "checked once by the format's one reader, then given to every camera's ingest_camera.")
-      .def(py::init([](const py::dict& document) { return SequenceFromDict(document); }), py::arg("document"))
-      .def_property_readonly("frame_count", &ingest::SequenceDescription::FrameCount)
-      .def_readonly("arrays", &ingest::SequenceDescription::arrays)
-      .def_readonly("markers_per_array", &ingest::SequenceDescription::markers_per_array)
-      .def_readonly("markers", &ingest::SequenceDescription::markers, "marker family spec")
-      .def_readonly("fps", &ingest::SequenceDescription::fps, "projector frame rate");
   m.def(
       "light_levels",
       [](const ingest::SequenceDescription& sequence) {

@@ -16,6 +16,8 @@ void register_detect(pybind11::module_& m);
 void register_video(pybind11::module_& m);
 void register_sync(pybind11::module_& m);
 void register_ingest(pybind11::module_& m);
+// The Sequence class and its parts, in the ingest submodule.
+void register_sequence(pybind11::module_& m);
 // The CameraIngestResult class and its parts, in the ingest submodule.
 void register_ingest_result(pybind11::module_& m);
 void register_selfcal(pybind11::module_& m);

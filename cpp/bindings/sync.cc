@@ -1,7 +1,8 @@
 // Bindings of calibproj::sync: light-code search and synchronisation of a brightness
-// signal (numpy arrays in, dicts out).
+// signal (numpy arrays and LightCodes in, bound result classes out).
 
 #include <pybind11/numpy.h>
+#include <pybind11/operators.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
@@ -15,7 +16,6 @@
 #include "checks.h"
 #include "ingest_options.h"
 #include "registry.h"
-#include "sync_convert.h"
 
 namespace py = pybind11;
 
@@ -53,6 +53,36 @@ sync::FrameWindow CodeWindow(const sync::LightTimeline& timeline, const sync::Li
 
 // The synchronisation's results as bound classes (read-only).
 void RegisterSyncTypes(py::module_& m) {
+  py::class_<sync::LightCode>(m, "LightCode",
+                              "A light code as projected: its bits (1 = white, 0 = black frames), each shown for "
+                              "frames_per_bit projector frames from first_frame on")
+      .def(py::init([](std::vector<int> bits, int frames_per_bit, int first_frame) {
+             sync::LightCode code{std::move(bits), frames_per_bit, first_frame};
+             code.Check("light code");
+             if (first_frame < 0) throw std::invalid_argument("light code: first_frame must not be negative");
+             return code;
+           }),
+           py::arg("bits"), py::arg("frames_per_bit"), py::arg("first_frame"),
+           "ValueError for an empty or constant code, bits other than 0/1, a frames_per_bit below 1 or a "
+           "negative first frame")
+      .def_property_readonly("bits", [](const sync::LightCode& c) { return py::tuple(py::cast(c.bits)); })
+      .def_readonly("frames_per_bit", &sync::LightCode::frames_per_bit)
+      .def_readonly("first_frame", &sync::LightCode::first_frame)
+      .def_property_readonly("frame_count", &sync::LightCode::FrameCount, "projector frames of the code")
+      .def_property_readonly("last_frame", [](const sync::LightCode& c) { return c.EndFrame() - 1; })
+      .def(
+          "frame_levels",
+          [](const sync::LightCode& c) {
+            py::array_t<uint8_t> levels(c.FrameCount());
+            for (int k = 0; k < c.FrameCount(); ++k) levels.mutable_data()[k] = c.bits[k / c.frames_per_bit];
+            return levels;
+          },
+          "0/1 level of every projector frame of the code, (frame_count,)")
+      .def(py::self == py::self)
+      .def("__repr__", [](const sync::LightCode& c) {
+        return "LightCode(" + std::to_string(c.bits.size()) + " bits, " + std::to_string(c.frames_per_bit) +
+               " frames per bit, from frame " + std::to_string(c.first_frame) + ")";
+      });
   py::class_<sync::FrameMap>(m, "FrameMap",
                              "Projector time to camera frames: frame = offset + rate * projector frame; exposure "
                              "in camera frames")
@@ -127,13 +157,12 @@ void register_sync(py::module_& m) {
   m.def("option_table", &SyncOptionTable, "Every sync knob as a Knob (name, default, help), in order.");
   m.def(
       "synchronise",
-      [](const DoubleArray& signal, const DoubleArray& levels, const py::dict& start, const py::dict& end,
-         double nominal_rate, const std::string& source, const py::kwargs& kwargs) {
+      [](const DoubleArray& signal, const DoubleArray& levels, const sync::LightCode& start_code,
+         const sync::LightCode& end_code, double nominal_rate, const std::string& source,
+         const py::kwargs& kwargs) {
         const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
         const std::vector<double> values = ToVector(signal, "signal");
         const sync::LightTimeline timeline(ToVector(levels, "levels"));
-        const sync::LightCode start_code = LightCodeFromDict(start, "start_code");
-        const sync::LightCode end_code = LightCodeFromDict(end, "end_code");
         sync::SyncResult result;
         {
           py::gil_scoped_release release;
@@ -144,18 +173,17 @@ void register_sync(py::module_& m) {
       py::arg("signal"), py::arg("levels"), py::arg("start_code"), py::arg("end_code"), py::arg("nominal_rate"),
       py::arg("source") = "signal",
       "Frame map of a camera from its per-frame brightness `signal` (NaN = not measured), the "
-      "projector's per-frame `levels` (0..1, NaN = unknown) and the light codes ({bits, "
-      "frames_per_bit, first_frame}); `nominal_rate` = camera fps / projector fps. Keyword "
+      "projector's per-frame `levels` (0..1, NaN = unknown) and the light codes (LightCode); "
+      "`nominal_rate` = camera fps / projector fps. Keyword "
       "options: see option_table(). RuntimeError naming `source` when a code is missing or "
       "the codes disagree.");
   m.def(
       "locate_code",
-      [](const DoubleArray& signal, const DoubleArray& levels, const py::dict& code, double nominal_rate,
-         const std::string& source, const py::kwargs& kwargs) {
+      [](const DoubleArray& signal, const DoubleArray& levels, const sync::LightCode& light_code,
+         double nominal_rate, const std::string& source, const py::kwargs& kwargs) {
         const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
         const std::vector<double> values = ToVector(signal, "signal");
         const sync::LightTimeline timeline(ToVector(levels, "levels"));
-        const sync::LightCode light_code = LightCodeFromDict(code, "code");
         sync::CodeLocation location;
         {
           py::gil_scoped_release release;
@@ -168,7 +196,8 @@ void register_sync(py::module_& m) {
   m.def(
       "estimate_readout",
       [](const py::array_t<double, py::array::c_style | py::array::forcecast>& band_signals,
-         const DoubleArray& levels, const py::dict& start, const py::dict& end, const sync::FrameMap& frame_map,
+         const DoubleArray& levels, const sync::LightCode& start, const sync::LightCode& end,
+         const sync::FrameMap& frame_map,
          const py::kwargs& kwargs) {
         RequireShape(band_signals, {-1, -1}, "band_signals");
         const sync::SyncOptions options = SyncOptionsFromKwargs(kwargs);
@@ -179,8 +208,7 @@ void register_sync(py::module_& m) {
         }
         const sync::LightTimeline timeline(ToVector(levels, "levels"));
         const std::vector<sync::FrameWindow> windows{
-            CodeWindow(timeline, LightCodeFromDict(start, "start_code"), options, "start_code"),
-            CodeWindow(timeline, LightCodeFromDict(end, "end_code"), options, "end_code")};
+            CodeWindow(timeline, start, options, "start_code"), CodeWindow(timeline, end, options, "end_code")};
         if (!(frame_map.rate > 0.0) || !(frame_map.exposure > 0.0)) throw std::invalid_argument("map: bad rate or exposure");
         sync::ReadoutEstimate estimate;
         {

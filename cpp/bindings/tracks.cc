@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "calibproj/formats/tracks_file.h"
+#include "arrays.h"
 #include "registry.h"
 
 namespace py = pybind11;
@@ -28,14 +29,6 @@ using formats::Tracks;
 using IdArray = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
 using PixelArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
 using BoolArray = py::array_t<bool, py::array::c_style | py::array::forcecast>;
-
-// A read-only array over `data`, kept alive by `owner` (the Tracks it belongs to).
-template <typename T>
-py::array ReadOnlyView(const T* data, std::vector<py::ssize_t> shape, const py::handle& owner) {
-  py::array view(py::dtype::of<T>(), std::move(shape), {}, data, owner);
-  py::detail::array_proxy(view.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
-  return view;
-}
 
 std::vector<std::int64_t> Flat(const IdArray& ids) {
   return std::vector<std::int64_t>(ids.data(), ids.data() + ids.size());

@@ -65,7 +65,7 @@ def rendering(folder: Path, scene: str, markers: str, arrays: int, seed: int) ->
     sequence = build_sequence(markers=markers, arrays=arrays)
     sequence_file = folder / "sequence.json"
     if (folder / "sim" / "truth.json").is_file() and sequence_file.is_file() and \
-            Sequence.load(sequence_file).to_dict() == sequence.to_dict():
+            Sequence.load(sequence_file) == sequence:
         return folder, sequence
     if folder.exists():
         shutil.rmtree(folder)

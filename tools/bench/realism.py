@@ -153,7 +153,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         if dense is not None:
             extra_s = dense.duration_s
             planned = room / "dense_sequence.json"
-            same_plan = planned.is_file() and Sequence.load(planned).to_dict() == dense.to_dict()
+            same_plan = planned.is_file() and Sequence.load(planned) == dense
             if not (args.reuse and same_plan and rendered(room / "dense", scene)):
                 planned.unlink(missing_ok=True)  # written once its rendering is complete
                 simulate_videos(scene, dense, room / "dense", seed=seed + 1000,

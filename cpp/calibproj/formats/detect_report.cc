@@ -145,7 +145,7 @@ ordered_json DetectReport(const std::vector<CameraOutcome>& cameras, const std::
                           const ingest::SequenceDescription& sequence) {
   ordered_json report;
   report["sequence"] = sequence_source;
-  report["markers"] = sequence.markers;
+  report["markers"] = sequence.markers.spec;
   ordered_json entries = ordered_json::object();
   for (const CameraOutcome& camera : cameras) entries[camera.name] = CameraSummary(camera, sequence);
   report["cameras"] = entries;

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "calibproj/detect/marker_family.h"
+#include "calibproj/common/limits.h"
 #include "calibproj/formats/files.h"
 #include "calibproj/formats/json_values.h"
 
@@ -120,50 +120,44 @@ std::pair<int, int> FrameRange(const json& o, const std::string& where) {
   return {Integer(o, where, "first_frame", 0), Integer(o, where, "last_frame", 0)};
 }
 
-// What sequence.json says beside the ingest's SequenceDescription, checked against it.
-struct Layout {
-  std::pair<int, int> grid;
-  int arrays = 0;
-  double margin_px = 0.0;
-  int frames_per_pattern = 0;
+// What sequence.json repeats of the SequenceDescription, checked against it.
+struct Repeated {
   int frame_count = 0;
   int start_last_frame = 0;
   int end_last_frame = 0;
-  int id_count = 0;  // the marker family's ids
+  int centre_arrays = 0;  // the shape of the centres list
+  int centres_per_array = 0;
 };
 
-// The marker family, checked against the geometry the file gives; returns its id count.
-int ReadMarkers(const json& document, ingest::SequenceDescription* s) {
+// The marker family, checked against the geometry the file gives.
+void ReadMarkers(const json& document, ingest::SequenceDescription* s) {
   const json& markers = Member(document, "", "markers");
-  s->markers = String(markers, "markers", "spec");
+  const std::string spec = String(markers, "markers", "spec");
   const std::string system = Choice(Member(markers, "markers", "system"), "markers/system", {"aruco", "apriltag"});
   const std::string family_name = String(markers, "markers", "family");
   const int grid_cells = Integer(markers, "markers", "grid_cells", 1);
   const int quad_cells = Integer(markers, "markers", "quad_cells", 1);
   const int id_count = markers.contains("id_count") ? Integer(markers, "markers", "id_count", 0) : 0;
-  s->inverted = Bool(markers, "markers", "inverted");
-  detect::MarkerFamily family;
+  const bool inverted = Bool(markers, "markers", "inverted");
   try {
-    family = detect::ParseMarkerFamily(s->markers);
+    s->markers = ingest::MarkerSystem::Of(spec, inverted);
   } catch (const std::invalid_argument& error) {
     throw SchemaError("markers/spec", error.what());
   }
   // The drawn and detected squares follow from the family: a file that says otherwise
   // would be drawn by one tool and detected by another with different geometry.
-  const detect::MarkerGeometry geometry = detect::GetMarkerGeometry(family);
+  const ingest::MarkerSystem& family = s->markers;
   const auto require = [&](bool same, const std::string& key, const std::string& expected) {
     if (!same) {
-      throw SchemaError("markers/" + key, Describe(markers.at(key)) + " does not match " + s->markers + " (" +
+      throw SchemaError("markers/" + key, Describe(markers.at(key)) + " does not match " + spec + " (" +
                                               expected + ")");
     }
   };
-  require(system == family.SystemName(), "system", family.SystemName());
-  require(family_name == family.name, "family", family.name);
-  require(grid_cells == geometry.grid_cells, "grid_cells", std::to_string(geometry.grid_cells));
-  require(quad_cells == geometry.quad_cells, "quad_cells", std::to_string(geometry.quad_cells));
-  const int family_ids = detect::MarkerIdCount(family);
-  if (markers.contains("id_count")) require(id_count == family_ids, "id_count", std::to_string(family_ids));
-  return family_ids;
+  require(system == family.system, "system", family.system);
+  require(family_name == family.family, "family", family.family);
+  require(grid_cells == family.grid_cells, "grid_cells", std::to_string(family.grid_cells));
+  require(quad_cells == family.quad_cells, "quad_cells", std::to_string(family.quad_cells));
+  if (markers.contains("id_count")) require(id_count == family.id_count, "id_count", std::to_string(family.id_count));
 }
 
 void ReadProjector(const json& document, ingest::SequenceDescription* s) {
@@ -172,36 +166,39 @@ void ReadProjector(const json& document, ingest::SequenceDescription* s) {
   s->fps = Positive(projector, "projector", "fps");
 }
 
-Layout ReadLayout(const json& document, ingest::SequenceDescription* s) {
+void ReadLayout(const json& document, ingest::SequenceDescription* s, Repeated* repeated) {
   const json& layout = Member(document, "", "layout");
-  Layout out;
-  out.grid = CountPair(layout, "layout", "grid");
-  out.arrays = Integer(layout, "layout", "arrays", 1);
+  std::tie(s->grid_rows, s->grid_cols) = CountPair(layout, "layout", "grid");
+  if (static_cast<long long>(s->grid_rows) * s->grid_cols > limits::kMaxPoints) {
+    throw SchemaError("layout/grid", Describe(layout.at("grid")) + " has more than " +
+                                         std::to_string(limits::kMaxPoints) + " markers per array");
+  }
+  s->arrays = Integer(layout, "layout", "arrays", 1);
   const json& scales = List(layout, "layout", "scales", 1);
   for (size_t k = 0; k < scales.size(); ++k) s->scales.push_back(Positive(scales[k], Item("layout/scales", k)));
   s->marker_px = Positive(layout, "layout", "marker_px");
-  out.margin_px = Number(layout, "layout", "margin_px");
-  Bool(layout, "layout", "snap_to_pixels");
-  if (Number(layout, "layout", "min_gap_modules") < 0.0) {
+  s->margin_px = Number(layout, "layout", "margin_px");
+  s->snap_to_pixels = Bool(layout, "layout", "snap_to_pixels");
+  s->min_gap_modules = Number(layout, "layout", "min_gap_modules");
+  if (s->min_gap_modules < 0.0) {
     throw SchemaError("layout/min_gap_modules", Describe(layout.at("min_gap_modules")) + " is negative");
   }
   Choice(Member(layout, "layout", "order"), "layout/order", {"array-major"});
-  out.frames_per_pattern = Integer(document, "", "frames_per_pattern", 1);
-  out.frame_count = Integer(document, "", "frame_count", 1);
-  return out;
+  s->frames_per_pattern = Integer(document, "", "frames_per_pattern", 1);
+  repeated->frame_count = Integer(document, "", "frame_count", 1);
 }
 
 // Centres are [array][marker][x, y]; every array has the same number of markers.
-void ReadCentres(const json& document, ingest::SequenceDescription* s) {
+void ReadCentres(const json& document, ingest::SequenceDescription* s, Repeated* repeated) {
   const json& centres = List(document, "", "centres", 1);
-  s->arrays = static_cast<int>(centres.size());
+  repeated->centre_arrays = static_cast<int>(centres.size());
   for (size_t a = 0; a < centres.size(); ++a) {
     const json& array = centres[a];
     const std::string where = Item("centres", a);
     if (!array.is_array()) throw SchemaError(where, Describe(array) + " is not of type 'array'");
     if (array.empty()) throw SchemaError(where, "[] has fewer than 1 items");
-    if (a == 0) s->markers_per_array = static_cast<int>(array.size());
-    if (static_cast<int>(array.size()) != s->markers_per_array) {
+    if (a == 0) repeated->centres_per_array = static_cast<int>(array.size());
+    if (static_cast<int>(array.size()) != repeated->centres_per_array) {
       throw std::invalid_argument("every array needs the same number of centres");
     }
     for (size_t m = 0; m < array.size(); ++m) {
@@ -277,77 +274,26 @@ void Require(bool condition, const std::string& message) {
   if (!condition) throw std::invalid_argument(message);
 }
 
-const ingest::SegmentSpec& OnlySegment(const ingest::SequenceDescription& s, const std::string& kind) {
-  const ingest::SegmentSpec* found = nullptr;
-  int count = 0;
-  for (const ingest::SegmentSpec& segment : s.segments) {
-    if (segment.kind == kind) {
-      found = &segment;
-      ++count;
-    }
-  }
-  Require(count == 1, "expected exactly one " + kind + " segment");
-  return *found;
+// The centres' shape is the layout's: (arrays, grid rows x columns, 2).
+void CheckCentreShape(const ingest::SequenceDescription& s, const Repeated& repeated) {
+  Require(repeated.centre_arrays == s.arrays && repeated.centres_per_array == s.markers_per_array,
+          "centres have shape (" + std::to_string(repeated.centre_arrays) + ", " +
+              std::to_string(repeated.centres_per_array) + ", 2), expected (" + std::to_string(s.arrays) + ", " +
+              std::to_string(s.markers_per_array) + ", 2) (arrays, markers, 2)");
 }
 
-bool Close(double value, double expected) { return std::abs(value - expected) <= 1e-8 + 1e-5 * std::abs(expected); }
-
-// What a schema cannot say: the parts of the sequence agree with each other. Runs
-// after the ingest's own Check(), so frames and codes are within the limits.
-void CheckConsistent(const ingest::SequenceDescription& s, const Layout& layout) {
-  const double margin = layout.margin_px;
-  Require(s.projector_width - 2.0 * margin > 0.0 && s.projector_height - 2.0 * margin > 0.0,
-          "grid " + std::to_string(layout.grid.first) + "x" + std::to_string(layout.grid.second) + " with margin " +
-              FormatNumber("%.1f", margin) + " px does not fit a " + std::to_string(s.projector_width) + "x" +
-              std::to_string(s.projector_height) + " projector");
-  const long long per_array = static_cast<long long>(layout.grid.first) * layout.grid.second;
-  Require(s.arrays == layout.arrays && s.markers_per_array == per_array,
-          "centres have shape (" + std::to_string(s.arrays) + ", " + std::to_string(s.markers_per_array) +
-              ", 2), expected (" + std::to_string(layout.arrays) + ", " + std::to_string(per_array) +
-              ", 2) (arrays, markers, 2)");
-  Require(s.markers_per_array <= layout.id_count, std::to_string(s.markers_per_array) + " markers per array but " +
-                                                      s.markers + " has only " + std::to_string(layout.id_count) +
-                                                      " ids");
-  Require(layout.frame_count == s.FrameCount(), "frame_count " + std::to_string(layout.frame_count) +
-                                                    " differs from the segments' " + std::to_string(s.FrameCount()));
-  const ingest::SegmentSpec& start = OnlySegment(s, "start_code");
-  const ingest::SegmentSpec& end = OnlySegment(s, "end_code");
-  const ingest::SegmentSpec& span = OnlySegment(s, "patterns");
-  const auto check_code = [](const sync::LightCode& code, int file_last, const ingest::SegmentSpec& segment) {
+// What the file repeats agrees with the sequence (checked by then).
+void CheckRepeated(const ingest::SequenceDescription& s, const Repeated& repeated) {
+  Require(repeated.frame_count == s.FrameCount(), "frame_count " + std::to_string(repeated.frame_count) +
+                                                      " differs from the segments' " + std::to_string(s.FrameCount()));
+  const auto check_code = [](const sync::LightCode& code, int file_last, const char* kind) {
     const int last = code.EndFrame() - 1;
-    Require(file_last == last, segment.kind + " ends on frame " + std::to_string(file_last) + " but its " +
+    Require(file_last == last, std::string(kind) + " ends on frame " + std::to_string(file_last) + " but its " +
                                    std::to_string(code.bits.size()) + " bits of " +
                                    std::to_string(code.frames_per_bit) + " frames end on " + std::to_string(last));
-    Require(segment.first_frame == code.first_frame && segment.last_frame == last,
-            segment.kind + " spans frames " + std::to_string(code.first_frame) + ".." + std::to_string(last) +
-                " but its segment " + std::to_string(segment.first_frame) + ".." + std::to_string(segment.last_frame));
   };
-  check_code(s.start_code, layout.start_last_frame, start);
-  check_code(s.end_code, layout.end_last_frame, end);
-  Require(s.start_code.bits != s.end_code.bits, "start and end light codes must differ");
-  Require(start.last_frame < span.first_frame && span.last_frame < end.first_frame,
-          "expected the start code, then the patterns, then the end code");
-  int previous_last = span.first_frame - 1;
-  for (size_t i = 0; i < s.patterns.size(); ++i) {
-    const ingest::PatternSpec& p = s.patterns[i];
-    const std::string where = "pattern " + std::to_string(i);
-    Require(p.first_frame > previous_last && p.last_frame <= span.last_frame,
-            where + " (frames " + std::to_string(p.first_frame) + ".." + std::to_string(p.last_frame) +
-                ") overlaps another pattern or leaves the patterns segment " + std::to_string(span.first_frame) +
-                ".." + std::to_string(span.last_frame));
-    const long long frames = static_cast<long long>(p.last_frame) - p.first_frame + 1;
-    Require(frames == layout.frames_per_pattern, where + " lasts " + std::to_string(frames) +
-                                                     " frames, expected frames_per_pattern = " +
-                                                     std::to_string(layout.frames_per_pattern));
-    Require(Close(p.scale, s.scales[p.scale_index]),
-            where + ": scale " + PythonFloat(p.scale) + " (index " + std::to_string(p.scale_index) +
-                ") is not the layout's scale " + PythonFloat(s.scales[p.scale_index]));
-    const double side = s.marker_px * p.scale;
-    Require(Close(p.marker_side_px, side), where + ": marker side " + PythonFloat(p.marker_side_px) +
-                                               " px, expected " + PythonFloat(side) + " px at scale " +
-                                               PythonFloat(p.scale));
-    previous_last = p.last_frame;
-  }
+  check_code(s.start_code, repeated.start_last_frame, "start_code");
+  check_code(s.end_code, repeated.end_last_frame, "end_code");
 }
 
 std::string WithoutPrefix(const std::string& message, const std::string& prefix) {
@@ -359,41 +305,105 @@ std::string WithoutPrefix(const std::string& message, const std::string& prefix)
 ingest::SequenceDescription SequenceFromDocument(const nlohmann::json& document) {
   RequireObject(document, "");
   ingest::SequenceDescription s;
-  const int id_count = ReadMarkers(document, &s);
+  Repeated repeated;
+  ReadMarkers(document, &s);
   ReadProjector(document, &s);
-  Layout layout = ReadLayout(document, &s);
-  layout.id_count = id_count;
-  ReadCentres(document, &s);
+  ReadLayout(document, &s, &repeated);
+  s.markers_per_array = s.grid_rows * s.grid_cols;
+  ReadCentres(document, &s, &repeated);
   ReadScaleTable(document);
   ReadPatterns(document, &s);
   ReadSegments(document, &s);
   const json& codes = Member(document, "", "codes");
-  layout.start_last_frame = ReadCode(codes, "start", &s.start_code);
-  layout.end_last_frame = ReadCode(codes, "end", &s.end_code);
+  repeated.start_last_frame = ReadCode(codes, "start", &s.start_code);
+  repeated.end_last_frame = ReadCode(codes, "end", &s.end_code);
+  CheckCentreShape(s, repeated);
   try {
     s.Check();
   } catch (const std::invalid_argument& error) {
     throw std::invalid_argument(WithoutPrefix(error.what(), "sequence: "));
   }
-  CheckConsistent(s, layout);
+  CheckRepeated(s, repeated);
   return s;
 }
 
-SequenceFile ReadSequenceFile(const std::filesystem::path& path) {
-  SequenceFile file;
-  file.document = ReadSchemaJson(path, "sequence", 1);
+ingest::SequenceDescription ReadSequence(const std::filesystem::path& path) {
+  const nlohmann::json document = ReadSchemaJson(path, "sequence", 1);
   try {
-    file.description = SequenceFromDocument(file.document);
+    return SequenceFromDocument(document);
   } catch (const SchemaError& error) {
     throw InputError(path.string() + ": invalid sequence file " + error.what());
   } catch (const std::invalid_argument& error) {
     throw InputError(path.string() + ": invalid sequence file: " + error.what());
   }
-  return file;
 }
 
-ingest::SequenceDescription ReadSequence(const std::filesystem::path& path) {
-  return ReadSequenceFile(path).description;
+nlohmann::ordered_json SequenceDocument(const ingest::SequenceDescription& s) {
+  using ordered = nlohmann::ordered_json;
+  const auto range = [](int first, int last) { return ordered{{"first_frame", first}, {"last_frame", last}}; };
+  const ingest::MarkerSystem& m = s.markers;
+  ordered document;
+  document["markers"] = {{"spec", m.spec}, {"system", m.system}, {"family", m.family},
+                         {"grid_cells", m.grid_cells}, {"quad_cells", m.quad_cells}, {"id_count", m.id_count},
+                         {"inverted", m.inverted}};
+  document["projector"] = {{"resolution", {s.projector_width, s.projector_height}}, {"fps", s.fps}};
+  document["layout"] = {{"grid", {s.grid_rows, s.grid_cols}}, {"arrays", s.arrays}, {"scales", s.scales},
+                        {"marker_px", s.marker_px}, {"margin_px", s.margin_px},
+                        {"snap_to_pixels", s.snap_to_pixels}, {"min_gap_modules", s.min_gap_modules},
+                        {"order", "array-major"}};
+  document["frames_per_pattern"] = s.frames_per_pattern;
+  document["frame_count"] = s.FrameCount();
+  document["duration_s"] = s.DurationS();
+  ordered centres = ordered::array();
+  for (int a = 0; a < s.arrays; ++a) {
+    ordered array = ordered::array();
+    for (int k = 0; k < s.markers_per_array; ++k) {
+      const cv::Point2d& c = s.centres[static_cast<size_t>(a) * s.markers_per_array + k];
+      array.push_back({c.x, c.y});
+    }
+    centres.push_back(std::move(array));
+  }
+  document["centres"] = std::move(centres);
+  ordered scales = ordered::array();
+  for (const double scale : s.scales) {
+    const double side = s.marker_px * scale;
+    scales.push_back({{"scale", scale}, {"marker_side_px", side}, {"module_px", side / m.grid_cells}});
+  }
+  document["scales"] = std::move(scales);
+  ordered patterns = ordered::array();
+  for (const ingest::PatternSpec& p : s.patterns) {
+    patterns.push_back({{"array", p.array}, {"scale_index", p.scale_index}, {"scale", p.scale},
+                        {"marker_side_px", p.marker_side_px}, {"first_frame", p.first_frame},
+                        {"last_frame", p.last_frame}, {"omitted", p.omitted}});
+  }
+  document["patterns"] = std::move(patterns);
+  const auto code = [](const sync::LightCode& c) {
+    return ordered{{"bits", c.bits}, {"frames_per_bit", c.frames_per_bit}, {"first_frame", c.first_frame},
+                   {"last_frame", c.EndFrame() - 1}};
+  };
+  document["codes"] = {{"start", code(s.start_code)}, {"end", code(s.end_code)}};
+  ordered references = {{"white", ordered::array()}, {"black", ordered::array()}};
+  ordered segments = ordered::array();
+  for (const ingest::SegmentSpec& segment : s.segments) {
+    if (segment.kind == "white" || segment.kind == "black") {
+      references[segment.kind].push_back(range(segment.first_frame, segment.last_frame));
+    }
+    segments.push_back({{"kind", segment.kind}, {"first_frame", segment.first_frame},
+                        {"last_frame", segment.last_frame}});
+  }
+  document["reference_frames"] = std::move(references);
+  document["segments"] = std::move(segments);
+  return document;
+}
+
+void WriteSequence(const std::filesystem::path& path, const ingest::SequenceDescription& sequence) {
+  try {
+    sequence.Check();
+  } catch (const std::invalid_argument& error) {
+    throw InputError(path.string() + ": cannot write the sequence file: " +
+                     WithoutPrefix(error.what(), "sequence: "));
+  }
+  AtomicWrite(path, DumpSchemaJson("sequence", 1, SequenceDocument(sequence)));
 }
 
 }  // namespace calibproj::formats

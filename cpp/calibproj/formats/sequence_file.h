@@ -1,7 +1,7 @@
 #pragma once
-// sequence.json (calibproj.sequence/1) read into the ingest's SequenceDescription. The
-// one reader of the format: calibproj-native, the ingest binding (Sequence.to_dict())
-// and the Python package's Sequence.load all accept exactly the documents it accepts.
+// sequence.json (calibproj.sequence/1) read into the ingest's SequenceDescription and
+// written from it. The one reader and writer of the format: calibproj-native and the
+// Python package (Sequence.load, Sequence.save) accept and write exactly the same files.
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -14,13 +14,12 @@ namespace calibproj::formats {
 // mistyped field or an inconsistent sequence.
 ingest::SequenceDescription ReadSequence(const std::filesystem::path& path);
 
-// The file's document with what ReadSequence makes of it (the Python package builds
-// its Sequence from the document once the core accepted it).
-struct SequenceFile {
-  nlohmann::json document;
-  ingest::SequenceDescription description;
-};
-SequenceFile ReadSequenceFile(const std::filesystem::path& path);
+// The body of sequence.json (without its schema tag), in the file's order of keys.
+nlohmann::ordered_json SequenceDocument(const ingest::SequenceDescription& sequence);
+
+// sequence.json written atomically after sequence.Check(); InputError naming the file
+// for a sequence whose parts disagree, with nothing written.
+void WriteSequence(const std::filesystem::path& path, const ingest::SequenceDescription& sequence);
 
 // The body of sequence.json (its schema tag not needed) checked field by field and for
 // consistency (segments tile the frames, codes and patterns inside their segments,

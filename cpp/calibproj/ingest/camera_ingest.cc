@@ -82,7 +82,7 @@ class CameraIngest {
         reader_(path, Decoding(source, options.decode_threads)),
         options_(Prepared(options, sequence, reader_.info().fps)),
         progress_(progress),
-        family_(detect::ParseMarkerFamily(sequence.markers)),
+        family_(detect::ParseMarkerFamily(sequence.markers.spec)),
         geometry_(detect::GetMarkerGeometry(family_)),
         timeline_(sequence.LightLevels()),
         nominal_rate_(reader_.info().fps / sequence.fps),
@@ -97,7 +97,7 @@ class CameraIngest {
                                 geometry_.quad_cells, options_.refine_undistorted, options_.edges,
                                 options_.refine_undistorted && options_.verify_predicted,
                                 options_.verification,
-                                ProjectedBits(family_, sequence.markers_per_array, sequence.inverted)},
+                                ProjectedBits(family_, sequence.markers_per_array, sequence.markers.inverted)},
                   options_.detection_threads, options_.max_pending_jobs),
         status_(sequence.patterns.size(), PatternStatus::kNotSeen),
         used_frames_(sequence.patterns.size()) {
@@ -162,8 +162,8 @@ class CameraIngest {
   // The options with what the sequence fixes (marker polarity) filled in.
   static IngestOptions Prepared(IngestOptions options, const SequenceDescription& sequence, double video_fps) {
     sequence.Check();
-    options.detector.aruco.inverted = sequence.inverted;
-    options.detector.apriltag.inverted = sequence.inverted;
+    options.detector.aruco.inverted = sequence.markers.inverted;
+    options.detector.apriltag.inverted = sequence.markers.inverted;
     if (options.refine_undistorted) {
       // The undistorted edge fit refines the detector's raw corners.
       options.detector.aruco.refinement.method = detect::CornerRefinement::kNone;

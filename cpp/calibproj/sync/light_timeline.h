@@ -28,6 +28,10 @@ struct LightCode {
   void Check(const char* what) const;
 };
 
+inline bool operator==(const LightCode& a, const LightCode& b) {
+  return a.bits == b.bits && a.frames_per_bit == b.frames_per_bit && a.first_frame == b.first_frame;
+}
+
 // Projector frames [begin, end) whose levels a model may use.
 struct FrameWindow {
   int begin = 0;

@@ -201,7 +201,7 @@ def _record(site: Any, projection: _Projection, recordings: Path, progress: bool
     sequence = Sequence.load(projection.sequence)
     aruco, apriltag = core_detector_options(sequence.markers.system, {})
     plan = _core.capture.CapturePlan(
-        site, str(projection.sequence), sequence.core(), str(projection.video), str(projection.folder or ""),
+        site, str(projection.sequence), sequence, str(projection.video), str(projection.folder or ""),
         str(recordings), aruco, apriltag, status_interval_s=STATUS_INTERVAL_S if progress else 0.0,
         **IngestOptions().to_kwargs())
     abort = _core.capture.Stop()

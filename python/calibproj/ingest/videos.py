@@ -236,7 +236,6 @@ def ingest(
         raise ValueError(f"live sources given for camera(s) without a source: {', '.join(unknown)}")
     aruco, apriltag = core_detector_options(sequence.markers.system, detector_options or {})
     _core.ingest.check_options(aruco, apriltag, **options.to_kwargs())  # not once per camera
-    core_sequence = sequence.core()  # read by the core once, for every camera
     names = list(paths)
     bars = _Progress(names, enabled=progress, observer=observer, live=live, cancel=cancel)
     exposures = dict(exposures or {})
@@ -248,7 +247,7 @@ def ingest(
     def run(name: str) -> CameraIngest:
         camera_options = options.replace(exposure_s=exposures.get(name, options.exposure_s),
                                          decode_threads=decode_threads)
-        job = _CameraJob(core_sequence, camera_options, aruco, apriltag, bars, live.get(name))
+        job = _CameraJob(sequence, camera_options, aruco, apriltag, bars, live.get(name))
         return job.run(name, paths[name], _intrinsics_for(intrinsics, name))
 
     try:
@@ -289,7 +288,7 @@ class _CameraJob:
 
     def __init__(self, sequence: Any, options: IngestOptions, aruco: Any, apriltag: Any,
                  bars: _Progress, live: Any = None) -> None:
-        self.sequence = sequence  # the core's (Sequence.core())
+        self.sequence = sequence  # a core Sequence, given as it is to every camera's ingest
         self.kwargs = options.to_kwargs()
         self.aruco = aruco
         self.apriltag = apriltag
@@ -422,10 +421,9 @@ def synchronise(signal: np.ndarray, sequence: Any, camera_fps: float, options: I
     from calibproj.ingest.options import sync_kwargs
 
     sequence, _ = _load_sequence(sequence)
-    document = sequence.to_dict()
-    levels = _core.ingest.light_levels(sequence.core())
-    return _core.sync.synchronise(np.asarray(signal, dtype=float), levels, document["codes"]["start"],
-                                  document["codes"]["end"], float(camera_fps) / float(sequence.fps), source,
+    levels = _core.ingest.light_levels(sequence)
+    return _core.sync.synchronise(np.asarray(signal, dtype=float), levels, sequence.start_code,
+                                  sequence.end_code, float(camera_fps) / float(sequence.fps), source,
                                   **sync_kwargs(options or IngestOptions(), camera_fps))
 
 

@@ -23,7 +23,6 @@ import numpy as np
 
 from calibproj.sequence.codes import LightCode, code_pair
 from calibproj.sequence.layout import MsmLayout
-from calibproj.sequence.markers import family_info
 from calibproj.sequence.sequence import MarkerSystem, Pattern, Segment, Sequence
 from calibproj.sequence.video import DEFAULT_CRF, DEFAULT_PRESET, GreyVideoWriter
 
@@ -149,12 +148,11 @@ def assemble_sequence(markers: MarkerSystem, layout: MsmLayout, centres: np.ndar
         scale = layout.scales[item.scale_index]
         patterns.append(Pattern(item.array, item.scale_index, scale, layout.marker_side(scale), first,
                                 first + frames_per_pattern - 1, tuple(item.omitted)))
-    sequence = Sequence(markers=markers, projector=layout.projector, fps=float(fps), layout=layout,
-                        min_gap_modules=min_gap_modules, frames_per_pattern=frames_per_pattern,
-                        centres=centres, patterns=patterns, segments=timeline.segments,
-                        start_code=start, end_code=end)
-    sequence.validate()
-    return sequence
+    return Sequence(markers=markers, projector=layout.projector, fps=float(fps), grid=layout.grid,
+                    scales=layout.scales, marker_px=layout.marker_px, margin_px=layout.margin,
+                    snap_to_pixels=layout.snap_to_pixels, min_gap_modules=min_gap_modules,
+                    frames_per_pattern=frames_per_pattern, centres=centres, patterns=patterns,
+                    segments=timeline.segments, start_code=start, end_code=end)
 
 
 def overhead_frames(code_degree: int, code_frames_per_bit: int, reference_frames: int) -> int:
@@ -273,9 +271,7 @@ def _with_overrides(options: SequenceOptions | None, overrides: dict[str, Any]) 
 
 
 def _marker_system(options: SequenceOptions) -> MarkerSystem:
-    info = family_info(options.markers)
-    return MarkerSystem(spec=info.spec, system=info.system, family=info.name, grid_cells=info.grid_cells,
-                        quad_cells=info.quad_cells, id_count=info.id_count, inverted=bool(options.inverted))
+    return MarkerSystem(options.markers, bool(options.inverted))
 
 
 def _layout(options: SequenceOptions) -> MsmLayout:

@@ -12,10 +12,11 @@ one, framed by black frames as they are projected.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
+
+from calibproj import _core
 
 MIN_DEGREE = 3
 MAX_DEGREE = 8
@@ -24,39 +25,9 @@ MAX_DEGREE = 8
 _CONTEXT_BITS = 16
 
 
-@dataclass(frozen=True)
-class LightCode:
-    """One light code as projected.
-
-    Attributes:
-        bits: the code, 1 = white frame(s), 0 = black frame(s).
-        frames_per_bit: projector frames each bit is shown for.
-        first_frame: projector frame where the first bit starts.
-    """
-
-    bits: tuple[int, ...]
-    frames_per_bit: int
-    first_frame: int
-
-    @property
-    def frame_count(self) -> int:
-        return len(self.bits) * self.frames_per_bit
-
-    @property
-    def last_frame(self) -> int:
-        return self.first_frame + self.frame_count - 1
-
-    def frame_levels(self) -> np.ndarray:
-        """0/1 level of every projector frame of the code, ``(frame_count,)``."""
-        return np.repeat(np.asarray(self.bits, dtype=np.uint8), self.frames_per_bit)
-
-    def to_dict(self) -> dict:
-        return {"bits": list(self.bits), "frames_per_bit": self.frames_per_bit,
-                "first_frame": self.first_frame, "last_frame": self.last_frame}
-
-    @classmethod
-    def from_dict(cls, data: dict) -> LightCode:
-        return cls(tuple(int(b) for b in data["bits"]), int(data["frames_per_bit"]), int(data["first_frame"]))
+# One light code as projected (bits, frames_per_bit, first_frame; frame_count,
+# last_frame, frame_levels()): the core's type, which the sync reads.
+LightCode = _core.sync.LightCode
 
 
 def _m_sequence(degree: int, taps: tuple[int, ...]) -> np.ndarray | None:

@@ -8,146 +8,91 @@ frames; patterns are ordered array-major (array 0 at every scale, then array 1, 
 recording: marker family and colours, projector resolution and frame rate, layout
 parameters, every marker centre (per array, the same at every scale), the frames of
 every pattern and segment, and the light codes.
+
+The data model is the C++ core's (``calibproj._core.ingest.Sequence``, with its parts
+``MarkerSystem``, ``Pattern``, ``Segment`` and ``_core.sync.LightCode``): the core
+checks a sequence once when it is built, reads and writes ``sequence.json``, and gives
+it to every camera's ingest. :class:`Sequence` adds what only Python does with it:
+the projector images of its frames.
 """
 
 from __future__ import annotations
 
-import bisect
 import functools
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from calibproj.sequence.codes import LightCode
+from calibproj import _core
+from calibproj.formats.jsonio import FormatError
 from calibproj.sequence.layout import MsmLayout
 from calibproj.sequence.markers import marker_bits
 from calibproj.sequence.raster import draw_cells
-from calibproj.formats.jsonio import FormatError, write_json
 
-KIND = "sequence"  # the schema tag calibproj.sequence/1
-MAJOR = 1
 # Patterns kept rendered per sequence: consecutive frames mostly share one pattern, so
 # a few suffice for renderers that walk the timeline (one 1080p pattern is 2 MB).
 DEFAULT_PATTERN_CACHE = 8
 
-
-@dataclass(frozen=True)
-class Segment:
-    """A run of frames of one kind, ``first_frame..last_frame`` inclusive."""
-
-    kind: str
-    first_frame: int
-    last_frame: int
-
-    @property
-    def frame_count(self) -> int:
-        return self.last_frame - self.first_frame + 1
+# The parts of a sequence, as the core defines them.
+MarkerSystem = _core.ingest.MarkerSystem
+Pattern = _core.ingest.Pattern
+Segment = _core.ingest.Segment
 
 
-@dataclass(frozen=True)
-class Pattern:
-    """One array of MSMs at one scale, shown on ``first_frame..last_frame`` (inclusive).
+class Sequence(_core.ingest.Sequence):
+    """A projection sequence with its rendering; build one with
+    :func:`calibproj.sequence.build_sequence` or read one with :meth:`load`.
 
-    ``omitted`` lists the markers of the array left out at this scale (they would
-    have overlapped another marker or left the image).
+    Built from the keyword parts of ``_core.ingest.Sequence`` (``markers``,
+    ``projector``, ``fps``, ``grid``, ``scales``, ``marker_px``, ``margin_px``,
+    ``snap_to_pixels``, ``min_gap_modules``, ``frames_per_pattern``, ``centres``,
+    ``patterns``, ``segments``, ``start_code``, ``end_code``) or from another sequence;
+    ValueError naming the first part that disagrees with the others. A sequence is not
+    changed once built.
     """
 
-    array: int
-    scale_index: int
-    scale: float
-    marker_side_px: float
-    first_frame: int
-    last_frame: int
-    omitted: tuple[int, ...] = ()
-
-
-@dataclass(frozen=True)
-class MarkerSystem:
-    """The marker family of a sequence and how it is drawn.
-
-    ``grid_cells`` is the drawn marker's side in modules (border included) and
-    ``quad_cells`` that of the square whose corners the detector returns; both are
-    centred on the MSM centre. ``inverted``: white markers on black.
-    """
-
-    spec: str
-    system: str
-    family: str
-    grid_cells: int
-    quad_cells: int
-    id_count: int
-    inverted: bool
-
-
-@dataclass
-class Sequence:
-    """A projection sequence; build one with :func:`calibproj.sequence.build_sequence`
-    or read one with :meth:`load`."""
-
-    markers: MarkerSystem
-    projector: tuple[int, int]
-    fps: float
-    layout: MsmLayout
-    min_gap_modules: float
-    frames_per_pattern: int
-    centres: np.ndarray
-    patterns: list[Pattern]
-    segments: list[Segment]
-    start_code: LightCode
-    end_code: LightCode
-    pattern_cache_size: int = DEFAULT_PATTERN_CACHE
-    _cache: Any = field(default=None, init=False, repr=False, compare=False)
-    _bits: dict = field(default_factory=dict, init=False, repr=False, compare=False)
-    _flats: dict = field(default_factory=dict, init=False, repr=False, compare=False)
-    _core_sequence: Any = field(default=None, init=False, repr=False, compare=False)
-
-    def __post_init__(self) -> None:
-        self.centres = np.asarray(self.centres, dtype=np.float64)
-        self._cache = functools.lru_cache(maxsize=self.pattern_cache_size)(self._render_pattern)
-
-    # ----------------------------------------------------------------- timeline
+    def __init__(self, *args: Any, pattern_cache_size: int = DEFAULT_PATTERN_CACHE, **parts: Any) -> None:
+        try:
+            super().__init__(*args, **parts)
+        except ValueError as error:
+            raise ValueError(str(error).removeprefix("sequence: ")) from None
+        # The core gives a new list on every read; the sequence does not change, so once.
+        self._patterns = tuple(super().patterns)
+        self._segments = tuple(super().segments)
+        self._cache = functools.lru_cache(maxsize=pattern_cache_size)(self._render_pattern)
+        self._bits: dict[int, np.ndarray] = {}
+        self._flats: dict[int, np.ndarray] = {}
 
     @property
-    def frame_count(self) -> int:
-        return self.segments[-1].last_frame + 1
+    def patterns(self) -> tuple[Pattern, ...]:
+        """Every :class:`Pattern`, in time order."""
+        return self._patterns
 
     @property
-    def duration_s(self) -> float:
-        return self.frame_count / self.fps
+    def segments(self) -> tuple[Segment, ...]:
+        """The :class:`Segment` s that tile the frames."""
+        return self._segments
 
-    @property
-    def point_count(self) -> int:
-        """Distinct MSM centres: arrays x markers per array."""
-        return self.centres.shape[0] * self.centres.shape[1]
+    def parts(self) -> dict[str, Any]:
+        """The keyword parts the sequence is built from."""
+        return {"markers": self.markers, "projector": self.projector, "fps": self.fps, "grid": self.grid,
+                "scales": self.scales, "marker_px": self.marker_px, "margin_px": self.margin_px,
+                "snap_to_pixels": self.snap_to_pixels, "min_gap_modules": self.min_gap_modules,
+                "frames_per_pattern": self.frames_per_pattern, "centres": self.centres,
+                "patterns": list(self._patterns), "segments": list(self._segments), "start_code": self.start_code,
+                "end_code": self.end_code}
 
-    def segment_at(self, frame: int) -> Segment:
-        """The segment that frame ``frame`` belongs to."""
-        self._check_frame(frame)
-        firsts = [segment.first_frame for segment in self.segments]
-        return self.segments[bisect.bisect_right(firsts, frame) - 1]
+    def replaced(self, **changes: Any) -> Sequence:
+        """A sequence with some parts changed (checked as any: ValueError)."""
+        return Sequence(**{**self.parts(), **changes})
 
-    def pattern_index_at(self, frame: int) -> int | None:
-        """Index in :attr:`patterns` of the pattern shown at ``frame``, or None."""
-        self._check_frame(frame)
-        firsts = [pattern.first_frame for pattern in self.patterns]
-        index = bisect.bisect_right(firsts, frame) - 1
-        if index >= 0 and frame <= self.patterns[index].last_frame:
-            return index
-        return None
-
-    def markers_shown(self, pattern_index: int) -> np.ndarray:
-        """Marker indices (= ids) drawn in a pattern, ascending."""
-        pattern = self.patterns[pattern_index]
-        shown = np.ones(self.centres.shape[1], dtype=bool)
-        shown[list(pattern.omitted)] = False
-        return np.flatnonzero(shown)
-
-    def _check_frame(self, frame: int) -> None:
-        if not 0 <= frame < self.frame_count:
-            raise IndexError(f"frame {frame} outside the sequence (0..{self.frame_count - 1})")
+    @functools.cached_property
+    def layout(self) -> MsmLayout:
+        """The layout the centres were placed by (for plans of further arrays)."""
+        return MsmLayout(projector=self.projector, grid=self.grid, arrays=self.arrays, scales=self.scales,
+                         marker_px=self.marker_px, margin_px=self.margin_px, snap_to_pixels=self.snap_to_pixels)
 
     # ---------------------------------------------------------------- rendering
 
@@ -169,16 +114,17 @@ class Sequence:
 
     def pattern_image(self, pattern_index: int) -> np.ndarray:
         """Projector image of one pattern (read-only ``uint8``, cached)."""
-        if not 0 <= pattern_index < len(self.patterns):
-            raise IndexError(f"pattern {pattern_index} outside 0..{len(self.patterns) - 1}")
+        if not 0 <= pattern_index < len(self._patterns):
+            raise IndexError(f"pattern {pattern_index} outside 0..{len(self._patterns) - 1}")
         return self._cache(pattern_index)
 
     def _render_pattern(self, pattern_index: int) -> np.ndarray:
-        pattern = self.patterns[pattern_index]
+        pattern = self._patterns[pattern_index]
         width, height = self.projector
+        centres = self.centres
         canvas = np.ones((height, width), dtype=np.float32)  # drawn black on white
         for marker in self.markers_shown(pattern_index):
-            draw_cells(canvas, self._marker_cells(int(marker)), self.centres[pattern.array, marker],
+            draw_cells(canvas, self._marker_cells(int(marker)), centres[pattern.array, marker],
                        pattern.marker_side_px)
         image = np.rint(canvas * 255.0).astype(np.uint8)
         if self.markers.inverted:
@@ -200,94 +146,7 @@ class Sequence:
             self._flats[level] = image
         return self._flats[level]
 
-    def core(self) -> Any:
-        """The sequence as the C++ core holds it (``_core.ingest.Sequence``): read and
-        checked once, then kept for every camera's ingest. A sequence is not changed once
-        built, so the kept one stays its twin."""
-        if self._core_sequence is None:
-            from calibproj import _core
-
-            self._core_sequence = _core.ingest.Sequence(self.to_dict())
-        return self._core_sequence
-
     # ------------------------------------------------------------------- files
-
-    def to_dict(self) -> dict[str, Any]:
-        """The body of ``sequence.json`` (without the schema tag)."""
-        layout = self.layout
-        whites = [s for s in self.segments if s.kind == "white"]
-        blacks = [s for s in self.segments if s.kind == "black"]
-        return {
-            "markers": {
-                "spec": self.markers.spec, "system": self.markers.system, "family": self.markers.family,
-                "grid_cells": self.markers.grid_cells, "quad_cells": self.markers.quad_cells,
-                "id_count": self.markers.id_count, "inverted": self.markers.inverted,
-            },
-            "projector": {"resolution": list(self.projector), "fps": self.fps},
-            "layout": {
-                "grid": list(layout.grid), "arrays": layout.arrays, "scales": list(layout.scales),
-                "marker_px": layout.marker_px, "margin_px": layout.margin, "snap_to_pixels": layout.snap_to_pixels,
-                "min_gap_modules": self.min_gap_modules, "order": "array-major",
-            },
-            "frames_per_pattern": self.frames_per_pattern,
-            "frame_count": self.frame_count,
-            "duration_s": self.duration_s,
-            "centres": self.centres.tolist(),
-            "scales": [
-                {"scale": scale, "marker_side_px": layout.marker_side(scale),
-                 "module_px": layout.marker_side(scale) / self.markers.grid_cells}
-                for scale in layout.scales
-            ],
-            "patterns": [
-                {"array": p.array, "scale_index": p.scale_index, "scale": p.scale,
-                 "marker_side_px": p.marker_side_px, "first_frame": p.first_frame,
-                 "last_frame": p.last_frame, "omitted": list(p.omitted)}
-                for p in self.patterns
-            ],
-            "codes": {"start": self.start_code.to_dict(), "end": self.end_code.to_dict()},
-            "reference_frames": {
-                "white": [{"first_frame": s.first_frame, "last_frame": s.last_frame} for s in whites],
-                "black": [{"first_frame": s.first_frame, "last_frame": s.last_frame} for s in blacks],
-            },
-            "segments": [{"kind": s.kind, "first_frame": s.first_frame, "last_frame": s.last_frame}
-                         for s in self.segments],
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Sequence:
-        """Build from the body of ``sequence.json`` (structure checked beforehand)."""
-        markers, layout = data["markers"], data["layout"]
-        return cls(
-            markers=MarkerSystem(
-                spec=markers["spec"], system=markers["system"], family=markers["family"],
-                grid_cells=int(markers["grid_cells"]), quad_cells=int(markers["quad_cells"]),
-                id_count=int(markers.get("id_count", 0)), inverted=bool(markers["inverted"]),
-            ),
-            projector=tuple(int(v) for v in data["projector"]["resolution"]),
-            fps=float(data["projector"]["fps"]),
-            layout=MsmLayout(
-                projector=tuple(int(v) for v in data["projector"]["resolution"]),
-                grid=tuple(int(v) for v in layout["grid"]), arrays=int(layout["arrays"]),
-                scales=tuple(float(v) for v in layout["scales"]), marker_px=float(layout["marker_px"]),
-                margin_px=float(layout["margin_px"]), snap_to_pixels=bool(layout["snap_to_pixels"]),
-            ),
-            min_gap_modules=float(layout["min_gap_modules"]),
-            frames_per_pattern=int(data["frames_per_pattern"]),
-            centres=np.asarray(data["centres"], dtype=np.float64),
-            patterns=[
-                Pattern(int(p["array"]), int(p["scale_index"]), float(p["scale"]), float(p["marker_side_px"]),
-                        int(p["first_frame"]), int(p["last_frame"]), tuple(int(m) for m in p["omitted"]))
-                for p in data["patterns"]
-            ],
-            segments=[Segment(s["kind"], int(s["first_frame"]), int(s["last_frame"])) for s in data["segments"]],
-            start_code=LightCode.from_dict(data["codes"]["start"]),
-            end_code=LightCode.from_dict(data["codes"]["end"]),
-        )
-
-    def save(self, path: str | os.PathLike) -> None:
-        """Write ``sequence.json`` atomically (after :meth:`validate`)."""
-        self.validate()
-        write_json(path, KIND, MAJOR, self.to_dict())
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Sequence:
@@ -297,23 +156,7 @@ class Sequence:
         The C++ core reads and checks the file (the one reader of the format, which
         ``calibproj-native`` uses too), so both tools accept exactly the same files.
         """
-        from calibproj import _core
-
         try:
-            document = _core.formats.read_sequence(Path(path))
+            return cls(_core.formats.read_sequence(Path(path)))
         except ValueError as error:
             raise FormatError(str(error)) from None
-        return cls.from_dict(document)
-
-    # --------------------------------------------------------------- validation
-
-    def validate(self) -> None:
-        """Raise ValueError if the parts of the sequence disagree with each other: the
-        C++ core's one reader of the format checks it (and keeps it for the ingest)."""
-        self._core_sequence = None
-        try:
-            self.core()
-        except (TypeError, ValueError) as error:
-            raise ValueError(str(error).removeprefix("sequence: ")) from None
-
-
