@@ -879,6 +879,7 @@ class Baselines:
             "_core.formats.parse_export_formats": Spec([("text", "yaml,colmap")]),
             "_core.formats.ProjectedMarkers": Spec([("centres_px", centres), ("marker_side_px", 4.0),
                                                    ("projector", (60, 30)), ("largest_side_px", np.full((2, 9), 8.0))]),
+            "_core.formats.ProjectedMarkers.from_sequence": Spec([("sequence", self.core_sequence)]),
             "_core.formats.ProjectedMarkers.pixels": Spec([("point_ids", np.array([0, 3, 10**9], dtype=np.int64))]),
             "_core.formats.ProjectedMarkers.largest_sides": Spec([
                 ("point_ids", np.array([0, 3, 10**9], dtype=np.int64))]),

@@ -152,6 +152,9 @@ void RegisterProjectedMarkers(py::module_& m) {
            "of a marker at scale 1, border included; projector: (width, height); largest_side_px: per MSM\n"
            "(arrays, markers_per_array) the side of the largest marker drawn at it, NaN where none, or None\n"
            "when not known. ValueError for shapes or sizes that make no sense.")
+      .def_static("from_sequence", &ProjectedMarkers::FromSequence, py::arg("sequence"),
+                  "The MSMs a Sequence draws, with per MSM the side of the largest marker drawn at it (NaN "
+                  "where none)")
       .def_property_readonly(
           "centres_px",
           [](const ProjectedMarkers& p) {

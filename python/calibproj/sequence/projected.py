@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import os
 
-import numpy as np
-
 from calibproj import _core
 from calibproj.sequence.sequence import Sequence
 
@@ -23,12 +21,7 @@ ProjectedMarkers = _core.formats.ProjectedMarkers
 def projected_markers(sequence) -> ProjectedMarkers:
     """The MSMs a ``calibproj.sequence.Sequence`` (what ``sequence.json`` holds) draws,
     with per MSM the side of the largest marker drawn at it (NaN where none)."""
-    largest = np.full(sequence.centres.shape[:2], np.nan)
-    for index, pattern in enumerate(sequence.patterns):
-        row = largest[pattern.array]
-        shown = sequence.markers_shown(index)
-        row[shown] = np.fmax(row[shown], pattern.marker_side_px)
-    return ProjectedMarkers(sequence.centres, sequence.layout.marker_side(1.0), tuple(sequence.projector), largest)
+    return ProjectedMarkers.from_sequence(sequence)
 
 
 def layout_markers(layout) -> ProjectedMarkers:
