@@ -61,9 +61,20 @@ def site_file(room, name: str, **changes) -> Path:
     return path
 
 
-def verdict_lines(cameras: dict) -> str:
-    """Each camera's verdict with its reason, a line each: a failure shows them whole."""
-    return "\n".join(f"{name}: {verdict['status']}: {verdict.get('reason')}" for name, verdict in cameras.items())
+def verdict_lines(cameras: dict, results: Path, live: VirtualRoom) -> str:
+    """Each camera's verdict with its reason, then what it recorded and what the room
+    sent it, a line each: a failure shows them whole."""
+    lines = [f"{name}: {verdict['status']}: {verdict.get('reason')}" for name, verdict in cameras.items()]
+    log = results / "recordings" / "capture.json"
+    if log.is_file():
+        document = json.loads(log.read_text())
+        lines += [f"{name}: recorded {camera['frames']} frames from {camera['first_frame_s']} s (the room sent "
+                  f"{live.sent.get(name)}, {live.late.get(name, 0)} left out as late), error {camera['error']}"
+                  for name, camera in document["cameras"].items()]
+        projection = document["projection"]
+        lines.append(f"projection: {projection['frames_logged']} frames logged, {projection['dropped_frames']} dropped "
+                     f"or late, every camera done {projection['cameras_done_after_end_s']} s after its end")
+    return "\n".join(lines)
 
 
 def recorded_from(results: Path) -> tuple[str, str]:
@@ -145,7 +156,7 @@ def test_a_moved_camera_is_found_and_repaired_by_a_live_check(room, calibrated, 
     # Exit status 3, "not confirmed": the stored calibration's dead camera is unknown.
     assert status == 3
     assert verdicts == {"far1": "unchanged", "far4": "moved", "near1": "unchanged", "ceiling": "unchanged",
-                        "dead": "unknown"}, verdict_lines(cameras)
+                        "dead": "unknown"}, verdict_lines(cameras, repaired, live)
     comparison = compare(repaired / "camera_poses.json", base / "room" / "truth.json")
     assert comparison.cameras["far4"].rotation_deg < MAX_ROTATION_RMSE_DEG
     assert (repaired / "check.json").is_file()
@@ -201,7 +212,7 @@ def test_the_native_capture_checks_and_repairs_a_moved_camera(room):
     cameras = json.loads((repaired / "check.json").read_text())["cameras"]
     verdicts = {name: verdict["status"] for name, verdict in cameras.items()}
     assert verdicts == {"far1": "unchanged", "far4": "unchanged", "near1": "moved", "ceiling": "unchanged",
-                        "dead": "unknown"}, verdict_lines(cameras) + "\n" + done.stdout + done.stderr
+                        "dead": "unknown"}, verdict_lines(cameras, repaired, live) + "\n" + done.stdout + done.stderr
     comparison = compare(repaired / "camera_poses.json", base / "room" / "truth.json")
     assert comparison.cameras["near1"].rotation_deg < MAX_ROTATION_RMSE_DEG
     assert recorded_from(repaired) == ("../native_check.json", "../native_results/intrinsics")

@@ -83,6 +83,9 @@ class VirtualRoom:
         self.display = ""
         self.urls: dict[str, str] = {}
         self.sent: dict[str, int] = {}  # frames sent per camera
+        # Frames left out per camera because its thread ran later than the grabs kept
+        # (the machine too busy for the room), beside those its drop rate left out.
+        self.late: dict[str, int] = {}
         self._xvfb: subprocess.Popen | None = None
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -326,6 +329,8 @@ class VirtualRoom:
                     writer.write(image, due - started)
                     sent += 1
                     self.sent[camera.name] = sent
+                elif not dropped:
+                    self.late[camera.name] = self.late.get(camera.name, 0) + 1
                 frame += 1
         finally:
             writer.close()
