@@ -273,9 +273,9 @@ ProjectedMarkers ProjectedMarkers::FromSequence(const ingest::SequenceDescriptio
   markers.projector_width = sequence.projector_width;
   markers.projector_height = sequence.projector_height;
   markers.largest_side_px.assign(markers.centres.size(), std::numeric_limits<double>::quiet_NaN());
-  for (const ingest::PatternSpec& pattern : sequence.patterns) {
-    for (int marker = 0; marker < sequence.markers_per_array; ++marker) {
-      if (std::count(pattern.omitted.begin(), pattern.omitted.end(), marker) > 0) continue;
+  for (size_t index = 0; index < sequence.patterns.size(); ++index) {
+    const ingest::PatternSpec& pattern = sequence.patterns[index];
+    for (const int marker : sequence.MarkersShown(static_cast<int>(index))) {
       double& side = markers.largest_side_px[static_cast<size_t>(pattern.array) * sequence.markers_per_array + marker];
       side = std::fmax(side, pattern.marker_side_px);
     }

@@ -227,8 +227,7 @@ detect::PatternMarkers SequenceDescription::Markers(int index, int grid_cells, i
   out.side_px = pattern.marker_side_px;
   out.grid_cells = grid_cells;
   out.quad_cells = quad_cells > 0 ? quad_cells : grid_cells;
-  for (int marker = 0; marker < markers_per_array; ++marker) {
-    if (std::find(pattern.omitted.begin(), pattern.omitted.end(), marker) != pattern.omitted.end()) continue;
+  for (const int marker : MarkersShown(index)) {
     out.ids.push_back(marker);
     out.centres.push_back(centres[pattern.array * markers_per_array + marker]);
   }
