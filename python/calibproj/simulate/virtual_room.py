@@ -43,10 +43,13 @@ from calibproj.simulate.scene import Scene, load_scene, save_scene
 logger = logging.getLogger(__name__)
 
 X_SERVER = "Xvfb"
-# Grabs kept (a camera thread may run this many grabs late: 1 s at 60 grabs a second),
-# and atlases of them kept for the cameras that film the same moment.
-GRAB_HISTORY = 60
-ATLAS_CACHE = 8
+# Grabs kept (a camera thread may run this many grabs late: 3 s at 60 grabs a second),
+# and atlases of them kept for the cameras that film the same moment (4.4 MB each for a
+# 960x540 display). On a machine too busy for the room, cameras fall behind by different
+# amounts: fewer would make a late camera lose its frames in runs, and fewer atlases
+# would have the cameras rebuild each other's, which makes them later still.
+GRAB_HISTORY = 180
+ATLAS_CACHE = 24
 # How long a camera waits for the grab that follows its frame's moment.
 GRAB_WAIT_S = 0.5
 DISPLAY_START_TIMEOUT_S = 10.0
