@@ -1,8 +1,9 @@
 """Registration accuracy and speed over many simulated scenes, FREE vs COPLANAR.
 
 For each scene preset and seed: a tracks-only simulation (noise in px, optional gross
-outliers), a calibration with each model, and the Sim(3)-aligned pose errors against
-the truth. Prints per preset and model: success rate (every camera registered and
+outliers), a calibration with each model (with the projector model, as ``calibrate``
+runs it with a sequence: every MSM's projector pixel from the layout; ``--no-projector``
+leaves it out), and the Sim(3)-aligned pose errors against the truth. Prints per preset and model: success rate (every camera registered and
 the errors within the bounds), rotation and translation RMSE statistics (median, 95th
 percentile, max), and the calibration time (median, single thread).
 
@@ -20,6 +21,7 @@ import numpy as np
 from calibproj.evaluation.comparison import compare
 from calibproj.formats.poses import CameraPoses
 from calibproj.registration.driver import RegistrationOptions, register
+from calibproj.sequence.projected import layout_markers
 from calibproj.simulate import simulate_tracks
 
 
@@ -33,6 +35,8 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--outliers", type=float, default=0.0, help="fraction of gross outliers (default 0)")
     parser.add_argument("--max-rotation-deg", type=float, default=0.02, help="success bound (default 0.02)")
     parser.add_argument("--max-translation-pct", type=float, default=0.05, help="success bound (default 0.05)")
+    parser.add_argument("--no-projector", action="store_true",
+                        help="calibrate without the projector model (tracks alone)")
     return parser.parse_args()
 
 
@@ -42,16 +46,19 @@ def percentile_line(values: list[float]) -> str:
 
 def main() -> None:
     args = parse_args()
-    print(f"noise {args.noise} px, outliers {args.outliers:.0%}, seeds {args.first_seed}..{args.first_seed + args.seeds - 1}")
+    print(f"noise {args.noise} px, outliers {args.outliers:.0%}, seeds {args.first_seed}..{args.first_seed + args.seeds - 1}, "
+          f"{'without' if args.no_projector else 'with'} the projector model")
     summary = []
     for scene in args.scenes.split(","):
         results = {model: {"rotation": [], "translation": [], "time": [], "ok": 0, "all": 0} for model in args.models.split(",")}
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             sim = simulate_tracks(scene, None, noise_px=args.noise, seed=seed, outlier_fraction=args.outliers)
             truth = CameraPoses({c.name: (c.R, c.t) for c in sim.scene.cameras}, "m")
+            projector = None if args.no_projector else layout_markers(sim.layout)
             for model, r in results.items():
                 start = time.perf_counter()
-                calibration = register(sim.tracks, sim.intrinsics, RegistrationOptions(model=model, seed=seed))
+                calibration = register(sim.tracks, sim.intrinsics, RegistrationOptions(model=model, seed=seed),
+                                       projector=projector)
                 r["time"].append(time.perf_counter() - start)
                 everything = not calibration.failed and len(calibration.registered) == len(sim.scene.cameras)
                 r["all"] += everything
