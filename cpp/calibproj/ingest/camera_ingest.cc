@@ -403,13 +403,13 @@ class CameraIngest {
     homography_.Update();
     pending_ = PendingPattern{};
     pending_.pattern = index;
-    const detect::PatternMarkers markers = sequence_.Markers(index, geometry_.grid_cells, geometry_.quad_cells);
+    const detect::PatternMarkers markers = sequence_.Markers(index);
     ScaleStats& stats = result_.scales[sequence_.patterns[index].scale_index];
     DetectionJob& job = pending_.job;
     job.pattern = index;
     job.ids = markers.ids;
     job.outward_fraction = std::min(options_.edges.outward_fraction,
-                                    options_.edge_gap_share * sequence_.GapModules(index, geometry_.grid_cells));
+                                    options_.edge_gap_share * sequence_.GapModules(index));
     const cv::Rect whole(0, 0, reader_.info().width, reader_.info().height);
     if (!homography_.valid()) {
       job.whole_frame = true;

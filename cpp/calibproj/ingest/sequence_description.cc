@@ -221,12 +221,12 @@ sync::LightTimeline SequenceDescription::LightLevels() const {
   return sync::LightTimeline(std::move(levels));
 }
 
-detect::PatternMarkers SequenceDescription::Markers(int index, int grid_cells, int quad_cells) const {
+detect::PatternMarkers SequenceDescription::Markers(int index) const {
   const PatternSpec& pattern = patterns.at(index);
   detect::PatternMarkers out;
   out.side_px = pattern.marker_side_px;
-  out.grid_cells = grid_cells;
-  out.quad_cells = quad_cells > 0 ? quad_cells : grid_cells;
+  out.grid_cells = markers.grid_cells;
+  out.quad_cells = markers.quad_cells;
   for (const int marker : MarkersShown(index)) {
     out.ids.push_back(marker);
     out.centres.push_back(centres[pattern.array * markers_per_array + marker]);
@@ -234,8 +234,8 @@ detect::PatternMarkers SequenceDescription::Markers(int index, int grid_cells, i
   return out;
 }
 
-double SequenceDescription::GapModules(int index, int grid_cells) const {
-  const detect::PatternMarkers shown = Markers(index, grid_cells);
+double SequenceDescription::GapModules(int index) const {
+  const detect::PatternMarkers shown = Markers(index);
   double nearest = std::numeric_limits<double>::infinity();
   for (std::size_t i = 0; i < shown.centres.size(); ++i) {
     for (std::size_t j = i + 1; j < shown.centres.size(); ++j) {
@@ -244,7 +244,7 @@ double SequenceDescription::GapModules(int index, int grid_cells) const {
       nearest = std::min(nearest, std::max(std::abs(d.x), std::abs(d.y)));
     }
   }
-  return (nearest - shown.side_px) / (shown.side_px / grid_cells);
+  return (nearest - shown.side_px) / (shown.side_px / markers.grid_cells);
 }
 
 }  // namespace calibproj::ingest

@@ -93,13 +93,12 @@ struct SequenceDescription {
   sync::LightTimeline LightLevels() const;
 
   // The markers drawn by pattern `index` (ids = marker indices), with their projector
-  // centres and drawn side; `grid_cells` is the family's drawn width in cells,
-  // `quad_cells` that of the detectors' quad (0: the grid's).
-  detect::PatternMarkers Markers(int index, int grid_cells, int quad_cells = 0) const;
+  // centres, drawn side and the family's grid and quad cells.
+  detect::PatternMarkers Markers(int index) const;
 
-  // Smallest gap between two drawn markers of pattern `index`, in modules (of a marker
-  // `grid_cells` wide); infinity when it shows one marker.
-  double GapModules(int index, int grid_cells) const;
+  // Smallest gap between two drawn markers of pattern `index`, in modules of the
+  // family's marker; infinity when it shows one marker.
+  double GapModules(int index) const;
 
  private:
   void CheckRanges() const;
