@@ -27,7 +27,7 @@ void Require(bool condition, const std::string& message) {
 }
 
 const std::string& AprilTagName(const MarkerFamily& family) {
-  if (family.system != MarkerSystem::kAprilTag) {
+  if (family.system != MarkerSystemKind::kAprilTag) {
     throw std::invalid_argument(family.Spec() + " is not an AprilTag family");
   }
   return family.name;

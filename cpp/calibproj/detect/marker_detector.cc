@@ -3,7 +3,7 @@
 namespace calibproj::detect {
 
 MarkerDetector::MarkerDetector(const MarkerFamily& family, const DetectorOptions& options) : family_(family) {
-  if (family.system == MarkerSystem::kAruco) {
+  if (family.system == MarkerSystemKind::kAruco) {
     aruco_ = std::make_unique<ArucoDetector>(family, options.aruco);
   } else {
     apriltag_ = std::make_unique<AprilTagDetector>(family, options.apriltag);

@@ -135,7 +135,7 @@ cv::Mat AprilTagBits(const std::string& name, int id) {
 
 }  // namespace
 
-std::string MarkerFamily::SystemName() const { return system == MarkerSystem::kAruco ? "aruco" : "apriltag"; }
+std::string MarkerFamily::SystemName() const { return system == MarkerSystemKind::kAruco ? "aruco" : "apriltag"; }
 
 std::string MarkerFamily::Spec() const { return SystemName() + ":" + name; }
 
@@ -143,8 +143,8 @@ MarkerFamily ParseMarkerFamily(const std::string& spec) {
   const auto colon = spec.find(':');
   const std::string system = Lower(spec.substr(0, colon));
   const std::string name = colon == std::string::npos ? "" : spec.substr(colon + 1);
-  if (system == "aruco") return {MarkerSystem::kAruco, Canonical("aruco", name, ArucoNames())};
-  if (system == "apriltag") return {MarkerSystem::kAprilTag, Canonical("apriltag", name, AprilTagFamilyNames())};
+  if (system == "aruco") return {MarkerSystemKind::kAruco, Canonical("aruco", name, ArucoNames())};
+  if (system == "apriltag") return {MarkerSystemKind::kAprilTag, Canonical("apriltag", name, AprilTagFamilyNames())};
   throw std::invalid_argument("unknown marker family '" + spec +
                               "': expected 'aruco:<dictionary>' or 'apriltag:<family>' (choose from " +
                               JoinSpecs("aruco", ArucoNames()) + ", " +
@@ -159,12 +159,12 @@ std::vector<std::string> MarkerFamilySpecs() {
 }
 
 int MarkerIdCount(const MarkerFamily& family) {
-  if (family.system == MarkerSystem::kAruco) return ArucoDictionaryNamed(family.name)->bytesList.rows;
+  if (family.system == MarkerSystemKind::kAruco) return ArucoDictionaryNamed(family.name)->bytesList.rows;
   return static_cast<int>(CreateAprilTagFamily(family.name)->ncodes);
 }
 
 MarkerGeometry GetMarkerGeometry(const MarkerFamily& family) {
-  if (family.system == MarkerSystem::kAruco) {
+  if (family.system == MarkerSystemKind::kAruco) {
     const int side = ArucoDictionaryNamed(family.name)->markerSize + 2;
     return {side, side};
   }
@@ -174,11 +174,11 @@ MarkerGeometry GetMarkerGeometry(const MarkerFamily& family) {
 
 cv::Mat MarkerBits(const MarkerFamily& family, int id) {
   CheckId(family, id);
-  return family.system == MarkerSystem::kAruco ? ArucoBits(family.name, id) : AprilTagBits(family.name, id);
+  return family.system == MarkerSystemKind::kAruco ? ArucoBits(family.name, id) : AprilTagBits(family.name, id);
 }
 
 cv::Ptr<cv::aruco::Dictionary> ArucoDictionary(const MarkerFamily& family) {
-  if (family.system != MarkerSystem::kAruco) {
+  if (family.system != MarkerSystemKind::kAruco) {
     throw std::invalid_argument(family.Spec() + " is not an ArUco dictionary");
   }
   return ArucoDictionaryNamed(family.name);

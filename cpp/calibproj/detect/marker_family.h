@@ -14,10 +14,10 @@
 
 namespace calibproj::detect {
 
-enum class MarkerSystem { kAruco, kAprilTag };
+enum class MarkerSystemKind { kAruco, kAprilTag };
 
 struct MarkerFamily {
-  MarkerSystem system = MarkerSystem::kAruco;
+  MarkerSystemKind system = MarkerSystemKind::kAruco;
   std::string name;  // canonical name without the system, e.g. "4X4_50" or "tag36h11"
 
   std::string SystemName() const;  // "aruco" or "apriltag"

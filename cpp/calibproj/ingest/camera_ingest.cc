@@ -83,7 +83,6 @@ class CameraIngest {
         options_(Prepared(options, sequence, reader_.info().fps)),
         progress_(progress),
         family_(detect::ParseMarkerFamily(sequence.markers.spec)),
-        geometry_(detect::GetMarkerGeometry(family_)),
         timeline_(sequence.LightLevels()),
         nominal_rate_(reader_.info().fps / sequence.fps),
         luma_(options_.luma_gamma, options_.mean_row_step),
@@ -94,7 +93,7 @@ class CameraIngest {
         pipeline_(family_, options_.detector, options_.roi,
                   CornerOptions{std::make_shared<const detect::LensTables>(
                                     camera, cv::Size(reader_.info().width, reader_.info().height)),
-                                geometry_.quad_cells, options_.refine_undistorted, options_.edges,
+                                sequence.markers.quad_cells, options_.refine_undistorted, options_.edges,
                                 options_.refine_undistorted && options_.verify_predicted,
                                 options_.verification,
                                 ProjectedBits(family_, sequence.markers_per_array, sequence.markers.inverted)},
@@ -504,7 +503,7 @@ class CameraIngest {
     if (!options_.adaptive_bootstrap || !options_.use_roi || target <= 0.0 || !(min_magnification_ > 0.0)) {
       return fixed;
     }
-    const double module = 0.5 * min_magnification_ * pattern.marker_side_px / geometry_.grid_cells;
+    const double module = 0.5 * min_magnification_ * pattern.marker_side_px / sequence_.markers.grid_cells;
     const int adaptive = std::min(static_cast<int>(module / target), options_.roi.max_downscale);
     return std::max(fixed, adaptive);
   }
@@ -647,8 +646,8 @@ class CameraIngest {
         // A marker over a surface edge has a displaced centre: it would bend the fits.
         const cv::Point2d& projector = sequence_.centres[pattern.array * sequence_.markers_per_array + record.marker];
         if (!homography_.CrossesSurfaces(projector, pattern.marker_side_px)) {
-          homography_.Add(projector, centre, record.side_px / (pattern.marker_side_px * geometry_.quad_cells /
-                                                               geometry_.grid_cells));
+          homography_.Add(projector, centre, record.side_px / (pattern.marker_side_px * sequence_.markers.quad_cells /
+                                                               sequence_.markers.grid_cells));
         }
       }
     }
@@ -789,7 +788,6 @@ class CameraIngest {
   IngestOptions options_;
   ProgressCallback progress_;
   detect::MarkerFamily family_;
-  detect::MarkerGeometry geometry_;
   sync::LightTimeline timeline_;
   double nominal_rate_;
   std::unique_ptr<sync::CodeTracker> tracker_;
