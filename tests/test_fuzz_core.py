@@ -479,6 +479,11 @@ class Baselines:
                                                      ("surface_map", np.array([0.4, 0, 0.01, 0, 0.4, 0, 0, 0])),
                                                      ("lens", np.zeros(2)), ("ab", np.array([0.1, 0.2])),
                                                      ("want", [True, True, True])]),
+            "_core.ba.evaluate_relief_projector_cost": Spec(
+                [("projector", np.array([0.1, -0.05])), ("weight", 100.0),
+                 ("surface_map", np.array([0.4, 0, 0.01, 0, 0.4, 0, 0, 0])), ("lens", np.zeros(2)), ("spacing", 0.5),
+                 ("ab", np.array([0.1, 0.2])), ("apex", np.array([0.33, 0.0, 0.1])),
+                 ("nodes", np.array([0.0, 0.01, -0.01, 0.0])), ("want", [True] * 8)]),
             "_core.selfcal.self_calibrate": Spec(
                 [("camera_index", s["camera_index"]), ("point_index", s["point_index"]), ("observed", s["observed"]),
                  ("lenses", np.tile([500.0, 320.0, 240.0, 0, 0, 0, 0, 0], (len(s["poses"]), 1))),

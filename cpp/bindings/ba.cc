@@ -319,6 +319,25 @@ void register_ba(py::module_& m) {
       py::arg("want") = std::vector<bool>{true, true, true},
       "Diagnostics: (ok, residual, [J_map, J_lens, J_ab]) of the projector surface cost (normalised pixel).");
   m.def(
+      "evaluate_relief_projector_cost",
+      [](const Eigen::VectorXd& projector, double weight, const Eigen::VectorXd& surface_map, const Eigen::VectorXd& lens,
+         double spacing, const Eigen::VectorXd& ab, const Eigen::VectorXd& apex, const Eigen::VectorXd& nodes,
+         const std::vector<bool>& want) {
+        if (!(spacing > 0.0) || nodes.size() != 4) throw std::invalid_argument("expected a positive spacing and 4 nodes");
+        ba::ReliefGrid grid;
+        grid.spacing = spacing;
+        grid.columns = grid.rows = 2;
+        const ba::ReliefProjectorCost cost(new ba::ProjectorSurfaceCost(Vec2(projector, "projector"), weight), grid, 0);
+        Eigen::VectorXd n0(1), n1(1), n2(1), n3(1);
+        n0 << nodes(0); n1 << nodes(1); n2 << nodes(2); n3 << nodes(3);
+        return EvaluateCost(cost, {surface_map, lens, ab, apex, n0, n1, n2, n3}, want);
+      },
+      py::arg("projector"), py::arg("weight"), py::arg("surface_map"), py::arg("lens"), py::arg("spacing"),
+      py::arg("ab"), py::arg("apex"), py::arg("nodes"), py::arg("want") = std::vector<bool>(8, true),
+      "Diagnostics: (ok, residual, [J_map, J_lens, J_ab, J_apex, J_node0..3]) of the projector cost of a centre on a\n"
+      "relief of one cell [0, spacing]^2 (corner heights `nodes`), seen along the ray from the apex\n"
+      "[1 / e, C_a / e, C_b / e].");
+  m.def(
       "point_on_plane",
       [](const Eigen::Vector4d& plane, const Eigen::Vector2d& ab) { return ba::PointOnPlane(plane.data(), ab.data()); },
       py::arg("plane"), py::arg("ab"), "World point of plane coordinates (a, b) on the plane [n, d].");

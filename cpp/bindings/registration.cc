@@ -131,6 +131,7 @@ void RegisterStepResults(py::module_& m) {
   py::class_<ReliefTest>(m, "ReliefTest", "Whether the floor was found uneven.")
       .def_readonly("tested", &ReliefTest::tested)
       .def_readonly("detected", &ReliefTest::detected)
+      .def_readonly("parallax", &ReliefTest::parallax, "the projector's apex is refined with the relief")
       .def_readonly("nodes", &ReliefTest::nodes)
       .def_readonly("gain_chi2", &ReliefTest::gain_chi2, "chi-square of the observations the relief takes off")
       .def_readonly("threshold_chi2", &ReliefTest::threshold_chi2,
@@ -276,6 +277,8 @@ of calibproj.registration.driver.RegistrationOptions.)doc")
       .def_property_readonly("point_planes", &Reconstruction::point_plane,
                              "Per point the plane it was placed on (0 the main plane, -1 off every plane or not placed).")
       .def_property_readonly("projector_lens", [](const Reconstruction& r) { return Eigen::VectorXd(r.projector_lens()); })
+      .def_property_readonly("projector_centre", [](const Reconstruction& r) { return Eigen::VectorXd(r.projector_centre()); },
+                             "the projector's optical centre where the floor's relief places it (NaN without a relief)")
       .def_property_readonly("projector_sigma_px", &Reconstruction::projector_sigma_px,
                              "Per group of points the projector maps' noise (projector px, NaN until estimated).")
       .def_property_readonly("projector_group_sides_px", &Reconstruction::projector_group_sides_px,

@@ -147,6 +147,13 @@ struct Parameters {
   std::array<double, (kMaxReliefCells + 1) * (kMaxReliefCells + 1)> relief_storage{};
   std::vector<int> relief_cell;
 
+  // The projector's apex [1 / e, C / e] (relief_cost.h), refined where the main plane has
+  // both a relief and a projector map; its prior's mean and weights.
+  Eigen::Vector3d apex = Eigen::Vector3d::Zero();
+  Eigen::Vector3d apex_mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d apex_weights = Eigen::Vector3d::Zero();
+  bool has_apex = false;
+
   bool HasRelief() const { return relief_grid.size() > 0; }
   double* ReliefNode(int node) { return relief_storage.data() + node; }
   // The relief's height under point p (0 without one).
@@ -216,6 +223,37 @@ void InitialRelief(const Options& options, Parameters* params) {
   }
 }
 
+// The apex's prior: the projector hangs as high above the plane as the highest camera
+// (half of that either way), above the middle of the plane's points (half their extent
+// either way), with residuals in units of the reference noise.
+void InitialApex(const Data& data, Parameters* params) {
+  if (!params->HasRelief() || !HasProjectorMap(*params, 0) || !(data.apex_prior_px > 0.0)) return;
+  const Eigen::Vector3d n = params->plane.head<3>();
+  double height = 0.0;
+  for (int c = 0; c < params->poses.rows(); ++c) {
+    const Eigen::Vector3d w = params->poses.row(c).head<3>().transpose();
+    const Eigen::Vector3d centre = -RotationFromAngleAxis(w).transpose() * params->poses.row(c).tail<3>().transpose();
+    const double offset = n.dot(centre) - params->plane(3);
+    if (std::abs(offset) > std::abs(height)) height = offset;
+  }
+  if (!(std::abs(height) > 0.0)) return;
+  Eigen::Vector2d middle = Eigen::Vector2d::Zero();
+  int count = 0;
+  for (int p = 0; p < static_cast<int>(params->points.rows()); ++p) {
+    if (params->point_plane[p] != 0) continue;
+    middle += params->points.row(p).head<2>().transpose();
+    ++count;
+  }
+  middle /= std::max(count, 1);
+  const ReliefGrid& grid = params->relief_grid;
+  const double extent = grid.spacing * std::max(grid.columns - 1, grid.rows - 1);
+  params->apex_mean << 1.0 / height, middle / height;
+  const double beta_sigma = 0.5 * extent / std::abs(height);
+  params->apex_weights << data.apex_prior_px / (0.5 / std::abs(height)), Eigen::Vector2d::Constant(data.apex_prior_px / beta_sigma);
+  params->apex = params->apex_mean;
+  params->has_apex = true;
+}
+
 Parameters InitialParameters(const Data& gauge_data, const Options& options) {
   Parameters params;
   params.poses = gauge_data.poses;
@@ -241,6 +279,7 @@ Parameters InitialParameters(const Data& gauge_data, const Options& options) {
   }
   InitialProjectorMaps(gauge_data, options, &params);
   if (gauge_data.relief_weight > 0.0) InitialRelief(options, &params);
+  InitialApex(gauge_data, &params);
   return params;
 }
 
@@ -266,6 +305,11 @@ struct Gauge {
   bool fixed = false;  // poses and points both refined: the gauge must be removed
 };
 
+// Point p is on the main plane's relief and the projector sees it along its ray.
+bool RaisedForProjector(const Parameters& params, int p) {
+  return params.has_apex && params.point_plane[p] == 0 && !params.relief_cell.empty() && params.relief_cell[p] >= 0;
+}
+
 // One residual per point with a projector pixel on a plane with a valid map; returns
 // how many.
 int AddProjectorTerms(const Data& data, Parameters& params, ceres::LossFunction* loss, ceres::Problem* problem,
@@ -276,8 +320,14 @@ int AddProjectorTerms(const Data& data, Parameters& params, ceres::LossFunction*
     if (!HasProjectorMap(params, k) || !HasProjectorPixel(data, p)) continue;
     const double weight =
         data.projector_weight * (data.projector_point_weights.size() > 0 ? data.projector_point_weights(p) : 1.0);
-    problem->AddResidualBlock(new ProjectorSurfaceCost(data.projector.row(p).transpose(), weight), loss,
-                              params.Map(k), params.lens.data(), params.PointBlock(p));
+    auto* cost = new ProjectorSurfaceCost(data.projector.row(p).transpose(), weight);
+    if (RaisedForProjector(params, p)) {
+      std::vector<double*> blocks = {params.Map(k), params.lens.data(), params.PointBlock(p), params.apex.data()};
+      for (int node : params.relief_grid.NodesOf(params.relief_cell[p])) blocks.push_back(params.ReliefNode(node));
+      problem->AddResidualBlock(new ReliefProjectorCost(cost, params.relief_grid, params.relief_cell[p]), loss, blocks);
+    } else {
+      problem->AddResidualBlock(cost, loss, params.Map(k), params.lens.data(), params.PointBlock(p));
+    }
     ++terms;
   }
   if (terms == 0) return 0;
@@ -288,6 +338,10 @@ int AddProjectorTerms(const Data& data, Parameters& params, ceres::LossFunction*
     if (params.map_valid[k]) ordering->AddElementToGroup(params.Map(k), 2 + num_planes);
   }
   ordering->AddElementToGroup(params.lens.data(), 3 + num_planes);
+  if (problem->HasParameterBlock(params.apex.data())) {
+    problem->AddResidualBlock(new ApexPriorCost(params.apex_mean, params.apex_weights), nullptr, params.apex.data());
+    ordering->AddElementToGroup(params.apex.data(), 3 + num_planes);
+  }
   return terms;
 }
 
@@ -430,6 +484,11 @@ void CopyProjectorOut(const Data& data, Parameters& params, const FrameChange& c
     surface.valid = true;
     surface.map = Eigen::Map<const SurfaceMap>(params.Map(static_cast<int>(k)));
     surface.world_from_plane = change.R.transpose() * (E - change.t * Eigen::RowVector3d(0.0, 0.0, 1.0));
+    if (k == 0 && params.has_apex && std::abs(params.apex(0)) > 0.0) {
+      const double height = 1.0 / params.apex(0);
+      result->projector_centre = surface.world_from_plane * Eigen::Vector3d(params.apex(1) * height, params.apex(2) * height, 1.0) +
+                                 change.R.transpose() * (height * n);
+    }
   }
   const int num_points = static_cast<int>(params.points.rows());
   result->projector_residuals = PixelMatrix::Constant(num_points, 2, std::numeric_limits<double>::quiet_NaN());
@@ -437,7 +496,9 @@ void CopyProjectorOut(const Data& data, Parameters& params, const FrameChange& c
     const int k = params.point_plane[p];
     if (!HasProjectorMap(params, k) || !HasProjectorPixel(data, p)) continue;
     const ProjectorSurfaceCost cost(data.projector.row(p).transpose(), 1.0);
-    const double* blocks[3] = {params.Map(k), params.lens.data(), params.PointBlock(p)};
+    Eigen::Vector2d foot = params.points.row(p).head<2>().transpose();
+    if (RaisedForProjector(params, p) && !ProjectorFootOf(foot, params.ReliefHeight(p), params.apex.data(), &foot)) continue;
+    const double* blocks[3] = {params.Map(k), params.lens.data(), foot.data()};
     double r[2];
     if (cost.Evaluate(blocks, r, nullptr)) result->projector_residuals.row(p) << r[0], r[1];
     ++result->projector_terms;
@@ -475,6 +536,7 @@ std::vector<double*> OtherKeptBlocks(const ceres::Problem& problem, Parameters& 
     if (params.map_valid[k]) keep(params.Map(k));
   }
   keep(params.lens.data());
+  keep(params.apex.data());
   for (int node = 0; node < params.relief_grid.size(); ++node) keep(params.ReliefNode(node));
   return blocks;
 }
@@ -702,6 +764,8 @@ void ValidateData(const Data& data, const Options& options) {
                (data.projector_point_weights.array() > 0.0).all()),
           "projector: one finite positive weight factor per point, or none");
   Require(std::isfinite(data.relief_weight) && data.relief_weight >= 0.0, "relief: the weight must be finite and >= 0");
+  Require(std::isfinite(data.apex_prior_px) && data.apex_prior_px >= 0.0,
+          "projector apex: the prior's noise must be finite and >= 0");
   ValidateLenses(data, num_cameras);
   Require(options.gauge_camera >= 0 && options.gauge_camera < num_cameras,
           "options: gauge camera " + Str(options.gauge_camera) + " out of range [0, " + Str(num_cameras) + ")");
@@ -852,6 +916,9 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
     for (int node = 0; node < result.relief_nodes; ++node) sum += *params.ReliefNode(node) * *params.ReliefNode(node);
     result.relief_rms = std::sqrt(sum / result.relief_nodes);
     result.relief_prior_cost = 0.5 * data.relief_weight * data.relief_weight * sum;
+    if (params.has_apex) {
+      result.relief_prior_cost += 0.5 * params.apex_weights.cwiseProduct(params.apex - params.apex_mean).squaredNorm();
+    }
   }
   result.poses = params.poses;
   result.plane = params.plane;

@@ -16,6 +16,7 @@
 
 #include <Eigen/Core>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -106,6 +107,11 @@ struct Data {
   // whose nodes have a prior of weight relief_weight = the reference noise (px) over the
   // expected root mean square height (world units); <= 0: the plane is flat.
   double relief_weight = 0.0;
+  // COPLANAR with a relief and a projector term: the reference noise (px) that the prior
+  // of the projector's apex (relief_cost.h) is weighed in; the apex is then refined, so
+  // that the projector sees a raised centre along its ray. <= 0: it sees every centre
+  // of the main plane at its foot on the plane.
+  double apex_prior_px = 0.0;
   // With compute_covariance: lenses the solve holds but whose own uncertainty is known
   // elsewhere (intrinsics refined by the self-calibration), whose effect on the poses the
   // result gives (Result::lens_sensitivity). Per camera the index of its lens block (-1:
@@ -169,6 +175,9 @@ struct Result {
   Eigen::Vector2d projector_lens = Eigen::Vector2d::Zero();
   PixelMatrix projector_residuals;
   int projector_terms = 0;
+  // With a relief and Data::apex_prior_px: the projector's optical centre, in the
+  // caller's frame, as the relief's parallax places it; NaN otherwise.
+  Eigen::Vector3d projector_centre = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   // With a relief: root mean square of its node heights (world units), how many, and
   // the share of final_cost its prior holds (final_cost - relief_prior_cost is the
   // cost of the observations alone).

@@ -103,6 +103,63 @@ bool ReliefReprojectionCost::Evaluate(double const* const* parameters, double* r
   return true;
 }
 
+ReliefProjectorCost::ReliefProjectorCost(ceres::CostFunction* projector_cost, const ReliefGrid& grid, int cell)
+    : projector_cost_(projector_cost), grid_(grid), cell_(cell) {
+  set_num_residuals(2);
+  *mutable_parameter_block_sizes() = {8, 2, 2, 3, 1, 1, 1, 1};
+}
+
+bool ProjectorFootOf(const Eigen::Vector2d& ab, double h, const double* apex, Eigen::Vector2d* foot) {
+  const double level = 1.0 - apex[0] * h;
+  if (!(std::abs(level) > 1e-9)) return false;
+  *foot = (ab - h * Eigen::Vector2d(apex[1], apex[2])) / level;
+  return foot->allFinite();
+}
+
+bool ReliefProjectorCost::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
+  const Eigen::Map<const Eigen::Vector2d> ab(parameters[2]);
+  const double* apex = parameters[3];
+  const ReliefGrid::Cell cell = grid_.CellAt(cell_, ab);
+  double h = 0.0;
+  for (int k = 0; k < 4; ++k) h += cell.weights[k] * parameters[4 + k][0];
+  Eigen::Vector2d foot;
+  if (!ProjectorFootOf(ab, h, apex, &foot)) return false;
+  const double* inner_parameters[3] = {parameters[0], parameters[1], foot.data()};
+  if (jacobians == nullptr) return projector_cost_->Evaluate(inner_parameters, residuals, nullptr);
+
+  Eigen::Matrix<double, 2, 2, Eigen::RowMajor> J_foot;
+  double* inner_jacobians[3] = {jacobians[0], jacobians[1], J_foot.data()};
+  if (!projector_cost_->Evaluate(inner_parameters, residuals, inner_jacobians)) return false;
+  const double level = 1.0 - apex[0] * h;
+  // dF/dh = (F / e - C / e) / level, with F = foot.
+  const Eigen::Vector2d dfoot_dh = (apex[0] * foot - Eigen::Vector2d(apex[1], apex[2])) / level;
+  const Eigen::Vector2d d_height = J_foot * dfoot_dh;
+  if (jacobians[2] != nullptr) {
+    Eigen::Vector2d dh_dab = Eigen::Vector2d::Zero();
+    for (int k = 0; k < 4; ++k) dh_dab += parameters[4 + k][0] * cell.gradients[k];
+    Eigen::Map<Eigen::Matrix<double, 2, 2, Eigen::RowMajor>>{jacobians[2]} =
+        J_foot / level + d_height * dh_dab.transpose();
+  }
+  if (jacobians[3] != nullptr) {
+    Eigen::Matrix<double, 2, 3> dfoot_dapex;
+    dfoot_dapex << h * foot / level, -h / level * Eigen::Matrix2d::Identity();
+    Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>>{jacobians[3]} = J_foot * dfoot_dapex;
+  }
+  for (int k = 0; k < 4; ++k) {
+    if (jacobians[4 + k] != nullptr) Eigen::Map<Eigen::Vector2d>{jacobians[4 + k]} = d_height * cell.weights[k];
+  }
+  return true;
+}
+
+bool ApexPriorCost::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
+  const Eigen::Map<const Eigen::Vector3d> apex(parameters[0]);
+  Eigen::Map<Eigen::Vector3d>{residuals} = weights_.cwiseProduct(apex - mean_);
+  if (jacobians != nullptr && jacobians[0] != nullptr) {
+    Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>{jacobians[0]} = weights_.asDiagonal();
+  }
+  return true;
+}
+
 bool ReliefPriorCost::Evaluate(double const* const* parameters, double* residuals, double** jacobians) const {
   residuals[0] = weight_ * parameters[0][0];
   if (jacobians != nullptr && jacobians[0] != nullptr) jacobians[0][0] = weight_;

@@ -14,9 +14,15 @@
 // (1 each) of the point's cell; its Jacobians follow from the wrapped cost's by the
 // chain rule, so an analytic or an automatically differentiated cost serves alike.
 //
-// The projector term keeps reading the point's plane coordinates: a height h moves the
-// projector's view of a centre by h times the tangent of the projector ray's angle,
-// about 0.1 h at the middle of a ceiling projection.
+// The projector sees a raised centre along its ray: the centre at plane coordinates
+// (a, b) and height h lies on the ray through the plane point F where the projector's
+// map places its pixel. With the projector's centre at height e over the plane above
+// plane coordinates C, F = ((a, b) - h C / e) / (1 - h / e): a shift of about h / e times
+// the distance to the projector's nadir, which on a 6 mm uneven floor bends the zoomed
+// camera's patch by a few tenths of a millimetre, a tilt of 0.05 deg. ReliefProjectorCost
+// wraps a ProjectorSurfaceCost with it; the projector's apex block (3) is
+// [1 / e, C_a / e, C_b / e], refined with the relief (1 / e so that a distant projector
+// is 0, not infinite).
 
 #include <ceres/cost_function.h>
 #include <ceres/sized_cost_function.h>
@@ -65,6 +71,35 @@ class ReliefReprojectionCost final : public ceres::CostFunction {
   std::unique_ptr<ceres::CostFunction> plane_cost_;
   const ReliefGrid grid_;
   const int cell_;
+};
+
+class ReliefProjectorCost final : public ceres::CostFunction {
+ public:
+  // Takes ownership of `projector_cost` (blocks map 8, lens 2, point 2); adds the apex
+  // (3) and the four node blocks (1 each) of `cell`.
+  ReliefProjectorCost(ceres::CostFunction* projector_cost, const ReliefGrid& grid, int cell);
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
+
+ private:
+  std::unique_ptr<ceres::CostFunction> projector_cost_;
+  const ReliefGrid grid_;
+  const int cell_;
+};
+
+// F of the comment above: where the projector's map must place a centre at plane
+// coordinates ab and height h, for the apex [1 / e, C / e]; false where the centre is
+// level with the projector.
+bool ProjectorFootOf(const Eigen::Vector2d& ab, double h, const double* apex, Eigen::Vector2d* foot);
+
+// A Gaussian prior on the apex: weights * (apex - mean), componentwise.
+class ApexPriorCost final : public ceres::SizedCostFunction<3, 3> {
+ public:
+  ApexPriorCost(const Eigen::Vector3d& mean, const Eigen::Vector3d& weights) : mean_(mean), weights_(weights) {}
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override;
+
+ private:
+  const Eigen::Vector3d mean_;
+  const Eigen::Vector3d weights_;
 };
 
 // The prior on one node's height: weight * h, weight = reference noise (px) / the

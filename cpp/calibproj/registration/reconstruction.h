@@ -152,6 +152,7 @@ struct ReliefTest {
   int nodes = 0;
   double gain_chi2 = 0.0;       // chi-square of the observations the relief takes off
   double threshold_chi2 = 0.0;  // 99.9 % quantile of chi-square with `nodes` degrees of freedom
+  bool parallax = false;        // the projector's apex is refined with the relief (kApexGainFactor)
 
   // One line for the log: the verdict and its figures ("" when not tested).
   std::string Describe() const;
@@ -264,6 +265,8 @@ class Reconstruction {
   // centres' noise (px, NaN until estimated).
   const std::vector<ba::ProjectorSurface>& projector_surfaces() const { return projector_surfaces_; }
   const Eigen::Vector2d& projector_lens() const { return projector_lens_; }
+  // The projector's optical centre where the floor's relief places it (NaN without one).
+  const Eigen::Vector3d& projector_centre() const { return projector_centre_; }
   std::vector<double> projector_sigma_px() const;
   const std::vector<double>& projector_group_sides_px() const { return projector_group_side_px_; }
   const std::vector<double>& camera_sigma_px() const { return camera_sigma_px_; }
@@ -363,6 +366,7 @@ class Reconstruction {
   ba::PixelMatrix projector_;  // normalised pixels (ba/projector_cost.h), per point
   double projector_width_ = 1.0;
   Eigen::Vector2d projector_lens_ = Eigen::Vector2d::Zero();
+  Eigen::Vector3d projector_centre_ = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   std::vector<ba::ProjectorSurface> projector_surfaces_;
   // Per plane, the convex hull (normalised projector pixels) of its reconstructed points;
   // empty for the main plane and for planes with too few points.
@@ -374,6 +378,7 @@ class Reconstruction {
   std::vector<double> camera_sigma_px_;  // NaN until estimated
   std::vector<double> ambiguity_deg_;
   bool relief_on_ = true;  // until TestRelief finds the floor flat
+  bool apex_on_ = false;   // TestRelief's relief is well above the noise (kApexGainFactor)
   bool testing_relief_ = false;  // TestRelief's uneven solve: the coarser test grid
 };
 
