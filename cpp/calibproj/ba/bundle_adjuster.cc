@@ -466,6 +466,7 @@ int BuildProblem(const Data& data, const Options& options, const Gauge& gauge, P
     for (int node = 0; node < params.relief_grid.size(); ++node) {
       problem->SetParameterBlockConstant(params.ReliefNode(node));
     }
+    if (problem->HasParameterBlock(params.apex.data())) problem->SetParameterBlockConstant(params.apex.data());
   }
   return projector_terms;
 }
