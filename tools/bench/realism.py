@@ -160,8 +160,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
                                 options=replace(RenderOptions(), **render_changes))
                 dense.save(planned)
             results = room / "results_dense"
-            calibration = calibrate_room(room / "dense" / "videos", room / "dense_sequence.json", results,
-                                         merge=room / "results")
+            calibration = calibrate_dense(calibrate_room, room, results, reused=args.reuse_detections and same_plan)
     truth = json.loads((room / "truth.json").read_text())
     report = json.loads(((room / "results") / "detect_report.json").read_text())
     row = {"condition": condition, "seed": seed, "total": len(scene.cameras), "extra_s": extra_s,
@@ -245,16 +244,34 @@ def calibrate_first(calibrate_room, room: Path, sequence_path: Path, results: Pa
     return calibration
 
 
+def calibrate_dense(calibrate_room, room: Path, results: Path, reused: bool):
+    """The calibration of ``room`` with its extra projection merged: from the extra
+    videos, or with ``reused`` from the merged detections an earlier run kept of the same
+    plan and rendering. The merged detections are kept beside."""
+    kept_tracks = room / "dense_tracks.json"
+    if reused and kept_tracks.is_file():
+        return calibrate_room(kept_tracks, room / "dense_sequence.json", results)
+    calibration = calibrate_room(room / "dense" / "videos", room / "dense_sequence.json", results,
+                                 merge=room / "results")
+    shutil.copyfile(results / "tracks.json", kept_tracks)
+    return calibration
+
+
 def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics: Path, scale: str,
                      options: RegistrationOptions, exposures, label: str, merge: Path | None = None,
                      refine_intrinsics: list[str] | None = None):
     """calibrate() into ``results`` with a metric scale; results in arbitrary units
     (logged) when the scale cannot be measured."""
+    # An earlier run's results must not pass for this one's when the calibration fails
+    # before it writes any.
+    (results / "camera_poses.json").unlink(missing_ok=True)
     try:
         return calibrate(videos, intrinsics, sequence=sequence, out=results, options=options, exposures=exposures,
                          scale=scale, force=True, progress=False, merge=merge, refine_intrinsics=refine_intrinsics)
     except ValueError as error:
         logging.warning("%s: %s", label, error)
+        if not (results / "camera_poses.json").is_file():
+            raise
         from calibproj.formats.calibration import Calibration
 
         return Calibration.load(results)
@@ -415,8 +432,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="with --work: calibrate the renderings already there again where their scene is the "
                              "condition's (same --arrays and --markers assumed) instead of rendering them anew")
     parser.add_argument("--reuse-detections", action="store_true",
-                        help="with --reuse: calibrate a reused rendering from the detections of its first projection "
-                             "that an earlier run kept (they depend on the rendering and the ingest only)")
+                        help="with --reuse: calibrate a reused rendering from the detections of its first projection, "
+                             "and of its extra one where the plan is the same, that an earlier run kept (they depend "
+                             "on the rendering and the ingest only)")
     parser.add_argument("--densify", action="store_true",
                         help="after the first calibration, render the extra projection `calibproj generate --densify` "
                              "plans for its weak cameras and calibrate again with --merge")
