@@ -489,6 +489,53 @@ def test_errors_a_camera_shares_widen_its_sigma_to_hold_the_truth() -> None:
     assert not calibration.metrics["ceiling"].weak
 
 
+def errors_to_reference(calibration, sim) -> dict[str, float]:
+    """Each camera's rotation error relative to the reference camera (the covariance's
+    gauge: its sigma is 0), the reference left out."""
+    reference = next(name for name, m in calibration.metrics.items() if m.rotation_sigma_deg == 0.0)
+    truth = {camera.name: camera.R for camera in sim.scene.cameras}
+    errors = rotation_errors_to_reference(calibration.poses, reference, truth)
+    return {name: error for name, error in errors.items() if name != reference}
+
+
+def with_shared_fields(sim, field_px: float, seed: int) -> Tracks:
+    """sim's tracks with each camera's centres moved by a field of the form
+    RegistrationOptions.shared_error_field models: a shift and linear terms in x and y
+    (the offset from the image centre in units of its half size), each drawn with
+    standard deviation field_px per image coordinate."""
+    tracks = sim.tracks
+    rng = np.random.default_rng(seed)
+    xy = tracks.xy.copy()
+    for c, name in enumerate(tracks.camera_names):
+        width, height = sim.intrinsics[name].resolution
+        own = tracks.camera_index == c
+        x, y = 2.0 * xy[own, 0] / width - 1.0, 2.0 * xy[own, 1] / height - 1.0
+        xy[own] += np.column_stack([np.ones_like(x), x, y]) @ rng.normal(scale=field_px, size=(3, 2))
+    return tracks.with_xy(xy)
+
+
+def test_a_field_each_camera_shares_is_propagated_into_every_pose() -> None:
+    """Each camera's centres carry independent noise (0.05 px) and a field of 0.05 px per
+    term (the same seed's room, a new field each run). Counted as independent, the
+    errors exceed the sigmas several times; with shared_error_field the field's share
+    (1: its terms as large as the noise), the sigmas hold the errors: over the runs and
+    cameras their ratio's root mean square is near 1, not far below (a covariance that
+    only widened would pass the first test, not this one)."""
+    sim, markers = demo_with_projector(noise_px=0.05)
+    fields = RegistrationOptions(error_correlation=0.0, shared_error_field=1.0)
+    ratios, independent = [], []
+    for run in range(4):
+        moved = with_shared_fields(sim, 0.05, seed=200 + run)
+        for options, out in ((fields, ratios), (INDEPENDENT_ERRORS, independent)):
+            calibration = RegistrationDriver(moved, sim.intrinsics, options, projector=markers).run()
+            errors = errors_to_reference(calibration, sim)
+            out.extend(errors[name] / calibration.metrics[name].rotation_sigma_deg for name in errors)
+    rms_ratio = float(np.sqrt(np.mean(np.square(ratios))))
+    assert 0.5 <= rms_ratio <= 1.5, ratios
+    assert max(ratios) <= 3.5, ratios
+    assert float(np.sqrt(np.mean(np.square(independent)))) > 2.0 * rms_ratio
+
+
 def test_an_uneven_floor_is_not_taken_for_the_zoomed_cameras_tilt() -> None:
     """A floor 3 mm (rms) uneven, as real floors are: the zoomed ceiling camera sees a
     patch half a metre wide, whose slope (about 0.7 deg) an exactly flat model gives it

@@ -391,11 +391,13 @@ GroupLosses MakeGroupLosses(const Data& data, ceres::LossFunction* loss, bool ad
 // Errors that one group of residuals shares are not averaged away by their number: a
 // group of N residuals with correlation rho carries the information of N / (1 + (N - 1)
 // rho) independent ones. The covariance sees each group's weight divided accordingly.
-void DiscountSharedErrors(const Data& data, double correlation, int projector_terms, GroupLosses* losses) {
+// With `cameras` off, only the projector's.
+void DiscountSharedErrors(const Data& data, double correlation, int projector_terms, bool cameras,
+                          GroupLosses* losses) {
   const auto discount = [&](int n) { return 1.0 / std::sqrt(1.0 + std::max(0, n - 1) * correlation); };
   std::vector<int> observations(losses->cameras.size(), 0);
   for (int i = 0; i < data.camera_index.size(); ++i) ++observations[data.camera_index(i)];
-  for (size_t c = 0; c < losses->cameras.size(); ++c) {
+  for (size_t c = 0; c < losses->cameras.size() && cameras; ++c) {
     const double w = CameraWeight(data, static_cast<int>(c)) * discount(observations[c]);
     static_cast<ceres::LossFunctionWrapper*>(losses->cameras[c].get())
         ->Reset(WeightedLoss(losses->loss, w).release(), ceres::TAKE_OWNERSHIP);
@@ -578,9 +580,37 @@ ConsideredParameters ConsideredLenses(const Data& data, const std::vector<ceres:
   return considered;
 }
 
+// The cameras' shared-error fields (Options::shared_error_field) as considered
+// parameters: kSharedFieldSize columns per camera, [shift u, shift v, u by x, v by x,
+// u by y, v by y], x and y the observation's offset from the principal point in units of
+// the principal point's own (the image's half size).
+constexpr int kSharedFieldSize = 6;
+ConsideredParameters ConsideredSharedFields(const Data& data, const std::vector<ceres::ResidualBlockId>& observation_blocks) {
+  auto observation_of = std::make_shared<std::unordered_map<ceres::ResidualBlockId, int>>();
+  for (size_t i = 0; i < observation_blocks.size(); ++i) observation_of->emplace(observation_blocks[i], static_cast<int>(i));
+  ConsideredParameters considered;
+  considered.columns = kSharedFieldSize * static_cast<int>(data.intrinsics.size());
+  considered.jacobian = [&data, observation_of](ceres::ResidualBlockId id, Eigen::MatrixXd* jacobian) {
+    const auto it = observation_of->find(id);
+    if (it == observation_of->end()) {
+      jacobian->resize(0, 0);
+      return 0;
+    }
+    const int c = data.camera_index(it->second);
+    const Intrinsics& K = data.intrinsics[c];
+    const double x = (data.observed(it->second, 0) - K.cx) / std::max(std::abs(K.cx), 1.0);
+    const double y = (data.observed(it->second, 1) - K.cy) / std::max(std::abs(K.cy), 1.0);
+    jacobian->resize(2, kSharedFieldSize);
+    *jacobian << 1, 0, x, 0, y, 0,
+                 0, 1, 0, x, 0, y;
+    return kSharedFieldSize * c;
+  };
+  return considered;
+}
+
 struct PoseCovariance {
   Eigen::MatrixXd joint;             // see Result::pose_covariance
-  Eigen::MatrixXd lens_sensitivity;  // see Result::lens_sensitivity; with considered lenses only
+  Eigen::MatrixXd sensitivity;  // d poses / d considered parameters (Result::lens_sensitivity's form), given some
 };
 
 // The joint covariance of every pose, [dtheta, dt] per camera in the caller's frame
@@ -624,8 +654,26 @@ PoseCovariance JointPoseCovariance(ceres::Problem* problem, Parameters& params, 
   PoseCovariance out;
   const Eigen::MatrixXd joint = M * reduced.covariance.topLeftCorner(columns, columns) * M.transpose();
   out.joint = 0.5 * (joint + joint.transpose());
-  if (lenses != nullptr) out.lens_sensitivity = M * reduced.sensitivity.topRows(columns);
+  if (lenses != nullptr) out.sensitivity = M * reduced.sensitivity.topRows(columns);
   return out;
+}
+
+// The poses' covariance with every camera's shared-error field propagated into it, for
+// residuals of unit variance: a camera weighed w (the reference noise over its own) has
+// field terms of variance share / w^2 in those units.
+Eigen::MatrixXd WithSharedFields(ceres::Problem* problem, const Data& data, Parameters& params, const Gauge& gauge,
+                                 const FrameChange& change, const std::vector<ceres::ResidualBlockId>& observation_blocks,
+                                 double share) {
+  const ConsideredParameters fields = ConsideredSharedFields(data, observation_blocks);
+  const PoseCovariance given = JointPoseCovariance(problem, params, gauge, change, &fields);
+  Eigen::VectorXd variance(fields.columns);
+  for (int c = 0; c < static_cast<int>(data.intrinsics.size()); ++c) {
+    const double w = CameraWeight(data, c);
+    variance.segment<kSharedFieldSize>(kSharedFieldSize * c).setConstant(share / (w * w));
+  }
+  const Eigen::MatrixXd from_fields =
+      given.sensitivity * variance.asDiagonal() * given.sensitivity.transpose();
+  return given.joint + 0.5 * (from_fields + from_fields.transpose());
 }
 
 const char* ModelName(Model model) { return model == Model::kFree ? "free" : "coplanar"; }
@@ -654,6 +702,8 @@ void Options::Check() const {
   Require(!compute_covariance || refine_poses, "options: covariance needs refine_poses");
   Require(error_correlation >= 0.0 && error_correlation <= 1.0,
           "options: error_correlation must be in [0, 1], got " + Str(error_correlation));
+  Require(shared_error_field >= 0.0 && shared_error_field <= 100.0,
+          "options: shared_error_field must be in [0, 100], got " + Str(shared_error_field));
   limits::RequireInRange(relief_cells, 1, kMaxReliefCells, "options: relief_cells");
 }
 
@@ -898,11 +948,17 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
       PoseCovariance with_lenses;
       if (lenses) {
         with_lenses = JointPoseCovariance(&problem, params, gauge, change, &considered);
-        result.lens_sensitivity = with_lenses.lens_sensitivity;
+        result.lens_sensitivity = with_lenses.sensitivity;
       }
-      if (shared_errors) DiscountSharedErrors(data, options.error_correlation, projector_terms, &losses);
-      result.pose_covariance = lenses && !shared_errors ? with_lenses.joint
-                                                        : JointPoseCovariance(&problem, params, gauge, change, nullptr).joint;
+      const bool fields = options.shared_error_field > 0.0;
+      if (shared_errors) DiscountSharedErrors(data, options.error_correlation, projector_terms, !fields, &losses);
+      if (fields) {
+        result.pose_covariance = WithSharedFields(&problem, data, params, gauge, change, observation_blocks,
+                                                  options.shared_error_field);
+      } else {
+        result.pose_covariance = lenses && !shared_errors ? with_lenses.joint
+                                                          : JointPoseCovariance(&problem, params, gauge, change, nullptr).joint;
+      }
       for (int c = 0; c < num_cameras; ++c) result.pose_covariances.push_back(result.pose_covariance.block<6, 6>(6 * c, 6 * c));
     } catch (const std::runtime_error& error) {
       result.covariance_failure = error.what();  // the solution stands without it

@@ -142,6 +142,12 @@ void VisitRegistrationOptions(OptionsT& o, Visitor&& visit) {
         "error that its centres have in common (the lens model, blur, a floor's texture) is not "
         "averaged away by their number, so the pose covariance counts a camera's N centres as N / "
         "(1 + (N - 1) * error_correlation) independent ones. The poses do not depend on it.");
+  visit("shared_error_field", o.shared_error_field,
+        "each camera's shared errors as a smooth field over its image instead (a shift and linear "
+        "terms in x and y, each of variance this share of the camera's noise variance), propagated "
+        "into the covariance: a far camera's field moves its own pose but hardly the local shape of "
+        "the patch it measures for a zoomed camera. error_correlation then discounts the projector's "
+        "residuals only. 0: off. The poses do not depend on it.");
   visit("floor_relief", o.floor_relief,
         "coplanar: the expected root mean square height of the floor's unevenness, as a share of "
         "the extent of the centres on it (0.001: 3 mm over a 3 m projection). The floor's centres "
