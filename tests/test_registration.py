@@ -326,7 +326,7 @@ def demo_with_projector(noise_px: float = 0.1, seed: int = 0, projector_dist: tu
 
 # Simulated tracks have independent errors: the covariance then needs no share of
 # errors common to a camera's centres (RegistrationOptions.error_correlation).
-INDEPENDENT_ERRORS = RegistrationOptions(error_correlation=0.0)
+INDEPENDENT_ERRORS = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0)
 
 
 def rotation_error_deg(calibration, sim, name: str) -> float:
@@ -498,35 +498,28 @@ def errors_to_reference(calibration, sim) -> dict[str, float]:
     return {name: error for name, error in errors.items() if name != reference}
 
 
-def with_shared_fields(sim, field_px: float, seed: int) -> Tracks:
-    """sim's tracks with each camera's centres moved by a field of the form
-    RegistrationOptions.shared_error_field models: a shift and linear terms in x and y
-    (the offset from the image centre in units of its half size), each drawn with
-    standard deviation field_px per image coordinate."""
+def with_shared_shifts(sim, shift_px: float, seed: int) -> Tracks:
+    """sim's tracks with each camera's centres moved by one shift (the form
+    RegistrationOptions.shared_error_shift models), drawn with standard deviation
+    shift_px along each image axis."""
     tracks = sim.tracks
-    rng = np.random.default_rng(seed)
-    xy = tracks.xy.copy()
-    for c, name in enumerate(tracks.camera_names):
-        width, height = sim.intrinsics[name].resolution
-        own = tracks.camera_index == c
-        x, y = 2.0 * xy[own, 0] / width - 1.0, 2.0 * xy[own, 1] / height - 1.0
-        xy[own] += np.column_stack([np.ones_like(x), x, y]) @ rng.normal(scale=field_px, size=(3, 2))
+    xy = tracks.xy + np.random.default_rng(seed).normal(scale=shift_px, size=(len(tracks.camera_names), 2))[
+        tracks.camera_index]
     return tracks.with_xy(xy)
 
 
-def test_a_field_each_camera_shares_is_propagated_into_every_pose() -> None:
-    """Each camera's centres carry independent noise (0.05 px) and a field of 0.05 px per
-    term (the same seed's room, a new field each run). Counted as independent, the
-    errors exceed the sigmas several times; with shared_error_field the field's share
-    (1: its terms as large as the noise), the sigmas hold the errors: over the runs and
-    cameras their ratio's root mean square is near 1, not far below (a covariance that
-    only widened would pass the first test, not this one)."""
+def test_a_shift_each_camera_shares_is_propagated_into_every_pose() -> None:
+    """Each camera's centres carry independent noise (0.05 px) and a shift of their own,
+    twice that (a new one each run, the same room). Counted as independent, the errors
+    exceed the sigmas several times; with shared_error_shift 2 the sigmas hold them: over
+    the runs and cameras their ratio's root mean square is near 1, not far below (a
+    covariance that only widened would pass the first test, not this one)."""
     sim, markers = demo_with_projector(noise_px=0.05)
-    fields = RegistrationOptions(error_correlation=0.0, shared_error_field=1.0)
+    shifts = RegistrationOptions(error_correlation=0.0, shared_error_shift=2.0)
     ratios, independent = [], []
     for run in range(4):
-        moved = with_shared_fields(sim, 0.05, seed=200 + run)
-        for options, out in ((fields, ratios), (INDEPENDENT_ERRORS, independent)):
+        moved = with_shared_shifts(sim, 0.1, seed=200 + run)
+        for options, out in ((shifts, ratios), (INDEPENDENT_ERRORS, independent)):
             calibration = RegistrationDriver(moved, sim.intrinsics, options, projector=markers).run()
             errors = errors_to_reference(calibration, sim)
             out.extend(errors[name] / calibration.metrics[name].rotation_sigma_deg for name in errors)
@@ -545,7 +538,7 @@ def test_an_uneven_floor_is_not_taken_for_the_zoomed_cameras_tilt() -> None:
 
     def calibrated(floor_relief: float) -> tuple[dict[str, float], Calibration]:
         """Errors relative to the reference camera, which its covariance's are."""
-        options = RegistrationOptions(error_correlation=0.0, floor_relief=floor_relief)
+        options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, floor_relief=floor_relief)
         calibration = RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
         assert sorted(calibration.registered) == sorted(sim.tracks.camera_names)
         reference = next(name for name, m in calibration.metrics.items() if m.rotation_sigma_deg == 0.0)
@@ -610,7 +603,7 @@ def test_the_relief_grid_has_the_cells_asked_for(caplog) -> None:
     for cells in (8, 24):
         caplog.clear()
         with caplog.at_level(logging.INFO, logger="calibproj.registration.driver"):
-            options = RegistrationOptions(error_correlation=0.0, relief_cells=cells)
+            options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, relief_cells=cells)
             RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
         found = re.search(r"over its (\d+) nodes", caplog.text)
         assert found, caplog.text
@@ -630,7 +623,7 @@ def test_a_flat_floor_keeps_the_flat_model_and_its_sigma(caplog) -> None:
     sim, markers = demo_with_projector(noise_px=0.05, seed=3)
 
     def calibrated(floor_relief: float) -> Calibration:
-        options = RegistrationOptions(error_correlation=0.0, floor_relief=floor_relief)
+        options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, floor_relief=floor_relief)
         return RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
 
     flat = calibrated(0.0)

@@ -16,9 +16,9 @@ runs it measures:
 
 A figure is "within 25 %" when the empirical 1 sigma (root of the trace of the
 covariance) is within 25 % of the predicted one. The calibrations take
-error_correlation 0: the fresh noise is white, which is what the prediction then
-assumes (the default, 0.005, widens the covariance for errors shared within a camera,
-which white noise does not have; its factor is printed). The last line:
+error_correlation 0 and shared_error_shift 0: the fresh noise is white, which is what
+the prediction then assumes (the defaults widen the covariance for errors shared within
+a camera, which white noise does not have; their factor is printed). The last line:
 
     uncertainty: cells_within_25pct=.. projection_within_25pct=..
 
@@ -155,7 +155,7 @@ def study(scene: str, args: argparse.Namespace) -> tuple[float, float]:
 
 def study_with(scene: str, clean, calibrator: Calibrator, args: argparse.Namespace) -> tuple[float, float]:
     rng = np.random.default_rng(args.seed)
-    options = RegistrationOptions(error_correlation=0.0)
+    options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0)
     start = time.perf_counter()
     nominal, intrinsics = calibrator(args.noise, rng, options=options)
     default, _ = calibrator(args.noise, np.random.default_rng(args.seed))
@@ -173,7 +173,7 @@ def study_with(scene: str, clean, calibrator: Calibrator, args: argparse.Namespa
     print(f"\n{scene}: {len(names)} cameras, reference {reference}, {len(cells)} cells seen by 2+, "
           f"noise {args.noise} px, {args.runs} runs (~{one / 2:.1f} s each); "
           f"lenses in the prediction: {', '.join(lenses) or 'none'}")
-    print(f"  the default error_correlation widens the predicted error by {inflation:.2f}x (median)")
+    print(f"  the default shared errors widen the predicted error by {inflation:.2f}x (median)")
     masks = [np.array([name in s for s in seen]) for name in names]
     projections = {name: _core.uncertainty.projection(nominal, intrinsics, name, cells) for name in names}
     weights = [np.linalg.inv(u.noise_px[c] ** 2 * np.eye(2) + projections[name][masks[c]])

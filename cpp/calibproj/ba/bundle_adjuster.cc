@@ -580,30 +580,24 @@ ConsideredParameters ConsideredLenses(const Data& data, const std::vector<ceres:
   return considered;
 }
 
-// The cameras' shared-error fields (Options::shared_error_field) as considered
-// parameters: kSharedFieldSize columns per camera, [shift u, shift v, u by x, v by x,
-// u by y, v by y], x and y the observation's offset from the principal point in units of
-// the principal point's own (the image's half size).
-constexpr int kSharedFieldSize = 6;
-ConsideredParameters ConsideredSharedFields(const Data& data, const std::vector<ceres::ResidualBlockId>& observation_blocks) {
-  auto observation_of = std::make_shared<std::unordered_map<ceres::ResidualBlockId, int>>();
-  for (size_t i = 0; i < observation_blocks.size(); ++i) observation_of->emplace(observation_blocks[i], static_cast<int>(i));
+// The cameras' shared error shifts (Options::shared_error_shift) as considered
+// parameters: two columns per camera, the shift along u and v, which every observation
+// of the camera takes whole.
+ConsideredParameters ConsideredSharedShifts(const Data& data, const std::vector<ceres::ResidualBlockId>& observation_blocks) {
+  auto camera_of = std::make_shared<std::unordered_map<ceres::ResidualBlockId, int>>();
+  for (size_t i = 0; i < observation_blocks.size(); ++i) {
+    camera_of->emplace(observation_blocks[i], data.camera_index(static_cast<int>(i)));
+  }
   ConsideredParameters considered;
-  considered.columns = kSharedFieldSize * static_cast<int>(data.intrinsics.size());
-  considered.jacobian = [&data, observation_of](ceres::ResidualBlockId id, Eigen::MatrixXd* jacobian) {
-    const auto it = observation_of->find(id);
-    if (it == observation_of->end()) {
+  considered.columns = 2 * static_cast<int>(data.intrinsics.size());
+  considered.jacobian = [camera_of](ceres::ResidualBlockId id, Eigen::MatrixXd* jacobian) {
+    const auto it = camera_of->find(id);
+    if (it == camera_of->end()) {
       jacobian->resize(0, 0);
       return 0;
     }
-    const int c = data.camera_index(it->second);
-    const Intrinsics& K = data.intrinsics[c];
-    const double x = (data.observed(it->second, 0) - K.cx) / std::max(std::abs(K.cx), 1.0);
-    const double y = (data.observed(it->second, 1) - K.cy) / std::max(std::abs(K.cy), 1.0);
-    jacobian->resize(2, kSharedFieldSize);
-    *jacobian << 1, 0, x, 0, y, 0,
-                 0, 1, 0, x, 0, y;
-    return kSharedFieldSize * c;
+    *jacobian = Eigen::Matrix2d::Identity();
+    return 2 * it->second;
   };
   return considered;
 }
@@ -658,22 +652,21 @@ PoseCovariance JointPoseCovariance(ceres::Problem* problem, Parameters& params, 
   return out;
 }
 
-// The poses' covariance with every camera's shared-error field propagated into it, for
+// The poses' covariance with every camera's shared error shift propagated into it, for
 // residuals of unit variance: a camera weighed w (the reference noise over its own) has
-// field terms of variance share / w^2 in those units.
-Eigen::MatrixXd WithSharedFields(ceres::Problem* problem, const Data& data, Parameters& params, const Gauge& gauge,
+// a shift of variance (factor / w)^2 per axis in those units.
+Eigen::MatrixXd WithSharedShifts(ceres::Problem* problem, const Data& data, Parameters& params, const Gauge& gauge,
                                  const FrameChange& change, const std::vector<ceres::ResidualBlockId>& observation_blocks,
-                                 double share) {
-  const ConsideredParameters fields = ConsideredSharedFields(data, observation_blocks);
-  const PoseCovariance given = JointPoseCovariance(problem, params, gauge, change, &fields);
-  Eigen::VectorXd variance(fields.columns);
+                                 double factor) {
+  const ConsideredParameters shifts = ConsideredSharedShifts(data, observation_blocks);
+  const PoseCovariance given = JointPoseCovariance(problem, params, gauge, change, &shifts);
+  Eigen::VectorXd variance(shifts.columns);
   for (int c = 0; c < static_cast<int>(data.intrinsics.size()); ++c) {
     const double w = CameraWeight(data, c);
-    variance.segment<kSharedFieldSize>(kSharedFieldSize * c).setConstant(share / (w * w));
+    variance.segment<2>(2 * c).setConstant(factor * factor / (w * w));
   }
-  const Eigen::MatrixXd from_fields =
-      given.sensitivity * variance.asDiagonal() * given.sensitivity.transpose();
-  return given.joint + 0.5 * (from_fields + from_fields.transpose());
+  const Eigen::MatrixXd from_shifts = given.sensitivity * variance.asDiagonal() * given.sensitivity.transpose();
+  return given.joint + 0.5 * (from_shifts + from_shifts.transpose());
 }
 
 const char* ModelName(Model model) { return model == Model::kFree ? "free" : "coplanar"; }
@@ -702,8 +695,8 @@ void Options::Check() const {
   Require(!compute_covariance || refine_poses, "options: covariance needs refine_poses");
   Require(error_correlation >= 0.0 && error_correlation <= 1.0,
           "options: error_correlation must be in [0, 1], got " + Str(error_correlation));
-  Require(shared_error_field >= 0.0 && shared_error_field <= 100.0,
-          "options: shared_error_field must be in [0, 100], got " + Str(shared_error_field));
+  Require(shared_error_shift >= 0.0 && shared_error_shift <= 100.0,
+          "options: shared_error_shift must be in [0, 100], got " + Str(shared_error_shift));
   limits::RequireInRange(relief_cells, 1, kMaxReliefCells, "options: relief_cells");
 }
 
@@ -950,11 +943,11 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
         with_lenses = JointPoseCovariance(&problem, params, gauge, change, &considered);
         result.lens_sensitivity = with_lenses.sensitivity;
       }
-      const bool fields = options.shared_error_field > 0.0;
-      if (shared_errors) DiscountSharedErrors(data, options.error_correlation, projector_terms, !fields, &losses);
-      if (fields) {
-        result.pose_covariance = WithSharedFields(&problem, data, params, gauge, change, observation_blocks,
-                                                  options.shared_error_field);
+      const bool shifts = options.shared_error_shift > 0.0;
+      if (shared_errors) DiscountSharedErrors(data, options.error_correlation, projector_terms, !shifts, &losses);
+      if (shifts) {
+        result.pose_covariance = WithSharedShifts(&problem, data, params, gauge, change, observation_blocks,
+                                                  options.shared_error_shift);
       } else {
         result.pose_covariance = lenses && !shared_errors ? with_lenses.joint
                                                           : JointPoseCovariance(&problem, params, gauge, change, nullptr).joint;

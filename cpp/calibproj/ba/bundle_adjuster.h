@@ -65,14 +65,15 @@ struct Options {
   // projector's. The covariance counts a group of N residuals as N / (1 + (N - 1) *
   // error_correlation) independent ones; the solution does not depend on it.
   double error_correlation = 0.0;
-  // With compute_covariance: each camera's shared errors as a smooth field over its
-  // image instead (a shift, and both coordinates' linear terms in x and y), each of its
-  // six terms of variance shared_error_field times the camera's noise variance. The
-  // fields are considered parameters: their effect on every pose is propagated into the
-  // covariance (a camera's field moves its own pose much, and the local shape of what
-  // it measures little), and error_correlation then discounts the projector's residuals
-  // only. 0: every residual group discounted by error_correlation.
-  double shared_error_field = 0.0;
+  // With compute_covariance: each camera's shared errors as a shift that all its
+  // observations take, of standard deviation shared_error_shift times the camera's noise
+  // along each image axis (a bias of its detections, its principal point, a timing
+  // offset), instead of error_correlation's discount. The shifts are considered
+  // parameters: their effect on every pose is propagated into the covariance, so that a
+  // camera's shift moves its own pose and what it places, not the local shape of the
+  // patch it measures for a zoomed camera. error_correlation then discounts the
+  // projector's residuals only. 0: every residual group discounted by error_correlation.
+  double shared_error_shift = 0.0;
   // COPLANAR with Data::relief_weight > 0: cells of the main plane's relief grid across
   // the larger extent of its points (relief_cost.h), at most kMaxReliefCells.
   int relief_cells = 24;

@@ -138,16 +138,18 @@ void VisitRegistrationOptions(OptionsT& o, Visitor&& visit) {
         "the projector maps' noise (projector pixels) until it is estimated, or for good with "
         "estimate_noise off.");
   visit("error_correlation", o.error_correlation,
-        "the correlation of one camera's centre errors (and of the projector's): a share of each "
-        "error that its centres have in common (the lens model, blur, a floor's texture) is not "
-        "averaged away by their number, so the pose covariance counts a camera's N centres as N / "
-        "(1 + (N - 1) * error_correlation) independent ones. The poses do not depend on it.");
-  visit("shared_error_field", o.shared_error_field,
-        "each camera's shared errors as a smooth field over its image instead (a shift and linear "
-        "terms in x and y, each of variance this share of the camera's noise variance), propagated "
-        "into the covariance: a far camera's field moves its own pose but hardly the local shape of "
-        "the patch it measures for a zoomed camera. error_correlation then discounts the projector's "
-        "residuals only. 0: off. The poses do not depend on it.");
+        "the correlation of the projector's errors (and of one camera's centre errors with "
+        "shared_error_shift 0): a share of each error that its centres have in common (the lens "
+        "model, blur, a floor's texture) is not averaged away by their number, so the pose "
+        "covariance counts N centres as N / (1 + (N - 1) * error_correlation) independent ones. The "
+        "poses do not depend on it.");
+  visit("shared_error_shift", o.shared_error_shift,
+        "each camera's shared errors as a shift that all its centres take (a bias of its detections, "
+        "its principal point, a timing offset), of this many times its noise along each image axis, "
+        "propagated into the covariance: a camera's shift moves its own pose and what it places, not "
+        "the local shape of the patch it measures for a zoomed camera. error_correlation then "
+        "discounts the projector's residuals only. 0: every camera discounted by error_correlation "
+        "instead. The poses do not depend on it.");
   visit("floor_relief", o.floor_relief,
         "coplanar: the expected root mean square height of the floor's unevenness, as a share of "
         "the extent of the centres on it (0.001: 3 mm over a 3 m projection). The floor's centres "

@@ -64,13 +64,14 @@ struct Options {
   // for all cameras, the projector at projector_sigma_px.
   bool estimate_noise = true;
   double projector_sigma_px = 0.1;  // projector pixels, until estimated
-  // The correlation of one camera's centre errors (ba::Options::error_correlation): the
-  // covariance counts a camera's N centres as N / (1 + (N - 1) * this) independent ones.
+  // The correlation of the projector's errors, and of one camera's centre errors with
+  // shared_error_shift 0 (ba::Options::error_correlation): the covariance counts N of
+  // them as N / (1 + (N - 1) * this) independent ones.
   double error_correlation = 0.005;
-  // Each camera's shared errors as a smooth field over its image instead, each term's
-  // variance this share of the camera's noise variance (ba::Options::shared_error_field);
-  // error_correlation then discounts the projector's residuals only. 0: off.
-  double shared_error_field = 0.0;
+  // Each camera's shared errors as a shift of its centres instead, this many times its
+  // noise (ba::Options::shared_error_shift); error_correlation then discounts the
+  // projector's residuals only. 0: off.
+  double shared_error_shift = 2.0;
   // COPLANAR: the expected root mean square height of the main plane's unevenness (a
   // real floor's), as a share of the extent of the centres on it (0.001: 3 mm over a
   // 3 m projection). Its points may leave the plane by a smooth relief with that prior
