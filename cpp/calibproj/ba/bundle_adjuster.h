@@ -72,7 +72,8 @@ struct Options {
   // parameters: their effect on every pose is propagated into the covariance, so that a
   // camera's shift moves its own pose and what it places, not the local shape of the
   // patch it measures for a zoomed camera. error_correlation then discounts the
-  // projector's residuals only. 0: every residual group discounted by error_correlation.
+  // projector's residuals only (and the registration the refined lenses' covariance).
+  // 0: every residual group discounted by error_correlation.
   double shared_error_shift = 0.0;
   // COPLANAR with Data::relief_weight > 0: cells of the main plane's relief grid across
   // the larger extent of its points (relief_cost.h), at most kMaxReliefCells.

@@ -148,8 +148,8 @@ void VisitRegistrationOptions(OptionsT& o, Visitor&& visit) {
         "its principal point, a timing offset), of this many times its noise along each image axis, "
         "propagated into the covariance: a camera's shift moves its own pose and what it places, not "
         "the local shape of the patch it measures for a zoomed camera. error_correlation then "
-        "discounts the projector's residuals only. 0: every camera discounted by error_correlation "
-        "instead. The poses do not depend on it.");
+        "discounts the projector's residuals and the refined lenses' covariance only. 0: every "
+        "camera discounted by error_correlation instead. The poses do not depend on it.");
   visit("floor_relief", o.floor_relief,
         "coplanar: the expected root mean square height of the floor's unevenness, as a share of "
         "the extent of the centres on it (0.001: 3 mm over a 3 m projection). The floor's centres "
