@@ -13,7 +13,8 @@ reported weak (rotation known worse than the registration's weak_rotation_sigma_
 the success on evaluation points that the weak cameras did not place; weak cameras are
 listed with their sigma. "Each on points placed without it" holds every camera out of
 placing the points it is judged on in turn (``evaluate_held_out``), and the camera with
-the largest sigma (the zoomed one) is given with its error held out in px.
+the longest focal length (the zoomed one) is given with its error, sigma and error held
+out in px.
 The last line, over the cameras not reported weak:
 ``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
 sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
@@ -164,6 +165,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     truth = json.loads((room / "truth.json").read_text())
     report = json.loads(((room / "results") / "detect_report.json").read_text())
     row = {"condition": condition, "seed": seed, "total": len(scene.cameras), "extra_s": extra_s,
+           "zoomed": max(scene.cameras, key=lambda camera: camera.fx).name,
            "failed": {name: reason for name, reason in calibration.failed.items()}}
     registered = [name for name in scene.camera_names if name in calibration.poses]
     row["registered"] = len(registered)
@@ -366,9 +368,11 @@ def worst_ratio(row: dict) -> float:
 
 
 def zoomed(row: dict) -> str:
-    """The camera with the largest rotation sigma: its error and sigma (deg), and its
-    mean error on evaluation points placed without it (px)."""
-    name = max(row["sigma_deg"], key=lambda n: row["sigma_deg"][n] or 0.0)
+    """The camera with the longest focal length: its error and sigma (deg), and its mean
+    error on evaluation points placed without it (px)."""
+    name = row["zoomed"]
+    if name not in row["sigma_deg"]:
+        return f"{name} not registered or the reference"
     alone = row["alone_px"].get(name)
     return (f"{name} {row['rot_deg'][name]:.4f}/{row['sigma_deg'][name]:.4f} deg "
             f"{'-' if alone is None else f'{alone:.3f}'} px alone")
