@@ -75,7 +75,7 @@ REGISTRATION_OPTIONS = {
     "outlier_threshold_px": 1.0, "outlier_sigma_factor": 3.0, "max_refine_rounds": 5, "view_score_levels": 3,
     "num_threads": 1, "intermediate_ba_iterations": 20, "final_ba_iterations": 100,
     "weak_rotation_sigma_deg": 1.0, "use_projector": True, "min_projector_pnp_points": 4, "estimate_noise": True,
-    "projector_sigma_px": 0.1, "error_correlation": 0.005, "shared_error_shift": 2.0, "floor_relief": 0.001,
+    "projector_sigma_px": 0.1, "error_correlation": 0.005, "shared_error_shift": 0.0, "floor_relief": 0.001,
 }
 
 

@@ -71,7 +71,7 @@ struct Options {
   // Each camera's shared errors as a shift of its centres instead, this many times its
   // noise (ba::Options::shared_error_shift); error_correlation then discounts the
   // projector's residuals and the refined lenses' covariance only. 0: off.
-  double shared_error_shift = 2.0;
+  double shared_error_shift = 0.0;
   // COPLANAR: the expected root mean square height of the main plane's unevenness (a
   // real floor's), as a share of the extent of the centres on it (0.001: 3 mm over a
   // 3 m projection). Its points may leave the plane by a smooth relief with that prior
