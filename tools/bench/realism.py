@@ -13,8 +13,8 @@ reported weak (rotation known worse than the registration's weak_rotation_sigma_
 the success on evaluation points that the weak cameras did not place; weak cameras are
 listed with their sigma. "Each on points placed without it" holds every camera out of
 placing the points it is judged on in turn (``evaluate_held_out``), and the camera with
-the longest focal length (the zoomed one) is given with its error, sigma and error held
-out in px.
+the longest focal length (the zoomed one) is given with its error and sigma (deg) and its
+error held out (px).
 The last line, over the cameras not reported weak:
 ``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
 sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
@@ -155,13 +155,14 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
             extra_s = dense.duration_s
             planned = room / "dense_sequence.json"
             same_plan = planned.is_file() and Sequence.load(planned) == dense
-            if not (args.reuse and same_plan and rendered(room / "dense", scene)):
+            dense_reused = args.reuse and same_plan and rendered(room / "dense", scene)
+            if not dense_reused:
                 planned.unlink(missing_ok=True)  # written once its rendering is complete
                 simulate_videos(scene, dense, room / "dense", seed=seed + 1000,
                                 options=replace(RenderOptions(), **render_changes))
                 dense.save(planned)
             results = room / "results_dense"
-            calibration = calibrate_dense(calibrate_room, room, results, reused=args.reuse_detections and same_plan)
+            calibration = calibrate_dense(calibrate_room, room, results, reused=args.reuse_detections and dense_reused)
     truth = json.loads((room / "truth.json").read_text())
     report = json.loads(((room / "results") / "detect_report.json").read_text())
     row = {"condition": condition, "seed": seed, "total": len(scene.cameras), "extra_s": extra_s,
