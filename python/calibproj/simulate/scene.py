@@ -225,6 +225,11 @@ class Person:
     height_m: float = 1.7
     albedo: float = 0.4
 
+    def __post_init__(self) -> None:
+        # Points given as lists (as JSON gives them) compare equal to the tuples a scene file reads.
+        object.__setattr__(self, "start", tuple(float(v) for v in self.start))
+        object.__setattr__(self, "end", tuple(float(v) for v in self.end))
+
     def centre(self, time_s: float) -> np.ndarray | None:
         """Where the person stands at ``time_s`` (floor metres), None before or after."""
         start, end = np.asarray(self.start, dtype=float), np.asarray(self.end, dtype=float)
