@@ -543,9 +543,7 @@ def test_an_uneven_floor_is_not_taken_for_the_zoomed_cameras_tilt() -> None:
         options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, floor_relief=floor_relief)
         calibration = RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
         assert sorted(calibration.registered) == sorted(sim.tracks.camera_names)
-        reference = next(name for name, m in calibration.metrics.items() if m.rotation_sigma_deg == 0.0)
-        truth = {camera.name: camera.R for camera in sim.scene.cameras}
-        return rotation_errors_to_reference(calibration.poses, reference, truth), calibration
+        return errors_to_reference(calibration, sim), calibration
 
     flat_errors, flat = calibrated(0.0)
     errors, calibration = calibrated(RegistrationOptions().floor_relief)

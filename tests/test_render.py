@@ -251,6 +251,24 @@ def test_a_file_that_is_not_a_sequence_is_named(tmp_path):
     assert not (tmp_path / "out" / "truth.json").exists()
 
 
+def test_an_interrupted_rendering_leaves_no_earlier_truth(tmp_path, monkeypatch):
+    """truth.json marks a complete rendering: one interrupted over an earlier rendering's
+    folder must not leave the earlier truth beside its own scene.json."""
+    import calibproj.simulate.render as render
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "truth.json").write_text("{}")
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(render, "_render_all", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        simulate_videos("small", short_sequence(), out)
+    assert (out / "scene.json").is_file() and not (out / "truth.json").exists()
+
+
 def test_a_camera_that_does_not_see_the_floor_is_named(tmp_path):
     small = load_scene("small")
     skyward = replace(small.cameras[0], name="skyward", position=(0.0, 0.0, 2.0), look_at=(0.0, 0.5, 6.0))

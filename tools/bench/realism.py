@@ -136,7 +136,8 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
     if scene.floor.relief is not None:  # each seed its own floor
         scene = replace(scene, floor=replace(scene.floor, relief=replace(scene.floor.relief, seed=seed)))
     room = work / f"{condition}-{seed}"
-    if not (args.reuse and rendered(room, scene)):
+    first_kept = ("first_tracks.json", "first_detect_report.json") if args.reuse_detections else ()
+    if not (args.reuse and rendered(room, scene, first_kept)):
         for kept in ("first_tracks.json", "first_detect_report.json"):  # of another rendering
             (room / kept).unlink(missing_ok=True)
         simulate_videos(scene, sequence, room, seed=seed, options=replace(RenderOptions(), **render_changes))
@@ -155,7 +156,8 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
             extra_s = dense.duration_s
             planned = room / "dense_sequence.json"
             same_plan = planned.is_file() and Sequence.load(planned) == dense
-            dense_reused = args.reuse and same_plan and rendered(room / "dense", scene)
+            dense_kept = ("../dense_tracks.json",) if args.reuse_detections else ()
+            dense_reused = args.reuse and same_plan and rendered(room / "dense", scene, dense_kept)
             if not dense_reused:
                 planned.unlink(missing_ok=True)  # written once its rendering is complete
                 simulate_videos(scene, dense, room / "dense", seed=seed + 1000,
@@ -291,12 +293,17 @@ def errors_to_reference(calibration, scene: Scene) -> dict[str, float]:
     return {name: error for name, error in errors.items() if sigma[name]}
 
 
-def rendered(room: Path, scene: Scene) -> bool:
-    """The room folder already holds a complete rendering of this scene."""
+def rendered(room: Path, scene: Scene, kept: tuple[str, ...] = ()) -> bool:
+    """The room folder already holds a complete rendering of this scene, with its videos
+    or, where ``kept`` names them, the detections kept of them (a sweep deletes the
+    videos)."""
     try:
-        return (room / "truth.json").is_file() and read_scene(room / "scene.json") == scene
+        same = (room / "truth.json").is_file() and read_scene(room / "scene.json") == scene
     except (OSError, ValueError):
         return False
+    videos = room / "videos"
+    has_videos = videos.is_dir() and any(videos.iterdir())
+    return same and (has_videos or bool(kept) and all((room / name).is_file() for name in kept))
 
 
 def locked_exposures(scene: Scene) -> dict[str, float]:

@@ -205,6 +205,9 @@ def simulate_videos(
     views = _floor_views(scene, scene_source, options)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    # truth.json, written last, marks a complete rendering: an earlier one's must not vouch
+    # for this one's scene.json while it renders (or after it is interrupted).
+    (out / "truth.json").unlink(missing_ok=True)
     write_intrinsics_dir(out / "intrinsics", {camera.name: camera.intrinsics for camera in scene.cameras})
     save_scene(out / "scene.json", scene)
     videos = _render_all(scene, sequence, timeline, clocks, views, out / "videos", seed, options, progress)
