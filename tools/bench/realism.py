@@ -48,6 +48,7 @@ from calibproj.evaluation.comparison import compare, rotation_errors_to_referenc
 from calibproj.cli.demo_room import marker_side_on_floor
 from calibproj.evaluation.independent import EvaluationOptions, evaluate, evaluate_held_out
 from calibproj.formats.intrinsics import load_intrinsics_dir
+from calibproj.ingest.videos import VIDEO_SUFFIXES
 from calibproj.pipeline import calibrate
 from calibproj.registration.driver import RegistrationOptions
 from calibproj.sequence import Sequence, generate
@@ -302,7 +303,7 @@ def rendered(room: Path, scene: Scene, kept: tuple[str, ...] = ()) -> bool:
     except (OSError, ValueError):
         return False
     videos = room / "videos"
-    has_videos = videos.is_dir() and any(videos.iterdir())
+    has_videos = videos.is_dir() and any(path.suffix in VIDEO_SUFFIXES for path in videos.iterdir())
     return same and (has_videos or bool(kept) and all((room / name).is_file() for name in kept))
 
 
