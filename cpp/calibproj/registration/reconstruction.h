@@ -71,8 +71,8 @@ struct Options {
   // Each camera's shared errors as a shift of its centres instead, this many times its
   // noise (ba::Options::shared_error_shift); error_correlation then discounts the
   // projector's residuals and the refined lenses' covariance only. 0: off. 1 is what
-  // rendered rooms with realistic effects show: there the errors' root mean square
-  // ratio to the sigmas is 1.05 (README, "How accurate is it in millimetres?").
+  // rendered rooms with realistic effects show (README, "How accurate is it in
+  // millimetres?").
   double shared_error_shift = 1.0;
   // COPLANAR: the expected root mean square height of the main plane's unevenness (a
   // real floor's), as a share of the extent of the centres on it (0.001: 3 mm over a
