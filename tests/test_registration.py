@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -310,8 +311,6 @@ def test_a_weak_camera_does_not_pull_the_others() -> None:
 # camera seeing about 25 centres of a 48-array sequence.
 def demo_with_projector(noise_px: float = 0.1, seed: int = 0, projector_dist: tuple[float, float] = (0.0, 0.0),
                         relief: FloorRelief | None = None, projector_moves: dict | None = None):
-    from dataclasses import replace
-
     from calibproj.sequence.projected import layout_markers
     from calibproj.sequence.layout import MsmLayout
     from calibproj.simulate.scene import load_scene
@@ -540,7 +539,7 @@ def test_an_uneven_floor_is_not_taken_for_the_zoomed_cameras_tilt() -> None:
 
     def calibrated(floor_relief: float) -> tuple[dict[str, float], Calibration]:
         """Errors relative to the reference camera, which its covariance's are."""
-        options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, floor_relief=floor_relief)
+        options = replace(INDEPENDENT_ERRORS, floor_relief=floor_relief)
         calibration = RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
         assert sorted(calibration.registered) == sorted(sim.tracks.camera_names)
         return errors_to_reference(calibration, sim), calibration
@@ -603,7 +602,7 @@ def test_the_relief_grid_has_the_cells_asked_for(caplog) -> None:
     for cells in (8, 24):
         caplog.clear()
         with caplog.at_level(logging.INFO, logger="calibproj.registration.driver"):
-            options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, relief_cells=cells)
+            options = replace(INDEPENDENT_ERRORS, relief_cells=cells)
             RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
         found = re.search(r"over its (\d+) nodes", caplog.text)
         assert found, caplog.text
@@ -623,7 +622,7 @@ def test_a_flat_floor_keeps_the_flat_model_and_its_sigma(caplog) -> None:
     sim, markers = demo_with_projector(noise_px=0.05, seed=3)
 
     def calibrated(floor_relief: float) -> Calibration:
-        options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, floor_relief=floor_relief)
+        options = replace(INDEPENDENT_ERRORS, floor_relief=floor_relief)
         return RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
 
     flat = calibrated(0.0)
