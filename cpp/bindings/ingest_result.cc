@@ -95,7 +95,9 @@ void RegisterColumns(py::module_& m) {
       .def_property_readonly("xy", [](const MergedCentres& c) { return PointColumn(c.centres, [](const MergedCentre& x) { return x.centre; }); },
                              "(N, 2) undistorted pixels")
       .def_property_readonly("scales_kept", [](const MergedCentres& c) { return Column<int>(c.centres, [](const MergedCentre& x) { return x.scales_kept; }); })
-      .def_property_readonly("scales_rejected", [](const MergedCentres& c) { return Column<int>(c.centres, [](const MergedCentre& x) { return x.scales_rejected; }); });
+      .def_property_readonly("scales_rejected", [](const MergedCentres& c) { return Column<int>(c.centres, [](const MergedCentre& x) { return x.scales_rejected; }); })
+      .def_property_readonly("drift", [](const MergedCentres& c) { return PointColumn(c.centres, [](const MergedCentre& x) { return x.drift; }); },
+                             "(N, 2) the move of each centre for its scales' drift (in xy; 0 where none)");
 }
 
 void RegisterStatistics(py::module_& m) {
@@ -130,6 +132,16 @@ void RegisterStatistics(py::module_& m) {
       .def_readonly("untimed", &FrameClockStats::untimed, "frames without a timestamp")
       .def_readonly("largest_gap", &FrameClockStats::largest_gap, "most slots between two consecutive frames")
       .def_readonly("jitter_rms_s", &FrameClockStats::jitter_rms_s, "timing jitter, seconds");
+  using detect::ScaleDriftResult;
+  py::class_<ScaleDriftResult>(m, "ScaleDriftResult", "How a camera's centres were moved for their scales' drift")
+      .def_readonly("bandwidth", &ScaleDriftResult::bandwidth,
+                    "the kernel's width chosen, a share of the MSMs' extent (inf: one drift; 0: none)")
+      .def_readonly("msms", &ScaleDriftResult::msms, "MSMs kept at two scales of different sizes")
+      .def_readonly("corrected", &ScaleDriftResult::corrected, "centres moved")
+      .def_readonly("rms_shift_px", &ScaleDriftResult::rms_shift_px, "root mean square of their moves")
+      .def_readonly("disagreement_none", &ScaleDriftResult::disagreement_none,
+                    "leave-one-out squared disagreement of the scales without a drift, px^2")
+      .def_readonly("disagreement_chosen", &ScaleDriftResult::disagreement_chosen, "... with the drift chosen");
 }
 
 }  // namespace
@@ -184,6 +196,7 @@ void register_ingest_result(py::module_& m) {
           "records", [](const IngestResult& r) { return ScaleRecords{r.result.records}; }, "every detection")
       .def_property_readonly(
           "centres", [](const IngestResult& r) { return MergedCentres{r.result.centres}; }, "the merged centres")
+      .def_property_readonly("scale_drift", field(&R::scale_drift), "how the centres were moved for their scales' drift")
       .def_property_readonly("signal", field(&R::signal),
                              "mean luma per grid slot, NaN where not measured or dropped")
       .def_property_readonly(

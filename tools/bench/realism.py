@@ -48,6 +48,7 @@ from calibproj.evaluation.comparison import compare, rotation_errors_to_referenc
 from calibproj.cli.demo_room import marker_side_on_floor
 from calibproj.evaluation.independent import EvaluationOptions, evaluate, evaluate_held_out
 from calibproj.formats.intrinsics import load_intrinsics_dir
+from calibproj.ingest.options import IngestOptions
 from calibproj.ingest.videos import VIDEO_SUFFIXES
 from calibproj.pipeline import calibrate
 from calibproj.registration.driver import RegistrationOptions
@@ -148,7 +149,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         calibrate_scaled, intrinsics=room / "intrinsics", scale=f"marker-size:{marker_side_m:.9f}",
         options=RegistrationOptions(model=args.model, use_projector=not args.no_projector, **args.registration_option),
         exposures=locked_exposures(scene) if args.locked_exposures else None, label=f"{condition} seed {seed}",
-        refine_intrinsics=args.refine_intrinsics)
+        refine_intrinsics=args.refine_intrinsics, ingest_options=IngestOptions(**args.ingest_option))
     calibration = calibrate_first(calibrate_room, room, sequence_path, results, reused=args.reuse_detections)
     extra_s = 0.0
     if args.densify:
@@ -265,7 +266,7 @@ def calibrate_dense(calibrate_room, room: Path, results: Path, reused: bool):
 
 def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics: Path, scale: str,
                      options: RegistrationOptions, exposures, label: str, merge: Path | None = None,
-                     refine_intrinsics: list[str] | None = None):
+                     refine_intrinsics: list[str] | None = None, ingest_options: IngestOptions | None = None):
     """calibrate() into ``results`` with a metric scale; results in arbitrary units
     (logged) when the scale cannot be measured."""
     # An earlier run's results must not pass for this one's when the calibration fails
@@ -273,7 +274,8 @@ def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics:
     (results / "camera_poses.json").unlink(missing_ok=True)
     try:
         return calibrate(videos, intrinsics, sequence=sequence, out=results, options=options, exposures=exposures,
-                         scale=scale, force=True, progress=False, merge=merge, refine_intrinsics=refine_intrinsics)
+                         scale=scale, force=True, progress=False, merge=merge, refine_intrinsics=refine_intrinsics,
+                         ingest_options=ingest_options)
     except ValueError as error:
         logging.warning("%s: %s", label, error)
         if not (results / "camera_poses.json").is_file():
@@ -408,17 +410,17 @@ def format_row(row: dict) -> str:
             + (format_lenses(row["lenses"]) if "lenses" in row else ""))
 
 
-def registration_changes(items: list[str]) -> dict:
-    """``NAME=VALUE`` items as RegistrationOptions fields, each value read as its default's type."""
-    defaults = RegistrationOptions()
+def option_changes(items: list[str], options_class, flag: str) -> dict:
+    """``NAME=VALUE`` items as fields of ``options_class``, each value read as its default's type."""
+    defaults = options_class()
     changes = {}
     for item in items:
         name, _, value = item.partition("=")
         if not hasattr(defaults, name) or not value:
-            raise ValueError(f"--registration-option {item!r}: expected NAME=VALUE with NAME a RegistrationOptions field")
+            raise ValueError(f"{flag} {item!r}: expected NAME=VALUE with NAME a {options_class.__name__} field")
         kind = type(getattr(defaults, name))
         changes[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
-    RegistrationOptions(**changes)  # its own checks, before any rendering
+    options_class(**changes)  # its own checks, before any rendering
     return changes
 
 
@@ -456,6 +458,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--registration-option", metavar="NAME=VALUE", action="append", default=[],
                         help="a RegistrationOptions field set for every calibration, e.g. relief_cells=16 "
                              "(repeatable; default none)")
+    parser.add_argument("--ingest-option", metavar="NAME=VALUE", action="append", default=[],
+                        help="an IngestOptions field set for every detection, e.g. scale_drift=0 (repeatable; "
+                             "default none)")
     parser.add_argument("--refine-intrinsics", metavar="[CAMERA=]ENTRIES", action="append", default=None,
                         help="self-calibrate every run from the true intrinsics (as calibrate's flag); each row "
                              "then lists the cameras flagged a misfit and the refined focal lengths' worst error "
@@ -463,9 +468,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, default=None, help="also write every row to this JSON file")
     args = parser.parse_args(argv)
     try:
-        args.registration_option = registration_changes(args.registration_option)
+        args.registration_option = option_changes(args.registration_option, RegistrationOptions,
+                                                  "--registration-option")
+        args.ingest_option = option_changes(args.ingest_option, IngestOptions, "--ingest-option")
     except ValueError as error:
         parser.error(str(error))
+    if args.ingest_option and args.reuse_detections:
+        parser.error("--ingest-option changes the detections, which --reuse-detections takes as kept")
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     names = [name.strip() for name in args.conditions.split(",") if name.strip()]
     unknown = sorted(set(names) - set(CONDITIONS))

@@ -46,6 +46,7 @@ struct MergedCentre {
   cv::Point2d centre;  // undistorted pixels
   int scales_kept = 0;
   int scales_rejected = 0;
+  cv::Point2d drift{0.0, 0.0};  // the move of the centre for its scales' drift (scale_drift.h)
 };
 
 // Merges the records per (array, marker); sets each record's `kept` and `deviation_px`.

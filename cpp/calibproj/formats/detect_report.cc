@@ -1,5 +1,6 @@
 #include "calibproj/formats/detect_report.h"
 
+#include <cmath>
 #include <cstdio>
 
 namespace calibproj::formats {
@@ -88,6 +89,9 @@ ordered_json CameraResultSummary(const ingest::CameraIngestResult& r, const inge
       r.consistency_problem.empty() ? ordered_json(nullptr) : ordered_json(r.consistency_problem);
   entry["scales"] = ScalesSummary(r.scales, sequence.scales);
   entry["msms_kept"] = r.centres.size();
+  const detect::ScaleDriftResult& drift = r.scale_drift;
+  entry["scale_drift"] = {{"bandwidth", std::isfinite(drift.bandwidth) ? ordered_json(drift.bandwidth) : ordered_json("camera")},
+                          {"msms", drift.msms}, {"corrected", drift.corrected}, {"rms_shift_px", drift.rms_shift_px}};
   entry["homography_rms_px"] = r.homography_valid ? ordered_json(r.homography_rms_px) : ordered_json(nullptr);
   entry["seconds"] = {{"total", r.seconds_total}, {"detection", r.seconds_detection}};
   return entry;
@@ -131,6 +135,10 @@ std::string CameraLines(const std::string& name, const ordered_json& camera) {
                      std::to_string(frames.at("duplicated").get<int>()) + " duplicated), " +
                      std::to_string(frames.at("detected").get<int>()) + " detected; " +
                      std::to_string(camera.at("msms_kept").get<int>()) + " MSMs kept";
+  if (camera.contains("scale_drift") && camera.at("scale_drift").value("corrected", 0) > 0) {
+    line += Format(" (moved %.3f px rms for their scales' drift)",
+                   camera.at("scale_drift").value("rms_shift_px", 0.0));
+  }
   std::string per_scale;
   for (const auto& s : camera.at("scales")) {
     per_scale += (per_scale.empty() ? "" : ", ") + Format("%g", s.at("scale").get<double>()) + ": " +

@@ -752,9 +752,23 @@ class CameraIngest {
       if (r.kept) ++result_.scales[r.scale_index].kept;
     }
     MeasureSpread();
+    CorrectScaleDrift();
     result_.homography_valid = homography_.valid();
     result_.homography = homography_.H();
     result_.homography_rms_px = homography_.rms_px();
+  }
+
+  // The merged centres moved for the drift of their scales on a floor that is not flat
+  // (after MeasureSpread, which measures the scales' spread around their mean).
+  void CorrectScaleDrift() {
+    std::vector<double> side;
+    for (const detect::ScaleRecord& r : result_.records) side.push_back(sequence_.patterns[r.pattern].marker_side_px);
+    std::vector<cv::Point2d> projector;
+    for (const detect::MergedCentre& c : result_.centres) {
+      projector.push_back(sequence_.centres[c.array * sequence_.markers_per_array + c.marker]);
+    }
+    result_.scale_drift =
+        detect::CorrectScaleDrift(result_.records, side, projector, &result_.centres, options_.scale_drift);
   }
 
   // Per scale, how far its kept detections lie from their MSM's merged centre (records
@@ -853,6 +867,7 @@ void IngestOptions::Check() const {
   roi.Check();
   homography.Check();
   merge.Check();
+  scale_drift.Check();
   Require(mean_row_step >= 1 && mean_row_step <= limits::kMaxImageSide,
           "mean_row_step must be in [1, " + std::to_string(limits::kMaxImageSide) + "]");
   Require(luma_gamma > 0.0, "luma_gamma must be positive");

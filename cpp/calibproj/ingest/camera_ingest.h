@@ -19,6 +19,7 @@
 #include "calibproj/detect/marker_detector.h"
 #include "calibproj/detect/marker_verification.h"
 #include "calibproj/detect/msm_merge.h"
+#include "calibproj/detect/scale_drift.h"
 #include "calibproj/detect/projector_homography.h"
 #include "calibproj/detect/resolution_limit.h"
 #include "calibproj/detect/roi.h"
@@ -44,6 +45,8 @@ struct IngestOptions {
   bool learn_resolution = true;
   detect::ResolutionOptions resolution;
   detect::MergeOptions merge;
+  // Merged centres moved to where a marker of no size would put them (scale_drift.h).
+  detect::ScaleDriftOptions scale_drift;
   // Every detection checked against one homography of the floor (wrong ids, frames of
   // another pattern).
   detect::ConsistencyOptions consistency;
@@ -185,6 +188,7 @@ struct CameraIngestResult {
   std::vector<ScaleStats> scales;
   std::vector<detect::ScaleRecord> records;
   std::vector<detect::MergedCentre> centres;
+  detect::ScaleDriftResult scale_drift;  // how the centres were moved for their scales' drift
   std::vector<double> signal;  // mean luma per grid slot, NaN where not measured or dropped
   std::vector<std::vector<double>> band_signals;  // the same per band of rows (readout)
   bool homography_valid = false;

@@ -234,6 +234,19 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "scales of an MSM farther than this from their median are rejected.");
   visit("min_scales", o.merge.min_scales,
         "scales an MSM needs (after rejection) to give a centre.");
+  visit("scale_drift", o.scale_drift.enabled,
+        "on a floor that is not flat a marker's corners leave its plane, and its centre drifts with the "
+        "square of its size (0.1 px on a floor 6 mm uneven): the drift is measured from the scales of "
+        "each MSM, smoothly over the floor, and every merged centre moved to where a marker of no size "
+        "would put it, when it predicts the scales' disagreement (cross-validated).");
+  visit("scale_drift_min_msms", o.scale_drift.min_msms,
+        "... provided this many MSMs are kept at two scales of different sizes;");
+  visit("scale_drift_prior_msms", o.scale_drift.prior_msms,
+        "... and the drift is shrunk towards none as if this many MSMs had measured none at every place "
+        "(a centre with few such neighbours is moved by less);");
+  visit("scale_drift_min_gain", o.scale_drift.min_gain,
+        "... and a drift is used only when it predicts this share of the scales' disagreement, each MSM's "
+        "from the others' (on a flat floor noise alone predicts a few percent).");
   visit("readout_bands", o.readout_bands,
         "horizontal bands of the image whose light codes are fitted separately: their offsets give a "
         "rolling shutter's readout time (0: not measured).");

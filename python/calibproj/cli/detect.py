@@ -64,6 +64,14 @@ def run(args: argparse.Namespace) -> int:
     return 0 if len(result.failed) < len(result.cameras) else 1
 
 
+def drift_note(camera: dict) -> str:
+    """How far the centres were moved for their scales' drift, when they were."""
+    drift = camera.get("scale_drift") or {}
+    if not drift.get("corrected"):
+        return ""
+    return f" (moved {drift['rms_shift_px']:.3f} px rms for their scales' drift)"
+
+
 def format_report(report: dict) -> str:
     """Per camera: sync, frames, markers per scale, MSMs kept (or the error)."""
     lines = []
@@ -77,7 +85,7 @@ def format_report(report: dict) -> str:
             f"{sync['offset_uncertainty_frames']:.3f} frames), {sync['camera_fps']:.4f} fps "
             f"({sync['drift_ppm']:+.0f} ppm), codes {sync['start_correlation']:.3f}/{sync['end_correlation']:.3f}; "
             f"frames {frames['decoded']} decoded ({frames['dropped']} dropped, {frames['duplicated']} duplicated), "
-            f"{frames['detected']} detected; {camera['msms_kept']} MSMs kept")
+            f"{frames['detected']} detected; {camera['msms_kept']} MSMs kept{drift_note(camera)}")
         per_scale = ", ".join(f"{s['scale']:g}: {s['detected']}/{s['searched']}" for s in camera["scales"])
         lines.append(f"    markers found/searched per scale: {per_scale}")
     return "\n".join(lines)
