@@ -64,7 +64,8 @@ BASELINES_THAT_RAISE = {"_core.geometry.Similarity3", "_core.video.VideoInfo", "
                         "_core.selfcal.Result", "_core.selfcal.RefineRequest", "_core.selfcal.LensReport",
                         "_core.selfcal.SelfCalibration", "_core.sync.SyncResult", "_core.sync.CodeLocation",
                         "_core.sync.BandFit", "_core.sync.ReadoutEstimate", "_core.ingest.ScaleRecords",
-                        "_core.ingest.MergedCentres", "_core.ingest.FrameClockStats", "_core.Knob",
+                        "_core.ingest.MergedCentres", "_core.ingest.FrameClockStats", "_core.ingest.ScaleDriftResult",
+                        "_core.Knob",
                         "_core.ba.ManifoldValues", "_core.selfcal.RefinedCalibration"}
 
 # Keyword options of registration.Reconstruction (cpp/bindings/registration.cc).
@@ -645,7 +646,7 @@ class Baselines:
             "_core.ba.ManifoldValues": Spec([]),
             **{f"_core.sync.{name}": Spec([]) for name in ("SyncResult", "CodeLocation", "BandFit", "ReadoutEstimate")},
             **{f"_core.ingest.{name}": Spec([]) for name in ("CameraIngestResult", "ScaleRecords", "MergedCentres",
-                                                             "ScaleStats", "FrameClockStats")},
+                                                             "ScaleStats", "FrameClockStats", "ScaleDriftResult")},
             "_core.sync.FrameMap.camera_frame": Spec([("projector_time", 3.0)]),
             "_core.sync.FrameMap.projector_time": Spec([("camera_frame", 12.0)]),
             "_core.ingest.lens_tables_map": Spec([("intrinsics", self.intrinsics), ("resolution", (64, 48)),
@@ -960,6 +961,7 @@ class Baselines:
             "_core.ingest.ScaleRecords": {"empty": lambda: _core.ingest.CameraIngestResult().records},
             "_core.ingest.MergedCentres": {"empty": lambda: _core.ingest.CameraIngestResult().centres},
             "_core.ingest.FrameClockStats": {"empty": lambda: _core.ingest.CameraIngestResult().timing},
+            "_core.ingest.ScaleDriftResult": {"empty": lambda: _core.ingest.CameraIngestResult().scale_drift},
             "_core.ingest.ScaleStats": {"empty": _core.ingest.ScaleStats},
             "_core.sync.FrameMap": {"synced": lambda: self.synchronised().map},
             "_core.sync.SyncResult": {"synced": self.synchronised},
