@@ -151,13 +151,14 @@ def test_bad_input_is_a_clear_error() -> None:
         selfcal.self_calibrate(camera_index, point_index, observed, lenses, shapes, [[0]] * 5, flipped, points)
 
 
-def test_a_lens_to_refine_turns_the_ingest_s_local_check_off() -> None:
+def test_a_lens_to_refine_turns_the_ingest_s_local_check_and_scale_drift_off() -> None:
     """The core's ingest options for lenses still to be refined, which both tools take when
-    no ingest option is given: the local check compares centres to a fraction of a pixel."""
+    no ingest option is given: the local check compares centres to a fraction of a pixel,
+    and the scales of a marker that such a lens bends disagree by its error."""
     from calibproj.ingest.options import IngestOptions
 
-    assert _core.ingest.unrefined_lens_changes() == [("consistency_local_neighbours", 0)]
-    assert IngestOptions().consistency_local_neighbours > 0
+    assert _core.ingest.unrefined_lens_changes() == [("consistency_local_neighbours", 0), ("scale_drift", False)]
+    assert IngestOptions().consistency_local_neighbours > 0 and IngestOptions().scale_drift
 
 
 def test_refine_request_parsing() -> None:

@@ -155,7 +155,7 @@ void register_ingest(py::module_& m) {
       },
       "(name, value) of the ingest knobs a calibration that refines lenses changes when no ingest options are "
       "given: the local consistency check off (a lens still to be refined does not allow its fraction of a "
-      "pixel).");
+      "pixel) and the scale drift off (its scales disagree by the lens's error).");
   m.def("option_table", &IngestOptionTable,
         "Every ingest knob as a Knob (name, default, help), in order: the one declaration "
         "calibproj.ingest.options.IngestOptions and both command lines are made from.");

@@ -856,6 +856,7 @@ bool ValidKnownExposure(double seconds) { return seconds > 0.0 && seconds <= kMa
 IngestOptions OptionsForUnrefinedLenses() {
   IngestOptions options;
   options.consistency.local_neighbours = 0;
+  options.scale_drift.enabled = false;
   return options;
 }
 

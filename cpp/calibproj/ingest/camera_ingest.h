@@ -139,7 +139,9 @@ struct IngestOptions {
 
 // The ingest options of a calibration that refines lenses when none are given: the
 // local consistency check off, as it compares each centre with its neighbours to a
-// fraction of a pixel, which a lens still to be refined does not allow.
+// fraction of a pixel, which a lens still to be refined does not allow; and the scale
+// drift off, as such a lens bends a large marker's corners and its scales disagree by
+// the lens's error, not the floor's.
 IngestOptions OptionsForUnrefinedLenses();
 
 // A camera's known exposure time (--exposure CAMERA=SECONDS): more than 0 and at most
