@@ -149,7 +149,9 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         calibrate_scaled, intrinsics=room / "intrinsics", scale=f"marker-size:{marker_side_m:.9f}",
         options=RegistrationOptions(model=args.model, use_projector=not args.no_projector, **args.registration_option),
         exposures=locked_exposures(scene) if args.locked_exposures else None, label=f"{condition} seed {seed}",
-        refine_intrinsics=args.refine_intrinsics, ingest_options=IngestOptions(**args.ingest_option))
+        refine_intrinsics=args.refine_intrinsics,
+        # None leaves calibrate its own choice (a lens to refine relaxes the ingest).
+        ingest_options=IngestOptions(**args.ingest_option) if args.ingest_option else None)
     calibration = calibrate_first(calibrate_room, room, sequence_path, results, reused=args.reuse_detections)
     extra_s = 0.0
     if args.densify:
@@ -417,7 +419,7 @@ def option_changes(items: list[str], options_class, flag: str) -> dict:
     for item in items:
         name, _, value = item.partition("=")
         if not hasattr(defaults, name) or not value:
-            raise ValueError(f"{flag} {item!r}: expected NAME=VALUE with NAME a {options_class.__name__} field")
+            raise ValueError(f"{flag} {item!r}: expected NAME=VALUE with NAME a field of {options_class.__name__}")
         kind = type(getattr(defaults, name))
         changes[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
     options_class(**changes)  # its own checks, before any rendering
