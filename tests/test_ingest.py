@@ -228,15 +228,7 @@ def test_merged_centre_is_the_mean_of_the_kept_scales_moved_by_their_drift(aruco
 
 def merged_centre_rms(result, truth) -> dict[str, float]:
     """Each camera's root mean square error of its merged centres against the truth (px)."""
-    rms = {}
-    for name, camera in result.cameras.items():
-        points = truth["image_points"][name]
-        true_xy = dict(zip(points["ids"], points["undistorted"]))
-        centres = camera.raw.centres
-        ids = centres.array * result.tracks.markers_per_array + centres.marker
-        errors = [np.subtract(xy, true_xy[int(i)]) for i, xy in zip(ids, centres.xy)]
-        rms[name] = float(np.sqrt(np.mean(np.sum(np.square(errors), axis=1))))
-    return rms
+    return {name: float(np.sqrt(np.mean(centre_errors(result, truth, name)[0] ** 2))) for name in result.cameras}
 
 
 def test_the_scales_drift_on_an_uneven_floor_is_taken_out(tmp_path):
