@@ -607,9 +607,10 @@ def test_the_relief_grid_has_the_cells_asked_for(caplog) -> None:
         found = re.search(r"over its (\d+) nodes", caplog.text)
         assert found, caplog.text
         nodes[cells] = int(found.group(1))
-    # The test of unevenness is on a grid half as fine: (cells / 2 + 1) nodes along the
-    # longer extent, fewer along the other.
-    assert 5 < nodes[8] <= 25 and 13 * 2 < nodes[24] <= 13 * 13, nodes
+    # The test of unevenness is on a grid half as fine; a cubic relief has (cells / 2 + 3)
+    # nodes along the longer extent (a ring of control points around the cells), fewer
+    # along the other.
+    assert 7 * 4 <= nodes[8] <= 7 * 7 and 15 * 4 <= nodes[24] <= 15 * 15, nodes
     with pytest.raises(ValueError, match="relief_cells"):
         RegistrationOptions(relief_cells=33)
 

@@ -45,8 +45,9 @@ ba::Intrinsics IntrinsicsOf(const Eigen::Matrix3d& K) { return {K(0, 0), K(1, 1)
 
 // Residual and the requested Jacobian blocks of one cost function at one point.
 py::tuple EvaluateCost(const ceres::CostFunction& cost, const std::vector<Eigen::VectorXd>& blocks,
-                       const std::vector<bool>& want) {
+                       std::vector<bool> want) {
   const auto& sizes = cost.parameter_block_sizes();
+  if (want.empty()) want.assign(sizes.size(), true);
   if (blocks.size() != sizes.size() || want.size() != sizes.size()) {
     throw std::invalid_argument("expected " + std::to_string(sizes.size()) + " parameter blocks and flags");
   }
@@ -66,6 +67,23 @@ py::tuple EvaluateCost(const ceres::CostFunction& cost, const std::vector<Eigen:
     if (want[b]) out_jacobians.append(jacobians[b]); else out_jacobians.append(py::none());
   }
   return py::make_tuple(ok, residual, out_jacobians);
+}
+
+// A relief of one cell [0, spacing]^2: bilinear for 4 nodes, cubic for 16.
+ba::ReliefGrid OneCellGrid(double spacing, const Eigen::VectorXd& nodes) {
+  if (!(spacing > 0.0) || (nodes.size() != 4 && nodes.size() != 16)) {
+    throw std::invalid_argument("expected a positive spacing and 4 (bilinear) or 16 (cubic) nodes");
+  }
+  ba::ReliefGrid grid;
+  grid.spacing = spacing;
+  grid.cell_columns = grid.cell_rows = 1;
+  grid.cubic = nodes.size() == 16;
+  return grid;
+}
+
+// One parameter block of size 1 per node height.
+void AppendNodeBlocks(const Eigen::VectorXd& nodes, std::vector<Eigen::VectorXd>* blocks) {
+  for (Eigen::Index k = 0; k < nodes.size(); ++k) blocks->push_back(Eigen::VectorXd::Constant(1, nodes(k)));
 }
 
 ba::Result BundleAdjustPy(const Eigen::VectorXi& camera_index, const Eigen::VectorXi& point_index,
@@ -294,20 +312,19 @@ void register_ba(py::module_& m) {
       [](const Eigen::Matrix3d& K, const Eigen::VectorXd& observed, double spacing, const Eigen::VectorXd& pose,
          const Eigen::VectorXd& plane, const Eigen::VectorXd& ab, const Eigen::VectorXd& nodes,
          const std::vector<bool>& want) {
-        if (!(spacing > 0.0) || nodes.size() != 4) throw std::invalid_argument("expected a positive spacing and 4 nodes");
-        ba::ReliefGrid grid;
-        grid.spacing = spacing;
-        grid.columns = grid.rows = 2;
+        const ba::ReliefGrid grid = OneCellGrid(spacing, nodes);
         const ba::ReliefReprojectionCost cost(
             new ba::PlanePointReprojectionCost(IntrinsicsOf(K), Vec2(observed, "observed")), grid, 0);
-        Eigen::VectorXd n0(1), n1(1), n2(1), n3(1);
-        n0 << nodes(0); n1 << nodes(1); n2 << nodes(2); n3 << nodes(3);
-        return EvaluateCost(cost, {pose, plane, ab, n0, n1, n2, n3}, want);
+        std::vector<Eigen::VectorXd> blocks = {pose, plane, ab};
+        AppendNodeBlocks(nodes, &blocks);
+        return EvaluateCost(cost, blocks, want);
       },
       py::arg("K"), py::arg("observed"), py::arg("spacing"), py::arg("pose"), py::arg("plane"), py::arg("ab"),
-      py::arg("nodes"), py::arg("want") = std::vector<bool>(7, true),
-      "Diagnostics: (ok, residual, [J_pose, J_plane, J_ab, J_node0..3]) of the COPLANAR cost on a relief of one\n"
-      "cell [0, spacing]^2 whose corner heights are `nodes` (order (0,0), (1,0), (0,1), (1,1)).");
+      py::arg("nodes"), py::arg("want") = std::vector<bool>(),
+      "Diagnostics: (ok, residual, [J_pose, J_plane, J_ab, J_node...]) of the COPLANAR cost on a relief of one\n"
+      "cell [0, spacing]^2: 4 nodes, its corners' heights (order (0,0), (1,0), (0,1), (1,1)), bilinear; or 16,\n"
+      "the cubic B-spline's control points at spacing * (i - 1, j - 1), node j * 4 + i. `want`: the\n"
+      "Jacobians asked for (empty: all).");
   m.def(
       "evaluate_projector_cost",
       [](const Eigen::VectorXd& projector, double weight, const Eigen::VectorXd& surface_map,
@@ -323,20 +340,17 @@ void register_ba(py::module_& m) {
       [](const Eigen::VectorXd& projector, double weight, const Eigen::VectorXd& surface_map, const Eigen::VectorXd& lens,
          double spacing, const Eigen::VectorXd& ab, const Eigen::VectorXd& apex, const Eigen::VectorXd& nodes,
          const std::vector<bool>& want) {
-        if (!(spacing > 0.0) || nodes.size() != 4) throw std::invalid_argument("expected a positive spacing and 4 nodes");
-        ba::ReliefGrid grid;
-        grid.spacing = spacing;
-        grid.columns = grid.rows = 2;
+        const ba::ReliefGrid grid = OneCellGrid(spacing, nodes);
         const ba::ReliefProjectorCost cost(new ba::ProjectorSurfaceCost(Vec2(projector, "projector"), weight), grid, 0);
-        Eigen::VectorXd n0(1), n1(1), n2(1), n3(1);
-        n0 << nodes(0); n1 << nodes(1); n2 << nodes(2); n3 << nodes(3);
-        return EvaluateCost(cost, {surface_map, lens, ab, apex, n0, n1, n2, n3}, want);
+        std::vector<Eigen::VectorXd> blocks = {surface_map, lens, ab, apex};
+        AppendNodeBlocks(nodes, &blocks);
+        return EvaluateCost(cost, blocks, want);
       },
       py::arg("projector"), py::arg("weight"), py::arg("surface_map"), py::arg("lens"), py::arg("spacing"),
-      py::arg("ab"), py::arg("apex"), py::arg("nodes"), py::arg("want") = std::vector<bool>(8, true),
-      "Diagnostics: (ok, residual, [J_map, J_lens, J_ab, J_apex, J_node0..3]) of the projector cost of a centre on a\n"
-      "relief of one cell [0, spacing]^2 (corner heights `nodes`), seen along the ray from the apex\n"
-      "[1 / e, C_a / e, C_b / e].");
+      py::arg("ab"), py::arg("apex"), py::arg("nodes"), py::arg("want") = std::vector<bool>(),
+      "Diagnostics: (ok, residual, [J_map, J_lens, J_ab, J_apex, J_node...]) of the projector cost of a centre on\n"
+      "a relief of one cell [0, spacing]^2 (nodes as for evaluate_relief_cost), seen along the ray from the\n"
+      "apex [1 / e, C_a / e, C_b / e]. `want`: the Jacobians asked for (empty: all).");
   m.def(
       "point_on_plane",
       [](const Eigen::Vector4d& plane, const Eigen::Vector2d& ab) { return ba::PointOnPlane(plane.data(), ab.data()); },

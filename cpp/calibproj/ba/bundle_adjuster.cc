@@ -144,7 +144,7 @@ struct Parameters {
   // The main plane's relief (relief_cost.h): node heights, kept here for the same
   // reason as the maps; per point its grid cell, -1 for a point without relief.
   ReliefGrid relief_grid;
-  std::array<double, (kMaxReliefCells + 1) * (kMaxReliefCells + 1)> relief_storage{};
+  std::array<double, (kMaxReliefCells + 3) * (kMaxReliefCells + 3)> relief_storage{};
   std::vector<int> relief_cell;
 
   // The projector's apex [1 / e, C / e] (relief_cost.h), refined where the main plane has
@@ -159,10 +159,7 @@ struct Parameters {
   // The relief's height under point p (0 without one).
   double ReliefHeight(int p) const {
     if (relief_cell.empty() || relief_cell[p] < 0) return 0.0;
-    const ReliefGrid::Cell cell = relief_grid.CellAt(relief_cell[p], points.row(p).head<2>().transpose());
-    double h = 0.0;
-    for (int k = 0; k < 4; ++k) h += cell.weights[k] * relief_storage[cell.nodes[k]];
-    return h;
+    return relief_grid.HeightAt(relief_cell[p], points.row(p).head<2>().transpose(), relief_storage.data());
   }
 
   double* Plane(int k) { return k == 0 ? plane.data() : more_planes.row(k - 1).data(); }
@@ -216,7 +213,7 @@ void InitialRelief(const Options& options, Parameters* params) {
     if (params->point_plane[p] == 0) ab.push_back(params->points.row(p).head<2>().transpose());
   }
   if (ab.size() < 2) return;
-  params->relief_grid = ReliefGrid::Covering(ab, options.relief_cells);
+  params->relief_grid = ReliefGrid::Covering(ab, options.relief_cells, options.relief_cubic);
   params->relief_cell.assign(params->points.rows(), -1);
   for (int p = 0; p < static_cast<int>(params->points.rows()); ++p) {
     if (params->point_plane[p] == 0) params->relief_grid.CellOf(params->points.row(p).head<2>(), &params->relief_cell[p]);
@@ -246,7 +243,7 @@ void InitialApex(const Data& data, Parameters* params) {
   }
   middle /= std::max(count, 1);
   const ReliefGrid& grid = params->relief_grid;
-  const double extent = grid.spacing * std::max(grid.columns - 1, grid.rows - 1);
+  const double extent = grid.spacing * std::max(grid.cell_columns, grid.cell_rows);
   params->apex_mean << 1.0 / height, middle / height;
   const double beta_sigma = 0.5 * extent / std::abs(height);
   params->apex_weights << data.apex_prior_px / (0.5 / std::abs(height)), Eigen::Vector2d::Constant(data.apex_prior_px / beta_sigma);

@@ -78,6 +78,8 @@ struct Options {
   // COPLANAR with Data::relief_weight > 0: cells of the main plane's relief grid across
   // the larger extent of its points (relief_cost.h), at most kMaxReliefCells.
   int relief_cells = 24;
+  // The relief's height between its nodes: a cubic B-spline (true) or bilinear.
+  bool relief_cubic = true;
 
   // Throws std::invalid_argument naming the first inconsistent option.
   void Check() const;

@@ -158,11 +158,15 @@ void VisitRegistrationOptions(OptionsT& o, Visitor&& visit) {
         "patch's slope as its own tilt. 0: an exactly flat floor.");
   visit("relief_cells", o.relief_cells,
         "coplanar, with a relief: the relief grid's cells across the larger extent of the floor's "
-        "centres; its height is bilinear between their corners, so a floor that rises and falls "
-        "over shorter distances than a cell needs more. A zoomed camera sees its patch's slope as its "
-        "own tilt: on the rendered 9-camera room (a floor 3 mm uneven), 24 cells leave it 0.018-0.047 "
-        "deg off where 12 left 0.031-0.082 deg (3 seeds). Whether the floor is uneven at all is "
-        "tested on a grid half as fine.");
+        "centres; a floor that rises and falls over shorter distances than a cell needs more. A "
+        "zoomed camera sees its patch's slope as its own tilt: on the rendered 9-camera room (a "
+        "floor 3 mm uneven, bilinear relief), 24 cells leave it 0.018-0.047 deg off where 12 left "
+        "0.031-0.082 deg (3 seeds). Whether the floor is uneven at all is tested on a grid half "
+        "as fine.");
+  visit("relief_cubic", o.relief_cubic,
+        "coplanar, with a relief: its height between the grid's nodes is a cubic B-spline, whose "
+        "slope and curvature run on across the cells' edges; off: bilinear between the cells' "
+        "corners, whose kinks a camera zoomed onto the floor sees at about a pixel per millimetre.");
 }
 
 }  // namespace calibproj::registration

@@ -1087,6 +1087,7 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   ba_options.shared_error_shift = options_.shared_error_shift;
   ba_options.relief_cells = testing_relief_ ? std::max(1, options_.relief_cells / kReliefTestCoarsening)
                                             : options_.relief_cells;
+  ba_options.relief_cubic = options_.relief_cubic;
   if (cameras.size() < 2 && options_.model == ba::Model::kFree) return result;
   // Without a covariance (the poses not all determined) the solution stands all the same.
   const ba::Result solved = ba::BundleAdjust(data, ba_options);

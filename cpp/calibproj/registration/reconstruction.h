@@ -80,8 +80,11 @@ struct Options {
   // (ba/relief_cost.h); 0: an exactly flat plane.
   double floor_relief = 0.001;
   // COPLANAR with a relief: the relief grid's cells across the larger extent of the
-  // main plane's centres (its nodes are bilinear between them).
+  // main plane's centres.
   int relief_cells = 24;
+  // The relief's height between its nodes: a cubic B-spline (smooth slope and
+  // curvature across the cells' edges) or, off, bilinear (ba::Options::relief_cubic).
+  bool relief_cubic = true;
 
   void Check() const;
 };
