@@ -2,6 +2,7 @@
 
 #include <ceres/ceres.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -577,24 +578,71 @@ ConsideredParameters ConsideredLenses(const Data& data, const std::vector<ceres:
   return considered;
 }
 
-// The cameras' shared error shifts (Options::shared_error_shift) as considered
-// parameters: two columns per camera, the shift along u and v, which every observation
-// of the camera takes whole.
-ConsideredParameters ConsideredSharedShifts(const Data& data, const std::vector<ceres::ResidualBlockId>& observation_blocks) {
-  auto camera_of = std::make_shared<std::unordered_map<ceres::ResidualBlockId, int>>();
-  for (size_t i = 0; i < observation_blocks.size(); ++i) {
-    camera_of->emplace(observation_blocks[i], data.camera_index(static_cast<int>(i)));
+// Nodes along each image axis of a camera's shared error field (Options::
+// shared_error_field): 3 x 3 over the box of its observations.
+constexpr int kFieldNodes = 3;
+
+// Per camera, the box of its observed pixels: [u_min, v_min, u_max, v_max].
+std::vector<Eigen::Vector4d> ObservedBoxes(const Data& data) {
+  std::vector<Eigen::Vector4d> boxes(data.intrinsics.size(), Eigen::Vector4d(INFINITY, INFINITY, -INFINITY, -INFINITY));
+  for (int i = 0; i < data.camera_index.size(); ++i) {
+    Eigen::Vector4d& box = boxes[data.camera_index(i)];
+    const Eigen::Vector2d uv = data.observed.row(i).transpose();
+    box.head<2>() = box.head<2>().cwiseMin(uv);
+    box.tail<2>() = box.tail<2>().cwiseMax(uv);
   }
+  return boxes;
+}
+
+// The bilinear weights of the field's nodes at pixel uv of a camera's box, node (i, j)
+// at index j * kFieldNodes + i.
+Eigen::Matrix<double, kFieldNodes * kFieldNodes, 1> FieldWeights(const Eigen::Vector4d& box, const Eigen::Vector2d& uv) {
+  Eigen::Matrix<double, kFieldNodes * kFieldNodes, 1> weights = Eigen::Matrix<double, kFieldNodes * kFieldNodes, 1>::Zero();
+  double cell[2];
+  int first[2];
+  for (int axis = 0; axis < 2; ++axis) {
+    const double extent = box(axis + 2) - box(axis);
+    const double x = extent > 0.0 ? std::clamp((uv(axis) - box(axis)) / extent, 0.0, 1.0) * (kFieldNodes - 1) : 0.0;
+    first[axis] = std::min(static_cast<int>(x), kFieldNodes - 2);
+    cell[axis] = x - first[axis];
+  }
+  for (int dj = 0; dj < 2; ++dj) {
+    for (int di = 0; di < 2; ++di) {
+      weights((first[1] + dj) * kFieldNodes + first[0] + di) =
+          (di ? cell[0] : 1.0 - cell[0]) * (dj ? cell[1] : 1.0 - cell[1]);
+    }
+  }
+  return weights;
+}
+
+// The cameras' shared errors as considered parameters: per camera two columns, the
+// shift along u and v that every observation of the camera takes whole
+// (Options::shared_error_shift), and with `field` two per node of its shared error
+// field, bilinear between the nodes (Options::shared_error_field).
+ConsideredParameters ConsideredSharedErrors(const Data& data, const std::vector<ceres::ResidualBlockId>& observation_blocks,
+                                            bool field) {
+  auto observation_of = std::make_shared<std::unordered_map<ceres::ResidualBlockId, int>>();
+  for (size_t i = 0; i < observation_blocks.size(); ++i) observation_of->emplace(observation_blocks[i], static_cast<int>(i));
+  const int per_camera = 2 + (field ? 2 * kFieldNodes * kFieldNodes : 0);
+  auto boxes = std::make_shared<std::vector<Eigen::Vector4d>>(ObservedBoxes(data));
   ConsideredParameters considered;
-  considered.columns = 2 * static_cast<int>(data.intrinsics.size());
-  considered.jacobian = [camera_of](ceres::ResidualBlockId id, Eigen::MatrixXd* jacobian) {
-    const auto it = camera_of->find(id);
-    if (it == camera_of->end()) {
+  considered.columns = per_camera * static_cast<int>(data.intrinsics.size());
+  considered.jacobian = [observation_of, boxes, per_camera, &data](ceres::ResidualBlockId id, Eigen::MatrixXd* jacobian) {
+    const auto it = observation_of->find(id);
+    if (it == observation_of->end()) {
       jacobian->resize(0, 0);
       return 0;
     }
-    *jacobian = Eigen::Matrix2d::Identity();
-    return 2 * it->second;
+    const int camera = data.camera_index(it->second);
+    jacobian->setZero(2, per_camera);
+    jacobian->leftCols<2>().setIdentity();
+    if (per_camera > 2) {
+      const auto weights = FieldWeights((*boxes)[camera], data.observed.row(it->second).transpose());
+      for (int node = 0; node < weights.size(); ++node) {
+        jacobian->block<2, 2>(0, 2 + 2 * node) = weights(node) * Eigen::Matrix2d::Identity();
+      }
+    }
+    return per_camera * camera;
   };
   return considered;
 }
@@ -649,21 +697,25 @@ PoseCovariance JointPoseCovariance(ceres::Problem* problem, Parameters& params, 
   return out;
 }
 
-// The poses' covariance with every camera's shared error shift propagated into it, for
+// The poses' covariance with every camera's shared errors propagated into it, for
 // residuals of unit variance: a camera weighed w (the reference noise over its own) has
-// a shift of variance (factor / w)^2 per axis in those units.
-Eigen::MatrixXd WithSharedShifts(ceres::Problem* problem, const Data& data, Parameters& params, const Gauge& gauge,
+// a shift of variance (shift / w)^2 per axis in those units, and each node of its field
+// one of (field / w)^2.
+Eigen::MatrixXd WithSharedErrors(ceres::Problem* problem, const Data& data, Parameters& params, const Gauge& gauge,
                                  const FrameChange& change, const std::vector<ceres::ResidualBlockId>& observation_blocks,
-                                 double factor) {
-  const ConsideredParameters shifts = ConsideredSharedShifts(data, observation_blocks);
-  const PoseCovariance given = JointPoseCovariance(problem, params, gauge, change, &shifts);
-  Eigen::VectorXd variance(shifts.columns);
-  for (int c = 0; c < static_cast<int>(data.intrinsics.size()); ++c) {
+                                 double shift, double field) {
+  const ConsideredParameters shared = ConsideredSharedErrors(data, observation_blocks, field > 0.0);
+  const PoseCovariance given = JointPoseCovariance(problem, params, gauge, change, &shared);
+  const int cameras = static_cast<int>(data.intrinsics.size());
+  const int per_camera = shared.columns / std::max(cameras, 1);
+  Eigen::VectorXd variance(shared.columns);
+  for (int c = 0; c < cameras; ++c) {
     const double w = CameraWeight(data, c);
-    variance.segment<2>(2 * c).setConstant(factor * factor / (w * w));
+    variance.segment(per_camera * c, per_camera).setConstant(field * field / (w * w));
+    variance.segment<2>(per_camera * c).setConstant(shift * shift / (w * w));
   }
-  const Eigen::MatrixXd from_shifts = given.sensitivity * variance.asDiagonal() * given.sensitivity.transpose();
-  return given.joint + 0.5 * (from_shifts + from_shifts.transpose());
+  const Eigen::MatrixXd from_shared = given.sensitivity * variance.asDiagonal() * given.sensitivity.transpose();
+  return given.joint + 0.5 * (from_shared + from_shared.transpose());
 }
 
 const char* ModelName(Model model) { return model == Model::kFree ? "free" : "coplanar"; }
@@ -694,6 +746,8 @@ void Options::Check() const {
           "options: error_correlation must be in [0, 1], got " + Str(error_correlation));
   Require(shared_error_shift >= 0.0 && shared_error_shift <= 100.0,
           "options: shared_error_shift must be in [0, 100], got " + Str(shared_error_shift));
+  Require(shared_error_field >= 0.0 && shared_error_field <= 100.0,
+          "options: shared_error_field must be in [0, 100], got " + Str(shared_error_field));
   limits::RequireInRange(relief_cells, 1, kMaxReliefCells, "options: relief_cells");
 }
 
@@ -940,11 +994,11 @@ Result BundleAdjust(const Data& data, const Options& requested, const CostFactor
         with_lenses = JointPoseCovariance(&problem, params, gauge, change, &considered);
         result.lens_sensitivity = with_lenses.sensitivity;
       }
-      const bool shifts = options.shared_error_shift > 0.0;
+      const bool shifts = options.shared_error_shift > 0.0 || options.shared_error_field > 0.0;
       if (shared_errors) DiscountSharedErrors(data, options.error_correlation, projector_terms, !shifts, &losses);
       if (shifts) {
-        result.pose_covariance = WithSharedShifts(&problem, data, params, gauge, change, observation_blocks,
-                                                  options.shared_error_shift);
+        result.pose_covariance = WithSharedErrors(&problem, data, params, gauge, change, observation_blocks,
+                                                  options.shared_error_shift, options.shared_error_field);
       } else {
         result.pose_covariance = lenses && !shared_errors ? with_lenses.joint
                                                           : JointPoseCovariance(&problem, params, gauge, change, nullptr).joint;

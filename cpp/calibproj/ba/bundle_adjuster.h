@@ -75,6 +75,13 @@ struct Options {
   // projector's residuals only (and the registration the refined lenses' covariance).
   // 0: every residual group discounted by error_correlation.
   double shared_error_shift = 0.0;
+  // Each camera's shared errors also as a smooth field over its image: independent
+  // shifts at the nodes of a 3 x 3 grid over the box of its observations, bilinear
+  // between them, of this many times its noise along each axis, propagated into the
+  // covariance as the shift is. A far camera's detection errors that vary across its
+  // view tilt the floor's relief under a zoomed camera's patch, which the uniform shift
+  // does not. 0: off.
+  double shared_error_field = 0.0;
   // COPLANAR with Data::relief_weight > 0: cells of the main plane's relief grid across
   // the larger extent of its points (relief_cost.h), at most kMaxReliefCells.
   int relief_cells = 24;

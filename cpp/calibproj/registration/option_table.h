@@ -150,6 +150,12 @@ void VisitRegistrationOptions(OptionsT& o, Visitor&& visit) {
         "the local shape of the patch it measures for a zoomed camera. error_correlation then "
         "discounts the projector's residuals and the refined lenses' covariance only. 0: every "
         "camera discounted by error_correlation instead. The poses do not depend on it.");
+  visit("shared_error_field", o.shared_error_field,
+        "each camera's shared errors also as a smooth field over its image: independent shifts at the "
+        "nodes of a 3 x 3 grid over its observations, bilinear between them, of this many times its "
+        "noise, propagated into the covariance as the shift is. A far camera's errors that vary across "
+        "its view tilt an uneven floor's relief under a zoomed camera's patch, which a uniform shift "
+        "does not. 0: off. The poses do not depend on it.");
   visit("floor_relief", o.floor_relief,
         "coplanar: the expected root mean square height of the floor's unevenness, as a share of "
         "the extent of the centres on it (0.001: 3 mm over a 3 m projection). The floor's centres "

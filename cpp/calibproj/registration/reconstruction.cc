@@ -153,6 +153,7 @@ void Options::Check() const {
   limits::RequireInRange(projector_sigma_px, 1e-6, 100.0, "registration: projector_sigma_px");
   limits::RequireInRange(error_correlation, 0.0, 1.0, "registration: error_correlation");
   limits::RequireInRange(shared_error_shift, 0.0, 100.0, "registration: shared_error_shift");
+  limits::RequireInRange(shared_error_field, 0.0, 100.0, "registration: shared_error_field");
   limits::RequireInRange(floor_relief, 0.0, 0.1, "registration: floor_relief");
   limits::RequireInRange(relief_cells, 1, ba::kMaxReliefCells, "registration: relief_cells");
 }
@@ -1085,6 +1086,7 @@ AdjustResult Reconstruction::Adjust(bool final, bool covariance) {
   if (covariance) AddLenses(cameras, &data);
   ba_options.error_correlation = options_.error_correlation;
   ba_options.shared_error_shift = options_.shared_error_shift;
+  ba_options.shared_error_field = options_.shared_error_field;
   ba_options.relief_cells = testing_relief_ ? std::max(1, options_.relief_cells / kReliefTestCoarsening)
                                             : options_.relief_cells;
   ba_options.relief_cubic = options_.relief_cubic;
