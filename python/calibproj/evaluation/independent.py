@@ -49,6 +49,10 @@ THRESHOLDS_PX = (0.5, 2.0, 5.0)
 INITIALISATIONS = ("pair", "all-views")
 LOSSES = ("none", "huber", "cauchy")
 MIN_VIEWS = 2
+# Nearest depth in front of a camera at which the core's bundle adjustment projects a
+# point (ba/camera.h kMinDepth): a point nearer than that is behind it for the
+# refinement, and must be left out before it, not refused by it.
+MIN_DEPTH = 1e-9
 EVALUATION_KIND = "evaluation"
 EVALUATION_MAJOR = 1
 
@@ -266,7 +270,7 @@ def _triangulate_and_refine(
     rays = normalised_rays(K[camera_index], xy)
     points = triangulate_tracks(R, t, camera_index, point_index, rays, tracks.num_points, options.initialisation)
     finite = np.all(np.isfinite(points), axis=1)[point_index]
-    in_front = finite & (depths(R[camera_index], t[camera_index], np.nan_to_num(points[point_index])) > 0)
+    in_front = finite & (depths(R[camera_index], t[camera_index], np.nan_to_num(points[point_index])) > MIN_DEPTH)
     behind = np.bincount(camera_index[finite & ~in_front], minlength=len(usable))
     # A point left with one view in front of its cameras is not determined: drop it.
     kept = tracks.select(in_front).with_min_track_length(MIN_VIEWS)
@@ -281,7 +285,7 @@ def _triangulate_and_refine(
     points = _refine(R[cameras], t[cameras], K[cameras], renumbered, point_index[anchor], xy[anchor], points,
                      options)
     projected, depth = project(K[camera_index], R[camera_index], t[camera_index], points[point_index])
-    in_front = depth > 0
+    in_front = depth > MIN_DEPTH
     behind = behind + np.bincount(camera_index[~in_front], minlength=len(usable))
     error = np.linalg.norm(projected - xy, axis=1)
     errors = {name: error[(camera_index == c) & in_front] for c, name in enumerate(usable)}
