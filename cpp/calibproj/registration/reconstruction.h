@@ -322,11 +322,17 @@ class Reconstruction {
   // True when the points of observations[k], k in subset, all lie on one plane (placed on
   // it, or drawn on it by the projector).
   bool AllOnOnePlane(const std::vector<int>& observations, const std::vector<int>& subset) const;
+  // True when observation i is its point's only active view among the registered cameras.
+  bool OnlyView(int observation) const;
+  // True when OnlyView(observation) and its camera's pose misses the projector's prediction of the point by more than the
+  // PnP threshold (AddPoints leaves such a point for the refinement's planes).
+  bool ProjectorContradictsSingleView(int observation) const;
   // The projector-pixel outline of every raised surface's reconstructed points
   // (surface_outlines_), once the planes are found.
   void OutlineSurfaces();
   // Points seen by one camera placed again on the plane whose projector-to-camera
-  // homography explains them.
+  // homography explains them, and those AddPoints left out placed on it for the first
+  // time (on the main plane where no plane explains them).
   void PlaceSingleViewPointsOnTheirSurfaces();
   int MinPnpPoints() const {
     return HasProjector() && !projector_surfaces_.empty()
