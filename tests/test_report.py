@@ -153,7 +153,8 @@ def test_report_page_has_viewport_warnings_numbers_and_no_provenance_note(report
     assert "Camera cam3 FAILED" in page  # in the headline above the tables
     assert "Positions and intrinsics" in page and "tilt from down [deg]" in page
     assert "No provenance recorded" in page  # results written without calibrate
-    assert "relief, estimated" in page  # coplanar: the points leave the floor by its relief only
+    # Coplanar on a simulated floor that is exactly flat: the relief test keeps it flat.
+    assert "kept flat" in page and "relief, estimated" not in page
     # The first screen answers whether every camera is OK: a line per camera, the
     # reference named, the others with their sigmas, the failure with its reason.
     head = re.search(r'<div class="headline">(.*?)</div>', page).group(1)
@@ -248,3 +249,12 @@ def test_a_bad_intrinsics_file_leaves_its_camera_without_intrinsics(report_with_
     page = write_report(folder).read_text(encoding="utf-8")
     assert "<h3>cam1</h3>" in page and "<h3>cam2</h3>" in page
     assert any(str(folder / "intrinsics" / "cam1.json") in r.getMessage() for r in caplog.records)
+
+
+def test_the_summary_says_when_the_floors_relief_was_estimated(report_with_a_failed_camera) -> None:
+    from calibproj.report.page import _summary
+
+    calibration = report_with_a_failed_camera[1]
+    uneven = calibration.replace(floor_rms=0.0003)  # what a relief the test found leaves
+    assert "relief, estimated" in _summary(uneven, [], None)
+    assert "kept flat" in _summary(calibration.replace(floor_rms=0.0), [], None)

@@ -1452,7 +1452,17 @@ RefineResult Reconstruction::Refine() {
   pose_lens_covariance_.resize(0, 0);
   lens_covariance_.resize(0, 0);
   covariance_noise_px_.clear();
+  const auto placed = [&] { return std::count(reconstructed_.begin(), reconstructed_.end(), true); };
+  const auto before_planes = placed();
   result.planes_found = FindPlanes();
+  if (placed() > before_planes) {
+    // Points placed for the first time (AddPoints left them for the planes) join as
+    // the registration's do, through a robust adjustment and the outlier filter: the
+    // relief test weighs every residual as it is (or-table room, a gross outlier among
+    // them: a relief detected on the flat floor at 2,700 times its bar).
+    Adjust(false);
+    FilterOutliers();
+  }
   result.relief = TestRelief();
   for (int round = 0; round < options_.max_refine_rounds; ++round) {
     // The covariance of every round (cheap: the reduced camera system): the last one
