@@ -619,21 +619,24 @@ def test_the_relief_places_the_projector_where_it_hangs() -> None:
         assert found == pytest.approx(expected, abs=0.01), name
 
 
-def test_the_relief_grid_has_the_cells_asked_for(caplog) -> None:
+@pytest.mark.parametrize("cubic", [False, True])
+def test_the_relief_grid_has_the_cells_asked_for(caplog, cubic: bool) -> None:
     sim, markers = demo_with_projector(noise_px=0.05, relief=FloorRelief(rms_m=0.003, seed=1))
     nodes = {}
     for cells in (8, 24):
         caplog.clear()
         with caplog.at_level(logging.INFO, logger="calibproj.registration.driver"):
-            options = replace(INDEPENDENT_ERRORS, relief_cells=cells)
+            options = replace(INDEPENDENT_ERRORS, relief_cells=cells, relief_cubic=cubic)
             RegistrationDriver(sim.tracks, sim.intrinsics, options, projector=markers).run()
         found = re.search(r"over its (\d+) nodes", caplog.text)
         assert found, caplog.text
         nodes[cells] = int(found.group(1))
-    # The test of unevenness is on a grid half as fine; a cubic relief has (cells / 2 + 3)
-    # nodes along the longer extent (a ring of control points around the cells), fewer
-    # along the other.
-    assert 7 * 4 <= nodes[8] <= 7 * 7 and 15 * 4 <= nodes[24] <= 15 * 15, nodes
+    # The test of unevenness is on a grid half as fine, with (cells / 2 + 1) nodes along
+    # the longer extent, fewer along the other; a cubic relief has a ring of control
+    # points around the cells besides (cells / 2 + 3).
+    ring = 2 if cubic else 0
+    assert (5 + ring) * (2 + ring) <= nodes[8] <= (5 + ring) ** 2, nodes
+    assert (13 + ring) * (4 + ring) <= nodes[24] <= (13 + ring) ** 2, nodes
     with pytest.raises(ValueError, match="relief_cells"):
         RegistrationOptions(relief_cells=33)
 

@@ -86,7 +86,7 @@ struct Options {
   // the larger extent of its points (relief_cost.h), at most kMaxReliefCells.
   int relief_cells = 24;
   // The relief's height between its nodes: a cubic B-spline (true) or bilinear.
-  bool relief_cubic = true;
+  bool relief_cubic = false;
 
   // Throws std::invalid_argument naming the first inconsistent option.
   void Check() const;

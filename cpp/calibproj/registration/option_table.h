@@ -172,7 +172,9 @@ void VisitRegistrationOptions(OptionsT& o, Visitor&& visit) {
   visit("relief_cubic", o.relief_cubic,
         "coplanar, with a relief: its height between the grid's nodes is a cubic B-spline, whose "
         "slope and curvature run on across the cells' edges; off: bilinear between the cells' "
-        "corners, whose kinks a camera zoomed onto the floor sees at about a pixel per millimetre.");
+        "corners, whose kinks a camera zoomed onto the floor sees at about a pixel per millimetre. "
+        "Off by default: the refinement takes 2.5-4x as long with it, for a zoomed camera 0-25 % "
+        "nearer the truth on the rendered rooms measured.");
 }
 
 }  // namespace calibproj::registration
