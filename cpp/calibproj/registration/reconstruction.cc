@@ -1459,7 +1459,7 @@ RefineResult Reconstruction::Refine() {
     // Points placed for the first time (AddPoints left them for the planes) join as
     // the registration's do, through a robust adjustment and the outlier filter: the
     // relief test weighs every residual as it is (or-table room, a gross outlier among
-    // them: a relief detected on the flat floor at 2,700 times its bar).
+    // them: a relief detected on the flat floor at 2,600 times its bar).
     Adjust(false);
     FilterOutliers();
   }

@@ -328,8 +328,9 @@ class Reconstruction {
   bool AllOnOnePlane(const std::vector<int>& observations, const std::vector<int>& subset) const;
   // True when observation i is its point's only active view among the registered cameras.
   bool OnlyView(int observation) const;
-  // True when OnlyView(observation) and its camera's pose misses the projector's prediction of the point by more than the
-  // PnP threshold (AddPoints leaves such a point for the refinement's planes).
+  // True when OnlyView(observation) and its camera's pose misses the projector's
+  // prediction of the point by more than the PnP threshold (AddPoints leaves such a
+  // point for the refinement's planes).
   bool ProjectorContradictsSingleView(int observation) const;
   // The projector-pixel outline of every raised surface's reconstructed points
   // (surface_outlines_), once the planes are found.
