@@ -153,12 +153,14 @@ def test_report_page_has_viewport_warnings_numbers_and_no_provenance_note(report
     assert "Camera cam3 FAILED" in page  # in the headline above the tables
     assert "Positions and intrinsics" in page and "tilt from down [deg]" in page
     assert "No provenance recorded" in page  # results written without calibrate
-    # Coplanar on a simulated floor that is exactly flat: the relief test keeps it flat.
-    assert "kept flat" in page and "relief, estimated" not in page
+    # Coplanar: the floor's line says whether the relief test found it uneven (a test at
+    # 99.9 %, so on a flat simulated floor either verdict can come; both texts are checked
+    # in test_the_summary_says_when_the_floors_relief_was_estimated).
+    calibration = report_with_a_failed_camera[1]
+    assert ("kept flat" if calibration.floor_rms < 1e-9 else "relief, estimated") in page
     # The first screen answers whether every camera is OK: a line per camera, the
     # reference named, the others with their sigmas, the failure with its reason.
     head = re.search(r'<div class="headline">(.*?)</div>', page).group(1)
-    calibration = report_with_a_failed_camera[1]
     assert f"<b>{len(calibration.poses)} of 3 cameras calibrated</b>" in head and head.count("<li") == 3
     assert f"Camera cam3 FAILED: {calibration.failed['cam3']}" in head
     assert re.search(r"cam2(: ok,| is WEAK:) rotation \d\.\d{4} deg, centre \d+\.\d+ ", head)
