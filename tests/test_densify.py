@@ -171,7 +171,8 @@ def test_a_texture_that_moves_large_markers_more_leaves_the_small_ones_their_wei
     assert len(sides) == 1 and np.all(np.isnan(by_size.largest_side_px[:sequence.layout.arrays]))
     # Independent simulated errors on an exactly flat floor (what the relief would take up
     # of the displaced centres is not what this test is about).
-    options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, floor_relief=0.0)
+    options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, shared_error_field=0.0,
+                                  floor_relief=0.0)
     sigma = {}
     for name, markers in (("one noise", ProjectedMarkers(by_size.centres_px, by_size.marker_side_px, by_size.projector)), ("by size", by_size)):
         driver = RegistrationDriver(tracks, intrinsics, options, projector=markers)

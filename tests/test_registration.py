@@ -325,7 +325,7 @@ def demo_with_projector(noise_px: float = 0.1, seed: int = 0, projector_dist: tu
 
 # Simulated tracks have independent errors: the covariance then needs no share of
 # errors common to a camera's centres (RegistrationOptions.error_correlation).
-INDEPENDENT_ERRORS = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0)
+INDEPENDENT_ERRORS = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, shared_error_field=0.0)
 
 
 def rotation_error_deg(calibration, sim, name: str) -> float:

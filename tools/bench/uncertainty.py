@@ -155,7 +155,7 @@ def study(scene: str, args: argparse.Namespace) -> tuple[float, float]:
 
 def study_with(scene: str, clean, calibrator: Calibrator, args: argparse.Namespace) -> tuple[float, float]:
     rng = np.random.default_rng(args.seed)
-    options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0)
+    options = RegistrationOptions(error_correlation=0.0, shared_error_shift=0.0, shared_error_field=0.0)
     start = time.perf_counter()
     nominal, intrinsics = calibrator(args.noise, rng, options=options)
     default, _ = calibrator(args.noise, np.random.default_rng(args.seed))

@@ -155,7 +155,8 @@ void VisitRegistrationOptions(OptionsT& o, Visitor&& visit) {
         "nodes of a 3 x 3 grid over its observations, bilinear between them, of this many times its "
         "noise, propagated into the covariance as the shift is. A far camera's errors that vary across "
         "its view tilt an uneven floor's relief under a zoomed camera's patch, which a uniform shift "
-        "does not. 0: off. The poses do not depend on it.");
+        "does not: on the rendered rooms with a floor 6 mm uneven the default leaves the zoomed camera "
+        "1.3-2.6 sigma off, where 0 (off) left it 2.2-5.2. The poses do not depend on it.");
   visit("floor_relief", o.floor_relief,
         "coplanar: the expected root mean square height of the floor's unevenness, as a share of "
         "the extent of the centres on it (0.001: 3 mm over a 3 m projection). The floor's centres "
