@@ -203,7 +203,7 @@ def test_a_weak_camera_can_be_kept_from_placing_the_points(paper) -> None:
     poses["far3"] = (matrix_from_rotvec(np.radians([0.0, 1.0, 0.0])) @ R, t)
     # far3 the only weak camera, whatever the others' sigmas say.
     metrics = dict(calibration.metrics)
-    for name, camera in metrics.items():
+    for camera in metrics.values():
         camera.weak = False
     calibration = calibration.replace(metrics=metrics)
     metrics = dict(calibration.metrics)
