@@ -14,7 +14,8 @@ the success on evaluation points that the weak cameras did not place; weak camer
 listed with their sigma. "Each on points placed without it" holds every camera out of
 placing the points it is judged on in turn (``evaluate_held_out``), and the camera with
 the longest focal length (the zoomed one) is given with its error and sigma (deg) and its
-error held out (px).
+error held out (px), also with every pose the true one (what its detections and the
+others' allow, whatever the registration does).
 The last line, over the cameras not reported weak:
 ``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
 sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
@@ -198,6 +199,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
         alone = [held_out[name].mean_px is not None and held_out[name].mean_px < 0.5
                  for name in comparison.cameras if name in held_out]
         row["success_alone"] = float(np.mean(alone)) if alone else math.nan
+        row["alone_px_at_truth"] = held_out_at_truth(calibration, scene, room, row["zoomed"])
         # The sigma is relative to the reference camera (sigma 0): so is this error.
         relative = errors_to_reference(calibration, scene)
         row["sigmas"] = {name: relative[name] / calibration.metrics[name].rotation_sigma_deg for name in relative}
@@ -285,6 +287,19 @@ def calibrate_scaled(videos: Path, sequence: Path, results: Path, *, intrinsics:
         from calibproj.formats.calibration import Calibration
 
         return Calibration.load(results)
+
+
+def held_out_at_truth(calibration, scene: Scene, room: Path, name: str) -> float | None:
+    """The mean error (px) of camera ``name`` on evaluation points placed without it when
+    every pose is the rendering's true one: what the detections alone allow, whatever
+    the registration does (None when it is not registered or has no such points)."""
+    if name not in calibration.poses:
+        return None
+    true_poses = {camera.name: (camera.R, camera.t) for camera in scene.cameras if camera.name in calibration.poses}
+    at_truth = evaluate(calibration.replace(poses=true_poses), room / "eval_tracks.json", room / "intrinsics",
+                        EvaluationOptions(held_out=(name,)))
+    judged = at_truth.cameras.get(name)
+    return None if judged is None else judged.mean_px
 
 
 def errors_to_reference(calibration, scene: Scene) -> dict[str, float]:
@@ -386,9 +401,10 @@ def zoomed(row: dict) -> str:
     name = row["zoomed"]
     if name not in row["sigma_deg"]:
         return f"{name} not registered or the reference"
-    alone = row["alone_px"].get(name)
+    alone, at_truth = row["alone_px"].get(name), row.get("alone_px_at_truth")
     return (f"{name} {row['rot_deg'][name]:.4f}/{row['sigma_deg'][name]:.4f} deg "
-            f"{'-' if alone is None else f'{alone:.3f}'} px alone")
+            f"{'-' if alone is None else f'{alone:.3f}'} px alone "
+            f"({'-' if at_truth is None else f'{at_truth:.3f}'} px at the true poses)")
 
 
 def format_row(row: dict) -> str:
@@ -424,6 +440,59 @@ def option_changes(items: list[str], options_class, flag: str) -> dict:
         changes[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
     options_class(**changes)  # its own checks, before any rendering
     return changes
+
+
+def summarise(rows: list[dict], lenses: bool) -> None:
+    """The last lines: the worst of every run (module docstring)."""
+    evaluated = [row for row in rows if "rot" in row]
+    # Over the cameras not reported weak: a weak camera is reported with its sigma.
+    worst_rot = max((row["rot_strong"] for row in evaluated), default=math.nan)
+    worst_success = min((row["success_strong"] for row in evaluated), default=math.nan)
+    registered = sum(row["registered"] for row in rows)
+    total = sum(row["total"] for row in rows)
+    worst_sync = max((row["sync_frames"]["determined"] for row in rows), default=math.nan)
+    beyond = max((row["sync_frames"]["beyond"] for row in rows), default=math.nan)
+    readouts = [row["readout_ms"] for row in rows if row["readout_ms"] is not None]
+    worst_readout = max((error for error, _ in readouts), default=math.nan)
+    worst_readout_sigmas = max((sigmas for _, sigmas in readouts), default=math.nan)
+    wrong = sum(row["wrong"] for row in rows)
+    worst_alone = min((row["success_alone"] for row in evaluated), default=math.nan)
+    worst_sigmas = max((worst_ratio(row) for row in evaluated), default=math.nan)
+    weak_runs = sum(bool(row["weak"]) for row in rows)
+    worst_extra = max((row["extra_s"] for row in rows), default=0.0)
+    at_truth = [row["alone_px_at_truth"] for row in evaluated if row.get("alone_px_at_truth") is not None]
+    print(f"realism: all cameras: worst_success_alone={worst_alone:.3f} worst_error_sigmas={worst_sigmas:.2f} "
+          f"runs_with_weak={weak_runs}/{len(rows)} worst_extra_projection_s={worst_extra:.1f} "
+          f"zoomed_alone_px_at_truth={min(at_truth, default=math.nan):.3f}..{max(at_truth, default=math.nan):.3f}")
+    print(f"realism: worst_rot_deg={worst_rot:.4f} worst_eval_success={worst_success:.3f} "
+          f"registered={registered}/{total} worst_sync_frames={worst_sync:.3f} sync_beyond_frames={beyond:.3f} "
+          f"worst_readout_ms={worst_readout:.2f} worst_readout_sigmas={worst_readout_sigmas:.1f} wrong={wrong}")
+    if lenses:
+        per_run = [list(row.get("lenses", {}).values()) for row in rows]
+        flagged = sum(any(lens["misfit"] for lens in run) for run in per_run)
+        trusted = [abs(lens["focal_sigmas"]) for run in per_run for lens in run
+                   if lens["focal_sigmas"] is not None and not lens["misfit"]]
+        print(f"realism: lenses: runs_with_misfit={flagged}/{len(rows)} "
+              f"worst_trusted_focal_sigmas={max(trusted, default=math.nan):.1f}")
+
+
+def summarise_files(paths: list[Path]) -> int:
+    """The rows and last lines of earlier runs' --json files; 2 with one line when one is
+    not such a file."""
+    rows = []
+    for path in paths:
+        try:
+            loaded = json.loads(path.read_text())
+            if not isinstance(loaded, list) or not all(isinstance(row, dict) and "condition" in row for row in loaded):
+                raise ValueError("not a list of realism rows")
+        except (OSError, ValueError) as error:
+            print(f"realism: {path}: {error}", file=sys.stderr)
+            return 2
+        rows += loaded
+    for row in rows:
+        print(format_row(row))
+    summarise(rows, lenses=any("lenses" in row for row in rows))
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -468,7 +537,11 @@ def main(argv: list[str] | None = None) -> int:
                              "then lists the cameras flagged a misfit and the refined focal lengths' worst error "
                              "in sigmas over the others")
     parser.add_argument("--json", type=Path, default=None, help="also write every row to this JSON file")
+    parser.add_argument("--summarise", metavar="JSON", type=Path, nargs="+", default=None,
+                        help="run nothing: print the rows and last lines of earlier runs' --json files together")
     args = parser.parse_args(argv)
+    if args.summarise:
+        return summarise_files(args.summarise)
     try:
         args.registration_option = option_changes(args.registration_option, RegistrationOptions,
                                                   "--registration-option")
@@ -497,34 +570,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(format_row(row), flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
-    evaluated = [row for row in rows if "rot" in row]
-    # Over the cameras not reported weak: a weak camera is reported with its sigma.
-    worst_rot = max((row["rot_strong"] for row in evaluated), default=math.nan)
-    worst_success = min((row["success_strong"] for row in evaluated), default=math.nan)
-    registered = sum(row["registered"] for row in rows)
-    total = sum(row["total"] for row in rows)
-    worst_sync = max((row["sync_frames"]["determined"] for row in rows), default=math.nan)
-    beyond = max((row["sync_frames"]["beyond"] for row in rows), default=math.nan)
-    readouts = [row["readout_ms"] for row in rows if row["readout_ms"] is not None]
-    worst_readout = max((error for error, _ in readouts), default=math.nan)
-    worst_readout_sigmas = max((sigmas for _, sigmas in readouts), default=math.nan)
-    wrong = sum(row["wrong"] for row in rows)
-    worst_alone = min((row["success_alone"] for row in evaluated), default=math.nan)
-    worst_sigmas = max((worst_ratio(row) for row in evaluated), default=math.nan)
-    weak_runs = sum(bool(row["weak"]) for row in rows)
-    worst_extra = max((row["extra_s"] for row in rows), default=0.0)
-    print(f"realism: all cameras: worst_success_alone={worst_alone:.3f} worst_error_sigmas={worst_sigmas:.2f} "
-          f"runs_with_weak={weak_runs}/{len(rows)} worst_extra_projection_s={worst_extra:.1f}")
-    print(f"realism: worst_rot_deg={worst_rot:.4f} worst_eval_success={worst_success:.3f} "
-          f"registered={registered}/{total} worst_sync_frames={worst_sync:.3f} sync_beyond_frames={beyond:.3f} "
-          f"worst_readout_ms={worst_readout:.2f} worst_readout_sigmas={worst_readout_sigmas:.1f} wrong={wrong}")
-    if args.refine_intrinsics:
-        lenses = [list(row.get("lenses", {}).values()) for row in rows]
-        flagged = sum(any(lens["misfit"] for lens in run) for run in lenses)
-        trusted = [abs(lens["focal_sigmas"]) for run in lenses for lens in run
-                   if lens["focal_sigmas"] is not None and not lens["misfit"]]
-        print(f"realism: lenses: runs_with_misfit={flagged}/{len(rows)} "
-              f"worst_trusted_focal_sigmas={max(trusted, default=math.nan):.1f}")
+    summarise(rows, lenses=bool(args.refine_intrinsics))
     return 0
 
 
