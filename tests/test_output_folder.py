@@ -218,7 +218,8 @@ def calibrate_args(sim: Path, out: Path, *extra: str, tracks: Path | None = None
     # Simulated tracks have independent errors (nothing shared to discount or shift): no
     # camera is weak, and a failure's error line is all a run prints.
     return ["calibrate", "--tracks", str(tracks or sim / "tracks.json"), "--intrinsics", str(sim / "intrinsics"),
-            "--out", str(out), "--no-progress", "--error-correlation", "0", "--shared-error-shift", "0", *extra]
+            "--out", str(out), "--no-progress", "--error-correlation", "0", "--shared-error-shift", "0",
+            "--shared-error-field", "0", *extra]
 
 
 def test_calibrate_force_leaves_nothing_of_the_previous_run(small: Path, tmp_path: Path, capsys) -> None:
