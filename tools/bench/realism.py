@@ -16,9 +16,14 @@ placing the points it is judged on in turn (``evaluate_held_out``), and the came
 the longest focal length (the zoomed one) is given with its error and sigma (deg) and its
 error held out (px), also with every pose the true one (what its detections and the
 others' allow, whatever the registration does).
-The last line, over the cameras not reported weak:
+The last lines: over every camera, ``realism: all cameras: worst_success_alone=..
+worst_error_sigmas=.. runs_with_weak=K/N worst_extra_projection_s=..
+zoomed_alone_px_at_truth=min..max``; over the runs where the zoomed camera is registered
+and not the reference, ``realism: zoomed camera: registered_and_evaluated=K/N
+largest_sigma_deg=.. worst_error_sigmas=..``; over the cameras not reported weak,
 ``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
 sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
+``--summarise JSON...`` prints the rows and last lines of earlier runs' ``--json`` files.
 With --refine-intrinsics every run also self-calibrates from the true intrinsics: each
 row lists the cameras flagged a misfit (a smooth pattern left in their residuals) and the
 refined focal lengths' worst error against the truth in sigmas over the others, and a
@@ -461,9 +466,14 @@ def summarise(rows: list[dict], lenses: bool) -> None:
     weak_runs = sum(bool(row["weak"]) for row in rows)
     worst_extra = max((row["extra_s"] for row in rows), default=0.0)
     at_truth = [row["alone_px_at_truth"] for row in evaluated if row.get("alone_px_at_truth") is not None]
+    zoomed_rows = [row for row in evaluated if row["zoomed"] in row["sigma_deg"]]
+    zoomed_sigma = max((row["sigma_deg"][row["zoomed"]] for row in zoomed_rows), default=math.nan)
+    zoomed_sigmas = max((row["sigmas"][row["zoomed"]] for row in zoomed_rows), default=math.nan)
     print(f"realism: all cameras: worst_success_alone={worst_alone:.3f} worst_error_sigmas={worst_sigmas:.2f} "
           f"runs_with_weak={weak_runs}/{len(rows)} worst_extra_projection_s={worst_extra:.1f} "
           f"zoomed_alone_px_at_truth={min(at_truth, default=math.nan):.3f}..{max(at_truth, default=math.nan):.3f}")
+    print(f"realism: zoomed camera: registered_and_evaluated={len(zoomed_rows)}/{len(rows)} "
+          f"largest_sigma_deg={zoomed_sigma:.4f} worst_error_sigmas={zoomed_sigmas:.2f}")
     print(f"realism: worst_rot_deg={worst_rot:.4f} worst_eval_success={worst_success:.3f} "
           f"registered={registered}/{total} worst_sync_frames={worst_sync:.3f} sync_beyond_frames={beyond:.3f} "
           f"worst_readout_ms={worst_readout:.2f} worst_readout_sigmas={worst_readout_sigmas:.1f} wrong={wrong}")
