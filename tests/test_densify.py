@@ -189,6 +189,39 @@ def test_a_texture_that_moves_large_markers_more_leaves_the_small_ones_their_wei
     assert sigma["by size"] < 0.85 * sigma["one noise"]
 
 
+def test_a_camera_that_sees_few_msms_at_two_scales_keeps_its_centres(room, tmp_path) -> None:
+    """The extra projection's markers are sized for the zoomed camera: the near camera
+    sharing its patch sees most of them at one scale. On a floor 6 mm uneven it keeps
+    11 MSMs at two scales, too few to measure the scales' drift: with 8 allowed, noise
+    passed for a drift, moved its 210 centres and left them farther from the truth (in
+    the rendered demo room the zoomed camera sharing them turned 0.17 deg, 5.4 sigma)."""
+    from dataclasses import replace
+
+    from calibproj.ingest.options import IngestOptions
+    from calibproj.ingest.videos import ingest
+    from calibproj.simulate.render import simulate_videos
+    from calibproj.simulate.scene import FloorRelief
+
+    scene = room["scene"]
+    uneven = replace(scene, floor=replace(scene.floor, relief=FloorRelief(rms_m=0.006, seed=2)),
+                     cameras=[camera for camera in scene.cameras if camera.name == "near1"])
+    simulate_videos(uneven, room["dense"], tmp_path, seed=1)
+    truth = json.loads((tmp_path / "truth.json").read_text())["image_points"]["near1"]
+    true_xy = dict(zip(truth["ids"], truth["undistorted"]))
+
+    def ingested(options: IngestOptions):
+        result = ingest(tmp_path / "videos", room["dense"], tmp_path / "intrinsics", options=options, progress=False)
+        ids, xy = result.tracks.observations("near1")
+        errors = np.array([np.asarray(observed) - true_xy[int(point)] for point, observed in zip(ids, xy)])
+        return result.cameras["near1"].raw, float(np.sqrt(np.mean(errors ** 2)))
+
+    (kept, kept_rms), (moved, moved_rms) = ingested(IngestOptions()), ingested(IngestOptions(scale_drift_min_msms=8))
+    assert 8 <= kept.scale_drift.msms < IngestOptions().scale_drift_min_msms
+    assert kept.scale_drift.corrected == 0 and np.all(kept.centres.drift == 0.0)
+    assert moved.scale_drift.corrected == len(moved.centres) > 100
+    assert moved_rms > 1.1 * kept_rms, (kept_rms, moved_rms)
+
+
 def assert_same_document(a, b, where: str) -> None:
     """Equal JSON documents, floats to 1e-9 (relative) where their key names a sigma."""
     assert type(a) is type(b), where

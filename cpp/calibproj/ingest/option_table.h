@@ -240,7 +240,9 @@ void VisitIngestOptions(IngestOptionsT& o, Visitor&& visit) {
         "each MSM, smoothly over the floor, and every merged centre moved to where a marker of no size "
         "would put it, when it predicts the scales' disagreement (cross-validated).");
   visit("scale_drift_min_msms", o.scale_drift.min_msms,
-        "... provided this many MSMs are kept at two scales of different sizes;");
+        "... provided this many MSMs are kept at two scales of different sizes (with fewer, noise "
+        "passes for a drift: 8 MSMs of a camera's small markers \"predicted\" 29 % of their "
+        "disagreement on a rendered room);");
   visit("scale_drift_prior_msms", o.scale_drift.prior_msms,
         "... and the drift is shrunk towards none as if this many MSMs had measured none at every place "
         "(a centre with few such neighbours is moved by less);");
