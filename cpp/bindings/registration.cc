@@ -135,7 +135,8 @@ void RegisterStepResults(py::module_& m) {
       .def_readonly("nodes", &ReliefTest::nodes)
       .def_readonly("gain_chi2", &ReliefTest::gain_chi2, "chi-square of the observations the relief takes off")
       .def_readonly("threshold_chi2", &ReliefTest::threshold_chi2,
-                    "99.9 % quantile of chi-square with `nodes` degrees of freedom")
+                    "the gain a flat floor's shared detection errors stay below: 4 times the 99.9 % quantile of "
+                    "chi-square with `nodes` degrees of freedom")
       .def_property_readonly("message", &ReliefTest::Describe, "the verdict and its figures ('' when not tested)");
   py::class_<RefineResult>(m, "RefineResult", "The final refinement's figures.")
       .def_readonly("rounds", &RefineResult::rounds)

@@ -161,7 +161,7 @@ struct AdjustResult {
 };
 
 // COPLANAR with a relief prior (Options::floor_relief): whether the main plane's relief
-// explains the observations better than their noise would, by the likelihood ratio of
+// explains the observations better than their noise and shared errors would, by the likelihood ratio of
 // the relief against an exactly flat plane. A relief that is not detected is left out:
 // on a flat floor it would only widen the zoomed camera's sigma, since that camera
 // cannot tell the slope of the patch it sees from its own tilt.
@@ -170,7 +170,8 @@ struct ReliefTest {
   bool detected = false;
   int nodes = 0;
   double gain_chi2 = 0.0;       // chi-square of the observations the relief takes off
-  double threshold_chi2 = 0.0;  // 99.9 % quantile of chi-square with `nodes` degrees of freedom
+  double threshold_chi2 = 0.0;  // kReliefSharedErrorFactor times the 99.9 % quantile of chi-square
+                                // with `nodes` degrees of freedom
   bool parallax = false;        // the projector's apex is refined with the relief (kApexGainFactor)
 
   // One line for the log: the verdict and its figures ("" when not tested).
