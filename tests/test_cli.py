@@ -265,6 +265,32 @@ def test_one_exit_status_convention(monkeypatch: pytest.MonkeyPatch, capsys: pyt
     assert len(error) == 1 or "internal" in line
 
 
+@pytest.mark.parametrize("signal_name", ["SIGTERM", "SIGINT"])
+def test_an_interruption_swallowed_by_other_code_is_still_one(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture, signal_name: str) -> None:
+    """Found by sending SIGTERM at the moment the staging folder appeared, 150 times: 2
+    runs went to their end (OpenCV's loader swallowed the KeyboardInterrupt) and 2
+    printed a traceback (pybind11 turned it into a TypeError while converting a path)."""
+    import os
+    import signal
+    import time
+
+    from calibproj.cli import compare
+
+    def run(args):
+        try:  # as a bare ``except:`` in a library does
+            os.kill(os.getpid(), getattr(signal, signal_name))
+            time.sleep(1.0)
+        except BaseException:
+            pass
+        raise TypeError("read_sequence(): incompatible function arguments")
+
+    monkeypatch.setattr(compare, "run", run)
+    assert main(["compare", "a.json", "b.json"]) == EXIT_INTERRUPTED
+    assert capsys.readouterr().err.strip().splitlines() == ["calibproj compare: interrupted"]
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handler is gone with the run
+
+
 def test_readme_documents_the_exit_status() -> None:
     readme = (REPO / "README.md").read_text()
     section = re.search(r"^## Exit status\n(.*?)(?=^## )", readme, re.MULTILINE | re.DOTALL)

@@ -107,22 +107,36 @@ def parse_arguments(parser: SuggestingArgumentParser, argv: list[str] | None) ->
     return args
 
 
-def _raise_interrupt(signal_number: int, frame: object) -> None:
-    raise KeyboardInterrupt
+class _Interruptions:
+    """Ctrl-C (SIGINT) and SIGTERM raise KeyboardInterrupt, and are remembered.
 
+    Python raises a signal's exception wherever the main thread is at the moment, and
+    code that is not ours may swallow it there: OpenCV's loader runs its configuration
+    under bare ``except:`` clauses, and pybind11 clears an error raised while it
+    converts an argument (``os.fspath``) and reports a TypeError instead. Remembered,
+    an interruption is reported as one whatever error it became."""
 
-@contextmanager
-def _terminate_interrupts() -> Iterator[None]:
-    """SIGTERM raises KeyboardInterrupt while the block runs (signal handlers can only be
-    set from the main thread; elsewhere nothing changes)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    def __init__(self) -> None:
+        self.received = False
+
+    def __call__(self, signal_number: int, frame: object) -> None:
+        self.received = True
+        raise KeyboardInterrupt
+
+    @contextmanager
+    def installed(self) -> Iterator[None]:
+        """The handler, while the block runs (signal handlers can only be set from the
+        main thread; elsewhere nothing changes)."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        import cv2  # noqa: F401  # before the handler: its loader would swallow an interruption
+        previous = {number: signal.signal(number, self) for number in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield
+        finally:
+            for number, handler in previous.items():
+                signal.signal(number, handler)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -147,17 +161,18 @@ def _run(argv: list[str] | None) -> int:
     level = logging.WARNING - 10 * min(args.verbose + args.command_verbose + 1, 2)
     logging.basicConfig(level=level, format="%(message)s")
     prefix = f"calibproj {args.command}"
+    interruptions = _Interruptions()
     try:
         from tqdm.contrib.logging import logging_redirect_tqdm
 
         # Log lines go through tqdm.write while bars are open: never in the middle of a bar.
-        with _terminate_interrupts(), logging_redirect_tqdm():
+        with interruptions.installed(), logging_redirect_tqdm():
             return int(args.run(args) or EXIT_OK)
     except KeyboardInterrupt:
         print(f"{prefix}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as error:
-        if caused_by_interrupt(error):  # e.g. a module the command imports, interrupted
+        if interruptions.received or caused_by_interrupt(error):  # an interruption in disguise
             print(f"{prefix}: interrupted", file=sys.stderr)
             return EXIT_INTERRUPTED
         if isinstance(error, (CommandError, ValueError, OSError)):
