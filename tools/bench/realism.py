@@ -23,7 +23,9 @@ and not the reference, ``realism: zoomed camera: registered_and_evaluated=K/N
 largest_sigma_deg=.. worst_error_sigmas=..``; over the cameras not reported weak,
 ``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
 sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
-``--summarise JSON...`` prints the rows and last lines of earlier runs' ``--json`` files.
+``--summarise JSON...`` prints the rows and last lines of earlier runs' ``--json`` files;
+``tools/bench/results/realism/`` keeps those of the densified sweep behind README's
+figures (``--summarise tools/bench/results/realism/*.json``).
 With --refine-intrinsics every run also self-calibrates from the true intrinsics: each
 row lists the cameras flagged a misfit (a smooth pattern left in their residuals) and the
 refined focal lengths' worst error against the truth in sigmas over the others, and a
@@ -177,7 +179,7 @@ def run(condition: str, seed: int, sequence, sequence_path: Path, work: Path, ar
             calibration = calibrate_dense(calibrate_room, room, results, reused=args.reuse_detections and dense_reused)
     truth = json.loads((room / "truth.json").read_text())
     report = json.loads(((room / "results") / "detect_report.json").read_text())
-    row = {"condition": condition, "seed": seed, "total": len(scene.cameras), "extra_s": extra_s,
+    row = {"scene": args.scene, "condition": condition, "seed": seed, "total": len(scene.cameras), "extra_s": extra_s,
            "zoomed": max(scene.cameras, key=lambda camera: camera.fx).name,
            "failed": {name: reason for name, reason in calibration.failed.items()}}
     registered = [name for name in scene.camera_names if name in calibration.poses]
@@ -412,15 +414,20 @@ def zoomed(row: dict) -> str:
             f"({'-' if at_truth is None else f'{at_truth:.3f}'} px at the true poses)")
 
 
+def run_label(row: dict) -> str:
+    """Scene (rows written before it was kept have none), condition and seed."""
+    return f"{row.get('scene', ''):<7} {row['condition']:<20} seed {row['seed']}"
+
+
 def format_row(row: dict) -> str:
     failed = "; ".join(f"{name}: {reason[:80]}" for name, reason in row["failed"].items())
     weak = ", ".join(f"{name} ({sigma:.3f} deg)" for name, sigma in row["weak"].items())
     readout = "-" if row["readout_ms"] is None else f"{row['readout_ms'][0]:.2f} ({row['readout_ms'][1]:.1f} sigma)"
     if "rot" not in row:
-        return (f"{row['condition']:<20} seed {row['seed']}  registered {row['registered']}/{row['total']}  "
+        return (f"{run_label(row)}  registered {row['registered']}/{row['total']}  "
                 f"{format_sync(row['sync_frames'])}  {failed}")
     mm = "-" if row["mm"] is None else f"{row['mm']:.2f}"
-    return (f"{row['condition']:<20} seed {row['seed']}  registered {row['registered']}/{row['total']}  "
+    return (f"{run_label(row)}  registered {row['registered']}/{row['total']}  "
             f"rot {row['rot']:.4f} deg (not weak {row['rot_strong']:.4f})  {mm} mm  eval {row['eval_px']:.3f} px  "
             f"@0.5 {100 * row['success']:.0f} % (not weak {100 * row['success_strong']:.0f} %, each on points "
             f"placed without it {100 * row['success_alone']:.0f} %)  worst error/sigma {worst_ratio(row):.1f} "
