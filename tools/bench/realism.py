@@ -23,9 +23,11 @@ and not the reference, ``realism: zoomed camera: registered_and_evaluated=K/N
 largest_sigma_deg=.. worst_error_sigmas=..``; over the cameras not reported weak,
 ``realism: worst_rot_deg=.. worst_eval_success=.. registered=A/B worst_sync_frames=..
 sync_beyond_frames=.. worst_readout_ms=.. worst_readout_sigmas=.. wrong=N``.
-``--summarise JSON...`` prints the rows and last lines of earlier runs' ``--json`` files;
-``tools/bench/results/realism/`` keeps those of the densified sweep behind README's
-figures (``--summarise tools/bench/results/realism/*.json``).
+``--summarise JSON...`` prints the rows and last lines of earlier runs' ``--json`` files.
+``--out-dir DIR`` keeps each run's row in a file of its own and takes the runs already
+there from it (same other options assumed), so that a sweep of many hours resumes where
+it stopped; ``tools/bench/results/realism/`` keeps those of the densified sweep behind
+README's figures (``--summarise tools/bench/results/realism/*.json``).
 With --refine-intrinsics every run also self-calibrates from the true intrinsics: each
 row lists the cameras flagged a misfit (a smooth pattern left in their residuals) and the
 refined focal lengths' worst error against the truth in sigmas over the others, and a
@@ -33,6 +35,7 @@ last line ``realism: lenses: runs_with_misfit=K/N worst_trusted_focal_sigmas=..`
 
     python tools/bench/realism.py                       # every condition, 3 seeds
     python tools/bench/realism.py --conditions clean,drops-2 --seeds 1 --arrays 12
+    python tools/bench/realism.py --scene or-full --densify --work W --out-dir tools/bench/results/realism
 """
 
 from __future__ import annotations
@@ -512,6 +515,14 @@ def summarise_files(paths: list[Path]) -> int:
     return 0
 
 
+def write_rows(path: Path, rows: list[dict]) -> None:
+    """Rows as JSON, whole or not at all (a stopped sweep leaves no half-written run)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(path.name + ".part")
+    partial.write_text(json.dumps(rows, indent=1) + "\n")
+    partial.replace(path)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scene", default="demo", help="scene preset (default demo)")
@@ -554,6 +565,10 @@ def main(argv: list[str] | None = None) -> int:
                              "then lists the cameras flagged a misfit and the refined focal lengths' worst error "
                              "in sigmas over the others")
     parser.add_argument("--json", type=Path, default=None, help="also write every row to this JSON file")
+    parser.add_argument("--out-dir", type=Path, default=None,
+                        help="also keep each run's row in DIR/SCENE-CONDITION-sSEED.json, written once the run is "
+                             "complete, and take a run whose file is there from it instead of running it again "
+                             "(a long sweep resumes where it stopped; default: none)")
     parser.add_argument("--summarise", metavar="JSON", type=Path, nargs="+", default=None,
                         help="run nothing: print the rows and last lines of earlier runs' --json files together")
     args = parser.parse_args(argv)
@@ -580,13 +595,19 @@ def main(argv: list[str] | None = None) -> int:
         rows = []
         for name in names:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
-                started = time.perf_counter()
-                row = run(name, seed, sequence, work / "sequence" / "sequence.json", work, args)
-                row["seconds"] = time.perf_counter() - started
+                kept = None if args.out_dir is None else args.out_dir / f"{args.scene}-{name}-s{seed}.json"
+                if kept is not None and kept.is_file():
+                    row, = json.loads(kept.read_text())
+                else:
+                    started = time.perf_counter()
+                    row = run(name, seed, sequence, work / "sequence" / "sequence.json", work, args)
+                    row["seconds"] = time.perf_counter() - started
+                    if kept is not None:
+                        write_rows(kept, [row])
                 rows.append(row)
                 print(format_row(row), flush=True)
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+        write_rows(args.json, rows)
     summarise(rows, lenses=bool(args.refine_intrinsics))
     return 0
 
